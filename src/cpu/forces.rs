@@ -1,0 +1,98 @@
+//! Accelerations: symmetric pressure (report Eq. 6), viscosity (Eq. 7), walls and gravity:
+//! twin of wgsl/forces.wgsl.
+
+use super::common::{cell_coords, GridR, KernelCoefficients};
+use super::Neighbours;
+use crate::real::{Real, V3};
+use crate::scene::Kernel;
+use rayon::prelude::*;
+
+pub struct ForcesInput<'a, R> {
+    pub kernel: &'a KernelCoefficients<R>,
+    pub grid: &'a GridR<R>,
+    pub fluid_mass: R,
+    pub viscosity: R,
+    pub boundary_friction: R,
+    pub gravity: V3<R>,
+    pub fluid: Neighbours<'a, R>,
+    pub velocities: &'a [V3<R>],
+    pub densities: &'a [R],
+    pub pressures: &'a [R],
+    pub walls: Neighbours<'a, R>,
+    pub wall_masses: &'a [R],
+}
+
+/// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
+///
+/// Viscosity is the kinematic form of Eq. 7 with the volume m_k/rho_k of Eq. 4:
+/// nu sum_k (m_k/rho_k) lap W_ik (u_k - u_i) for the Mueller kernels (Mueller et al. 2003), and
+/// 2 (d + 2) nu sum_k (m_k/rho_k) (u_ik . x_ik) / (|x_ik|^2 + 0.01 h^2) grad W_ik for the cubic
+/// spline (Monaghan 2005, Eq. 6.3), whose Laplacian changes sign.
+/// A wall particle mirrors the fluid particle's pressure (p_w = max(p_i, 0), rho_w = rho_i; as in
+/// Akinci et al. 2012), so walls only push, and it takes part in viscosity at rest with the
+/// volume m_w/rho_i, scaled by the boundary friction.
+pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
+    let kernel = input.kernel;
+    let cubic = kernel.kind == Kernel::CubicSpline;
+    let viscous = input.viscosity > R::zero();
+    let eps = R::of(0.01) * kernel.h2;
+    let ten = R::of(10.0);
+    accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| {
+        let xi = input.fluid.positions[i];
+        let ui = input.velocities[i];
+        let rho_i = input.densities[i];
+        let p_i = input.pressures[i];
+        let pi_over = p_i / (rho_i * rho_i);
+        let wall_p_over = R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i);
+        let c = cell_coords(input.grid, xi);
+        // Sums without the constant factors, which are applied once at the end.
+        let mut fluid_pressure = V3::zero();
+        let mut fluid_visc = V3::zero();
+        let mut wall_pressure = V3::zero();
+        let mut wall_visc = V3::zero();
+        for (k0, k1) in input.grid.stencil_runs(c) {
+            for j in input.fluid.span(k0, k1) {
+                let rij = xi - input.fluid.positions[j];
+                let r2 = rij.length_squared();
+                if r2 >= kernel.h2 {
+                    continue;
+                }
+                let r = r2.sqrt();
+                let grad = kernel.grad_w(rij, r);
+                let rho_j = input.densities[j];
+                let pj_over = input.pressures[j] / (rho_j * rho_j);
+                fluid_pressure -= grad * (pi_over + pj_over);
+                if viscous {
+                    let inv_rho = R::one() / rho_j;
+                    let uij = ui - input.velocities[j];
+                    if cubic {
+                        fluid_visc += grad * (inv_rho * uij.dot(rij) / (r2 + eps));
+                    } else {
+                        fluid_visc -= uij * (inv_rho * kernel.lap_w(r));
+                    }
+                }
+            }
+            for j in input.walls.span(k0, k1) {
+                let rij = xi - input.walls.positions[j];
+                let r2 = rij.length_squared();
+                if r2 >= kernel.h2 {
+                    continue;
+                }
+                let r = r2.sqrt();
+                let grad = kernel.grad_w(rij, r);
+                let mw = input.wall_masses[j];
+                wall_pressure -= grad * mw;
+                if viscous {
+                    if cubic {
+                        wall_visc += grad * (mw * ui.dot(rij) / (r2 + eps));
+                    } else {
+                        wall_visc -= ui * (mw * kernel.lap_w(r));
+                    }
+                }
+            }
+        }
+        let nu = if cubic { ten * input.viscosity } else { input.viscosity };
+        let visc = fluid_visc * (nu * input.fluid_mass) + wall_visc * (nu * input.boundary_friction / rho_i);
+        *acc = fluid_pressure * input.fluid_mass + wall_pressure * wall_p_over + visc + input.gravity;
+    });
+}

@@ -1,0 +1,243 @@
+//! The CPU reference path: the same stages as the GPU, one module per WGSL file, generic over
+//! f32 and f64. `f64` is the judge of every GPU result.
+
+pub mod bin_count;
+pub mod bin_scatter;
+pub mod common;
+pub mod density;
+pub mod forces;
+pub mod integrate;
+pub mod prefix_sum;
+pub mod reorder;
+
+use crate::real::{Real, V3};
+use crate::scene::{InitialState, Params};
+use crate::sim::{Health, Snapshot};
+use common::{cell_coords, GridR, KernelCoefficients};
+use integrate::PlaneR;
+use std::ops::Range;
+
+/// Particles sorted by cell with the start of every cell: `starts[c]..starts[c + 1]`.
+#[derive(Clone, Copy)]
+pub struct Neighbours<'a, R> {
+    pub positions: &'a [V3<R>],
+    pub starts: &'a [u32],
+}
+
+impl<R> Neighbours<'_, R> {
+    /// The particles of the cells with keys `k0..k1` (a contiguous run of cells).
+    pub fn span(&self, k0: u32, k1: u32) -> Range<usize> {
+        self.starts[k0 as usize] as usize..self.starts[k1 as usize] as usize
+    }
+}
+
+/// Sorts points by cell (stable counting sort) and returns the permutation and the cell starts.
+pub fn sort_by_cell<R: Real>(grid: &GridR<R>, positions: &[V3<R>]) -> (Vec<u32>, Vec<u32>) {
+    let mut keys = vec![0u32; positions.len()];
+    let mut counts = vec![0u32; grid.cell_count()];
+    let mut starts = vec![0u32; grid.cell_count() + 1];
+    let mut sorted = vec![0u32; positions.len()];
+    bin_count::bin_count(grid, positions, &mut keys, &mut counts);
+    prefix_sum::prefix_sum(&counts, &mut starts);
+    bin_scatter::bin_scatter(&keys, &starts, &mut sorted);
+    (sorted, starts)
+}
+
+/// The CPU solver. Particle arrays are kept in cell order (like the GPU's); `ids` maps each slot
+/// back to the particle's original index.
+pub struct CpuSolver<R: Real> {
+    params: Params,
+    kernel: KernelCoefficients<R>,
+    grid: GridR<R>,
+    planes: Vec<PlaneR<R>>,
+    positions: Vec<V3<R>>,
+    velocities: Vec<V3<R>>,
+    ids: Vec<u32>,
+    densities: Vec<R>,
+    pressures: Vec<R>,
+    accelerations: Vec<V3<R>>,
+    keys: Vec<u32>,
+    counts: Vec<u32>,
+    starts: Vec<u32>,
+    sorted: Vec<u32>,
+    scratch_v3: Vec<V3<R>>,
+    scratch_ids: Vec<u32>,
+    wall_positions: Vec<V3<R>>,
+    wall_masses: Vec<R>,
+    wall_starts: Vec<u32>,
+    step: u64,
+    health: Health,
+}
+
+impl<R: Real> CpuSolver<R> {
+    pub fn new(params: &Params, initial: &InitialState) -> Self {
+        let grid = GridR::<R>::new(params);
+        let n = initial.fluid_positions.len();
+        // Walls never move: sort them by cell once.
+        let walls: Vec<V3<R>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
+        let (wall_order, wall_starts) = sort_by_cell(&grid, &walls);
+        let planes = params
+            .planes
+            .iter()
+            .map(|p| PlaneR { normal: V3::from64(p.normal), offset: R::of(p.offset), restitution: R::of(p.restitution) })
+            .collect();
+        CpuSolver {
+            params: params.clone(),
+            kernel: KernelCoefficients::new(params.kernel, params.h),
+            grid,
+            planes,
+            positions: initial.fluid_positions.iter().map(|&p| V3::from64(p)).collect(),
+            velocities: initial.fluid_velocities.iter().map(|&p| V3::from64(p)).collect(),
+            ids: (0..n as u32).collect(),
+            densities: vec![R::zero(); n],
+            pressures: vec![R::zero(); n],
+            accelerations: vec![V3::zero(); n],
+            keys: vec![0; n],
+            counts: vec![0; grid.cell_count()],
+            starts: vec![0; grid.cell_count() + 1],
+            sorted: vec![0; n],
+            scratch_v3: Vec::with_capacity(n),
+            scratch_ids: Vec::with_capacity(n),
+            wall_positions: wall_order.iter().map(|&i| walls[i as usize]).collect(),
+            wall_masses: wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect(),
+            wall_starts,
+            step: 0,
+            health: Health::default(),
+        }
+    }
+
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+    pub fn steps_done(&self) -> u64 {
+        self.step
+    }
+    pub fn health(&self) -> Health {
+        self.health
+    }
+    pub fn fluid_len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Stage 1: counting-sort binning and reordering of the state into cell order.
+    pub fn bin(&mut self) {
+        self.counts.fill(0);
+        bin_count::bin_count(&self.grid, &self.positions, &mut self.keys, &mut self.counts);
+        prefix_sum::prefix_sum(&self.counts, &mut self.starts);
+        bin_scatter::bin_scatter(&self.keys, &self.starts, &mut self.sorted);
+        reorder::reorder(&self.sorted, &self.positions, &mut self.scratch_v3);
+        std::mem::swap(&mut self.positions, &mut self.scratch_v3);
+        reorder::reorder(&self.sorted, &self.velocities, &mut self.scratch_v3);
+        std::mem::swap(&mut self.velocities, &mut self.scratch_v3);
+        reorder::reorder(&self.sorted, &self.ids, &mut self.scratch_ids);
+        std::mem::swap(&mut self.ids, &mut self.scratch_ids);
+    }
+
+    /// Stage 2: density and pressure of every particle.
+    pub fn compute_density(&mut self) {
+        let p = &self.params;
+        let input = density::DensityInput {
+            kernel: &self.kernel,
+            grid: &self.grid,
+            fluid_mass: R::of(p.fluid_mass),
+            rest_density: R::of(p.rest_density),
+            stiffness: R::of(p.stiffness),
+            eos: p.eos,
+            clamp_negative_pressure: p.clamp_negative_pressure,
+            fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+            walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
+            wall_masses: &self.wall_masses,
+        };
+        density::density(&input, &mut self.densities, &mut self.pressures);
+    }
+
+    /// Stage 3: accelerations.
+    pub fn compute_forces(&mut self) {
+        let p = &self.params;
+        let input = forces::ForcesInput {
+            kernel: &self.kernel,
+            grid: &self.grid,
+            fluid_mass: R::of(p.fluid_mass),
+            viscosity: R::of(p.viscosity_at_step(self.step)),
+            boundary_friction: R::of(p.boundary_friction),
+            gravity: V3::from64(p.gravity),
+            fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+            velocities: &self.velocities,
+            densities: &self.densities,
+            pressures: &self.pressures,
+            walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
+            wall_masses: &self.wall_masses,
+        };
+        forces::forces(&input, &mut self.accelerations);
+    }
+
+    /// Stage 4: integration and boundaries. Returns what went wrong in this step.
+    pub fn integrate(&mut self) -> integrate::StepHealth {
+        let input = integrate::IntegrateInput {
+            dt: R::of(self.params.dt),
+            planes: &self.planes,
+            domain_min: V3::from64(self.params.domain_min),
+            domain_max: V3::from64(self.params.domain_max),
+            accelerations: &self.accelerations,
+        };
+        integrate::integrate(&input, &mut self.positions, &mut self.velocities)
+    }
+
+    /// One full time step; records the first step that produced a non-finite or escaped particle.
+    pub fn step_once(&mut self) {
+        self.bin();
+        self.compute_density();
+        self.compute_forces();
+        let max_density = self.densities.iter().fold(R::zero(), |a, &b| a.max(b)).to64();
+        self.health.max_density = self.health.max_density.max(max_density);
+        let h = self.integrate();
+        self.step += 1;
+        self.health.record(self.step, h.non_finite, h.escaped);
+    }
+
+    /// Runs up to `n` steps, stopping early after a step that went wrong.
+    pub fn step(&mut self, n: u64) {
+        for _ in 0..n {
+            self.step_once();
+            if !self.health.is_ok() {
+                break;
+            }
+        }
+    }
+
+    /// The state in the original particle order; density and pressure are evaluated for the
+    /// current positions.
+    pub fn snapshot(&mut self) -> Snapshot {
+        self.bin();
+        self.compute_density();
+        let n = self.positions.len();
+        let mut s = Snapshot::with_len(n, self.step, self.step as f64 * self.params.dt);
+        for (slot, &id) in self.ids.iter().enumerate() {
+            let id = id as usize;
+            s.positions[id] = self.positions[slot].to64();
+            s.velocities[id] = self.velocities[slot].to64();
+            s.densities[id] = self.densities[slot].to64();
+            s.pressures[id] = self.pressures[slot].to64();
+        }
+        s
+    }
+
+    /// Accelerations of the last step (or of the last `compute_forces`), in original order.
+    pub fn accelerations(&self) -> Vec<[f64; 3]> {
+        let mut out = vec![[0.0; 3]; self.positions.len()];
+        for (slot, &id) in self.ids.iter().enumerate() {
+            out[id as usize] = self.accelerations[slot].to64();
+        }
+        out
+    }
+
+    /// Current cell of every particle in original order (for tests of the binning).
+    pub fn cell_of(&self, p: [f64; 3]) -> u32 {
+        self.grid.key(cell_coords(&self.grid, V3::from64(p)))
+    }
+
+    /// The sorted wall particles and their cell starts.
+    pub fn walls(&self) -> (&[V3<R>], &[R], &[u32]) {
+        (&self.wall_positions, &self.wall_masses, &self.wall_starts)
+    }
+}

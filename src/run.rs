@@ -1,0 +1,143 @@
+//! The `wgsph run` loop: steps a backend, writes snapshots and the summary, and stops with a
+//! diagnosis when the state goes bad.
+
+use crate::output::{snapshot_path, write_snapshot_csv, write_summary, Summary};
+use crate::scene::{Params, Scene};
+use crate::sim::{Backend, Health};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+pub struct RunOptions {
+    pub steps: u64,
+    pub out: PathBuf,
+    /// Write a snapshot every this many steps (0: only the first and the last).
+    pub snapshot_every: u64,
+    /// Read the health counters every this many steps.
+    pub check_every: u64,
+    pub progress: bool,
+}
+
+/// Steps for a run of `time` seconds (or the scene's end time).
+pub fn steps_for_time(params: &Params, time: Option<f64>) -> u64 {
+    let t = time.unwrap_or(params.end_time);
+    ((t / params.dt) - 1e-9).ceil().max(0.0) as u64
+}
+
+/// Default snapshot interval: about 50 snapshots per run.
+pub fn default_snapshot_every(steps: u64) -> u64 {
+    (steps / 50).max(1)
+}
+
+/// Why a run went bad, with the likely cause in terms of the CFL condition.
+pub fn diagnose(params: &Params, health: &Health, max_speed: f64) -> String {
+    let step = health.first_bad_step.unwrap_or(0);
+    let c0 = params.speed_of_sound();
+    let cfl = params.dt * (c0 + max_speed) / params.h;
+    let g = params.gravity.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let mut what = Vec::new();
+    if health.non_finite > 0 {
+        what.push(format!("{} particles became NaN or infinite", health.non_finite));
+    }
+    if health.escaped > 0 {
+        what.push(format!("{} particles left the domain", health.escaped));
+    }
+    let mut msg = format!("step {step} (t = {:.6}): {}.", step as f64 * params.dt, what.join(" and "));
+    msg += &format!(
+        " Likely cause: the time step is too large for the stiffness: the CFL number dt (c0 + |v|max) / h = {:.3} \
+         (dt = {}, c0 = {:.4}, |v|max = {:.4}, h = {}); explicit WCSPH is stable below about 0.4",
+        cfl, params.dt, c0, max_speed, params.h
+    );
+    if g > 0.0 {
+        msg += &format!(", and the force condition dt sqrt(|g|/h) = {:.3} should stay below about 0.25", params.dt * (g / params.h).sqrt());
+    }
+    msg += ". Lower dt or the stiffness, or check the scene's boundaries.";
+    msg
+}
+
+/// Runs `opts.steps` steps, writing `out/snapshots/*.csv` and `out/summary.json`.
+/// Returns the summary; `summary.failure` is set when the state went bad.
+pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summary> {
+    std::fs::create_dir_all(opts.out.join("snapshots"))?;
+    let params = backend.params().clone();
+    let start = backend.steps_done();
+    let end = start + opts.steps;
+    let bar = if opts.progress && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        let b = indicatif::ProgressBar::new(opts.steps);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} steps  {per_sec}  eta {eta}  {msg}")
+                .expect("valid template"),
+        );
+        Some(b)
+    } else {
+        None
+    };
+    let t0 = Instant::now();
+    let mut last_snapshot: Option<PathBuf> = None;
+    let mut max_speed = 0.0f64;
+    let mut failure = None;
+    let write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<()> {
+        let s = backend.snapshot()?;
+        *max_speed = s.max_speed();
+        let path = snapshot_path(&opts.out, s.step);
+        write_snapshot_csv(&path, &s)?;
+        *last = Some(path);
+        Ok(())
+    };
+    if opts.snapshot_every > 0 || opts.steps == 0 {
+        write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+    }
+    let mut step = start;
+    while step < end {
+        let next_snap = if opts.snapshot_every > 0 { (step / opts.snapshot_every + 1) * opts.snapshot_every } else { end };
+        let next_check = (step / opts.check_every.max(1) + 1) * opts.check_every.max(1);
+        let target = end.min(next_snap).min(next_check);
+        backend.step(target - step)?;
+        step = backend.steps_done();
+        let health = backend.health()?;
+        if let Some(b) = &bar {
+            b.set_position(step - start);
+            b.set_message(format!("t = {:.3}", step as f64 * params.dt));
+        }
+        if !health.is_ok() {
+            failure = Some(diagnose(&params, &health, max_speed));
+            break;
+        }
+        if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
+            write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        }
+    }
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let wall_seconds = t0.elapsed().as_secs_f64();
+    let health = backend.health()?;
+    let steps = backend.steps_done() - start;
+    let summary = Summary {
+        scene: scene.name.clone(),
+        backend: backend.kind().into(),
+        adapter: backend.adapter(),
+        fluid_particles: backend.fluid_count(),
+        wall_particles: backend.wall_count(),
+        steps,
+        sim_time: backend.steps_done() as f64 * params.dt,
+        dt: params.dt,
+        wall_seconds,
+        particle_steps_per_second: if wall_seconds > 0.0 { (steps as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
+        max_density_ratio: health.max_density / params.rest_density,
+        nan_count: health.non_finite,
+        escaped: health.escaped,
+        failure: failure.clone(),
+        last_snapshot: last_snapshot.as_ref().map(|p| p.display().to_string()),
+    };
+    write_summary(&opts.out.join("summary.json"), &summary)?;
+    Ok(summary)
+}
+
+/// The one-line summary printed at the end of a run.
+pub fn summary_line(s: &Summary, out: &Path) -> String {
+    format!(
+        "{}: {} fluid + {} wall particles, {} steps to t = {:.4} on {} in {:.2} s ({:.3e} particle-steps/s), max rho/rho0 = {:.4}, nan = {}, escaped = {} -> {}",
+        s.scene, s.fluid_particles, s.wall_particles, s.steps, s.sim_time, s.adapter, s.wall_seconds,
+        s.particle_steps_per_second, s.max_density_ratio, s.nan_count, s.escaped, out.display()
+    )
+}

@@ -1,0 +1,131 @@
+//! What both backends share: the snapshot of the state, the health of a run, and the `Backend`
+//! interface the command line drives.
+
+use crate::cpu::CpuSolver;
+use crate::real::Real;
+use crate::scene::Params;
+
+/// Fluid particles in their original order, widened to f64.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Snapshot {
+    pub step: u64,
+    pub time: f64,
+    pub positions: Vec<[f64; 3]>,
+    pub velocities: Vec<[f64; 3]>,
+    pub densities: Vec<f64>,
+    pub pressures: Vec<f64>,
+}
+
+impl Snapshot {
+    pub fn with_len(n: usize, step: u64, time: f64) -> Self {
+        Snapshot {
+            step,
+            time,
+            positions: vec![[0.0; 3]; n],
+            velocities: vec![[0.0; 3]; n],
+            densities: vec![0.0; n],
+            pressures: vec![0.0; n],
+        }
+    }
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+    /// Number of particles with a non-finite value in any field.
+    pub fn non_finite_count(&self) -> usize {
+        (0..self.len())
+            .filter(|&i| {
+                !(self.positions[i].iter().chain(&self.velocities[i]).all(|v| v.is_finite())
+                    && self.densities[i].is_finite()
+                    && self.pressures[i].is_finite())
+            })
+            .count()
+    }
+    pub fn max_speed(&self) -> f64 {
+        self.velocities.iter().map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max)
+    }
+    pub fn kinetic_energy(&self, mass: f64) -> f64 {
+        self.velocities.iter().map(|v| 0.5 * mass * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])).sum()
+    }
+}
+
+/// What a run found wrong, and the largest density seen.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Health {
+    /// Particles with a non-finite position or velocity after the last step.
+    pub non_finite: u64,
+    /// Particles outside the domain after the last step.
+    pub escaped: u64,
+    /// The first step after which a particle was non-finite or outside the domain.
+    pub first_bad_step: Option<u64>,
+    /// Largest density over all steps so far.
+    pub max_density: f64,
+}
+
+impl Health {
+    pub fn is_ok(&self) -> bool {
+        self.first_bad_step.is_none()
+    }
+    pub fn record(&mut self, step: u64, non_finite: u32, escaped: u32) {
+        self.non_finite = non_finite as u64;
+        self.escaped = escaped as u64;
+        if (non_finite > 0 || escaped > 0) && self.first_bad_step.is_none() {
+            self.first_bad_step = Some(step);
+        }
+    }
+}
+
+/// A simulation the command line can drive: the CPU reference or the GPU pipeline.
+pub trait Backend {
+    /// "cpu" or "gpu".
+    fn kind(&self) -> &'static str;
+    /// The adapter name, or "cpu".
+    fn adapter(&self) -> String;
+    fn params(&self) -> &Params;
+    fn fluid_count(&self) -> usize;
+    fn wall_count(&self) -> usize;
+    /// Advances up to `n` steps (a backend may stop early after a step that went wrong).
+    fn step(&mut self, n: u64) -> anyhow::Result<()>;
+    fn steps_done(&self) -> u64;
+    /// Reads the health counters (a few bytes on the GPU).
+    fn health(&mut self) -> anyhow::Result<Health>;
+    fn snapshot(&mut self) -> anyhow::Result<Snapshot>;
+    /// Accelerations used by the last step, in original particle order.
+    fn accelerations(&mut self) -> anyhow::Result<Vec<[f64; 3]>>;
+}
+
+impl<R: Real> Backend for CpuSolver<R> {
+    fn kind(&self) -> &'static str {
+        "cpu"
+    }
+    fn adapter(&self) -> String {
+        format!("cpu ({}, {} threads)", std::any::type_name::<R>(), rayon::current_num_threads())
+    }
+    fn params(&self) -> &Params {
+        CpuSolver::params(self)
+    }
+    fn fluid_count(&self) -> usize {
+        self.fluid_len()
+    }
+    fn wall_count(&self) -> usize {
+        self.walls().0.len()
+    }
+    fn step(&mut self, n: u64) -> anyhow::Result<()> {
+        CpuSolver::step(self, n);
+        Ok(())
+    }
+    fn steps_done(&self) -> u64 {
+        CpuSolver::steps_done(self)
+    }
+    fn health(&mut self) -> anyhow::Result<Health> {
+        Ok(CpuSolver::health(self))
+    }
+    fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
+        Ok(CpuSolver::snapshot(self))
+    }
+    fn accelerations(&mut self) -> anyhow::Result<Vec<[f64; 3]>> {
+        Ok(CpuSolver::accelerations(self))
+    }
+}
