@@ -1,6 +1,7 @@
 //! The `wgsph` command line.
 
 use crate::cpu::CpuSolver;
+use crate::gpu::{GpuContext, GpuSolver};
 use crate::run::{default_snapshot_every, run, steps_for_time, summary_line, RunOptions};
 use crate::scene::{Scene, SceneError, BUILTIN_SCENES};
 use crate::sim::Backend;
@@ -20,6 +21,10 @@ pub enum Command {
     Run(RunArgs),
     /// List the built-in scenes.
     Scenes,
+    /// List the GPU adapters with their backend, type and the limits that matter.
+    Adapters,
+    /// Run the GPU and the f64 CPU reference from the same state and compare every field.
+    Compare(CompareArgs),
 }
 
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
@@ -72,6 +77,16 @@ impl Default for RunArgs {
     }
 }
 
+#[derive(Args, Debug, Clone)]
+pub struct CompareArgs {
+    /// A built-in scene name or a path to a scene TOML file.
+    #[arg(default_value = "seed")]
+    pub scene: String,
+    /// Steps of the second comparison (the first is after one step).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: u64,
+}
+
 /// An error in what the user gave: exit code 2.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -84,6 +99,17 @@ pub fn main() -> i32 {
     let cli = Cli::parse();
     let result = match cli.command.unwrap_or(Command::Run(RunArgs::default())) {
         Command::Run(args) => cmd_run(&args),
+        Command::Compare(args) => cmd_compare(&args),
+        Command::Adapters => {
+            let lines = crate::gpu::device::describe_adapters();
+            if lines.is_empty() {
+                println!("no GPU adapter found");
+            }
+            for l in lines {
+                println!("{l}");
+            }
+            Ok(0)
+        }
         Command::Scenes => {
             for (name, description, _) in BUILTIN_SCENES {
                 println!("{name:<12} {description}");
@@ -112,13 +138,55 @@ pub fn load_scene(name: &str) -> anyhow::Result<Scene> {
 pub fn make_backend(scene: &Scene, choice: BackendChoice, precision: Precision) -> anyhow::Result<Box<dyn Backend>> {
     let params = scene.params();
     let initial = scene.initial_state();
-    match choice {
-        BackendChoice::Gpu => Err(InputError("the gpu backend is not available in this build; use --backend cpu".into()).into()),
-        BackendChoice::Cpu | BackendChoice::Auto => Ok(match precision {
+    let cpu = |precision| -> Box<dyn Backend> {
+        match precision {
             Precision::F64 => Box::new(CpuSolver::<f64>::new(&params, &initial)),
             Precision::F32 => Box::new(CpuSolver::<f32>::new(&params, &initial)),
-        }),
+        }
+    };
+    match choice {
+        BackendChoice::Cpu => Ok(cpu(precision)),
+        BackendChoice::Gpu => Ok(Box::new(GpuSolver::new(GpuContext::new()?, &params, &initial)?)),
+        BackendChoice::Auto => match GpuContext::new() {
+            Ok(ctx) => Ok(Box::new(GpuSolver::new(ctx, &params, &initial)?)),
+            Err(e) => {
+                eprintln!("warning: {e:#}; falling back to the cpu backend");
+                Ok(cpu(precision))
+            }
+        },
     }
+}
+
+fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
+    let scene = load_scene(&args.scene)?;
+    let params = scene.params();
+    let initial = scene.initial_state();
+    let mut gpu = GpuSolver::new(GpuContext::new()?, &params, &initial)?;
+    let mut cpu = CpuSolver::<f64>::new(&params, &initial);
+    println!(
+        "{}: {} fluid + {} wall particles; gpu {} against cpu f64",
+        scene.name,
+        initial.fluid_positions.len(),
+        initial.wall_positions.len(),
+        gpu.adapter()
+    );
+    let mut ok = true;
+    let mut done = 0;
+    for (target, tol) in [(1, &crate::compare::ONE_STEP), (args.steps.max(1), &crate::compare::MANY_STEPS)] {
+        if target <= done {
+            continue;
+        }
+        gpu.step(target - done)?;
+        cpu.step(target - done);
+        done = target;
+        let (gf, cf) = (gpu.step_fields()?, cpu.step_fields());
+        let (gs, cs) = (gpu.snapshot()?, cpu.snapshot());
+        let c = crate::compare::compare(&params, done, tol, (&gf, &gs), (&cf, &cs));
+        print!("{}", c.table());
+        ok &= c.passed();
+    }
+    println!("{}", if ok { "compare: passed" } else { "compare: FAILED (an error is over its tolerance)" });
+    Ok(if ok { 0 } else { 1 })
 }
 
 fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {

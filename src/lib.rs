@@ -7,7 +7,9 @@
 //! h and symplectic Euler.
 
 pub mod cli;
+pub mod compare;
 pub mod cpu;
+pub mod gpu;
 pub mod output;
 pub mod real;
 pub mod run;

@@ -51,6 +51,14 @@ impl Snapshot {
     }
 }
 
+/// The fields one step computed, in original particle order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepFields {
+    pub densities: Vec<f64>,
+    pub pressures: Vec<f64>,
+    pub accelerations: Vec<[f64; 3]>,
+}
+
 /// What a run found wrong, and the largest density seen.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Health {
@@ -92,8 +100,9 @@ pub trait Backend {
     /// Reads the health counters (a few bytes on the GPU).
     fn health(&mut self) -> anyhow::Result<Health>;
     fn snapshot(&mut self) -> anyhow::Result<Snapshot>;
-    /// Accelerations used by the last step, in original particle order.
-    fn accelerations(&mut self) -> anyhow::Result<Vec<[f64; 3]>>;
+    /// Density, pressure and acceleration computed by the last step, in original particle
+    /// order (read before a snapshot, which re-evaluates density for the new positions).
+    fn step_fields(&mut self) -> anyhow::Result<StepFields>;
 }
 
 impl<R: Real> Backend for CpuSolver<R> {
@@ -125,7 +134,7 @@ impl<R: Real> Backend for CpuSolver<R> {
     fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
         Ok(CpuSolver::snapshot(self))
     }
-    fn accelerations(&mut self) -> anyhow::Result<Vec<[f64; 3]>> {
-        Ok(CpuSolver::accelerations(self))
+    fn step_fields(&mut self) -> anyhow::Result<StepFields> {
+        Ok(CpuSolver::step_fields(self))
     }
 }

@@ -12,6 +12,7 @@ pub struct ForcesInput<'a, R> {
     pub grid: &'a GridR<R>,
     pub fluid_mass: R,
     pub viscosity: R,
+    pub rest_density: R,
     pub boundary_friction: R,
     pub gravity: V3<R>,
     pub fluid: Neighbours<'a, R>,
@@ -24,10 +25,11 @@ pub struct ForcesInput<'a, R> {
 
 /// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
 ///
-/// Viscosity is the kinematic form of Eq. 7 with the volume m_k/rho_k of Eq. 4:
-/// nu sum_k (m_k/rho_k) lap W_ik (u_k - u_i) for the Mueller kernels (Mueller et al. 2003), and
-/// 2 (d + 2) nu sum_k (m_k/rho_k) (u_ik . x_ik) / (|x_ik|^2 + 0.01 h^2) grad W_ik for the cubic
-/// spline (Monaghan 2005, Eq. 6.3), whose Laplacian changes sign.
+/// Viscosity is Eq. 7 with the volumes m_k/rho_k of Eq. 4 and the dynamic viscosity
+/// mu = rho0 nu, divided by rho_i (Mueller et al. 2003, Eq. 14): nu rho0 sum_k m_k/(rho_i rho_k)
+/// lap W_ik (u_k - u_i), symmetric in i and k so that it conserves momentum exactly; for the
+/// cubic spline, whose Laplacian changes sign, 2 (d + 2) nu rho0 sum_k m_k/(rho_i rho_k)
+/// (u_ik . x_ik) / (|x_ik|^2 + 0.01 h^2) grad W_ik (Monaghan 2005, Eq. 6.3).
 /// A wall particle mirrors the fluid particle's pressure (p_w = max(p_i, 0), rho_w = rho_i; as in
 /// Akinci et al. 2012), so walls only push, and it takes part in viscosity at rest with the
 /// volume m_w/rho_i, scaled by the boundary friction.
@@ -92,7 +94,7 @@ pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
             }
         }
         let nu = if cubic { ten * input.viscosity } else { input.viscosity };
-        let visc = fluid_visc * (nu * input.fluid_mass) + wall_visc * (nu * input.boundary_friction / rho_i);
+        let visc = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
         *acc = fluid_pressure * input.fluid_mass + wall_pressure * wall_p_over + visc + input.gravity;
     });
 }

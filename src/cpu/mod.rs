@@ -12,7 +12,7 @@ pub mod reorder;
 
 use crate::real::{Real, V3};
 use crate::scene::{InitialState, Params};
-use crate::sim::{Health, Snapshot};
+use crate::sim::{Health, Snapshot, StepFields};
 use common::{cell_coords, GridR, KernelCoefficients};
 use integrate::PlaneR;
 use std::ops::Range;
@@ -159,6 +159,7 @@ impl<R: Real> CpuSolver<R> {
             grid: &self.grid,
             fluid_mass: R::of(p.fluid_mass),
             viscosity: R::of(p.viscosity_at_step(self.step)),
+            rest_density: R::of(p.rest_density),
             boundary_friction: R::of(p.boundary_friction),
             gravity: V3::from64(p.gravity),
             fluid: Neighbours { positions: &self.positions, starts: &self.starts },
@@ -222,11 +223,14 @@ impl<R: Real> CpuSolver<R> {
         s
     }
 
-    /// Accelerations of the last step (or of the last `compute_forces`), in original order.
-    pub fn accelerations(&self) -> Vec<[f64; 3]> {
-        let mut out = vec![[0.0; 3]; self.positions.len()];
+    /// Density, pressure and acceleration of the last step, in original order.
+    pub fn step_fields(&self) -> StepFields {
+        let n = self.positions.len();
+        let mut out = StepFields { densities: vec![0.0; n], pressures: vec![0.0; n], accelerations: vec![[0.0; 3]; n] };
         for (slot, &id) in self.ids.iter().enumerate() {
-            out[id as usize] = self.accelerations[slot].to64();
+            out.densities[id as usize] = self.densities[slot].to64();
+            out.pressures[id as usize] = self.pressures[slot].to64();
+            out.accelerations[id as usize] = self.accelerations[slot].to64();
         }
         out
     }

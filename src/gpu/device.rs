@@ -1,0 +1,178 @@
+//! Adapter choice and device creation.
+//!
+//! `WGPU_BACKEND` (vulkan, metal, dx12, gl) and `WGPU_ADAPTER_NAME` (a case-insensitive part of
+//! the name) are honoured as in wgpu's own utilities; otherwise a discrete GPU is preferred.
+
+use anyhow::Context;
+
+/// An adapter, its device and queue.
+pub struct GpuContext {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+}
+
+/// No usable adapter, or one that cannot hold the scene.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter with compute shaders was found{0}")]
+    NoAdapter(String),
+    #[error("adapter '{adapter}' ({backend}): {what} needs {need} but the adapter's {limit} is {have}")]
+    Limit { adapter: String, backend: String, what: String, limit: &'static str, need: u64, have: u64 },
+}
+
+fn backends() -> wgpu::Backends {
+    wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all())
+}
+
+fn instance() -> wgpu::Instance {
+    // Without a display, Mesa's EGL would probe Wayland and X11 and complain on stderr; the
+    // surfaceless platform is what a headless compute or offscreen run needs.
+    // Done once, before any graphics call of the process, so no thread reads the environment
+    // while it changes.
+    static HEADLESS_EGL: std::sync::Once = std::sync::Once::new();
+    HEADLESS_EGL.call_once(|| {
+        if std::env::var_os("EGL_PLATFORM").is_none()
+            && std::env::var_os("WAYLAND_DISPLAY").is_none()
+            && std::env::var_os("DISPLAY").is_none()
+        {
+            std::env::set_var("EGL_PLATFORM", "surfaceless");
+        }
+    });
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    desc.backends = backends();
+    wgpu::Instance::new(desc)
+}
+
+fn type_rank(t: wgpu::DeviceType) -> u32 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+fn backend_rank(b: wgpu::Backend) -> u32 {
+    match b {
+        wgpu::Backend::Vulkan | wgpu::Backend::Metal | wgpu::Backend::Dx12 => 0,
+        wgpu::Backend::Gl => 1,
+        _ => 2,
+    }
+}
+
+fn supports_compute(a: &wgpu::Adapter) -> bool {
+    a.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+}
+
+/// Every adapter of the enabled backends, best first.
+pub fn adapters() -> Vec<wgpu::Adapter> {
+    let mut list = pollster::block_on(instance().enumerate_adapters(backends()));
+    list.sort_by_key(|a| {
+        let i = a.get_info();
+        (type_rank(i.device_type), backend_rank(i.backend))
+    });
+    list
+}
+
+/// Every adapter with compute shaders, best first (what the tests run on).
+pub fn compute_adapters() -> Vec<wgpu::Adapter> {
+    adapters().into_iter().filter(supports_compute).collect()
+}
+
+/// The adapter a run uses: the best one with compute shaders, filtered by `WGPU_ADAPTER_NAME`.
+pub fn choose_adapter() -> Result<wgpu::Adapter, GpuError> {
+    let wanted = std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase());
+    let all = adapters();
+    let names: Vec<String> = all.iter().map(|a| format!("{} ({:?})", a.get_info().name, a.get_info().backend)).collect();
+    all.into_iter()
+        .filter(supports_compute)
+        .find(|a| wanted.as_ref().is_none_or(|w| a.get_info().name.to_lowercase().contains(w)))
+        .ok_or_else(|| {
+            let mut why = String::new();
+            if let Some(w) = &wanted {
+                why += &format!(" matching WGPU_ADAPTER_NAME='{w}'");
+            }
+            if names.is_empty() {
+                why += " (no adapter at all: install a GPU driver, or Mesa's lavapipe/llvmpipe for a software adapter)";
+            } else {
+                why += &format!(" (adapters found: {})", names.join(", "));
+            }
+            GpuError::NoAdapter(why)
+        })
+}
+
+impl GpuContext {
+    /// Opens the chosen adapter with all of its limits, so big scenes can use big buffers.
+    pub fn new() -> anyhow::Result<Self> {
+        let adapter = choose_adapter()?;
+        Self::from_adapter(adapter)
+    }
+
+    pub fn from_adapter(adapter: wgpu::Adapter) -> anyhow::Result<Self> {
+        let info = adapter.get_info();
+        let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("wgsph"),
+            required_features: features,
+            required_limits: adapter.limits(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .with_context(|| format!("cannot open a device on adapter '{}' ({:?})", info.name, info.backend))?;
+        Ok(GpuContext { adapter, device, queue, info })
+    }
+
+    /// Fails with a message naming the adapter and the limit when a buffer of `bytes` cannot be
+    /// bound as one storage buffer.
+    pub fn check_storage_binding(&self, what: &str, bytes: u64) -> Result<(), GpuError> {
+        let l = self.device.limits();
+        let err = |limit, have| GpuError::Limit {
+            adapter: self.info.name.clone(),
+            backend: format!("{:?}", self.info.backend),
+            what: what.into(),
+            limit,
+            need: bytes,
+            have,
+        };
+        if bytes > l.max_storage_buffer_binding_size as u64 {
+            return Err(err("max_storage_buffer_binding_size", l.max_storage_buffer_binding_size as u64));
+        }
+        if bytes > l.max_buffer_size {
+            return Err(err("max_buffer_size", l.max_buffer_size));
+        }
+        Ok(())
+    }
+
+    pub fn describe(&self) -> String {
+        format!("{} ({:?}, {:?})", self.info.name, self.info.backend, self.info.device_type)
+    }
+}
+
+/// One line per adapter with the limits that matter for big scenes (`wgsph adapters`).
+pub fn describe_adapters() -> Vec<String> {
+    adapters()
+        .iter()
+        .map(|a| {
+            let i = a.get_info();
+            let l = a.limits();
+            format!(
+                "{} | backend {:?} | type {:?} | driver {} {} | compute {} | max_storage_buffer_binding_size {} MiB | max_buffer_size {} MiB | storage buffers per stage {} | workgroups per dimension {} | timestamps {}",
+                i.name,
+                i.backend,
+                i.device_type,
+                i.driver,
+                i.driver_info,
+                if supports_compute(a) { "yes" } else { "no" },
+                l.max_storage_buffer_binding_size as u64 >> 20,
+                l.max_buffer_size >> 20,
+                l.max_storage_buffers_per_shader_stage,
+                l.max_compute_workgroups_per_dimension,
+                if a.features().contains(wgpu::Features::TIMESTAMP_QUERY) { "yes" } else { "no" },
+            )
+        })
+        .collect()
+}

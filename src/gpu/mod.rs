@@ -1,0 +1,9 @@
+//! The GPU path: device, structure-of-arrays buffers, the WGSL pipelines and their dispatch order.
+
+pub mod device;
+pub mod pipelines;
+pub mod scan;
+pub mod solver;
+
+pub use device::{GpuContext, GpuError};
+pub use solver::GpuSolver;

@@ -1,0 +1,101 @@
+//! The multi-level exclusive scan (wgsl/prefix_sum.wgsl) over a buffer of u32, for any length.
+
+use super::pipelines::{bind_group, dispatch_size, stage, Stage, Use, SCAN_BLOCK};
+use std::num::NonZeroU64;
+
+/// The levels of a scan of `len` values held in `data`: level 0 scans the data in blocks, each
+/// higher level scans the block totals of the level below, until one block remains.
+pub struct Scan {
+    scan_blocks: Stage,
+    add_offsets: Stage,
+    /// (bind group, values at this level) per level, lowest first.
+    levels: Vec<(wgpu::BindGroup, u64)>,
+    _sums: Vec<wgpu::Buffer>,
+    max_per_dim: u32,
+}
+
+impl Scan {
+    pub fn new(device: &wgpu::Device, uniform: &wgpu::Buffer, data: &wgpu::Buffer, len: u64) -> Scan {
+        let uses = [Use::Uniform, Use::ReadWrite, Use::ReadWrite];
+        let scan_blocks = stage(device, "prefix_sum", "scan_blocks", &uses, &[]);
+        let add_offsets = stage(device, "prefix_sum", "add_block_offsets", &uses, &[]);
+        let mut sums = Vec::new();
+        let mut levels = Vec::new();
+        let mut level_len = len;
+        loop {
+            let blocks = level_len.div_ceil(SCAN_BLOCK as u64).max(1);
+            let sum_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("scan block sums"),
+                size: blocks * 4,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            });
+            let source = if levels.is_empty() { data } else { sums.last().unwrap() };
+            let bg = bind_group(
+                device,
+                "scan level",
+                &scan_blocks.layout,
+                &[
+                    uniform.as_entire_binding(),
+                    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: source,
+                        offset: 0,
+                        size: NonZeroU64::new(level_len * 4),
+                    }),
+                    sum_buffer.as_entire_binding(),
+                ],
+            );
+            levels.push((bg, level_len));
+            sums.push(sum_buffer);
+            if blocks == 1 {
+                break;
+            }
+            level_len = blocks;
+        }
+        Scan { scan_blocks, add_offsets, levels, _sums: sums, max_per_dim: device.limits().max_compute_workgroups_per_dimension }
+    }
+
+    /// Records the scan into a compute pass.
+    pub fn record(&self, pass: &mut wgpu::ComputePass) {
+        pass.set_pipeline(&self.scan_blocks.pipeline);
+        for (bg, len) in &self.levels {
+            let (x, y) = dispatch_size(*len, SCAN_BLOCK, self.max_per_dim);
+            pass.set_bind_group(0, bg, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        pass.set_pipeline(&self.add_offsets.pipeline);
+        for (bg, len) in self.levels.iter().rev().skip(1) {
+            let (x, y) = dispatch_size(*len, SCAN_BLOCK, self.max_per_dim);
+            pass.set_bind_group(0, bg, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+    }
+}
+
+/// Exclusive prefix sum of `values` on the GPU (the same pipeline the step uses for cell
+/// starts); returns `values.len() + 1` sums, the last being the total.
+pub fn exclusive_scan(ctx: &super::GpuContext, values: &[u32]) -> anyhow::Result<Vec<u32>> {
+    use wgpu::util::DeviceExt;
+    let device = &ctx.device;
+    let mut data = values.to_vec();
+    data.push(0);
+    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("params"),
+        contents: &super::solver::GpuParams::default().bytes(),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("scan data"),
+        contents: bytemuck::cast_slice(&data),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    });
+    let scan = Scan::new(device, &uniform, &buffer, data.len() as u64);
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scan") });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });
+        scan.record(&mut pass);
+    }
+    ctx.queue.submit([encoder.finish()]);
+    let bytes = super::solver::read_buffers(ctx, &[(&buffer, data.len() as u64 * 4)])?;
+    Ok(bytemuck::pod_collect_to_vec(&bytes[0]))
+}
