@@ -27,19 +27,6 @@ fn backends() -> wgpu::Backends {
 }
 
 fn instance() -> wgpu::Instance {
-    // Without a display, Mesa's EGL would probe Wayland and X11 and complain on stderr; the
-    // surfaceless platform is what a headless compute or offscreen run needs.
-    // Done once, before any graphics call of the process, so no thread reads the environment
-    // while it changes.
-    static HEADLESS_EGL: std::sync::Once = std::sync::Once::new();
-    HEADLESS_EGL.call_once(|| {
-        if std::env::var_os("EGL_PLATFORM").is_none()
-            && std::env::var_os("WAYLAND_DISPLAY").is_none()
-            && std::env::var_os("DISPLAY").is_none()
-        {
-            std::env::set_var("EGL_PLATFORM", "surfaceless");
-        }
-    });
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
     desc.backends = backends();
     wgpu::Instance::new(desc)
