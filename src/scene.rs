@@ -555,6 +555,32 @@ impl Scene {
         walls.layers.unwrap_or(((self.physics.smoothing_length / s) - 1e-9).ceil().max(1.0) as u32)
     }
 
+    /// The same scene at another resolution: particle and wall spacings, h and dt multiplied by
+    /// `factor` (dt with h keeps the CFL number), so the particle count changes by 1/factor^3.
+    pub fn with_resolution(&self, factor: f64) -> Scene {
+        let mut s = self.clone();
+        s.physics.particle_spacing *= factor;
+        s.physics.smoothing_length *= factor;
+        s.time.dt *= factor;
+        if let Some(m) = &mut s.physics.particle_mass {
+            *m *= factor.powi(3);
+        }
+        for b in &mut s.boundary {
+            if let Boundary::Container { walls, .. } | Boundary::Box { walls, .. } = b {
+                if let Some(sp) = &mut walls.spacing {
+                    *sp *= factor;
+                }
+            }
+        }
+        s
+    }
+
+    /// The scene refined or coarsened to about `fluid_particles` fluid particles.
+    pub fn with_fluid_particles(&self, fluid_particles: u64) -> Scene {
+        let now = self.initial_state().fluid_positions.len().max(1) as f64;
+        self.with_resolution((now / fluid_particles.max(1) as f64).cbrt())
+    }
+
     /// Particle count computed from the lattice sizes, without creating the particles.
     pub fn estimated_particle_count(&self) -> u64 {
         let s = self.physics.particle_spacing;

@@ -387,6 +387,12 @@ impl GpuSolver {
         })
     }
 
+    /// Blocks until the GPU has finished everything submitted (for timing).
+    pub fn wait(&self) -> anyhow::Result<()> {
+        self.ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None })?;
+        Ok(())
+    }
+
     pub fn context(&self) -> &GpuContext {
         &self.ctx
     }
