@@ -63,6 +63,9 @@ pub struct RunArgs {
     /// Write a snapshot every K steps (default: about 50 per run; 0: only the first and last).
     #[arg(long)]
     pub snapshot_every: Option<u64>,
+    /// Refine or coarsen the scene to about N fluid particles (spacings, h and dt scale together).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub particles: Option<u64>,
     /// Check for NaN and escaped particles every K steps.
     #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..))]
     pub check_every: u64,
@@ -195,7 +198,11 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
             return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
         }
     }
-    let scene = load_scene(&args.scene)?;
+    let mut scene = load_scene(&args.scene)?;
+    if let Some(n) = args.particles {
+        scene = scene.with_fluid_particles(n);
+        scene.validate(&crate::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    }
     let params = scene.params();
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
     let mut backend = make_backend(&scene, args.backend, args.precision)?;

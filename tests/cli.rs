@@ -109,3 +109,14 @@ fn a_run_that_blows_up_stops_with_a_diagnosis_and_keeps_its_outputs() {
         }
     }
 }
+
+#[test]
+fn particles_option_scales_the_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = wgsph(&["run", "hydrostatic", "--particles", "500", "--steps", "2", "--backend", "cpu", "--out", "o"], dir.path());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = summary(&dir.path().join("o"));
+    assert!((350..=650).contains(&s.fluid_particles), "{}", s.fluid_particles);
+    let out = wgsph(&["run", "hydrostatic", "--particles", "0"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+}
