@@ -53,20 +53,26 @@ fn small_scene(kernel: &str, eos: &str, clamp: bool) -> Scene {
     Scene::from_toml_str(&text, &SceneOrigin::Text).unwrap()
 }
 
+/// Runs `steps` steps on the GPU and on the f64 CPU path from the scene's initial state and
+/// compares them.
+fn gpu_against_cpu(ctx: GpuContext, scene: &Scene, steps: u64, tol: &wgsph::compare::Tolerances) -> wgsph::compare::Comparison {
+    let (p, init) = (scene.params(), scene.initial_state());
+    let mut gpu = GpuSolver::new(ctx, &p, &init).unwrap();
+    let mut cpu = CpuSolver::<f64>::new(&p, &init);
+    gpu.step(steps).unwrap();
+    cpu.step(steps);
+    let (gf, cf) = (gpu.step_fields().unwrap(), cpu.step_fields());
+    let (gs, cs) = (gpu.snapshot().unwrap(), cpu.snapshot());
+    compare(&p, steps, tol, (&gf, &gs), (&cf, &cs))
+}
+
 #[test]
 fn one_step_agrees_with_the_f64_cpu_path_to_f32_precision() {
     for ctx in common::contexts() {
         let name = ctx.describe();
         for (kernel, eos, clamp) in [("mueller", "tait", true), ("mueller", "linear", false), ("cubic_spline", "tait", false)] {
-            let scene = small_scene(kernel, eos, clamp);
-            let (p, init) = (scene.params(), scene.initial_state());
-            let mut gpu = GpuSolver::new(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &p, &init).unwrap();
-            let mut cpu = CpuSolver::<f64>::new(&p, &init);
-            gpu.step(1).unwrap();
-            cpu.step(1);
-            let (gf, cf) = (gpu.step_fields().unwrap(), cpu.step_fields());
-            let (gs, cs) = (gpu.snapshot().unwrap(), cpu.snapshot());
-            let c = compare(&p, 1, &ONE_STEP, (&gf, &gs), (&cf, &cs));
+            let device = GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
+            let c = gpu_against_cpu(device, &small_scene(kernel, eos, clamp), 1, &ONE_STEP);
             let what = format!("{name} {kernel}/{eos}:\n{}", c.table());
             // Density to a relative 1e-5; acceleration to 1e-4 of its RMS magnitude.
             assert!(c.field("density").max < 1e-5, "{what}");
@@ -81,15 +87,7 @@ fn one_step_agrees_with_the_f64_cpu_path_to_f32_precision() {
 #[test]
 fn many_steps_stay_within_the_stated_tolerances_including_a_viscosity_change() {
     for ctx in common::contexts() {
-        let scene = small_scene("mueller", "tait", true);
-        let (p, init) = (scene.params(), scene.initial_state());
-        let mut gpu = GpuSolver::new(ctx, &p, &init).unwrap();
-        let mut cpu = CpuSolver::<f64>::new(&p, &init);
-        gpu.step(100).unwrap();
-        cpu.step(100);
-        let (gf, cf) = (gpu.step_fields().unwrap(), cpu.step_fields());
-        let (gs, cs) = (gpu.snapshot().unwrap(), cpu.snapshot());
-        let c = compare(&p, 100, &MANY_STEPS, (&gf, &gs), (&cf, &cs));
+        let c = gpu_against_cpu(ctx, &small_scene("mueller", "tait", true), 100, &MANY_STEPS);
         assert!(c.passed(), "{}", c.table());
     }
 }
@@ -97,15 +95,7 @@ fn many_steps_stay_within_the_stated_tolerances_including_a_viscosity_change() {
 #[test]
 fn compare_dam_break_100_steps_passes() {
     for ctx in common::contexts() {
-        let scene = Scene::builtin("dam_break").unwrap();
-        let (p, init) = (scene.params(), scene.initial_state());
-        let mut gpu = GpuSolver::new(ctx, &p, &init).unwrap();
-        let mut cpu = CpuSolver::<f64>::new(&p, &init);
-        gpu.step(100).unwrap();
-        cpu.step(100);
-        let (gf, cf) = (gpu.step_fields().unwrap(), cpu.step_fields());
-        let (gs, cs) = (gpu.snapshot().unwrap(), cpu.snapshot());
-        let c = compare(&p, 100, &MANY_STEPS, (&gf, &gs), (&cf, &cs));
+        let c = gpu_against_cpu(ctx, &Scene::builtin("dam_break").unwrap(), 100, &MANY_STEPS);
         assert!(c.passed(), "{}", c.table());
     }
 }
@@ -126,7 +116,6 @@ fn binning_matches_a_cpu_counting_sort_exactly() {
             assert_eq!(starts, cpu_starts);
             assert_eq!(ids, sorted);
         }
-        drop(ctx);
     }
 }
 
