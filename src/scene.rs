@@ -47,7 +47,7 @@ pub const BUILTIN_SCENES: &[(&str, &str, &str)] = &[
     ),
     (
         "dam_break",
-        "a 0.4 m x 0.8 m water column collapsing in a 1.6 m tank (SI, Tait EOS, c0 = 40 m/s)",
+        "a 0.4 m x 0.8 m water column collapsing in a closed 1.6 m x 1 m tank (SI, Tait EOS, c0 = 40 m/s)",
         include_str!("../scenes/dam_break.toml"),
     ),
     (
