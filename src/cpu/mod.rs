@@ -13,7 +13,7 @@ pub mod reorder;
 use crate::real::{Real, V3};
 use crate::scene::{InitialState, Params};
 use crate::sim::{Health, Snapshot, StepFields};
-use common::{cell_coords, GridR, KernelCoefficients};
+use common::{GridR, KernelCoefficients};
 use integrate::PlaneR;
 use std::ops::Range;
 
@@ -233,11 +233,6 @@ impl<R: Real> CpuSolver<R> {
             out.accelerations[id as usize] = self.accelerations[slot].to64();
         }
         out
-    }
-
-    /// Current cell of every particle in original order (for tests of the binning).
-    pub fn cell_of(&self, p: [f64; 3]) -> u32 {
-        self.grid.key(cell_coords(&self.grid, V3::from64(p)))
     }
 
     /// The sorted wall particles and their cell starts.
