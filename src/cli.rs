@@ -179,12 +179,8 @@ fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
         if target <= done {
             continue;
         }
-        gpu.step(target - done)?;
-        cpu.step(target - done);
+        let c = crate::compare::step_and_compare(&mut gpu, &mut cpu, target - done, tol)?;
         done = target;
-        let (gf, cf) = (gpu.step_fields()?, cpu.step_fields());
-        let (gs, cs) = (gpu.snapshot()?, cpu.snapshot());
-        let c = crate::compare::compare(&params, done, tol, (&gf, &gs), (&cf, &cs));
         print!("{}", c.table());
         ok &= c.passed();
     }

@@ -10,7 +10,7 @@
 //! - velocity: |v - v_ref| / max(RMS(|v_ref|), |g| dt).
 
 use crate::scene::Params;
-use crate::sim::{Snapshot, StepFields};
+use crate::sim::{Backend, Snapshot, StepFields};
 
 /// Maximum and RMS error of one field.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -127,4 +127,26 @@ pub fn compare(
             ("velocity", field(velocity), tol.velocity),
         ],
     }
+}
+
+/// Advances both backends by `steps` more steps and compares them there: the fields of the last
+/// step, then the state after it (in that order, since a snapshot re-evaluates density).
+pub fn step_and_compare(
+    test: &mut dyn Backend,
+    reference: &mut dyn Backend,
+    steps: u64,
+    tol: &Tolerances,
+) -> anyhow::Result<Comparison> {
+    test.step(steps)?;
+    reference.step(steps)?;
+    anyhow::ensure!(
+        test.steps_done() == reference.steps_done(),
+        "the backends stopped at different steps ({} and {})",
+        test.steps_done(),
+        reference.steps_done()
+    );
+    let (tf, rf) = (test.step_fields()?, reference.step_fields()?);
+    let (ts, rs) = (test.snapshot()?, reference.snapshot()?);
+    let params = reference.params().clone();
+    Ok(compare(&params, reference.steps_done(), tol, (&tf, &ts), (&rf, &rs)))
 }

@@ -577,14 +577,21 @@ impl Scene {
 
     /// The scene refined or coarsened to about `fluid_particles` fluid particles.
     pub fn with_fluid_particles(&self, fluid_particles: u64) -> Scene {
-        let now = self.initial_state().fluid_positions.len().max(1) as f64;
+        let now = self.fluid_particle_count().max(1) as f64;
         self.with_resolution((now / fluid_particles.max(1) as f64).cbrt())
     }
 
-    /// Particle count computed from the lattice sizes, without creating the particles.
+    /// Fluid particles of the scene, counted from the lattice sizes without creating them.
+    pub fn fluid_particle_count(&self) -> u64 {
+        let s = self.physics.particle_spacing;
+        self.fluid.iter().map(|b| lattice_counts(b.min, b.max, s).iter().product::<u64>()).sum()
+    }
+
+    /// Particle count (fluid and walls, walls over-estimated by their bounding shell) computed
+    /// from the lattice sizes, without creating the particles.
     pub fn estimated_particle_count(&self) -> u64 {
         let s = self.physics.particle_spacing;
-        let mut n: u64 = self.fluid.iter().map(|b| lattice_counts(b.min, b.max, s).iter().product::<u64>()).sum();
+        let mut n = self.fluid_particle_count();
         for b in &self.boundary {
             if let Boundary::Container { min, max, walls, .. } | Boundary::Box { min, max, walls } = b {
                 let ws = walls.spacing.unwrap_or(s);

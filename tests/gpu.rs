@@ -3,7 +3,7 @@
 
 mod common;
 
-use wgsph::compare::{compare, MANY_STEPS, ONE_STEP};
+use wgsph::compare::{step_and_compare, MANY_STEPS, ONE_STEP};
 use wgsph::cpu::common::GridR;
 use wgsph::cpu::{prefix_sum::prefix_sum, sort_by_cell, CpuSolver};
 use wgsph::gpu::scan::exclusive_scan;
@@ -59,11 +59,7 @@ fn gpu_against_cpu(ctx: GpuContext, scene: &Scene, steps: u64, tol: &wgsph::comp
     let (p, init) = (scene.params(), scene.initial_state());
     let mut gpu = GpuSolver::new(ctx, &p, &init).unwrap();
     let mut cpu = CpuSolver::<f64>::new(&p, &init);
-    gpu.step(steps).unwrap();
-    cpu.step(steps);
-    let (gf, cf) = (gpu.step_fields().unwrap(), cpu.step_fields());
-    let (gs, cs) = (gpu.snapshot().unwrap(), cpu.snapshot());
-    compare(&p, steps, tol, (&gf, &gs), (&cf, &cs))
+    step_and_compare(&mut gpu, &mut cpu, steps, tol).unwrap()
 }
 
 #[test]

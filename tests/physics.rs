@@ -2,7 +2,6 @@
 
 use wgsph::cpu::CpuSolver;
 use wgsph::scene::{Scene, SceneOrigin};
-use wgsph::sim::Backend;
 
 fn scene(text: &str) -> Scene {
     Scene::from_toml_str(text, &SceneOrigin::Text).expect("valid test scene")

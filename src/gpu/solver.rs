@@ -13,45 +13,27 @@ use crate::sim::{Backend, Health, Snapshot, StepFields};
 use encase::{ShaderType, UniformBuffer};
 use wgpu::util::DeviceExt;
 
-/// A WGSL vec4<f32> for encase.
+/// A WGSL `vec4<T>` for encase (which has no glam support of its own).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Vec4f(pub [f32; 4]);
-impl AsRef<[f32; 4]> for Vec4f {
-    fn as_ref(&self) -> &[f32; 4] {
+pub struct Vec4<T>(pub [T; 4]);
+impl<T> AsRef<[T; 4]> for Vec4<T> {
+    fn as_ref(&self) -> &[T; 4] {
         &self.0
     }
 }
-impl AsMut<[f32; 4]> for Vec4f {
-    fn as_mut(&mut self) -> &mut [f32; 4] {
+impl<T> AsMut<[T; 4]> for Vec4<T> {
+    fn as_mut(&mut self) -> &mut [T; 4] {
         &mut self.0
     }
 }
-impl From<[f32; 4]> for Vec4f {
-    fn from(v: [f32; 4]) -> Self {
-        Vec4f(v)
+impl<T> From<[T; 4]> for Vec4<T> {
+    fn from(v: [T; 4]) -> Self {
+        Vec4(v)
     }
 }
-encase::impl_vector!(4, Vec4f, f32; using AsRef AsMut From);
-
-/// A WGSL vec4<u32> for encase.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Vec4u(pub [u32; 4]);
-impl AsRef<[u32; 4]> for Vec4u {
-    fn as_ref(&self) -> &[u32; 4] {
-        &self.0
-    }
-}
-impl AsMut<[u32; 4]> for Vec4u {
-    fn as_mut(&mut self) -> &mut [u32; 4] {
-        &mut self.0
-    }
-}
-impl From<[u32; 4]> for Vec4u {
-    fn from(v: [u32; 4]) -> Self {
-        Vec4u(v)
-    }
-}
-encase::impl_vector!(4, Vec4u, u32; using AsRef AsMut From);
+encase::impl_vector!(4, Vec4<T>; (T); using AsRef AsMut From);
+pub type Vec4f = Vec4<f32>;
+pub type Vec4u = Vec4<u32>;
 
 /// The uniform parameter block: `struct Params` in wgsl/common.wgsl.
 #[derive(ShaderType, Clone, Debug, Default)]
@@ -82,7 +64,7 @@ pub struct GpuParams {
 }
 
 fn v4(v: [f64; 3]) -> Vec4f {
-    Vec4f([v[0] as f32, v[1] as f32, v[2] as f32, 0.0])
+    Vec4([v[0] as f32, v[1] as f32, v[2] as f32, 0.0])
 }
 
 impl GpuParams {
@@ -93,15 +75,15 @@ impl GpuParams {
         let mut planes = [Vec4f::default(); MAX_PLANES];
         let mut restitution = [Vec4f::default(); MAX_PLANES];
         for (i, pl) in p.planes.iter().enumerate() {
-            planes[i] = Vec4f([pl.normal[0] as f32, pl.normal[1] as f32, pl.normal[2] as f32, pl.offset as f32]);
-            restitution[i] = Vec4f([pl.restitution as f32, 0.0, 0.0, 0.0]);
+            planes[i] = Vec4([pl.normal[0] as f32, pl.normal[1] as f32, pl.normal[2] as f32, pl.offset as f32]);
+            restitution[i] = Vec4([pl.restitution as f32, 0.0, 0.0, 0.0]);
         }
         GpuParams {
             domain_min: v4(p.domain_min),
             domain_max: v4(p.domain_max),
             gravity: v4(p.gravity),
-            grid_origin: Vec4f([g.origin.0[0], g.origin.0[1], g.origin.0[2], 0.0]),
-            grid_dims: Vec4u([g.dims[0], g.dims[1], g.dims[2], 0]),
+            grid_origin: Vec4([g.origin.0[0], g.origin.0[1], g.origin.0[2], 0.0]),
+            grid_dims: Vec4([g.dims[0], g.dims[1], g.dims[2], 0]),
             h: k.h,
             h2: k.h2,
             inv_cell: g.inv_cell,
