@@ -96,7 +96,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         let health = backend.health()?;
         if let Some(b) = &bar {
             b.set_position(step - start);
-            b.set_message(format!("t = {:.3}", step as f64 * params.dt));
+            b.set_message(format!("t = {:.3}", backend.time()));
         }
         if !health.is_ok() {
             failure = Some(diagnose(&params, &health, max_speed));
@@ -119,7 +119,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         fluid_particles: backend.fluid_count(),
         wall_particles: backend.wall_count(),
         steps,
-        sim_time: backend.steps_done() as f64 * params.dt,
+        sim_time: backend.time(),
         dt: params.dt,
         wall_seconds,
         particle_steps_per_second: if wall_seconds > 0.0 { (steps as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },

@@ -97,6 +97,10 @@ pub trait Backend {
     /// Advances up to `n` steps (a backend may stop early after a step that went wrong).
     fn step(&mut self, n: u64) -> anyhow::Result<()>;
     fn steps_done(&self) -> u64;
+    /// Simulated time reached so far.
+    fn time(&self) -> f64 {
+        self.steps_done() as f64 * self.params().dt
+    }
     /// Reads the health counters (a few bytes on the GPU).
     fn health(&mut self) -> anyhow::Result<Health>;
     fn snapshot(&mut self) -> anyhow::Result<Snapshot>;
