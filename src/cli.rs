@@ -69,6 +69,45 @@ pub struct RunArgs {
     /// Check for NaN and escaped particles every K steps.
     #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..))]
     pub check_every: u64,
+    /// Write rendered pictures DIR/frame_00000.png, ... (every --frame-every steps).
+    #[arg(long, value_name = "DIR")]
+    pub frames: Option<PathBuf>,
+    /// A picture every K steps (default: about 100 per run).
+    #[arg(long, value_name = "K", requires = "frames", value_parser = clap::value_parser!(u64).range(1..))]
+    pub frame_every: Option<u64>,
+    #[command(flatten)]
+    pub picture: PictureArgs,
+}
+
+/// How pictures look (`run --frames` and `view`).
+#[derive(Args, Debug, Clone)]
+pub struct PictureArgs {
+    /// Picture size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = crate::render::parse_resolution)]
+    pub resolution: (u32, u32),
+    #[arg(long, value_enum, default_value_t = crate::render::Style::Particles)]
+    pub style: crate::render::Style,
+    /// The field that colours the particles (viridis colour map).
+    #[arg(long, value_enum, default_value_t = crate::render::ColorBy::Speed)]
+    pub color_by: crate::render::ColorBy,
+    /// A fixed colour range MIN:MAX (default: each picture's smallest to largest value).
+    #[arg(long, value_name = "MIN:MAX", value_parser = crate::render::parse_range)]
+    pub color_range: Option<(f32, f32)>,
+    #[arg(long, value_enum, default_value_t = crate::render::Walls::Faint)]
+    pub walls: crate::render::Walls,
+}
+
+impl PictureArgs {
+    pub fn options(&self) -> crate::render::RenderOptions {
+        crate::render::RenderOptions {
+            width: self.resolution.0,
+            height: self.resolution.1,
+            style: self.style,
+            color_by: self.color_by,
+            range: self.color_range,
+            walls: self.walls,
+        }
+    }
 }
 
 impl Default for RunArgs {
@@ -208,9 +247,17 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
         snapshot_every: args.snapshot_every.unwrap_or_else(|| default_snapshot_every(steps)),
         check_every: args.check_every,
         progress: true,
+        frames: args.frames.as_ref().map(|dir| crate::run::FramesSpec {
+            dir: dir.clone(),
+            every: args.frame_every.unwrap_or((steps / 100).max(1)),
+            options: args.picture.options(),
+        }),
     };
     let summary = run(backend.as_mut(), &scene, &opts)?;
     println!("{}", summary_line(&summary, &args.out));
+    if let Some(dir) = &args.frames {
+        println!("{} pictures in {}", summary.frames, dir.display());
+    }
     if let Some(f) = &summary.failure {
         eprintln!("error: the run stopped at {f}");
         if let Some(s) = &summary.last_snapshot {

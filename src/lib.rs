@@ -12,6 +12,7 @@ pub mod cpu;
 pub mod gpu;
 pub mod output;
 pub mod real;
+pub mod render;
 pub mod run;
 pub mod scene;
 pub mod sim;

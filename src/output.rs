@@ -87,6 +87,9 @@ pub struct Summary {
     /// Why the run stopped early, if it did.
     pub failure: Option<String>,
     pub last_snapshot: Option<String>,
+    /// Pictures written (`--frames`).
+    #[serde(default)]
+    pub frames: u64,
 }
 
 pub fn write_summary(path: &Path, s: &Summary) -> anyhow::Result<()> {

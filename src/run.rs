@@ -1,12 +1,23 @@
 //! The `wgsph run` loop: steps a backend, writes snapshots and the summary, and stops with a
 //! diagnosis when the state goes bad.
 
+use crate::render::frames::FrameRecorder;
 use crate::output::{snapshot_path, write_snapshot_csv, write_summary, Summary};
 use crate::scene::{Params, Scene};
 use crate::sim::{Backend, Health};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// Pictures to write during a run.
+#[derive(Clone, Debug)]
+pub struct FramesSpec {
+    pub dir: PathBuf,
+    /// A picture every this many steps (the first of the run and the last too).
+    pub every: u64,
+    pub options: crate::render::RenderOptions,
+}
+
+#[derive(Default)]
 pub struct RunOptions {
     pub steps: u64,
     pub out: PathBuf,
@@ -15,6 +26,7 @@ pub struct RunOptions {
     /// Read the health counters every this many steps.
     pub check_every: u64,
     pub progress: bool,
+    pub frames: Option<FramesSpec>,
 }
 
 /// Steps for a run of `time` seconds (or the scene's end time).
@@ -86,11 +98,19 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     if opts.snapshot_every > 0 || opts.steps == 0 {
         write_snap(backend, &mut last_snapshot, &mut max_speed)?;
     }
+    let mut frames = match &opts.frames {
+        Some(f) => Some(FrameRecorder::new(backend, scene, f.options.clone(), f.dir.clone(), f.every.max(1))?),
+        None => None,
+    };
+    if let Some(f) = &mut frames {
+        f.capture(backend)?;
+    }
     let mut step = start;
     while step < end {
         let next_snap = if opts.snapshot_every > 0 { (step / opts.snapshot_every + 1) * opts.snapshot_every } else { end };
         let next_check = (step / opts.check_every.max(1) + 1) * opts.check_every.max(1);
-        let target = end.min(next_snap).min(next_check);
+        let next_frame = frames.as_ref().map_or(end, |f| (step / f.every + 1) * f.every);
+        let target = end.min(next_snap).min(next_check).min(next_frame);
         backend.step(target - step)?;
         step = backend.steps_done();
         let health = backend.health()?;
@@ -105,7 +125,16 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
             write_snap(backend, &mut last_snapshot, &mut max_speed)?;
         }
+        if let Some(f) = &mut frames {
+            if step == end || step % f.every == 0 {
+                f.capture(backend)?;
+            }
+        }
     }
+    let frames_written = match frames {
+        Some(f) => f.finish()?,
+        None => 0,
+    };
     if let Some(b) = bar {
         b.finish_and_clear();
     }
@@ -128,6 +157,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         escaped: health.escaped,
         failure: failure.clone(),
         last_snapshot: last_snapshot.as_ref().map(|p| p.display().to_string()),
+        frames: frames_written,
     };
     write_summary(&opts.out.join("summary.json"), &summary)?;
     Ok(summary)

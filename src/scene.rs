@@ -75,6 +75,29 @@ pub struct Scene {
     pub fluid: Vec<FluidBlock>,
     #[serde(default)]
     pub boundary: Vec<Boundary>,
+    /// Camera of rendered frames; default: framed automatically around the tank and fluid.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraSpec>,
+}
+
+/// A perspective camera for rendered frames.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+    /// Vertical field of view in degrees.
+    #[serde(default = "default_fov")]
+    pub fov_degrees: f64,
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn default_fov() -> f64 {
+    40.0
 }
 
 fn default_name() -> String {
@@ -463,6 +486,25 @@ impl Scene {
             return Err(err(origin, "physics.boundary_friction", format!("is {}; must be finite and >= 0", p.boundary_friction)));
         }
         finite3("physics.gravity", p.gravity)?;
+        if let Some(c) = &self.camera {
+            finite3("camera.eye", c.eye)?;
+            finite3("camera.target", c.target)?;
+            finite3("camera.up", c.up)?;
+            let d = [c.target[0] - c.eye[0], c.target[1] - c.eye[1], c.target[2] - c.eye[2]];
+            let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if dn == 0.0 {
+                return Err(err(origin, "camera.target", format!("is {:?}, the same point as camera.eye; they must differ", c.target)));
+            }
+            let un = (c.up[0] * c.up[0] + c.up[1] * c.up[1] + c.up[2] * c.up[2]).sqrt();
+            let cross = [d[1] * c.up[2] - d[2] * c.up[1], d[2] * c.up[0] - d[0] * c.up[2], d[0] * c.up[1] - d[1] * c.up[0]];
+            let cn = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
+            if !(un > 0.0 && cn > 1e-6 * dn * un) {
+                return Err(err(origin, "camera.up", format!("is {:?}; must be non-zero and not parallel to the viewing direction", c.up)));
+            }
+            if !(c.fov_degrees.is_finite() && c.fov_degrees > 1.0 && c.fov_degrees < 170.0) {
+                return Err(err(origin, "camera.fov_degrees", format!("is {}; must be between 1 and 170", c.fov_degrees)));
+            }
+        }
         positive("time.dt", self.time.dt)?;
         positive("time.end_time", self.time.end_time)?;
         ordered("domain", self.domain.min, self.domain.max)?;
@@ -660,6 +702,37 @@ impl Scene {
     }
 
     /// Regions fluid must never enter: the wall shells of containers and the obstacle boxes.
+    /// The box worth looking at: the solids and the fluid blocks, within the domain (the
+    /// domain alone when the scene has neither).
+    pub fn view_bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut boxes: Vec<([f64; 3], [f64; 3])> = self.solid_regions().iter().map(|r| (r.min, r.max)).collect();
+        boxes.extend(self.fluid.iter().map(|f| (f.min, f.max)));
+        if boxes.is_empty() {
+            return (self.domain.min, self.domain.max);
+        }
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for (a, b) in boxes {
+            for k in 0..3 {
+                lo[k] = lo[k].min(a[k]).max(self.domain.min[k]);
+                hi[k] = hi[k].max(b[k]).min(self.domain.max[k]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Lattice spacing of the wall particles (the smallest over the particle boundaries).
+    pub fn wall_spacing(&self) -> f64 {
+        self.boundary
+            .iter()
+            .filter_map(|b| match b {
+                Boundary::Container { walls, .. } | Boundary::Box { walls, .. } => Some(walls.spacing.unwrap_or(self.physics.particle_spacing)),
+                Boundary::Plane { .. } => None,
+            })
+            .reduce(f64::min)
+            .unwrap_or(self.physics.particle_spacing)
+    }
+
     pub fn solid_regions(&self) -> Vec<SolidRegion> {
         let mut out = Vec::new();
         for b in &self.boundary {

@@ -107,6 +107,11 @@ pub trait Backend {
     /// Density, pressure and acceleration computed by the last step, in original particle
     /// order (read before a snapshot, which re-evaluates density for the new positions).
     fn step_fields(&mut self) -> anyhow::Result<StepFields>;
+    /// The device and the particle buffers of a backend that keeps its particles on a GPU, for
+    /// drawing them where they are (in the backend's current order, after the last step).
+    fn gpu_particles(&self) -> Option<(crate::gpu::GpuContext, crate::render::ParticleBuffers)> {
+        None
+    }
 }
 
 impl<R: Real> Backend for CpuSolver<R> {

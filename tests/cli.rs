@@ -120,3 +120,40 @@ fn particles_option_scales_the_scene() {
     let out = wgsph(&["run", "hydrostatic", "--particles", "0"], dir.path());
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn run_writes_frames_of_the_asked_size() {
+    let dir = tempfile::tempdir().unwrap();
+    if common::contexts().is_empty() {
+        return;
+    }
+    let out = wgsph(
+        &["run", "hydrostatic", "--steps", "20", "--out", "o", "--frames", "f", "--frame-every", "10", "--resolution", "160x90", "--style", "surface"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut names: Vec<String> =
+        std::fs::read_dir(dir.path().join("f")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    names.sort();
+    assert_eq!(names, ["frame_00000.png", "frame_00001.png", "frame_00002.png"]);
+    let img = image::open(dir.path().join("f/frame_00002.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (160, 90));
+    assert_eq!(summary(&dir.path().join("o")).frames, 3);
+}
+
+#[test]
+fn bad_picture_options_are_refused_with_what_is_allowed() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flag, value, expect) in [
+        ("--resolution", "1280by720", "WIDTHxHEIGHT"),
+        ("--resolution", "4x4", "between 16 and 8192"),
+        ("--color-range", "3:1", "MIN < MAX"),
+        ("--style", "cartoon", "particles"),
+    ] {
+        let out = wgsph(&["run", "hydrostatic", "--steps", "1", "--frames", "f", flag, value], dir.path());
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(expect) && err.contains(flag), "{flag} {value}: {err}");
+    }
+    assert!(!dir.path().join("f").exists());
+}

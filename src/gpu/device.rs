@@ -5,7 +5,8 @@
 
 use anyhow::Context;
 
-/// An adapter, its device and queue.
+/// An adapter, its device and queue (handles: clones share them).
+#[derive(Clone)]
 pub struct GpuContext {
     pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,

@@ -181,7 +181,8 @@ fn storage(device: &wgpu::Device, label: &str, bytes: u64, extra: wgpu::BufferUs
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST | extra,
+        // VERTEX: the renderer draws particles straight from these buffers.
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::VERTEX | extra,
         mapped_at_creation: false,
     })
 }
@@ -192,7 +193,7 @@ fn storage_init(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Bu
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some(label),
         contents: &data,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::VERTEX,
     })
 }
 
@@ -589,6 +590,19 @@ impl Backend for GpuSolver {
             densities: unpermute(&ids, rho.iter().map(|&v| v as f64)),
             pressures: unpermute(&ids, p.iter().map(|&v| v as f64)),
         })
+    }
+    fn gpu_particles(&self) -> Option<(GpuContext, crate::render::ParticleBuffers)> {
+        let st = &self.state[self.current];
+        Some((
+            self.ctx.clone(),
+            crate::render::ParticleBuffers {
+                positions: st.positions.clone(),
+                velocities: st.velocities.clone(),
+                densities: self.densities.clone(),
+                pressures: self.pressures.clone(),
+                count: self.fluid_count,
+            },
+        ))
     }
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {
         let n = self.fluid_count as u64;
