@@ -25,6 +25,29 @@ pub enum Command {
     Adapters,
     /// Run the GPU and the f64 CPU reference from the same state and compare every field.
     Compare(CompareArgs),
+    /// Open a window that runs a scene on the GPU and draws every frame (orbit camera, keys).
+    View(ViewArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct ViewArgs {
+    /// A built-in scene name or a path to a scene TOML file.
+    #[arg(default_value = "dam_break")]
+    pub scene: String,
+    /// Refine or coarsen the scene to about N fluid particles.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub particles: Option<u64>,
+    /// Simulation steps per drawn frame (default: 1/60 s of simulated time, at most 64).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps_per_frame: Option<u64>,
+    #[command(flatten)]
+    pub picture: PictureArgs,
+    /// Save the last frame's picture (as presented) to this PNG file; needs --quit-after.
+    #[arg(long, value_name = "FILE", requires = "quit_after")]
+    pub screenshot: Option<PathBuf>,
+    /// Close the window after N frames.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub quit_after: Option<u64>,
 }
 
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
@@ -142,6 +165,7 @@ pub fn main() -> i32 {
     let result = match cli.command.unwrap_or(Command::Run(RunArgs::default())) {
         Command::Run(args) => cmd_run(&args),
         Command::Compare(args) => cmd_compare(&args),
+        Command::View(args) => cmd_view(&args),
         Command::Adapters => {
             let lines = crate::gpu::device::describe_adapters();
             if lines.is_empty() {
@@ -225,6 +249,31 @@ fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
     }
     println!("{}", if ok { "compare: passed" } else { "compare: FAILED (an error is over its tolerance)" });
     Ok(if ok { 0 } else { 1 })
+}
+
+#[cfg(feature = "view")]
+fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
+    let mut scene = load_scene(&args.scene)?;
+    if let Some(n) = args.particles {
+        scene = scene.with_fluid_particles(n);
+        scene.validate(&crate::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    }
+    let dt = scene.time.dt;
+    let steps_per_frame = args.steps_per_frame.unwrap_or_else(|| ((1.0 / 60.0 / dt).ceil() as u64).clamp(1, 64));
+    crate::view::view(
+        scene,
+        crate::view::ViewOptions {
+            picture: args.picture.options(),
+            steps_per_frame,
+            screenshot: args.screenshot.clone(),
+            quit_after: args.quit_after,
+        },
+    )
+}
+
+#[cfg(not(feature = "view"))]
+fn cmd_view(_: &ViewArgs) -> anyhow::Result<i32> {
+    Err(InputError("this wgsph was built without the `view` feature (a headless build); rebuild with default features for `wgsph view`".into()).into())
 }
 
 fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {

@@ -16,6 +16,8 @@ pub mod render;
 pub mod run;
 pub mod scene;
 pub mod sim;
+#[cfg(feature = "view")]
+pub mod view;
 
 pub use scene::{Scene, SceneError};
 pub use sim::{Backend, Health, Snapshot};

@@ -23,7 +23,7 @@ pub enum GpuError {
     Limit { adapter: String, backend: String, what: String, limit: &'static str, need: u64, have: u64 },
 }
 
-fn backends() -> wgpu::Backends {
+pub fn backends() -> wgpu::Backends {
     wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all())
 }
 
@@ -57,7 +57,11 @@ fn supports_compute(a: &wgpu::Adapter) -> bool {
 
 /// Every adapter of the enabled backends, best first.
 pub fn adapters() -> Vec<wgpu::Adapter> {
-    let mut list = pollster::block_on(instance().enumerate_adapters(backends()));
+    best_first(pollster::block_on(instance().enumerate_adapters(backends())))
+}
+
+/// Sorts adapters: discrete before integrated before software; native APIs before OpenGL.
+pub fn best_first(mut list: Vec<wgpu::Adapter>) -> Vec<wgpu::Adapter> {
     list.sort_by_key(|a| {
         let i = a.get_info();
         (type_rank(i.device_type), backend_rank(i.backend))
@@ -72,8 +76,12 @@ pub fn compute_adapters() -> Vec<wgpu::Adapter> {
 
 /// The adapter a run uses: the best one with compute shaders, filtered by `WGPU_ADAPTER_NAME`.
 pub fn choose_adapter() -> Result<wgpu::Adapter, GpuError> {
+    choose_from(adapters())
+}
+
+/// The best of `all` (sorted best first) with compute shaders, filtered by `WGPU_ADAPTER_NAME`.
+pub fn choose_from(all: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter, GpuError> {
     let wanted = std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase());
-    let all = adapters();
     let names: Vec<String> = all.iter().map(|a| format!("{} ({:?})", a.get_info().name, a.get_info().backend)).collect();
     all.into_iter()
         .filter(supports_compute)
