@@ -123,3 +123,18 @@ fn the_command_line_exits_with_2_on_bad_input_before_any_work() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cpu"));
 }
+
+#[test]
+fn camera_fields_are_checked() {
+    let with = |camera: &str| format!("{GOOD}\n[camera]\n{camera}\n");
+    Scene::from_toml_str(&with("eye = [0.5, 0.5, 3.0]\ntarget = [0.5, 0.5, 0.5]"), &SceneOrigin::Text).unwrap();
+    for (camera, field, allowed) in [
+        ("eye = [0.5, 0.5, 0.5]\ntarget = [0.5, 0.5, 0.5]", "camera.target", "must differ"),
+        ("eye = [0.5, 3.0, 0.5]\ntarget = [0.5, 0.5, 0.5]", "camera.up", "not parallel"),
+        ("eye = [0.5, 0.5, 3.0]\ntarget = [0.5, 0.5, 0.5]\nfov_degrees = 180.0", "camera.fov_degrees", "between 1 and 170"),
+        ("eye = [0.5, 0.5, nan]\ntarget = [0.5, 0.5, 0.5]", "camera.eye", "finite"),
+    ] {
+        let e = error_of(&with(camera));
+        assert!(e.contains("tank.toml") && e.contains(field) && e.contains(allowed), "{camera}: {e}");
+    }
+}
