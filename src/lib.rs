@@ -6,13 +6,16 @@
 //! Laplacian viscosity, gravity, wall particles and analytic planes, a uniform grid of cell size
 //! h and symplectic Euler.
 
+pub mod checkpoint;
 pub mod cli;
 pub mod compare;
 pub mod cpu;
+pub mod export;
 pub mod gpu;
 pub mod output;
 pub mod real;
 pub mod run;
+pub mod rundir;
 pub mod scene;
 pub mod sim;
 

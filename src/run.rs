@@ -1,7 +1,8 @@
 //! The `wgsph run` loop: steps a backend, writes snapshots and the summary, and stops with a
 //! diagnosis when the state goes bad.
 
-use crate::output::{snapshot_path, write_snapshot_csv, write_summary, Summary};
+use crate::export::SnapshotFormat;
+use crate::output::{write_summary, Summary};
 use crate::scene::{Params, Scene};
 use crate::sim::{Backend, Health};
 use std::path::{Path, PathBuf};
@@ -15,6 +16,35 @@ pub struct RunOptions {
     /// Read the health counters every this many steps.
     pub check_every: u64,
     pub progress: bool,
+    /// Snapshot file formats (the first one is the summary's `last_snapshot`).
+    pub formats: Vec<SnapshotFormat>,
+    /// Write `DIR/checkpoint.wgsph` every this many steps (0: never).
+    pub checkpoint_every: u64,
+    /// Set when the run continues from a checkpoint: no first snapshot is written (the
+    /// interrupted run wrote it), and the VTK series index keeps the earlier snapshots.
+    pub resumed: Option<ResumedRun>,
+}
+
+/// What a resumed run takes over from the run that wrote its checkpoint.
+#[derive(Clone, Debug, Default)]
+pub struct ResumedRun {
+    pub last_snapshot: Option<PathBuf>,
+    pub max_speed: f64,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            steps: 0,
+            out: PathBuf::from("out"),
+            snapshot_every: 0,
+            check_every: 50,
+            progress: false,
+            formats: vec![SnapshotFormat::Csv],
+            checkpoint_every: 0,
+            resumed: None,
+        }
+    }
 }
 
 /// Steps for a run of `time` seconds (or the scene's end time).
@@ -54,7 +84,8 @@ pub fn diagnose(params: &Params, health: &Health, max_speed: f64) -> String {
     msg
 }
 
-/// Runs `opts.steps` steps, writing `out/snapshots/*.csv` and `out/summary.json`.
+/// Runs `opts.steps` steps, writing `out/snapshots/step_*.{csv,vtk,ply}`, `out/summary.json` and
+/// checkpoints.
 /// Returns the summary; `summary.failure` is set when the state went bad.
 pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summary> {
     std::fs::create_dir_all(opts.out.join("snapshots"))?;
@@ -72,25 +103,26 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         None
     };
     let t0 = Instant::now();
-    let mut last_snapshot: Option<PathBuf> = None;
-    let mut max_speed = 0.0f64;
+    let resumed = opts.resumed.clone().unwrap_or_default();
+    let mut last_snapshot: Option<PathBuf> = resumed.last_snapshot;
+    let mut max_speed = resumed.max_speed;
     let mut failure = None;
-    let write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<()> {
+    let mut writer = crate::checkpoint::snapshot_writer(opts, start)?;
+    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<()> {
         let s = backend.snapshot()?;
         *max_speed = s.max_speed();
-        let path = snapshot_path(&opts.out, s.step);
-        write_snapshot_csv(&path, &s)?;
-        *last = Some(path);
+        *last = Some(writer.write(&s)?);
         Ok(())
     };
-    if opts.snapshot_every > 0 || opts.steps == 0 {
+    if opts.resumed.is_none() {
         write_snap(backend, &mut last_snapshot, &mut max_speed)?;
     }
     let mut step = start;
     while step < end {
         let next_snap = if opts.snapshot_every > 0 { (step / opts.snapshot_every + 1) * opts.snapshot_every } else { end };
         let next_check = (step / opts.check_every.max(1) + 1) * opts.check_every.max(1);
-        let target = end.min(next_snap).min(next_check);
+        let next_checkpoint = if opts.checkpoint_every > 0 { (step / opts.checkpoint_every + 1) * opts.checkpoint_every } else { end };
+        let target = end.min(next_snap).min(next_check).min(next_checkpoint);
         backend.step(target - step)?;
         step = backend.steps_done();
         let health = backend.health()?;
@@ -104,6 +136,12 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         }
         if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
             write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        }
+        if opts.checkpoint_every > 0 && step % opts.checkpoint_every == 0 {
+            let c = crate::checkpoint::capture(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
+            let path = opts.out.join(crate::checkpoint::CHECKPOINT_FILE);
+            crate::checkpoint::write(&path, &c)?;
+            log::info!("wrote {} at step {step}", path.display());
         }
     }
     if let Some(b) = bar {
