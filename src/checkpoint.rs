@@ -151,20 +151,28 @@ pub fn resume_run(dir: &Path, args: &RunArgs) -> anyhow::Result<i32> {
             backend.adapter()
         );
     }
-    backend.restore_state(&c.state).with_context(|| format!("cannot restore {}", path.display()))?;
+    let summary = resume_with(backend.as_mut(), dir, &c, end, !args.quiet)?;
+    crate::cli::report_run(&summary, dir, args.quiet)
+}
+
+/// Restores `c` into `backend` (a fresh one of the kind that saved it) and runs on to step
+/// `end`, writing into `dir` with the settings of the interrupted run.
+pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u64, progress: bool) -> anyhow::Result<crate::output::Summary> {
+    let step = c.state.step;
+    backend.restore_state(&c.state).with_context(|| format!("cannot restore the checkpoint in {}", dir.display()))?;
     log::info!("resuming {} at step {step} towards step {end}", dir.display());
     let opts = RunOptions {
-        steps: end - step,
+        steps: end.saturating_sub(step),
         out: dir.to_path_buf(),
         snapshot_every: c.run.snapshot_every,
         check_every: c.run.check_every,
-        progress: !args.quiet,
+        progress,
         formats: c.run.formats.clone(),
         checkpoint_every: c.run.checkpoint_every,
         resumed: Some(ResumedRun { last_snapshot: c.run.last_snapshot.as_ref().map(PathBuf::from), max_speed: c.run.max_speed }),
     };
-    let summary = run(backend.as_mut(), &scene, &opts)?;
-    crate::cli::report_run(&summary, dir, args.quiet)
+    let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::Text)?;
+    run(backend, &scene, &opts)
 }
 
 /// A fresh backend of the kind that saved a state (`gpu`, `cpu f32`, `cpu f64`).

@@ -207,13 +207,13 @@ fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
 }
 
 fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
-    if let Some(dir) = &args.resume {
-        return crate::checkpoint::resume_run(dir, args);
-    }
     if let Some(t) = args.time {
         if !(t.is_finite() && t >= 0.0) {
             return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
         }
+    }
+    if let Some(dir) = &args.resume {
+        return crate::checkpoint::resume_run(dir, args);
     }
     let mut scene = load_scene(&args.scene)?;
     if let Some(n) = args.particles {
