@@ -5,6 +5,12 @@
 //! density by kernel summation, a linear or Tait equation of state, the symmetric pressure force,
 //! Laplacian viscosity, gravity, wall particles and analytic planes, a uniform grid of cell size
 //! h and symplectic Euler.
+//!
+//! Programs that embed the simulator start from [`Simulation`]: a [`Scene`] (from a file, a
+//! TOML string or built in code) on the GPU or the CPU, [`Simulation::step`],
+//! [`Simulation::snapshot`], and on the GPU the wgpu device and particle buffers for their own
+//! rendering. The `wgsph` command line is [`cli`]; snapshot files in other formats are
+//! [`export`]; checkpoints are [`checkpoint`].
 
 pub mod checkpoint;
 pub mod cli;
@@ -18,6 +24,8 @@ pub mod run;
 pub mod rundir;
 pub mod scene;
 pub mod sim;
+pub mod simulation;
 
 pub use scene::{Scene, SceneError};
 pub use sim::{Backend, Health, Snapshot};
+pub use simulation::Simulation;
