@@ -25,6 +25,7 @@ pub mod rundir;
 pub mod scene;
 pub mod sim;
 pub mod simulation;
+pub mod splishsplash;
 
 pub use scene::{Scene, SceneError};
 pub use sim::{Backend, Health, Snapshot};
