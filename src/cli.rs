@@ -92,6 +92,23 @@ pub struct RunArgs {
     /// Check for NaN and escaped particles every K steps.
     #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..))]
     pub check_every: u64,
+    /// Snapshot formats, repeated or comma-separated: csv, vtk (ParaView, with a .vtk.series
+    /// index), ply (Blender, splashsurf).
+    #[arg(long = "format", value_enum, value_delimiter = ',', default_values_t = [crate::export::SnapshotFormat::Csv])]
+    pub formats: Vec<crate::export::SnapshotFormat>,
+    /// No progress bar and no summary line (warnings and errors are still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Replace the output directory if it exists and is not empty (otherwise that is refused).
+    #[arg(long)]
+    pub overwrite: bool,
+    /// Write the full state to DIR/checkpoint.wgsph every K steps (0: never).
+    #[arg(long, default_value_t = 0, value_name = "K")]
+    pub checkpoint_every: u64,
+    /// Continue the run in DIR from its checkpoint, to the end it was heading to (or for
+    /// --steps N / --time T more); scene and settings come from the checkpoint.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "frames"])]
+    pub resume: Option<PathBuf>,
     /// Write rendered pictures DIR/frame_00000.png, ... (every --frame-every steps).
     #[arg(long, value_name = "DIR")]
     pub frames: Option<PathBuf>,
@@ -160,8 +177,9 @@ pub struct InputError(pub String);
 /// Parses the command line, runs it and returns the process exit code:
 /// 0 success, 1 a run that went bad or a failed check, 2 bad input.
 pub fn main() -> i32 {
-    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let cli = Cli::parse();
+    let quiet = matches!(&cli.command, Some(Command::Run(a)) if a.quiet);
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(if quiet { "error" } else { "warn" })).init();
     let result = match cli.command.unwrap_or(Command::Run(RunArgs::default())) {
         Command::Run(args) => cmd_run(&args),
         Command::Compare(args) => cmd_compare(&args),
@@ -282,6 +300,9 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
             return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
         }
     }
+    if let Some(dir) = &args.resume {
+        return crate::checkpoint::resume_run(dir, args);
+    }
     let mut scene = load_scene(&args.scene)?;
     if let Some(n) = args.particles {
         scene = scene.with_fluid_particles(n);
@@ -289,13 +310,18 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
     }
     let params = scene.params();
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
+    crate::rundir::prepare_out_dir(&args.out, args.overwrite)?;
+    crate::rundir::write_scene_copy(&args.out, &scene)?;
     let mut backend = make_backend(&scene, args.backend, args.precision)?;
     let opts = RunOptions {
         steps,
         out: args.out.clone(),
         snapshot_every: args.snapshot_every.unwrap_or_else(|| default_snapshot_every(steps)),
         check_every: args.check_every,
-        progress: true,
+        progress: !args.quiet,
+        formats: args.formats.clone(),
+        checkpoint_every: args.checkpoint_every,
+        resumed: None,
         frames: args.frames.as_ref().map(|dir| crate::run::FramesSpec {
             dir: dir.clone(),
             every: args.frame_every.unwrap_or((steps / 100).max(1)),
@@ -303,14 +329,22 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
         }),
     };
     let summary = run(backend.as_mut(), &scene, &opts)?;
-    println!("{}", summary_line(&summary, &args.out));
-    if let Some(dir) = &args.frames {
+    if let (Some(dir), false) = (&args.frames, args.quiet) {
         println!("{} pictures in {}", summary.frames, dir.display());
+    }
+    report_run(&summary, &args.out, args.quiet)
+}
+
+/// Prints the end of a run (the summary line unless quiet; the failure, if any) and returns
+/// its exit code.
+pub fn report_run(summary: &crate::output::Summary, out: &std::path::Path, quiet: bool) -> anyhow::Result<i32> {
+    if !quiet {
+        println!("{}", summary_line(summary, out));
     }
     if let Some(f) = &summary.failure {
         eprintln!("error: the run stopped at {f}");
         if let Some(s) = &summary.last_snapshot {
-            eprintln!("the last good snapshot is {s}; the summary is {}", args.out.join("summary.json").display());
+            eprintln!("the last good snapshot is {s}; the summary is {}", out.join("summary.json").display());
         }
         return Ok(1);
     }

@@ -1,8 +1,9 @@
 //! The `wgsph run` loop: steps a backend, writes snapshots and the summary, and stops with a
 //! diagnosis when the state goes bad.
 
+use crate::export::SnapshotFormat;
+use crate::output::{write_summary, Summary};
 use crate::render::frames::FrameRecorder;
-use crate::output::{snapshot_path, write_snapshot_csv, write_summary, Summary};
 use crate::scene::{Params, Scene};
 use crate::sim::{Backend, Health};
 use std::path::{Path, PathBuf};
@@ -17,7 +18,6 @@ pub struct FramesSpec {
     pub options: crate::render::RenderOptions,
 }
 
-#[derive(Default)]
 pub struct RunOptions {
     pub steps: u64,
     pub out: PathBuf,
@@ -27,6 +27,36 @@ pub struct RunOptions {
     pub check_every: u64,
     pub progress: bool,
     pub frames: Option<FramesSpec>,
+    /// Snapshot file formats (the first one is the summary's `last_snapshot`).
+    pub formats: Vec<SnapshotFormat>,
+    /// Write `DIR/checkpoint.wgsph` every this many steps (0: never).
+    pub checkpoint_every: u64,
+    /// Set when the run continues from a checkpoint: no first snapshot is written (the
+    /// interrupted run wrote it), and the VTK series index keeps the earlier snapshots.
+    pub resumed: Option<ResumedRun>,
+}
+
+/// What a resumed run takes over from the run that wrote its checkpoint.
+#[derive(Clone, Debug, Default)]
+pub struct ResumedRun {
+    pub last_snapshot: Option<PathBuf>,
+    pub max_speed: f64,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            steps: 0,
+            out: PathBuf::from("out"),
+            snapshot_every: 0,
+            check_every: 50,
+            progress: false,
+            formats: vec![SnapshotFormat::Csv],
+            checkpoint_every: 0,
+            resumed: None,
+            frames: None,
+        }
+    }
 }
 
 /// Steps for a run of `time` seconds (or the scene's end time).
@@ -66,7 +96,8 @@ pub fn diagnose(params: &Params, health: &Health, max_speed: f64) -> String {
     msg
 }
 
-/// Runs `opts.steps` steps, writing `out/snapshots/*.csv` and `out/summary.json`.
+/// Runs `opts.steps` steps, writing `out/snapshots/step_*.{csv,vtk,ply}`, `out/summary.json` and
+/// checkpoints.
 /// Returns the summary; `summary.failure` is set when the state went bad.
 pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summary> {
     std::fs::create_dir_all(opts.out.join("snapshots"))?;
@@ -84,18 +115,18 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         None
     };
     let t0 = Instant::now();
-    let mut last_snapshot: Option<PathBuf> = None;
-    let mut max_speed = 0.0f64;
+    let resumed = opts.resumed.clone().unwrap_or_default();
+    let mut last_snapshot: Option<PathBuf> = resumed.last_snapshot;
+    let mut max_speed = resumed.max_speed;
     let mut failure = None;
-    let write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<()> {
+    let mut writer = crate::checkpoint::snapshot_writer(opts, start)?;
+    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<()> {
         let s = backend.snapshot()?;
         *max_speed = s.max_speed();
-        let path = snapshot_path(&opts.out, s.step);
-        write_snapshot_csv(&path, &s)?;
-        *last = Some(path);
+        *last = Some(writer.write(&s)?);
         Ok(())
     };
-    if opts.snapshot_every > 0 || opts.steps == 0 {
+    if opts.resumed.is_none() {
         write_snap(backend, &mut last_snapshot, &mut max_speed)?;
     }
     let mut frames = match &opts.frames {
@@ -109,8 +140,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     while step < end {
         let next_snap = if opts.snapshot_every > 0 { (step / opts.snapshot_every + 1) * opts.snapshot_every } else { end };
         let next_check = (step / opts.check_every.max(1) + 1) * opts.check_every.max(1);
+        let next_checkpoint = if opts.checkpoint_every > 0 { (step / opts.checkpoint_every + 1) * opts.checkpoint_every } else { end };
         let next_frame = frames.as_ref().map_or(end, |f| (step / f.every + 1) * f.every);
-        let target = end.min(next_snap).min(next_check).min(next_frame);
+        let target = end.min(next_snap).min(next_check).min(next_checkpoint).min(next_frame);
         backend.step(target - step)?;
         step = backend.steps_done();
         let health = backend.health()?;
@@ -129,6 +161,12 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             if step == end || step % f.every == 0 {
                 f.capture(backend)?;
             }
+        }
+        if opts.checkpoint_every > 0 && step % opts.checkpoint_every == 0 {
+            let c = crate::checkpoint::capture(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
+            let path = opts.out.join(crate::checkpoint::CHECKPOINT_FILE);
+            crate::checkpoint::write(&path, &c)?;
+            log::info!("wrote {} at step {step}", path.display());
         }
     }
     let frames_written = match frames {

@@ -389,7 +389,7 @@ impl Scene {
         })
     }
 
-    /// A built-in name or a path to a TOML file.
+    /// A built-in name, a path to a TOML file, or a SPlisHSPlasH scene (`*.json`).
     pub fn load(name_or_path: &str) -> Result<Scene, SceneError> {
         if let Some(s) = Scene::builtin(name_or_path) {
             return Ok(s);
@@ -406,6 +406,10 @@ impl Scene {
         }
         let text = std::fs::read_to_string(path)
             .map_err(|e| err(&origin, "scene", format!("cannot read the file: {e}")))?;
+        if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
+            let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            return crate::splishsplash::scene_from_json(&text, &name, &origin);
+        }
         Scene::from_toml_str(&text, &origin)
     }
 

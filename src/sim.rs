@@ -112,6 +112,50 @@ pub trait Backend {
     fn gpu_particles(&self) -> Option<(crate::gpu::GpuContext, crate::render::ParticleBuffers)> {
         None
     }
+    /// Everything the next step reads, in the backend's internal (cell) order, for checkpoints.
+    fn save_state(&mut self) -> anyhow::Result<BackendState>;
+    /// Continues from a saved state: the following steps are bitwise those the saving backend
+    /// would have computed (on the same adapter or float type).
+    fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()>;
+}
+
+/// The complete dynamic state of a backend: particles in the internal order the next step's
+/// binning starts from (the order inside a cell depends on it), their original ids, the step
+/// count and the health counters. Values are widened to f64, which is exact for f32.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BackendState {
+    /// `gpu`, `cpu f32` or `cpu f64`: a state is restored only into the same kind.
+    pub kind: String,
+    pub step: u64,
+    pub positions: Vec<[f64; 3]>,
+    pub velocities: Vec<[f64; 3]>,
+    pub ids: Vec<u32>,
+    pub non_finite: u64,
+    pub escaped: u64,
+    pub first_bad_step: Option<u64>,
+    pub max_density: f64,
+}
+
+impl BackendState {
+    /// Checks that the state fits a backend of `kind` with `fluid_count` particles.
+    pub fn check_fits(&self, kind: &str, fluid_count: usize) -> anyhow::Result<()> {
+        anyhow::ensure!(self.kind == kind, "the state was saved by the {} backend, not {kind}", self.kind);
+        let n = fluid_count;
+        anyhow::ensure!(
+            self.positions.len() == n && self.velocities.len() == n && self.ids.len() == n,
+            "the state holds {} particles; the scene has {n}",
+            self.positions.len()
+        );
+        let mut seen = vec![false; n];
+        for &id in &self.ids {
+            anyhow::ensure!((id as usize) < n && !seen[id as usize], "the state's particle ids are not a permutation");
+            seen[id as usize] = true;
+        }
+        Ok(())
+    }
+    pub fn health(&self) -> Health {
+        Health { non_finite: self.non_finite, escaped: self.escaped, first_bad_step: self.first_bad_step, max_density: self.max_density }
+    }
 }
 
 impl<R: Real> Backend for CpuSolver<R> {
@@ -145,5 +189,11 @@ impl<R: Real> Backend for CpuSolver<R> {
     }
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {
         Ok(CpuSolver::step_fields(self))
+    }
+    fn save_state(&mut self) -> anyhow::Result<BackendState> {
+        Ok(CpuSolver::save_state(self))
+    }
+    fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
+        CpuSolver::restore_state(self, state)
     }
 }

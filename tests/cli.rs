@@ -41,7 +41,7 @@ fn run_writes_snapshots_and_a_summary() {
     // No temporary files are left beside the outputs.
     assert!(std::fs::read_dir(&o).unwrap().all(|e| {
         let n = e.unwrap().file_name();
-        n == "summary.json" || n == "snapshots"
+        n == "summary.json" || n == "snapshots" || n == "scene.toml"
     }));
 }
 

@@ -12,7 +12,7 @@ pub mod reorder;
 
 use crate::real::{Real, V3};
 use crate::scene::{InitialState, Params};
-use crate::sim::{Health, Snapshot, StepFields};
+use crate::sim::{BackendState, Health, Snapshot, StepFields};
 use common::{GridR, KernelCoefficients};
 use integrate::PlaneR;
 use std::ops::Range;
@@ -233,6 +233,37 @@ impl<R: Real> CpuSolver<R> {
             out.accelerations[id as usize] = self.accelerations[slot].to64();
         }
         out
+    }
+
+    /// The name of this backend in a saved state: `cpu f32` or `cpu f64`.
+    pub fn state_kind() -> String {
+        format!("cpu f{}", 8 * std::mem::size_of::<R>())
+    }
+
+    /// The particles in their current internal order, the step and the health: all the next
+    /// step reads (densities, pressures and accelerations are recomputed before use).
+    pub fn save_state(&self) -> BackendState {
+        BackendState {
+            kind: Self::state_kind(),
+            step: self.step,
+            positions: self.positions.iter().map(|p| p.to64()).collect(),
+            velocities: self.velocities.iter().map(|v| v.to64()).collect(),
+            ids: self.ids.clone(),
+            non_finite: self.health.non_finite,
+            escaped: self.health.escaped,
+            first_bad_step: self.health.first_bad_step,
+            max_density: self.health.max_density,
+        }
+    }
+
+    pub fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
+        state.check_fits(&Self::state_kind(), self.positions.len())?;
+        self.positions = state.positions.iter().map(|&p| V3::from64(p)).collect();
+        self.velocities = state.velocities.iter().map(|&v| V3::from64(v)).collect();
+        self.ids = state.ids.clone();
+        self.step = state.step;
+        self.health = state.health();
+        Ok(())
     }
 
     /// The sorted wall particles and their cell starts.

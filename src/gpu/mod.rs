@@ -6,4 +6,4 @@ pub mod scan;
 pub mod solver;
 
 pub use device::{GpuContext, GpuError};
-pub use solver::GpuSolver;
+pub use solver::{GpuSolver, ParticleBuffers};

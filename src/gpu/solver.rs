@@ -9,7 +9,7 @@ use crate::cpu::common::{GridR, KernelCoefficients};
 use crate::cpu::sort_by_cell;
 use crate::real::V3;
 use crate::scene::{InitialState, Params, MAX_PLANES};
-use crate::sim::{Backend, Health, Snapshot, StepFields};
+use crate::sim::{Backend, BackendState, Health, Snapshot, StepFields};
 use encase::{ShaderType, UniformBuffer};
 use wgpu::util::DeviceExt;
 
@@ -470,11 +470,44 @@ impl GpuSolver {
         Ok((bytemuck::pod_collect_to_vec(&data[0]), bytemuck::pod_collect_to_vec(&data[1])))
     }
 
+    /// The buffers holding the current particle state (they alternate between two pairs as the
+    /// solver steps: ask again after stepping). Particles are in cell order; `ids` maps each
+    /// slot to the particle's original index. `densities` and `pressures` are in the same order
+    /// after a snapshot.
+    pub fn particle_buffers(&self) -> ParticleBuffers<'_> {
+        let st = &self.state[self.current];
+        ParticleBuffers {
+            positions: &st.positions,
+            velocities: &st.velocities,
+            ids: &st.ids,
+            densities: &self.densities,
+            pressures: &self.pressures,
+            count: self.fluid_count,
+        }
+    }
+
     fn read_status(&self) -> anyhow::Result<[u32; STATUS_WORDS as usize]> {
         let data = read_buffers(&self.ctx, &[(&self.status, STATUS_WORDS * 4)])?;
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
         Ok(words.try_into().expect("status has 5 words"))
     }
+}
+
+/// The GPU buffers of the particle state, for rendering or post-processing on the GPU.
+#[derive(Clone, Copy, Debug)]
+pub struct ParticleBuffers<'a> {
+    /// `array<vec4<f32>>`: x, y, z, 0.
+    pub positions: &'a wgpu::Buffer,
+    /// `array<vec4<f32>>`: vx, vy, vz, 0.
+    pub velocities: &'a wgpu::Buffer,
+    /// `array<u32>`: the original index of the particle in each slot.
+    pub ids: &'a wgpu::Buffer,
+    /// `array<f32>`.
+    pub densities: &'a wgpu::Buffer,
+    /// `array<f32>`.
+    pub pressures: &'a wgpu::Buffer,
+    /// Number of fluid particles (elements of each array).
+    pub count: u32,
 }
 
 /// Copies `buffers` to mappable staging buffers and reads them back (waits for the GPU).
@@ -603,6 +636,50 @@ impl Backend for GpuSolver {
                 count: self.fluid_count,
             },
         ))
+    }
+    fn save_state(&mut self) -> anyhow::Result<BackendState> {
+        let n = self.fluid_count as u64;
+        let st = &self.state[self.current];
+        let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16), (&st.ids, n * 4)])?;
+        let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
+        let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
+        let status = self.read_status()?;
+        anyhow::ensure!(status[0] as u64 == self.steps % (1 << 32), "the GPU counted {} steps, the host {}", status[0], self.steps);
+        Ok(BackendState {
+            kind: "gpu".into(),
+            step: self.steps,
+            positions: pos.iter().map(widen).collect(),
+            velocities: vel.iter().map(widen).collect(),
+            ids: bytemuck::pod_collect_to_vec(&data[2]),
+            non_finite: status[1] as u64,
+            escaped: status[2] as u64,
+            first_bad_step: (status[3] != NO_BAD_STEP).then_some(status[3] as u64),
+            max_density: f32::from_bits(status[4]) as f64,
+        })
+    }
+    fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
+        state.check_fits("gpu", self.fluid_count as usize)?;
+        // The w components are 0, as the integration writes them.
+        let pos = vec4s(&state.positions, |_| 0.0);
+        let vel = vec4s(&state.velocities, |_| 0.0);
+        let st = &self.state[0];
+        let q = &self.ctx.queue;
+        q.write_buffer(&st.positions, 0, bytemuck::cast_slice(&pos));
+        q.write_buffer(&st.velocities, 0, bytemuck::cast_slice(&vel));
+        q.write_buffer(&st.ids, 0, bytemuck::cast_slice(&state.ids));
+        let status: [u32; STATUS_WORDS as usize] = [
+            state.step as u32,
+            state.non_finite as u32,
+            state.escaped as u32,
+            state.first_bad_step.map_or(NO_BAD_STEP, |s| s as u32),
+            (state.max_density as f32).to_bits(),
+        ];
+        q.write_buffer(&self.status, 0, bytemuck::cast_slice(&status));
+        q.submit([]);
+        self.current = 0;
+        self.accel_state = 0;
+        self.steps = state.step;
+        Ok(())
     }
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {
         let n = self.fluid_count as u64;
