@@ -201,13 +201,16 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
     }
     let params = scene.params();
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
+    // With adaptive dt a run to a time has no step count known in advance.
+    let end_time = (params.adaptive.is_some() && args.steps.is_none()).then(|| args.time.unwrap_or(params.end_time));
     let mut backend = make_backend(&scene, args.backend, args.precision)?;
     let opts = RunOptions {
-        steps,
+        steps: if end_time.is_some() { u64::MAX / 4 } else { steps },
         out: args.out.clone(),
         snapshot_every: args.snapshot_every.unwrap_or_else(|| default_snapshot_every(steps)),
         check_every: args.check_every,
         progress: true,
+        end_time,
     };
     let summary = run(backend.as_mut(), &scene, &opts)?;
     println!("{}", summary_line(&summary, &args.out));
