@@ -25,6 +25,8 @@ pub enum Command {
     Adapters,
     /// Run the GPU and the f64 CPU reference from the same state and compare every field.
     Compare(CompareArgs),
+    /// Measure speed against accuracy: one scene under many settings against a reference run.
+    Tradeoff(crate::tradeoff::TradeoffArgs),
 }
 
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
@@ -103,6 +105,7 @@ pub fn main() -> i32 {
     let result = match cli.command.unwrap_or(Command::Run(RunArgs::default())) {
         Command::Run(args) => cmd_run(&args),
         Command::Compare(args) => cmd_compare(&args),
+        Command::Tradeoff(args) => crate::tradeoff::cmd_tradeoff(&args),
         Command::Adapters => {
             let lines = crate::gpu::device::describe_adapters();
             if lines.is_empty() {

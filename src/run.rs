@@ -109,9 +109,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             // run ends at the first step reaching t_end.
             let dt = backend.dt_stats()?.last;
             let left = t_end - backend.time();
-            if dt > 0.0 {
-                target = target.min(step + ((0.5 * left / dt).floor() as u64).max(1));
-            }
+            // Before the first step there is no dt yet: take one.
+            let chunk = if dt > 0.0 { ((0.5 * left / dt).floor() as u64).max(1) } else { 1 };
+            target = target.min(step + chunk);
         }
         backend.step(target - step)?;
         step = backend.steps_done();
