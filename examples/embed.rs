@@ -31,7 +31,7 @@ fn drop_scene() -> Scene {
             boundary_friction: 0.0,
             gravity: [0.0, -9.81, 0.0],
         },
-        time: Time { dt: 2.5e-4, end_time: 0.5 },
+        time: Time::fixed(2.5e-4, 0.5),
         fluid: vec![FluidBlock { min: [0.15, 0.25, 0.15], max: [0.35, 0.45, 0.35], jitter: 0.05, velocity: [0.0; 3] }],
         boundary: vec![Boundary::Container { min: [0.0; 3], max: [0.5; 3], open_top: false, walls: WallParticles::default() }],
         camera: None,

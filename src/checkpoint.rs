@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 pub const CHECKPOINT_FILE: &str = "checkpoint.wgsph";
 const MAGIC: &[u8; 8] = b"WGSPHCKP";
 /// Bumped whenever the payload's layout or meaning changes.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// The wgsph version written into (and required of) checkpoints.
 pub const WGSPH_VERSION: &str = env!("CARGO_PKG_VERSION");
 
@@ -52,6 +52,8 @@ pub struct RunRecord {
     pub last_snapshot: Option<String>,
     /// The largest speed in the last snapshot (for the diagnosis of a later blow-up).
     pub max_speed: f64,
+    /// With adaptive dt, the simulated time the run was heading to.
+    pub end_time: Option<f64>,
 }
 
 /// A checkpoint that cannot be used.
@@ -171,6 +173,7 @@ pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u
         checkpoint_every: c.run.checkpoint_every,
         resumed: Some(ResumedRun { last_snapshot: c.run.last_snapshot.as_ref().map(PathBuf::from), max_speed: c.run.max_speed }),
         frames: None,
+        end_time: c.run.end_time,
     };
     let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::Text)?;
     run(backend, &scene, &opts)
@@ -207,6 +210,7 @@ pub fn capture(
             adapter: backend.adapter(),
             last_snapshot: last_snapshot.map(|p| p.display().to_string()),
             max_speed,
+            end_time: opts.end_time,
         },
         state: backend.save_state()?,
     })

@@ -27,6 +27,8 @@ pub enum Command {
     Compare(CompareArgs),
     /// Open a window that runs a scene on the GPU and draws every frame (orbit camera, keys).
     View(ViewArgs),
+    /// Measure speed against accuracy: one scene under many settings against a reference run.
+    Tradeoff(crate::tradeoff::TradeoffArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -184,6 +186,7 @@ pub fn main() -> i32 {
         Command::Run(args) => cmd_run(&args),
         Command::Compare(args) => cmd_compare(&args),
         Command::View(args) => cmd_view(&args),
+        Command::Tradeoff(args) => crate::tradeoff::cmd_tradeoff(&args),
         Command::Adapters => {
             let lines = crate::gpu::device::describe_adapters();
             if lines.is_empty() {
@@ -310,11 +313,20 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
     }
     let params = scene.params();
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
+    if args.checkpoint_every > 0 && params.rebuild_every > 1 {
+        return Err(InputError(format!(
+            "--checkpoint-every {} needs time.neighbour_rebuild_every = 1 (the scene has {}): between rebuilds the state depends on the grid of the last rebuild, which a checkpoint does not hold",
+            args.checkpoint_every, params.rebuild_every
+        ))
+        .into());
+    }
     crate::rundir::prepare_out_dir(&args.out, args.overwrite)?;
     crate::rundir::write_scene_copy(&args.out, &scene)?;
+    // With adaptive dt a run to a time has no step count known in advance.
+    let end_time = (params.adaptive.is_some() && args.steps.is_none()).then(|| args.time.unwrap_or(params.end_time));
     let mut backend = make_backend(&scene, args.backend, args.precision)?;
     let opts = RunOptions {
-        steps,
+        steps: if end_time.is_some() { u64::MAX / 4 } else { steps },
         out: args.out.clone(),
         snapshot_every: args.snapshot_every.unwrap_or_else(|| default_snapshot_every(steps)),
         check_every: args.check_every,
@@ -327,6 +339,7 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
             every: args.frame_every.unwrap_or((steps / 100).max(1)),
             options: args.picture.options(),
         }),
+        end_time,
     };
     let summary = run(backend.as_mut(), &scene, &opts)?;
     if let (Some(dir), false) = (&args.frames, args.quiet) {

@@ -19,6 +19,7 @@ pub mod cpu;
 pub mod export;
 pub mod gpu;
 pub mod output;
+pub mod plot;
 pub mod real;
 pub mod render;
 pub mod run;
@@ -27,6 +28,7 @@ pub mod scene;
 pub mod sim;
 pub mod simulation;
 pub mod splishsplash;
+pub mod tradeoff;
 #[cfg(feature = "view")]
 pub mod view;
 

@@ -79,6 +79,13 @@ pub struct Summary {
     pub steps: u64,
     pub sim_time: f64,
     pub dt: f64,
+    /// Smallest, largest and mean step taken (all equal to `dt` without adaptive dt).
+    #[serde(default)]
+    pub dt_min: f64,
+    #[serde(default)]
+    pub dt_max: f64,
+    #[serde(default)]
+    pub dt_mean: f64,
     pub wall_seconds: f64,
     pub particle_steps_per_second: f64,
     pub max_density_ratio: f64,

@@ -34,6 +34,9 @@ pub struct RunOptions {
     /// Set when the run continues from a checkpoint: no first snapshot is written (the
     /// interrupted run wrote it), and the VTK series index keeps the earlier snapshots.
     pub resumed: Option<ResumedRun>,
+    /// With adaptive dt: stop at the first step that reaches this simulated time (`steps` is
+    /// then an upper bound).
+    pub end_time: Option<f64>,
 }
 
 /// What a resumed run takes over from the run that wrote its checkpoint.
@@ -55,6 +58,7 @@ impl Default for RunOptions {
             checkpoint_every: 0,
             resumed: None,
             frames: None,
+            end_time: None,
         }
     }
 }
@@ -72,6 +76,11 @@ pub fn default_snapshot_every(steps: u64) -> u64 {
 
 /// Why a run went bad, with the likely cause in terms of the CFL condition.
 pub fn diagnose(params: &Params, health: &Health, max_speed: f64) -> String {
+    diagnose_at(params, health, max_speed, health.first_bad_step.unwrap_or(0) as f64 * params.dt)
+}
+
+/// `diagnose` for a run at simulated time `time` whose last step was `params.dt` (adaptive dt).
+pub fn diagnose_at(params: &Params, health: &Health, max_speed: f64, time: f64) -> String {
     let step = health.first_bad_step.unwrap_or(0);
     let c0 = params.speed_of_sound();
     let cfl = params.dt * (c0 + max_speed) / params.h;
@@ -83,7 +92,7 @@ pub fn diagnose(params: &Params, health: &Health, max_speed: f64) -> String {
     if health.escaped > 0 {
         what.push(format!("{} particles left the domain", health.escaped));
     }
-    let mut msg = format!("step {step} (t = {:.6}): {}.", step as f64 * params.dt, what.join(" and "));
+    let mut msg = format!("step {step} (t = {time:.6}): {}.", what.join(" and "));
     msg += &format!(
         " Likely cause: the time step is too large for the stiffness: the CFL number dt (c0 + |v|max) / h = {:.3} \
          (dt = {}, c0 = {:.4}, |v|max = {:.4}, h = {}); explicit WCSPH is stable below about 0.4",
@@ -91,6 +100,9 @@ pub fn diagnose(params: &Params, health: &Health, max_speed: f64) -> String {
     );
     if g > 0.0 {
         msg += &format!(", and the force condition dt sqrt(|g|/h) = {:.3} should stay below about 0.25", params.dt * (g / params.h).sqrt());
+    }
+    if let Some(a) = params.adaptive {
+        msg += &format!(". With adaptive dt (dt_min = {}, dt_max = {}): lower time.cfl_number or time.force_number, or dt_min", a.dt_min, a.dt_max);
     }
     msg += ". Lower dt or the stiffness, or check the scene's boundaries.";
     msg
@@ -105,7 +117,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let start = backend.steps_done();
     let end = start + opts.steps;
     let bar = if opts.progress && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
-        let b = indicatif::ProgressBar::new(opts.steps);
+        // With adaptive dt the bar counts thousandths of the simulated time.
+        let b = indicatif::ProgressBar::new(if opts.end_time.is_some() { 1000 } else { opts.steps });
         b.set_style(
             indicatif::ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} steps  {per_sec}  eta {eta}  {msg}")
                 .expect("valid template"),
@@ -137,21 +150,42 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         f.capture(backend)?;
     }
     let mut step = start;
+    let mut end = end;
     while step < end {
         let next_snap = if opts.snapshot_every > 0 { (step / opts.snapshot_every + 1) * opts.snapshot_every } else { end };
         let next_check = (step / opts.check_every.max(1) + 1) * opts.check_every.max(1);
         let next_checkpoint = if opts.checkpoint_every > 0 { (step / opts.checkpoint_every + 1) * opts.checkpoint_every } else { end };
         let next_frame = frames.as_ref().map_or(end, |f| (step / f.every + 1) * f.every);
-        let target = end.min(next_snap).min(next_check).min(next_checkpoint).min(next_frame);
+        let mut target = end.min(next_snap).min(next_check).min(next_checkpoint).min(next_frame);
+        if let Some(t_end) = opts.end_time {
+            // Adaptive dt: steps of about half the time left, at the current dt, so that the
+            // run ends at the first step reaching t_end.
+            let dt = backend.dt_stats()?.last;
+            let left = t_end - backend.time();
+            // Before the first step there is no dt yet: take one.
+            let chunk = if dt > 0.0 { ((0.5 * left / dt).floor() as u64).max(1) } else { 1 };
+            target = target.min(step + chunk);
+        }
         backend.step(target - step)?;
         step = backend.steps_done();
+        if opts.end_time.is_some_and(|t_end| backend.time() >= t_end) {
+            end = step;
+        }
         let health = backend.health()?;
         if let Some(b) = &bar {
-            b.set_position(step - start);
+            match opts.end_time {
+                Some(t_end) => b.set_position((1000.0 * backend.time() / t_end).min(1000.0) as u64),
+                None => b.set_position(step - start),
+            }
             b.set_message(format!("t = {:.3}", backend.time()));
         }
         if !health.is_ok() {
-            failure = Some(diagnose(&params, &health, max_speed));
+            failure = Some(if params.adaptive.is_some() {
+                let last = Params { dt: backend.dt_stats()?.last, ..params.clone() };
+                diagnose_at(&last, &health, max_speed, backend.time())
+            } else {
+                diagnose(&params, &health, max_speed)
+            });
             break;
         }
         if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
@@ -179,6 +213,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let wall_seconds = t0.elapsed().as_secs_f64();
     let health = backend.health()?;
     let steps = backend.steps_done() - start;
+    let dt_stats = backend.dt_stats()?;
     let summary = Summary {
         scene: scene.name.clone(),
         backend: backend.kind().into(),
@@ -188,6 +223,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         steps,
         sim_time: backend.time(),
         dt: params.dt,
+        dt_min: dt_stats.min,
+        dt_max: dt_stats.max,
+        dt_mean: dt_stats.mean,
         wall_seconds,
         particle_steps_per_second: if wall_seconds > 0.0 { (steps as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
         max_density_ratio: health.max_density / params.rest_density,
@@ -204,8 +242,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
 /// The one-line summary printed at the end of a run.
 pub fn summary_line(s: &Summary, out: &Path) -> String {
     format!(
-        "{}: {} fluid + {} wall particles, {} steps to t = {:.4} on {} in {:.2} s ({:.3e} particle-steps/s), max rho/rho0 = {:.4}, nan = {}, escaped = {} -> {}",
-        s.scene, s.fluid_particles, s.wall_particles, s.steps, s.sim_time, s.adapter, s.wall_seconds,
+        "{}: {} fluid + {} wall particles, {} steps to t = {:.4} (dt min/max/mean {:.3e}/{:.3e}/{:.3e}) on {} in {:.2} s ({:.3e} particle-steps/s), max rho/rho0 = {:.4}, nan = {}, escaped = {} -> {}",
+        s.scene, s.fluid_particles, s.wall_particles, s.steps, s.sim_time, s.dt_min, s.dt_max, s.dt_mean, s.adapter, s.wall_seconds,
         s.particle_steps_per_second, s.max_density_ratio, s.nan_count, s.escaped, out.display()
     )
 }

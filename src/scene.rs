@@ -202,6 +202,89 @@ pub struct Time {
     pub dt: f64,
     /// Simulated time at which `wgsph run` stops by default.
     pub end_time: f64,
+    /// Adaptive time stepping: dt from the CFL, force and viscous conditions every step.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub adaptive: bool,
+    /// C_cfl in dt <= C_cfl h / (c0 + |v|max) (adaptive only).
+    #[serde(default = "default_cfl_number")]
+    pub cfl_number: f64,
+    /// C_f in dt <= C_f sqrt(h / |a|max) (adaptive only).
+    #[serde(default = "default_force_number")]
+    pub force_number: f64,
+    /// C_visc in dt <= C_visc h^2 / nu (adaptive only).
+    #[serde(default = "default_viscous_number")]
+    pub viscous_number: f64,
+    /// Smallest adaptive dt; default dt / 1000.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dt_min: Option<f64>,
+    /// Largest adaptive dt; default dt.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dt_max: Option<f64>,
+    /// Rebuild the neighbour grid every this many steps (1 or 2; between rebuilds particles
+    /// keep the cells of the last rebuild).
+    #[serde(default = "default_rebuild_every")]
+    pub neighbour_rebuild_every: u32,
+}
+
+impl Time {
+    /// A fixed time step of `dt` up to `end_time`, every other setting at its default.
+    pub fn fixed(dt: f64, end_time: f64) -> Time {
+        Time {
+            dt,
+            end_time,
+            adaptive: false,
+            cfl_number: default_cfl_number(),
+            force_number: default_force_number(),
+            viscous_number: default_viscous_number(),
+            dt_min: None,
+            dt_max: None,
+            neighbour_rebuild_every: default_rebuild_every(),
+        }
+    }
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+fn default_cfl_number() -> f64 {
+    0.25
+}
+fn default_force_number() -> f64 {
+    0.25
+}
+fn default_viscous_number() -> f64 {
+    0.125
+}
+fn default_rebuild_every() -> u32 {
+    1
+}
+
+/// Adaptive time stepping, resolved: dt = clamp(min(C_cfl h / (c0 + |v|max),
+/// C_f sqrt(h / |a|max), C_visc h^2 / nu), dt_min, dt_max) (Monaghan 1992; Morris et al. 1997
+/// for the viscous condition).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdaptiveDt {
+    pub cfl_number: f64,
+    pub force_number: f64,
+    pub viscous_number: f64,
+    pub dt_min: f64,
+    pub dt_max: f64,
+}
+
+impl AdaptiveDt {
+    /// The step for the largest speed and acceleration: the same formula on the CPU and in
+    /// wgsl/integrate.wgsl `choose_dt`.
+    pub fn dt(&self, h: f64, c0: f64, max_speed: f64, max_accel: f64, nu: f64) -> f64 {
+        let mut dt = self.cfl_number * h / (c0 + max_speed);
+        if max_accel > 0.0 {
+            dt = dt.min(self.force_number * (h / max_accel).sqrt());
+        }
+        if nu > 0.0 {
+            dt = dt.min(self.viscous_number * h * h / nu);
+        }
+        // NaN (a blown-up state) falls to dt_min; the health check reports it.
+        if dt.is_nan() { self.dt_min } else { dt.clamp(self.dt_min, self.dt_max) }
+    }
 }
 
 /// A box of fluid filled on a lattice of the physics spacing, with seeded random offsets.
@@ -310,6 +393,10 @@ pub struct Params {
     pub gravity: [f64; 3],
     pub dt: f64,
     pub end_time: f64,
+    /// Adaptive time stepping, when the scene asks for it (`dt` is then its largest step).
+    pub adaptive: Option<AdaptiveDt>,
+    /// Rebuild the neighbour grid every this many steps.
+    pub rebuild_every: u32,
     pub domain_min: [f64; 3],
     pub domain_max: [f64; 3],
     pub planes: Vec<Plane>,
@@ -322,6 +409,13 @@ impl Params {
     pub fn viscosity_at_step(&self, step: u64) -> f64 {
         let t = (step as f64 + 0.5) * self.dt;
         viscosity_at(&self.viscosity, t)
+    }
+    /// Whether any viscosity of the scene (its schedule included) is above zero.
+    pub fn uses_viscosity(&self) -> bool {
+        self.viscosity.iter().any(|&(_, nu)| nu > 0.0)
+    }
+    pub fn uses_gravity(&self) -> bool {
+        self.gravity.iter().any(|&g| g != 0.0)
     }
     /// The speed of sound implied by the equation of state: c0^2 = dp/drho at rho0.
     pub fn speed_of_sound(&self) -> f64 {
@@ -511,6 +605,7 @@ impl Scene {
         }
         positive("time.dt", self.time.dt)?;
         positive("time.end_time", self.time.end_time)?;
+        self.validate_time_options(origin)?;
         ordered("domain", self.domain.min, self.domain.max)?;
         let inside = |q: [f64; 3]| (0..3).all(|a| q[a] >= self.domain.min[a] && q[a] <= self.domain.max[a]);
 
@@ -596,6 +691,43 @@ impl Scene {
         Ok(())
     }
 
+    /// Adaptive dt and the neighbour rebuild interval.
+    fn validate_time_options(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
+        let t = &self.time;
+        if !(1..=2).contains(&t.neighbour_rebuild_every) {
+            return Err(err(origin, "time.neighbour_rebuild_every", format!("is {}; must be 1 or 2", t.neighbour_rebuild_every)));
+        }
+        for (field, v) in [("time.cfl_number", t.cfl_number), ("time.force_number", t.force_number), ("time.viscous_number", t.viscous_number)] {
+            if !(v.is_finite() && v > 0.0 && v <= 1.0) {
+                return Err(err(origin, field, format!("is {v}; must be in (0, 1]")));
+            }
+        }
+        for (field, v) in [("time.dt_min", t.dt_min), ("time.dt_max", t.dt_max)] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(err(origin, field, format!("is {v}; must be a finite number > 0")));
+                }
+            }
+        }
+        if !t.adaptive && (t.dt_min.is_some() || t.dt_max.is_some()) {
+            return Err(err(origin, "time.dt_min", "dt_min and dt_max need adaptive = true"));
+        }
+        if t.adaptive {
+            let (lo, hi) = (t.dt_min.unwrap_or(t.dt * 1e-3), t.dt_max.unwrap_or(t.dt));
+            if lo > hi {
+                return Err(err(origin, "time.dt_min", format!("is {lo}, above dt_max {hi}; must be <= dt_max")));
+            }
+            if !self.physics.viscosity_schedule.is_empty() {
+                return Err(err(
+                    origin,
+                    "physics.viscosity_schedule",
+                    "cannot be combined with time.adaptive = true (the GPU picks its step itself, so the host cannot time a viscosity change); use one viscosity or a fixed dt",
+                ));
+            }
+        }
+        Ok(())
+    }
+
     fn wall_layers(&self, walls: &WallParticles) -> u32 {
         let s = walls.spacing.unwrap_or(self.physics.particle_spacing);
         walls.layers.unwrap_or(((self.physics.smoothing_length / s) - 1e-9).ceil().max(1.0) as u32)
@@ -608,6 +740,8 @@ impl Scene {
         s.physics.particle_spacing *= factor;
         s.physics.smoothing_length *= factor;
         s.time.dt *= factor;
+        s.time.dt_min = s.time.dt_min.map(|d| d * factor);
+        s.time.dt_max = s.time.dt_max.map(|d| d * factor);
         if let Some(m) = &mut s.physics.particle_mass {
             *m *= factor.powi(3);
         }
@@ -698,6 +832,14 @@ impl Scene {
             gravity: p.gravity,
             dt: self.time.dt,
             end_time: self.time.end_time,
+            adaptive: self.time.adaptive.then(|| AdaptiveDt {
+                cfl_number: self.time.cfl_number,
+                force_number: self.time.force_number,
+                viscous_number: self.time.viscous_number,
+                dt_min: self.time.dt_min.unwrap_or(self.time.dt * 1e-3),
+                dt_max: self.time.dt_max.unwrap_or(self.time.dt),
+            }),
+            rebuild_every: self.time.neighbour_rebuild_every,
             domain_min: self.domain.min,
             domain_max: self.domain.max,
             planes,

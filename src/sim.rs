@@ -85,6 +85,21 @@ impl Health {
     }
 }
 
+/// The time steps taken so far: smallest, largest, mean and the last one.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DtStats {
+    pub min: f64,
+    pub max: f64,
+    pub mean: f64,
+    pub last: f64,
+}
+
+impl DtStats {
+    pub fn fixed(dt: f64) -> Self {
+        DtStats { min: dt, max: dt, mean: dt, last: dt }
+    }
+}
+
 /// A simulation the command line can drive: the CPU reference or the GPU pipeline.
 pub trait Backend {
     /// "cpu" or "gpu".
@@ -100,6 +115,14 @@ pub trait Backend {
     /// Simulated time reached so far.
     fn time(&self) -> f64 {
         self.steps_done() as f64 * self.params().dt
+    }
+    /// The steps taken so far (with adaptive dt a few bytes read from the GPU).
+    fn dt_stats(&mut self) -> anyhow::Result<DtStats> {
+        Ok(DtStats::fixed(self.params().dt))
+    }
+    /// Bytes the backend allocated for the simulation, where it knows.
+    fn memory_bytes(&self) -> Option<u64> {
+        None
     }
     /// Reads the health counters (a few bytes on the GPU).
     fn health(&mut self) -> anyhow::Result<Health>;
@@ -134,6 +157,13 @@ pub struct BackendState {
     pub escaped: u64,
     pub first_bad_step: Option<u64>,
     pub max_density: f64,
+    /// The CPU's simulated time and its smallest, largest and last dt (adaptive dt makes
+    /// time differ from step x dt).
+    pub time: f64,
+    pub dt_min_max_last: [f64; 3],
+    /// The GPU's whole status buffer (health counters, and the adaptive step's dt, time and
+    /// its compensation), restored word for word.
+    pub gpu_status: Vec<u32>,
 }
 
 impl BackendState {
@@ -180,6 +210,15 @@ impl<R: Real> Backend for CpuSolver<R> {
     }
     fn steps_done(&self) -> u64 {
         CpuSolver::steps_done(self)
+    }
+    fn time(&self) -> f64 {
+        CpuSolver::time(self)
+    }
+    fn dt_stats(&mut self) -> anyhow::Result<DtStats> {
+        Ok(CpuSolver::dt_stats(self))
+    }
+    fn memory_bytes(&self) -> Option<u64> {
+        Some(CpuSolver::memory_bytes(self))
     }
     fn health(&mut self) -> anyhow::Result<Health> {
         Ok(CpuSolver::health(self))

@@ -453,7 +453,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             boundary_friction: if fluid.viscosity > 0.0 { fluid.viscosity_boundary / fluid.viscosity } else { 0.0 },
             gravity,
         },
-        time: Time { dt, end_time },
+        time: Time::fixed(dt, end_time),
         fluid: blocks,
         boundary,
         camera: None,

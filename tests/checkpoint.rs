@@ -50,6 +50,12 @@ impl Backend for FailingAt<'_> {
     fn steps_done(&self) -> u64 {
         self.inner.steps_done()
     }
+    fn time(&self) -> f64 {
+        self.inner.time()
+    }
+    fn dt_stats(&mut self) -> anyhow::Result<wgsph::sim::DtStats> {
+        self.inner.dt_stats()
+    }
     fn health(&mut self) -> anyhow::Result<Health> {
         self.inner.health()
     }
@@ -81,8 +87,7 @@ fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
 
 /// Runs 40 steps uninterrupted, and 40 steps interrupted at step 25 with checkpoints every 20
 /// and resumed on a fresh backend from `make`; every snapshot file must be the same bytes.
-fn resumed_run_is_bitwise_the_uninterrupted_one(make: &mut dyn FnMut() -> Box<dyn Backend>, what: &str) {
-    let scene = Scene::builtin("dam_break").unwrap();
+fn resumed_run_is_bitwise_the_uninterrupted_one(make: &mut dyn FnMut() -> Box<dyn Backend>, scene: &Scene, what: &str) {
     let dir = tempfile::tempdir().unwrap();
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));
     let opts = |out: &Path, checkpoint_every| RunOptions {
@@ -94,10 +99,10 @@ fn resumed_run_is_bitwise_the_uninterrupted_one(make: &mut dyn FnMut() -> Box<dy
         checkpoint_every,
         ..Default::default()
     };
-    let whole = run(make().as_mut(), &scene, &opts(&a, 0)).unwrap();
+    let whole = run(make().as_mut(), scene, &opts(&a, 0)).unwrap();
     assert!(whole.failure.is_none());
     let mut first = make();
-    let e = run(&mut FailingAt { inner: first.as_mut(), fail_at: 25 }, &scene, &opts(&b, 20)).unwrap_err();
+    let e = run(&mut FailingAt { inner: first.as_mut(), fail_at: 25 }, scene, &opts(&b, 20)).unwrap_err();
     assert!(e.to_string().contains("interrupted"), "{e}");
     let c = read(&b.join(CHECKPOINT_FILE)).unwrap();
     assert_eq!((c.state.step, c.run.end_step), (20, 40), "{what}");
@@ -110,31 +115,43 @@ fn resumed_run_is_bitwise_the_uninterrupted_one(make: &mut dyn FnMut() -> Box<dy
         assert!(x == y, "{what}: {name} differs after the resume");
     }
     assert_eq!(resumed.max_density_ratio, whole.max_density_ratio, "{what}");
+    assert_eq!(resumed.sim_time, whole.sim_time, "{what}");
     assert_eq!(resumed.last_snapshot.map(|p| Path::new(&p).file_name().unwrap().to_owned()), Some("step_000040.csv".into()));
     // The checkpoint of the finished run is at its end.
     assert_eq!(read(&b.join(CHECKPOINT_FILE)).unwrap().state.step, 40);
 }
 
+/// The dam break with a fixed step, and with adaptive dt (whose time, dt and compensation
+/// live in the state too).
+fn scenes() -> Vec<(Scene, &'static str)> {
+    let fixed = Scene::builtin("dam_break").unwrap();
+    let mut adaptive = fixed.clone();
+    adaptive.time.adaptive = true;
+    vec![(fixed, "fixed dt"), (adaptive, "adaptive dt")]
+}
+
 #[test]
 fn cpu_restart_is_bitwise_exact() {
-    let scene = Scene::builtin("dam_break").unwrap();
-    let (p, init) = (scene.params(), scene.initial_state());
-    resumed_run_is_bitwise_the_uninterrupted_one(&mut || Box::new(CpuSolver::<f64>::new(&p, &init)), "cpu f64");
-    resumed_run_is_bitwise_the_uninterrupted_one(&mut || Box::new(CpuSolver::<f32>::new(&p, &init)), "cpu f32");
+    for (scene, how) in scenes() {
+        let (p, init) = (scene.params(), scene.initial_state());
+        resumed_run_is_bitwise_the_uninterrupted_one(&mut || Box::new(CpuSolver::<f64>::new(&p, &init)), &scene, &format!("cpu f64, {how}"));
+        resumed_run_is_bitwise_the_uninterrupted_one(&mut || Box::new(CpuSolver::<f32>::new(&p, &init)), &scene, &format!("cpu f32, {how}"));
+    }
 }
 
 #[test]
 fn gpu_restart_is_bitwise_exact_on_every_adapter() {
-    let scene = Scene::builtin("dam_break").unwrap();
-    let (p, init) = (scene.params(), scene.initial_state());
-    for (i, ctx) in common::contexts().into_iter().enumerate() {
-        let name = ctx.describe();
-        drop(ctx);
-        let mut make = || -> Box<dyn Backend> {
-            let ctx = common::contexts().into_iter().nth(i).unwrap();
-            Box::new(GpuSolver::new(ctx, &p, &init).unwrap())
-        };
-        resumed_run_is_bitwise_the_uninterrupted_one(&mut make, &name);
+    for (scene, how) in scenes() {
+        let (p, init) = (scene.params(), scene.initial_state());
+        for (i, ctx) in common::contexts().into_iter().enumerate() {
+            let name = format!("{}, {how}", ctx.describe());
+            drop(ctx);
+            let mut make = || -> Box<dyn Backend> {
+                let ctx = common::contexts().into_iter().nth(i).unwrap();
+                Box::new(GpuSolver::new(ctx, &p, &init).unwrap())
+            };
+            resumed_run_is_bitwise_the_uninterrupted_one(&mut make, &scene, &name);
+        }
     }
 }
 

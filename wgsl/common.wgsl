@@ -6,6 +6,12 @@
 override KERNEL: u32 = 0u;                      // 0: Mueller et al. 2003, 1: cubic spline
 override EOS: u32 = 0u;                         // 0: linear (report Eq. 8), 1: Tait (Eq. 9)
 override CLAMP_NEGATIVE_PRESSURE: bool = false;
+// The terms a scene uses: a term that is off is compiled out of every stage.
+override VISCOSITY: bool = true;                // some viscosity of the scene (or its schedule) > 0
+override WALLS: bool = true;                    // the scene has wall particles
+override PLANES: bool = true;                   // the scene has analytic planes
+override GRAVITY: bool = true;                  // gravity is not zero
+override ADAPTIVE_DT: bool = false;             // dt chosen on the GPU every step (integrate.wgsl)
 
 const WORKGROUP_SIZE: u32 = 128u;
 const MAX_PLANES: u32 = 8u;
@@ -38,6 +44,15 @@ struct Params {
     planes: array<vec4<f32>, 8>,
     // x: restitution.
     plane_restitution: array<vec4<f32>, 8>,
+    // Adaptive dt: speed of sound, C_cfl, C_f, C_visc, dt_min, dt_max.
+    speed_of_sound: f32,
+    cfl_number: f32,
+    force_number: f32,
+    viscous_number: f32,
+    dt_min: f32,
+    dt_max: f32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;

@@ -34,10 +34,12 @@ fn main(
                 let d = xi - positions[j].xyz;
                 fluid_sum += kernel_w(dot(d, d));
             }
-            for (var j = wall_starts[cells.x]; j < wall_starts[cells.y]; j++) {
-                let w = wall_positions[j];
-                let d = xi - w.xyz;
-                wall_sum += w.w * kernel_w(dot(d, d));
+            if (WALLS) {
+                for (var j = wall_starts[cells.x]; j < wall_starts[cells.y]; j++) {
+                    let w = wall_positions[j];
+                    let d = xi - w.xyz;
+                    wall_sum += w.w * kernel_w(dot(d, d));
+                }
             }
         }
         let rho = params.fluid_mass * fluid_sum + wall_sum;

@@ -19,7 +19,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let cubic = KERNEL == 1u;
-    let viscous = params.viscosity > 0.0;
+    let viscous = VISCOSITY && params.viscosity > 0.0;
     let eps = 0.01 * params.h2;
     let xi = positions[i].xyz;
     let ui = velocities[i].xyz;
@@ -56,27 +56,32 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
                 }
             }
         }
-        for (var j = wall_starts[cells.x]; j < wall_starts[cells.y]; j++) {
-            let w = wall_positions[j];
-            let rij = xi - w.xyz;
-            let r2 = dot(rij, rij);
-            if (r2 >= params.h2) {
-                continue;
-            }
-            let r = sqrt(r2);
-            let grad = kernel_grad(rij, r);
-            wall_pressure -= grad * w.w;
-            if (viscous) {
-                if (cubic) {
-                    wall_visc += grad * (w.w * dot(ui, rij) / (r2 + eps));
-                } else {
-                    wall_visc -= ui * (w.w * kernel_laplacian(r));
+        if (WALLS) {
+            for (var j = wall_starts[cells.x]; j < wall_starts[cells.y]; j++) {
+                let w = wall_positions[j];
+                let rij = xi - w.xyz;
+                let r2 = dot(rij, rij);
+                if (r2 >= params.h2) {
+                    continue;
+                }
+                let r = sqrt(r2);
+                let grad = kernel_grad(rij, r);
+                wall_pressure -= grad * w.w;
+                if (viscous) {
+                    if (cubic) {
+                        wall_visc += grad * (w.w * dot(ui, rij) / (r2 + eps));
+                    } else {
+                        wall_visc -= ui * (w.w * kernel_laplacian(r));
+                    }
                 }
             }
         }
     }
     let nu = select(params.viscosity, 10.0 * params.viscosity, cubic);
     let visc = fluid_visc * (nu * params.rest_density * params.fluid_mass / rho_i) + wall_visc * (nu * params.boundary_friction / rho_i);
-    let a = fluid_pressure * params.fluid_mass + wall_pressure * wall_p_over + visc + params.gravity.xyz;
+    var a = fluid_pressure * params.fluid_mass + wall_pressure * wall_p_over + visc;
+    if (GRAVITY) {
+        a += params.gravity.xyz;
+    }
     accelerations[i] = vec4<f32>(a, 0.0);
 }

@@ -1,4 +1,5 @@
-// Symplectic Euler (v += dt a, then x += dt v), the analytic planes, and the health counters.
+// Symplectic Euler (v += dt a, then x += dt v), the analytic planes, and the health counters;
+// with adaptive dt also the reduction of the largest speed and acceleration and the choice of dt.
 // Twin of src/cpu/integrate.rs.
 
 @group(0) @binding(1) var<storage, read_write> positions: array<vec4<f32>>;
@@ -6,7 +7,17 @@
 @group(0) @binding(3) var<storage, read> accelerations: array<vec4<f32>>;
 // [0] steps done, [1] non-finite particles this step, [2] escaped particles this step,
 // [3] first bad step (0xffffffff: none), [4] largest density (float bits).
+// Adaptive dt only (float bits): [5] largest |v| and [6] largest |a| of this step, [7] this
+// step's dt, [8] simulated time and [9] its Kahan compensation (time = [8] - [9]), [10] smallest
+// and [11] largest dt so far.
 @group(0) @binding(4) var<storage, read_write> status: array<atomic<u32>>;
+
+fn step_dt() -> f32 {
+    if (ADAPTIVE_DT) {
+        return bitcast<f32>(atomicLoad(&status[7]));
+    }
+    return params.dt;
+}
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -14,20 +25,23 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (i >= params.fluid_count) {
         return;
     }
+    let dt = step_dt();
     var v = velocities[i].xyz;
     var x = positions[i].xyz;
-    v += accelerations[i].xyz * params.dt;
-    x += v * params.dt;
+    v += accelerations[i].xyz * dt;
+    x += v * dt;
     // A plane puts a particle behind it back on it and removes (or reflects, with restitution)
     // the velocity into it, so that no particle is lost through it.
-    for (var k = 0u; k < params.plane_count; k++) {
-        let plane = params.planes[k];
-        let d = dot(x, plane.xyz) - plane.w;
-        if (d < 0.0) {
-            x -= plane.xyz * d;
-            let vn = dot(v, plane.xyz);
-            if (vn < 0.0) {
-                v -= plane.xyz * ((1.0 + params.plane_restitution[k].x) * vn);
+    if (PLANES) {
+        for (var k = 0u; k < params.plane_count; k++) {
+            let plane = params.planes[k];
+            let d = dot(x, plane.xyz) - plane.w;
+            if (d < 0.0) {
+                x -= plane.xyz * d;
+                let vn = dot(v, plane.xyz);
+                if (vn < 0.0) {
+                    v -= plane.xyz * ((1.0 + params.plane_restitution[k].x) * vn);
+                }
             }
         }
     }
@@ -39,6 +53,70 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     } else if (any(x < params.domain_min.xyz) || any(x > params.domain_max.xyz)) {
         atomicAdd(&status[2], 1u);
     }
+}
+
+var<workgroup> group_speed: atomic<u32>;
+var<workgroup> group_accel: atomic<u32>;
+
+// Adaptive dt, 1 of 2: the largest |v| (at the start of the step) and |a| (of this step),
+// reduced per workgroup, then once per workgroup into the status buffer. Non-negative floats
+// order like their bits; a non-finite value is left out (the health check reports it).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn reduce_maxima(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    if (lid == 0u) {
+        atomicStore(&group_speed, 0u);
+        atomicStore(&group_accel, 0u);
+    }
+    workgroupBarrier();
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let speed = length(velocities[i].xyz);
+        let accel = length(accelerations[i].xyz);
+        if (is_finite_f32(speed)) {
+            atomicMax(&group_speed, bitcast<u32>(speed));
+        }
+        if (is_finite_f32(accel)) {
+            atomicMax(&group_accel, bitcast<u32>(accel));
+        }
+    }
+    workgroupBarrier();
+    if (lid == 0u) {
+        atomicMax(&status[5], atomicLoad(&group_speed));
+        atomicMax(&status[6], atomicLoad(&group_accel));
+    }
+}
+
+// Adaptive dt, 2 of 2 (one thread): dt = clamp(min(C_cfl h / (c0 + |v|max), C_f sqrt(h / |a|max),
+// C_visc h^2 / nu), dt_min, dt_max) (Monaghan 1992; Morris et al. 1997), the simulated time
+// (Kahan-compensated sum, so that 10^5 steps of f32 lose no time) and the dt range.
+// Twin of AdaptiveDt::dt in src/scene.rs.
+@compute @workgroup_size(1)
+fn choose_dt() {
+    let speed = bitcast<f32>(atomicLoad(&status[5]));
+    let accel = bitcast<f32>(atomicLoad(&status[6]));
+    atomicStore(&status[5], 0u);
+    atomicStore(&status[6], 0u);
+    var dt = params.cfl_number * params.h / (params.speed_of_sound + speed);
+    if (accel > 0.0) {
+        dt = min(dt, params.force_number * sqrt(params.h / accel));
+    }
+    if (VISCOSITY && params.viscosity > 0.0) {
+        dt = min(dt, params.viscous_number * params.h2 / params.viscosity);
+    }
+    dt = clamp(dt, params.dt_min, params.dt_max);
+    atomicStore(&status[7], bitcast<u32>(dt));
+    let sum = bitcast<f32>(atomicLoad(&status[8]));
+    let compensation = bitcast<f32>(atomicLoad(&status[9]));
+    let y = dt - compensation;
+    let t = sum + y;
+    atomicStore(&status[9], bitcast<u32>((t - sum) - y));
+    atomicStore(&status[8], bitcast<u32>(t));
+    atomicStore(&status[10], bitcast<u32>(min(bitcast<f32>(atomicLoad(&status[10])), dt)));
+    atomicStore(&status[11], bitcast<u32>(max(bitcast<f32>(atomicLoad(&status[11])), dt)));
 }
 
 // One thread after every step: counts the step and remembers the first one that went wrong.

@@ -22,6 +22,8 @@ pub struct DensityInput<'a, R> {
 
 /// rho_i = sum_k m_k W(|x_i - x_k|, h) over fluid (itself included) and wall particles.
 pub fn density<R: Real>(input: &DensityInput<R>, densities: &mut [R], pressures: &mut [R]) {
+    // A scene without walls skips them (WALLS = false on the GPU).
+    let walls = !input.wall_masses.is_empty();
     densities.par_iter_mut().zip(pressures.par_iter_mut()).enumerate().for_each(|(i, (rho, p))| {
         let xi = input.fluid.positions[i];
         let c = cell_coords(input.grid, xi);
@@ -31,7 +33,7 @@ pub fn density<R: Real>(input: &DensityInput<R>, densities: &mut [R], pressures:
             for j in input.fluid.span(k0, k1) {
                 fluid_sum = fluid_sum + input.kernel.w((xi - input.fluid.positions[j]).length_squared());
             }
-            for j in input.walls.span(k0, k1) {
+            for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {
                 wall_sum = wall_sum + input.wall_masses[j] * input.kernel.w((xi - input.walls.positions[j]).length_squared());
             }
         }

@@ -37,6 +37,9 @@ pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     let kernel = input.kernel;
     let cubic = kernel.kind == Kernel::CubicSpline;
     let viscous = input.viscosity > R::zero();
+    // Terms the scene does not use are skipped, as they are compiled out on the GPU.
+    let walls = !input.wall_masses.is_empty();
+    let gravity = input.gravity != V3::zero();
     let eps = R::of(0.01) * kernel.h2;
     let ten = R::of(10.0);
     accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| {
@@ -74,7 +77,7 @@ pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
                     }
                 }
             }
-            for j in input.walls.span(k0, k1) {
+            for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {
                 let rij = xi - input.walls.positions[j];
                 let r2 = rij.length_squared();
                 if r2 >= kernel.h2 {
@@ -95,6 +98,7 @@ pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
         }
         let nu = if cubic { ten * input.viscosity } else { input.viscosity };
         let visc = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
-        *acc = fluid_pressure * input.fluid_mass + wall_pressure * wall_p_over + visc + input.gravity;
+        let a = fluid_pressure * input.fluid_mass + wall_pressure * wall_p_over + visc;
+        *acc = if gravity { a + input.gravity } else { a };
     });
 }

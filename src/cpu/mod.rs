@@ -12,7 +12,7 @@ pub mod reorder;
 
 use crate::real::{Real, V3};
 use crate::scene::{InitialState, Params};
-use crate::sim::{BackendState, Health, Snapshot, StepFields};
+use crate::sim::{BackendState, DtStats, Health, Snapshot, StepFields};
 use common::{GridR, KernelCoefficients};
 use integrate::PlaneR;
 use std::ops::Range;
@@ -67,6 +67,9 @@ pub struct CpuSolver<R: Real> {
     wall_starts: Vec<u32>,
     step: u64,
     health: Health,
+    /// Simulated time and the steps' dt (adaptive dt makes them differ from step x dt).
+    time: f64,
+    dt_stats: DtStats,
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -76,6 +79,8 @@ impl<R: Real> CpuSolver<R> {
         // Walls never move: sort them by cell once.
         let walls: Vec<V3<R>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
         let (wall_order, wall_starts) = sort_by_cell(&grid, &walls);
+        // Without walls no stage visits them: no per-cell array.
+        let wall_starts = if walls.is_empty() { Vec::new() } else { wall_starts };
         let planes = params
             .planes
             .iter()
@@ -103,6 +108,8 @@ impl<R: Real> CpuSolver<R> {
             wall_starts,
             step: 0,
             health: Health::default(),
+            time: 0.0,
+            dt_stats: DtStats { min: f64::INFINITY, ..DtStats::default() },
         }
     }
 
@@ -117,6 +124,29 @@ impl<R: Real> CpuSolver<R> {
     }
     pub fn fluid_len(&self) -> usize {
         self.positions.len()
+    }
+    pub fn time(&self) -> f64 {
+        if self.params.adaptive.is_some() {
+            self.time
+        } else {
+            self.step as f64 * self.params.dt
+        }
+    }
+    pub fn dt_stats(&self) -> DtStats {
+        if self.step == 0 {
+            DtStats::default()
+        } else {
+            DtStats { mean: self.time() / self.step as f64, ..self.dt_stats }
+        }
+    }
+    /// Bytes of the solver's arrays.
+    pub fn memory_bytes(&self) -> u64 {
+        let r = std::mem::size_of::<R>() as u64;
+        let v3 = 3 * r;
+        let n = self.positions.len() as u64;
+        n * (4 * v3 + 2 * r + 4 * 4) // positions, velocities, accelerations, scratch; densities, pressures; ids, keys, sorted, scratch ids
+            + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
+            + self.wall_positions.len() as u64 * (v3 + r)
     }
 
     /// Stage 1: counting-sort binning and reordering of the state into cell order.
@@ -172,10 +202,27 @@ impl<R: Real> CpuSolver<R> {
         forces::forces(&input, &mut self.accelerations);
     }
 
+    /// This step's dt: fixed, or with adaptive dt from the largest speed (at the start of the
+    /// step) and acceleration (of this step), as wgsl/integrate.wgsl `choose_dt`.
+    pub fn choose_dt(&self) -> f64 {
+        let Some(adaptive) = self.params.adaptive else {
+            return self.params.dt;
+        };
+        let finite_max = |values: &mut dyn Iterator<Item = f64>| values.filter(|v| v.is_finite()).fold(0.0, f64::max);
+        let speed = finite_max(&mut self.velocities.iter().map(|v| v.length().to64()));
+        let accel = finite_max(&mut self.accelerations.iter().map(|a| a.length().to64()));
+        let p = &self.params;
+        adaptive.dt(p.h, p.speed_of_sound(), speed, accel, p.viscosity_at_step(self.step))
+    }
+
     /// Stage 4: integration and boundaries. Returns what went wrong in this step.
     pub fn integrate(&mut self) -> integrate::StepHealth {
+        self.integrate_with(self.params.dt)
+    }
+
+    fn integrate_with(&mut self, dt: f64) -> integrate::StepHealth {
         let input = integrate::IntegrateInput {
-            dt: R::of(self.params.dt),
+            dt: R::of(dt),
             planes: &self.planes,
             domain_min: V3::from64(self.params.domain_min),
             domain_max: V3::from64(self.params.domain_max),
@@ -185,13 +232,21 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// One full time step; records the first step that produced a non-finite or escaped particle.
+    /// The neighbour grid is rebuilt every `rebuild_every` steps, as on the GPU.
     pub fn step_once(&mut self) {
-        self.bin();
+        if self.step % self.params.rebuild_every.max(1) as u64 == 0 {
+            self.bin();
+        }
         self.compute_density();
         self.compute_forces();
         let max_density = self.densities.iter().fold(R::zero(), |a, &b| a.max(b)).to64();
         self.health.max_density = self.health.max_density.max(max_density);
-        let h = self.integrate();
+        let dt = self.choose_dt();
+        let h = self.integrate_with(dt);
+        self.time += dt;
+        self.dt_stats.min = self.dt_stats.min.min(dt);
+        self.dt_stats.max = self.dt_stats.max.max(dt);
+        self.dt_stats.last = dt;
         self.step += 1;
         self.health.record(self.step, h.non_finite, h.escaped);
     }
@@ -212,7 +267,7 @@ impl<R: Real> CpuSolver<R> {
         self.bin();
         self.compute_density();
         let n = self.positions.len();
-        let mut s = Snapshot::with_len(n, self.step, self.step as f64 * self.params.dt);
+        let mut s = Snapshot::with_len(n, self.step, self.time());
         for (slot, &id) in self.ids.iter().enumerate() {
             let id = id as usize;
             s.positions[id] = self.positions[slot].to64();
@@ -253,6 +308,9 @@ impl<R: Real> CpuSolver<R> {
             escaped: self.health.escaped,
             first_bad_step: self.health.first_bad_step,
             max_density: self.health.max_density,
+            time: self.time,
+            dt_min_max_last: [self.dt_stats.min, self.dt_stats.max, self.dt_stats.last],
+            gpu_status: Vec::new(),
         }
     }
 
@@ -263,6 +321,9 @@ impl<R: Real> CpuSolver<R> {
         self.ids = state.ids.clone();
         self.step = state.step;
         self.health = state.health();
+        self.time = state.time;
+        let [min, max, last] = state.dt_min_max_last;
+        self.dt_stats = DtStats { min, max, last, ..DtStats::default() };
         Ok(())
     }
 

@@ -68,12 +68,18 @@ pub fn bind_group(device: &wgpu::Device, label: &str, layout: &wgpu::BindGroupLa
     device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
 }
 
-/// The specialisation constants of a scene (pipeline-overridable constants in common.wgsl).
+/// The specialisation constants of a scene (pipeline-overridable constants in common.wgsl):
+/// a term the scene does not use is compiled out rather than branched over per particle.
 pub fn constants(params: &Params) -> Vec<(&'static str, f64)> {
+    let flag = |on: bool| if on { 1.0 } else { 0.0 };
     vec![
         ("KERNEL", match params.kernel { Kernel::Mueller => 0.0, Kernel::CubicSpline => 1.0 }),
         ("EOS", match params.eos { EquationOfState::Linear => 0.0, EquationOfState::Tait => 1.0 }),
-        ("CLAMP_NEGATIVE_PRESSURE", if params.clamp_negative_pressure { 1.0 } else { 0.0 }),
+        ("CLAMP_NEGATIVE_PRESSURE", flag(params.clamp_negative_pressure)),
+        ("VISCOSITY", flag(params.uses_viscosity())),
+        ("PLANES", flag(!params.planes.is_empty())),
+        ("GRAVITY", flag(params.uses_gravity())),
+        ("ADAPTIVE_DT", flag(params.adaptive.is_some())),
     ]
 }
 

@@ -55,6 +55,11 @@ impl Scan {
         Scan { scan_blocks, add_offsets, levels, _sums: sums, max_per_dim: device.limits().max_compute_workgroups_per_dimension }
     }
 
+    /// Bytes of the block-sum buffers.
+    pub fn bytes(&self) -> u64 {
+        self._sums.iter().map(|b| b.size()).sum()
+    }
+
     /// Records the scan into a compute pass.
     pub fn record(&self, pass: &mut wgpu::ComputePass) {
         pass.set_pipeline(&self.scan_blocks.pipeline);

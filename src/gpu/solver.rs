@@ -9,7 +9,7 @@ use crate::cpu::common::{GridR, KernelCoefficients};
 use crate::cpu::sort_by_cell;
 use crate::real::V3;
 use crate::scene::{InitialState, Params, MAX_PLANES};
-use crate::sim::{Backend, BackendState, Health, Snapshot, StepFields};
+use crate::sim::{Backend, BackendState, DtStats, Health, Snapshot, StepFields};
 use encase::{ShaderType, UniformBuffer};
 use wgpu::util::DeviceExt;
 
@@ -61,6 +61,14 @@ pub struct GpuParams {
     pub pad0: u32,
     pub planes: [Vec4f; MAX_PLANES],
     pub plane_restitution: [Vec4f; MAX_PLANES],
+    pub speed_of_sound: f32,
+    pub cfl_number: f32,
+    pub force_number: f32,
+    pub viscous_number: f32,
+    pub dt_min: f32,
+    pub dt_max: f32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 fn v4(v: [f64; 3]) -> Vec4f {
@@ -102,6 +110,14 @@ impl GpuParams {
             pad0: 0,
             planes,
             plane_restitution: restitution,
+            speed_of_sound: p.speed_of_sound() as f32,
+            cfl_number: p.adaptive.map_or(0.0, |a| a.cfl_number as f32),
+            force_number: p.adaptive.map_or(0.0, |a| a.force_number as f32),
+            viscous_number: p.adaptive.map_or(0.0, |a| a.viscous_number as f32),
+            dt_min: p.adaptive.map_or(p.dt, |a| a.dt_min) as f32,
+            dt_max: p.adaptive.map_or(p.dt, |a| a.dt_max) as f32,
+            pad1: 0,
+            pad2: 0,
         }
     }
 
@@ -136,12 +152,16 @@ struct Pipelines {
     forces: Stage,
     integrate: Stage,
     finish_step: Stage,
+    /// Adaptive dt only: the reduction of |v|max and |a|max, and the choice of dt.
+    adaptive: Option<(Stage, Stage)>,
 }
 
 /// Steps per command buffer: enough to amortise submission, few enough to check health often.
 pub const STEPS_PER_SUBMIT: u64 = 32;
 
-const STATUS_WORDS: u64 = 5;
+/// The status buffer: health counters, and the adaptive step's maxima, dt and time (see
+/// wgsl/integrate.wgsl).
+const STATUS_WORDS: u64 = 12;
 const NO_BAD_STEP: u32 = u32::MAX;
 
 pub struct GpuSolver {
@@ -175,6 +195,8 @@ pub struct GpuSolver {
     finish_group: wgpu::BindGroup,
     steps: u64,
     dispatch: (u32, u32),
+    /// Bytes of every buffer the solver allocated.
+    memory: u64,
 }
 
 fn storage(device: &wgpu::Device, label: &str, bytes: u64, extra: wgpu::BufferUsages) -> wgpu::Buffer {
@@ -233,6 +255,9 @@ impl GpuSolver {
         let walls_sorted: Vec<[f64; 3]> = wall_order.iter().map(|&i| initial.wall_positions[i as usize]).collect();
         let wall_masses: Vec<f32> = wall_order.iter().map(|&i| initial.wall_masses[i as usize] as f32).collect();
         let wall_positions = storage_init(device, "wall positions", bytemuck::cast_slice(&vec4s(&walls_sorted, |i| wall_masses[i])));
+        // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
+        let has_walls = !initial.wall_positions.is_empty();
+        let wall_starts = if has_walls { wall_starts } else { Vec::new() };
         let wall_starts_buf = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
 
         let positions = vec4s(&initial.fluid_positions, |_| 0.0);
@@ -257,11 +282,14 @@ impl GpuSolver {
         let accelerations = storage(device, "accelerations", n * 16, wgpu::BufferUsages::empty());
         let mut status_init = [0u32; STATUS_WORDS as usize];
         status_init[3] = NO_BAD_STEP;
+        status_init[10] = f32::INFINITY.to_bits();
         let status = storage_init(device, "status", bytemuck::cast_slice(&status_init));
         let scan = Scan::new(device, &uniform, &starts, cells + 1);
 
-        let k = constants(params);
+        let mut k = constants(params);
+        k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
         use Use::*;
+        let integrate_uses = [Uniform, ReadWrite, ReadWrite, Read, ReadWrite];
         let pipelines = Pipelines {
             bin_count: stage(device, "bin_count", "main", &[Uniform, Read, ReadWrite, ReadWrite, ReadWrite], &k),
             bin_scatter: stage(device, "bin_scatter", "main", &[Uniform, Read, Read, Read, ReadWrite], &k),
@@ -274,8 +302,11 @@ impl GpuSolver {
             ),
             density: stage(device, "density", "main", &[Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite], &k),
             forces: stage(device, "forces", "main", &[Uniform, Read, Read, Read, Read, Read, Read, Read, ReadWrite], &k),
-            integrate: stage(device, "integrate", "main", &[Uniform, ReadWrite, ReadWrite, Read, ReadWrite], &k),
-            finish_step: stage(device, "integrate", "finish_step", &[Uniform, ReadWrite, ReadWrite, Read, ReadWrite], &k),
+            integrate: stage(device, "integrate", "main", &integrate_uses, &k),
+            finish_step: stage(device, "integrate", "finish_step", &integrate_uses, &k),
+            adaptive: params.adaptive.map(|_| {
+                (stage(device, "integrate", "reduce_maxima", &integrate_uses, &k), stage(device, "integrate", "choose_dt", &integrate_uses, &k))
+            }),
         };
         let state = [state0, state1];
         let u = uniform.as_entire_binding();
@@ -340,6 +371,12 @@ impl GpuSolver {
             &[u.clone(), b(&state[0].positions), b(&state[0].velocities), b(&accelerations), b(&status)],
         );
         let dispatch = dispatch_size(n, WORKGROUP_SIZE, device.limits().max_compute_workgroups_per_dimension);
+        let memory = [&uniform, &keys, &ranks, &unordered, &starts, &densities, &pressures, &accelerations, &status, &wall_positions, &wall_starts_buf]
+            .iter()
+            .map(|b| b.size())
+            .chain(state.iter().flat_map(|s| [s.positions.size(), s.velocities.size(), s.ids.size()]))
+            .sum::<u64>()
+            + scan.bytes();
         Ok(GpuSolver {
             params: params.clone(),
             fluid_count: n as u32,
@@ -366,6 +403,7 @@ impl GpuSolver {
             finish_group,
             steps: 0,
             dispatch,
+            memory,
             ctx,
         })
     }
@@ -399,15 +437,26 @@ impl GpuSolver {
         drop(pass);
     }
 
-    /// Records one full step.
+    /// Records one full step. The neighbour grid is rebuilt every `rebuild_every` steps; in
+    /// between, the stages work on the current buffers in place with the cells of the last
+    /// rebuild (the bind groups of the other parity write to them).
     fn record_step(&mut self, encoder: &mut wgpu::CommandEncoder) {
-        let parity = self.current;
-        self.record_bin(encoder);
+        let rebuild = self.steps % self.params.rebuild_every.max(1) as u64 == 0;
+        let parity = if rebuild { self.current } else { 1 - self.current };
+        if rebuild {
+            self.record_bin(encoder);
+        }
         encoder.clear_buffer(&self.status, 4, Some(8));
         let g = &self.groups[parity];
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("step"), timestamp_writes: None });
         self.dispatch_particles(&mut pass, &self.pipelines.density, &g.density);
         self.dispatch_particles(&mut pass, &self.pipelines.forces, &g.forces);
+        if let Some((reduce, choose)) = &self.pipelines.adaptive {
+            self.dispatch_particles(&mut pass, reduce, &g.integrate);
+            pass.set_pipeline(&choose.pipeline);
+            pass.set_bind_group(0, &g.integrate, &[]);
+            pass.dispatch_workgroups(1, 1, 1);
+        }
         self.dispatch_particles(&mut pass, &self.pipelines.integrate, &g.integrate);
         pass.set_pipeline(&self.pipelines.finish_step.pipeline);
         pass.set_bind_group(0, &self.finish_group, &[]);
@@ -429,13 +478,15 @@ impl GpuSolver {
     /// schedule starts a new command buffer after a uniform write.
     pub fn advance(&mut self, n: u64) {
         let mut left = n;
+        // Without a schedule the viscosity never changes: no per-step look-up.
+        let scheduled = self.params.viscosity.len() > 1;
         while left > 0 {
             let nu = self.params.viscosity_at_step(self.steps);
             self.set_viscosity(nu);
             let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
             let mut batch = 0;
             while batch < left.min(STEPS_PER_SUBMIT) {
-                if batch > 0 && self.params.viscosity_at_step(self.steps) != nu {
+                if scheduled && batch > 0 && self.params.viscosity_at_step(self.steps) != nu {
                     break;
                 }
                 self.record_step(&mut encoder);
@@ -489,7 +540,12 @@ impl GpuSolver {
     fn read_status(&self) -> anyhow::Result<[u32; STATUS_WORDS as usize]> {
         let data = read_buffers(&self.ctx, &[(&self.status, STATUS_WORDS * 4)])?;
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
-        Ok(words.try_into().expect("status has 5 words"))
+        Ok(words.try_into().expect("status has STATUS_WORDS words"))
+    }
+
+    /// Bytes of every buffer the solver allocated on the device.
+    pub fn memory_bytes(&self) -> u64 {
+        self.memory
     }
 }
 
@@ -590,6 +646,38 @@ impl Backend for GpuSolver {
     fn steps_done(&self) -> u64 {
         self.steps
     }
+    fn time(&self) -> f64 {
+        if self.params.adaptive.is_none() {
+            return self.steps as f64 * self.params.dt;
+        }
+        // A few bytes: the compensated sum of the steps' dt (wgsl/integrate.wgsl choose_dt).
+        match read_buffers(&self.ctx, &[(&self.status, STATUS_WORDS * 4)]) {
+            Ok(data) => {
+                let w: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
+                f32::from_bits(w[8]) as f64 - f32::from_bits(w[9]) as f64
+            }
+            Err(e) => {
+                log::error!("reading the simulated time failed: {e:#}");
+                f64::NAN
+            }
+        }
+    }
+    fn dt_stats(&mut self) -> anyhow::Result<DtStats> {
+        let Some(_) = self.params.adaptive else {
+            return Ok(DtStats::fixed(self.params.dt));
+        };
+        let s = self.read_status()?;
+        let f = |i: usize| f32::from_bits(s[i]) as f64;
+        let time = f(8) - f(9);
+        Ok(if self.steps == 0 {
+            DtStats::default()
+        } else {
+            DtStats { min: f(10), max: f(11), mean: time / self.steps as f64, last: f(7) }
+        })
+    }
+    fn memory_bytes(&self) -> Option<u64> {
+        Some(self.memory)
+    }
     fn health(&mut self) -> anyhow::Result<Health> {
         let s = self.read_status()?;
         Ok(Health {
@@ -617,7 +705,7 @@ impl Backend for GpuSolver {
         let p: Vec<f32> = bytemuck::pod_collect_to_vec(&data[4]);
         Ok(Snapshot {
             step: self.steps,
-            time: self.steps as f64 * self.params.dt,
+            time: self.time(),
             positions: unpermute(&ids, pos.iter().map(widen)),
             velocities: unpermute(&ids, vel.iter().map(widen)),
             densities: unpermute(&ids, rho.iter().map(|&v| v as f64)),
@@ -655,6 +743,9 @@ impl Backend for GpuSolver {
             escaped: status[2] as u64,
             first_bad_step: (status[3] != NO_BAD_STEP).then_some(status[3] as u64),
             max_density: f32::from_bits(status[4]) as f64,
+            time: 0.0,
+            dt_min_max_last: [0.0; 3],
+            gpu_status: status.to_vec(),
         })
     }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
@@ -667,14 +758,13 @@ impl Backend for GpuSolver {
         q.write_buffer(&st.positions, 0, bytemuck::cast_slice(&pos));
         q.write_buffer(&st.velocities, 0, bytemuck::cast_slice(&vel));
         q.write_buffer(&st.ids, 0, bytemuck::cast_slice(&state.ids));
-        let status: [u32; STATUS_WORDS as usize] = [
-            state.step as u32,
-            state.non_finite as u32,
-            state.escaped as u32,
-            state.first_bad_step.map_or(NO_BAD_STEP, |s| s as u32),
-            (state.max_density as f32).to_bits(),
-        ];
-        q.write_buffer(&self.status, 0, bytemuck::cast_slice(&status));
+        anyhow::ensure!(
+            state.gpu_status.len() == STATUS_WORDS as usize,
+            "the state holds {} status words; this solver has {STATUS_WORDS}",
+            state.gpu_status.len()
+        );
+        let status = &state.gpu_status;
+        q.write_buffer(&self.status, 0, bytemuck::cast_slice(status));
         q.submit([]);
         self.current = 0;
         self.accel_state = 0;

@@ -1,0 +1,60 @@
+//! The cost of each model term: one step of `dam_break` (about 4000 fluid particles) with every
+//! term, and with one term switched off (or, for adaptive dt and the grid rebuild interval,
+//! switched on) at a time. The GPU pipelines are specialised per scene and the CPU path skips
+//! unused terms, so the difference between two rows is what the term costs.
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use std::time::{Duration, Instant};
+use wgsph::cpu::CpuSolver;
+use wgsph::gpu::{GpuContext, GpuSolver};
+use wgsph::scene::{Boundary, Scene};
+
+fn variants() -> Vec<(&'static str, Scene)> {
+    let base = Scene::builtin("dam_break").unwrap();
+    let mut out = vec![("all terms", base.clone())];
+    let mut s = base.clone();
+    s.physics.viscosity = 0.0;
+    out.push(("no viscosity", s));
+    let mut s = base.clone();
+    s.boundary.retain(|b| matches!(b, Boundary::Plane { .. }));
+    out.push(("no wall particles", s));
+    let mut s = base.clone();
+    s.boundary.retain(|b| !matches!(b, Boundary::Plane { .. }));
+    out.push(("no planes", s));
+    let mut s = base.clone();
+    s.physics.gravity = [0.0; 3];
+    out.push(("no gravity", s));
+    let mut s = base.clone();
+    s.time.adaptive = true;
+    out.push(("adaptive dt", s));
+    let mut s = base.clone();
+    s.time.neighbour_rebuild_every = 2;
+    out.push(("grid rebuilt every 2nd step", s));
+    out
+}
+
+fn bench_terms(c: &mut Criterion) {
+    let mut group = c.benchmark_group("terms");
+    group.sample_size(10).measurement_time(Duration::from_secs(3)).warm_up_time(Duration::from_secs(1));
+    for (name, scene) in variants() {
+        let (p, init) = (scene.params(), scene.initial_state());
+        group.throughput(Throughput::Elements(init.fluid_positions.len() as u64));
+        if let Ok(ctx) = GpuContext::new() {
+            let mut gpu = GpuSolver::new(ctx, &p, &init).unwrap();
+            group.bench_function(format!("gpu/{name}"), |b| {
+                b.iter_custom(|iters| {
+                    let t = Instant::now();
+                    gpu.advance(iters);
+                    gpu.wait().unwrap();
+                    t.elapsed()
+                })
+            });
+        }
+        let mut cpu = CpuSolver::<f32>::new(&p, &init);
+        group.bench_function(format!("cpu_f32/{name}"), |b| b.iter(|| cpu.step_once()));
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_terms);
+criterion_main!(benches);
