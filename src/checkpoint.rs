@@ -52,6 +52,8 @@ pub struct RunRecord {
     pub last_snapshot: Option<String>,
     /// The largest speed in the last snapshot (for the diagnosis of a later blow-up).
     pub max_speed: f64,
+    pub surface_mesh_every: u64,
+    pub surface_mesh_format: crate::surface::MeshFormat,
 }
 
 /// A checkpoint that cannot be used.
@@ -170,6 +172,8 @@ pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u
         formats: c.run.formats.clone(),
         checkpoint_every: c.run.checkpoint_every,
         resumed: Some(ResumedRun { last_snapshot: c.run.last_snapshot.as_ref().map(PathBuf::from), max_speed: c.run.max_speed }),
+        surface_mesh_every: c.run.surface_mesh_every,
+        surface_mesh_format: c.run.surface_mesh_format,
     };
     let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::Text)?;
     run(backend, &scene, &opts)
@@ -206,6 +210,8 @@ pub fn capture(
             adapter: backend.adapter(),
             last_snapshot: last_snapshot.map(|p| p.display().to_string()),
             max_speed,
+            surface_mesh_every: opts.surface_mesh_every,
+            surface_mesh_format: opts.surface_mesh_format,
         },
         state: backend.save_state()?,
     })

@@ -84,8 +84,15 @@ pub struct RunArgs {
     pub checkpoint_every: u64,
     /// Continue the run in DIR from its checkpoint, to the end it was heading to (or for
     /// --steps N / --time T more); scene and settings come from the checkpoint.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format"])]
     pub resume: Option<PathBuf>,
+    /// Reconstruct the fluid surface (marching cubes over an SPH density field, splashsurf)
+    /// every K steps into DIR/surface/step_NNNNNN.obj (0: never).
+    #[arg(long, default_value_t = 0, value_name = "K")]
+    pub surface_mesh_every: u64,
+    /// File format of the surface meshes.
+    #[arg(long, value_enum, default_value_t = crate::surface::MeshFormat::Obj)]
+    pub surface_mesh_format: crate::surface::MeshFormat,
 }
 
 impl Default for RunArgs {
@@ -234,6 +241,8 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
         formats: args.formats.clone(),
         checkpoint_every: args.checkpoint_every,
         resumed: None,
+        surface_mesh_every: args.surface_mesh_every,
+        surface_mesh_format: args.surface_mesh_format,
     };
     let summary = run(backend.as_mut(), &scene, &opts)?;
     report_run(&summary, &args.out, args.quiet)

@@ -26,6 +26,7 @@ pub mod scene;
 pub mod sim;
 pub mod simulation;
 pub mod splishsplash;
+pub mod surface;
 
 pub use scene::{Scene, SceneError};
 pub use sim::{Backend, Health, Snapshot};

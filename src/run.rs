@@ -4,7 +4,7 @@
 use crate::export::SnapshotFormat;
 use crate::output::{write_summary, Summary};
 use crate::scene::{Params, Scene};
-use crate::sim::{Backend, Health};
+use crate::sim::{Backend, Health, Snapshot};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -23,6 +23,9 @@ pub struct RunOptions {
     /// Set when the run continues from a checkpoint: no first snapshot is written (the
     /// interrupted run wrote it), and the VTK series index keeps the earlier snapshots.
     pub resumed: Option<ResumedRun>,
+    /// Reconstruct the fluid surface every this many steps (0: never), into `DIR/surface/`.
+    pub surface_mesh_every: u64,
+    pub surface_mesh_format: crate::surface::MeshFormat,
 }
 
 /// What a resumed run takes over from the run that wrote its checkpoint.
@@ -43,6 +46,8 @@ impl Default for RunOptions {
             formats: vec![SnapshotFormat::Csv],
             checkpoint_every: 0,
             resumed: None,
+            surface_mesh_every: 0,
+            surface_mesh_format: crate::surface::MeshFormat::Obj,
         }
     }
 }
@@ -108,21 +113,34 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut max_speed = resumed.max_speed;
     let mut failure = None;
     let mut writer = crate::checkpoint::snapshot_writer(opts, start)?;
-    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<()> {
+    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Snapshot> {
         let s = backend.snapshot()?;
         *max_speed = s.max_speed();
         *last = Some(writer.write(&s)?);
+        Ok(s)
+    };
+    let surface = crate::surface::SurfaceParameters::for_scene(&params, scene.physics.particle_spacing);
+    let write_surface = |backend: &mut dyn Backend, snapshot: Option<Snapshot>| -> anyhow::Result<()> {
+        let s = match snapshot {
+            Some(s) => s,
+            None => backend.snapshot()?,
+        };
+        crate::surface::write_snapshot_surface(&opts.out, &s, &surface, opts.surface_mesh_format)?;
         Ok(())
     };
     if opts.resumed.is_none() {
-        write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        let s = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        if opts.surface_mesh_every > 0 {
+            write_surface(backend, Some(s))?;
+        }
     }
     let mut step = start;
     while step < end {
         let next_snap = if opts.snapshot_every > 0 { (step / opts.snapshot_every + 1) * opts.snapshot_every } else { end };
         let next_check = (step / opts.check_every.max(1) + 1) * opts.check_every.max(1);
         let next_checkpoint = if opts.checkpoint_every > 0 { (step / opts.checkpoint_every + 1) * opts.checkpoint_every } else { end };
-        let target = end.min(next_snap).min(next_check).min(next_checkpoint);
+        let next_mesh = if opts.surface_mesh_every > 0 { (step / opts.surface_mesh_every + 1) * opts.surface_mesh_every } else { end };
+        let target = end.min(next_snap).min(next_check).min(next_checkpoint).min(next_mesh);
         backend.step(target - step)?;
         step = backend.steps_done();
         let health = backend.health()?;
@@ -134,8 +152,12 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             failure = Some(diagnose(&params, &health, max_speed));
             break;
         }
+        let mut snapshot = None;
         if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
-            write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+            snapshot = Some(write_snap(backend, &mut last_snapshot, &mut max_speed)?);
+        }
+        if opts.surface_mesh_every > 0 && step % opts.surface_mesh_every == 0 {
+            write_surface(backend, snapshot)?;
         }
         if opts.checkpoint_every > 0 && step % opts.checkpoint_every == 0 {
             let c = crate::checkpoint::capture(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
