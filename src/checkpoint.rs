@@ -54,6 +54,8 @@ pub struct RunRecord {
     pub max_speed: f64,
     /// With adaptive dt, the simulated time the run was heading to.
     pub end_time: Option<f64>,
+    pub surface_mesh_every: u64,
+    pub surface_mesh_format: crate::surface::MeshFormat,
 }
 
 /// A checkpoint that cannot be used.
@@ -174,6 +176,8 @@ pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u
         resumed: Some(ResumedRun { last_snapshot: c.run.last_snapshot.as_ref().map(PathBuf::from), max_speed: c.run.max_speed }),
         frames: None,
         end_time: c.run.end_time,
+        surface_mesh_every: c.run.surface_mesh_every,
+        surface_mesh_format: c.run.surface_mesh_format,
     };
     let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::Text)?;
     run(backend, &scene, &opts)
@@ -211,6 +215,8 @@ pub fn capture(
             last_snapshot: last_snapshot.map(|p| p.display().to_string()),
             max_speed,
             end_time: opts.end_time,
+            surface_mesh_every: opts.surface_mesh_every,
+            surface_mesh_format: opts.surface_mesh_format,
         },
         state: backend.save_state()?,
     })

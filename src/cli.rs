@@ -109,8 +109,15 @@ pub struct RunArgs {
     pub checkpoint_every: u64,
     /// Continue the run in DIR from its checkpoint, to the end it was heading to (or for
     /// --steps N / --time T more); scene and settings come from the checkpoint.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "frames"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format", "frames"])]
     pub resume: Option<PathBuf>,
+    /// Reconstruct the fluid surface (marching cubes over an SPH density field, splashsurf)
+    /// every K steps into DIR/surface/step_NNNNNN.obj (0: never).
+    #[arg(long, default_value_t = 0, value_name = "K")]
+    pub surface_mesh_every: u64,
+    /// File format of the surface meshes.
+    #[arg(long, value_enum, default_value_t = crate::surface::MeshFormat::Obj)]
+    pub surface_mesh_format: crate::surface::MeshFormat,
     /// Write rendered pictures DIR/frame_00000.png, ... (every --frame-every steps).
     #[arg(long, value_name = "DIR")]
     pub frames: Option<PathBuf>,
@@ -340,6 +347,8 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
             options: args.picture.options(),
         }),
         end_time,
+        surface_mesh_every: args.surface_mesh_every,
+        surface_mesh_format: args.surface_mesh_format,
     };
     let summary = run(backend.as_mut(), &scene, &opts)?;
     if let (Some(dir), false) = (&args.frames, args.quiet) {

@@ -28,6 +28,7 @@ pub mod scene;
 pub mod sim;
 pub mod simulation;
 pub mod splishsplash;
+pub mod surface;
 pub mod tradeoff;
 #[cfg(feature = "view")]
 pub mod view;

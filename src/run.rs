@@ -5,7 +5,7 @@ use crate::export::SnapshotFormat;
 use crate::output::{write_summary, Summary};
 use crate::render::frames::FrameRecorder;
 use crate::scene::{Params, Scene};
-use crate::sim::{Backend, Health};
+use crate::sim::{Backend, Health, Snapshot};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -37,6 +37,9 @@ pub struct RunOptions {
     /// With adaptive dt: stop at the first step that reaches this simulated time (`steps` is
     /// then an upper bound).
     pub end_time: Option<f64>,
+    /// Reconstruct the fluid surface every this many steps (0: never), into `DIR/surface/`.
+    pub surface_mesh_every: u64,
+    pub surface_mesh_format: crate::surface::MeshFormat,
 }
 
 /// What a resumed run takes over from the run that wrote its checkpoint.
@@ -59,6 +62,8 @@ impl Default for RunOptions {
             resumed: None,
             frames: None,
             end_time: None,
+            surface_mesh_every: 0,
+            surface_mesh_format: crate::surface::MeshFormat::Obj,
         }
     }
 }
@@ -133,14 +138,26 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut max_speed = resumed.max_speed;
     let mut failure = None;
     let mut writer = crate::checkpoint::snapshot_writer(opts, start)?;
-    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<()> {
+    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Snapshot> {
         let s = backend.snapshot()?;
         *max_speed = s.max_speed();
         *last = Some(writer.write(&s)?);
+        Ok(s)
+    };
+    let surface = crate::surface::SurfaceParameters::for_scene(&params, scene.physics.particle_spacing);
+    let write_surface = |backend: &mut dyn Backend, snapshot: Option<Snapshot>| -> anyhow::Result<()> {
+        let s = match snapshot {
+            Some(s) => s,
+            None => backend.snapshot()?,
+        };
+        crate::surface::write_snapshot_surface(&opts.out, &s, &surface, opts.surface_mesh_format)?;
         Ok(())
     };
     if opts.resumed.is_none() {
-        write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        let s = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        if opts.surface_mesh_every > 0 {
+            write_surface(backend, Some(s))?;
+        }
     }
     let mut frames = match &opts.frames {
         Some(f) => Some(FrameRecorder::new(backend, scene, f.options.clone(), f.dir.clone(), f.every.max(1))?),
@@ -155,8 +172,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         let next_snap = if opts.snapshot_every > 0 { (step / opts.snapshot_every + 1) * opts.snapshot_every } else { end };
         let next_check = (step / opts.check_every.max(1) + 1) * opts.check_every.max(1);
         let next_checkpoint = if opts.checkpoint_every > 0 { (step / opts.checkpoint_every + 1) * opts.checkpoint_every } else { end };
+        let next_mesh = if opts.surface_mesh_every > 0 { (step / opts.surface_mesh_every + 1) * opts.surface_mesh_every } else { end };
         let next_frame = frames.as_ref().map_or(end, |f| (step / f.every + 1) * f.every);
-        let mut target = end.min(next_snap).min(next_check).min(next_checkpoint).min(next_frame);
+        let mut target = end.min(next_snap).min(next_check).min(next_checkpoint).min(next_frame).min(next_mesh);
         if let Some(t_end) = opts.end_time {
             // Adaptive dt: steps of about half the time left, at the current dt, so that the
             // run ends at the first step reaching t_end.
@@ -188,8 +206,12 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             });
             break;
         }
+        let mut snapshot = None;
         if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
-            write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+            snapshot = Some(write_snap(backend, &mut last_snapshot, &mut max_speed)?);
+        }
+        if opts.surface_mesh_every > 0 && step % opts.surface_mesh_every == 0 {
+            write_surface(backend, snapshot)?;
         }
         if let Some(f) = &mut frames {
             if step == end || step % f.every == 0 {

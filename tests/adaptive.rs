@@ -169,7 +169,7 @@ fn a_run_to_a_time_with_adaptive_dt_ends_at_the_first_step_reaching_it() {
     }
     for mut b in list {
         let dir = tempfile::tempdir().unwrap();
-        let opts = RunOptions { steps: u64::MAX / 4, out: dir.path().into(), snapshot_every: 0, check_every: 50, progress: false, end_time: Some(0.05) };
+        let opts = RunOptions { steps: u64::MAX / 4, out: dir.path().into(), snapshot_every: 0, check_every: 50, progress: false, end_time: Some(0.05), ..Default::default() };
         let summary = run(b.as_mut(), &s, &opts).unwrap();
         assert!(summary.failure.is_none());
         assert!(summary.sim_time >= 0.05 && summary.sim_time < 0.05 + summary.dt_max, "{}: {summary:?}", b.adapter());

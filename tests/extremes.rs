@@ -94,7 +94,7 @@ fn inside(x: &[f64; 3], min: [f64; 3], max: [f64; 3]) -> bool {
 /// directory and returns the summary and the snapshots written.
 fn run_to_dir(backend: &mut dyn Backend, scene: &Scene, steps: u64, every: u64) -> (wgsph::output::Summary, Vec<wgsph::Snapshot>) {
     let dir = tempfile::tempdir().unwrap();
-    let opts = RunOptions { steps, out: dir.path().to_path_buf(), snapshot_every: every, check_every: every, progress: false, end_time: None };
+    let opts = RunOptions { steps, out: dir.path().to_path_buf(), snapshot_every: every, check_every: every, progress: false, end_time: None, ..Default::default() };
     let summary = run(backend, scene, &opts).unwrap();
     let mut snaps = Vec::new();
     for e in std::fs::read_dir(dir.path().join("snapshots")).unwrap() {
