@@ -81,11 +81,13 @@ fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
-fn diff(a: [f64; 3], b: [f64; 3]) -> f64 {
+/// Distance between two points.
+pub fn diff(a: [f64; 3], b: [f64; 3]) -> f64 {
     norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]])
 }
 
-fn rms(values: impl Iterator<Item = f64>) -> f64 {
+/// Root mean square (0 for no values).
+pub fn rms(values: impl Iterator<Item = f64>) -> f64 {
     let (mut s, mut n) = (0.0, 0usize);
     for v in values {
         s += v * v;

@@ -18,6 +18,7 @@
 //! per simulated second and per particle-step, and the bytes the backend allocated.
 
 use crate::cli::InputError;
+use crate::compare::{diff as distance, rms};
 use crate::cpu::CpuSolver;
 use crate::gpu::{GpuContext, GpuSolver};
 use crate::output::write_atomic;
@@ -274,18 +275,6 @@ pub struct Row {
     pub pareto: bool,
 }
 
-fn rms(values: impl Iterator<Item = f64>) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
-    for v in values {
-        s += v * v;
-        n += 1;
-    }
-    (s / n.max(1) as f64).sqrt()
-}
-
-fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
 
 /// The errors and costs of `run` against `reference`.
 pub fn row(config: &Config, run: &Record, reference: &Record) -> Row {

@@ -7,7 +7,7 @@ use wgsph::cpu::CpuSolver;
 use wgsph::gpu::GpuSolver;
 use wgsph::run::{run, RunOptions};
 use wgsph::scene::{InitialState, Scene, SceneOrigin};
-use wgsph::sim::Backend;
+use wgsph::sim::{Backend, StepFields};
 
 fn scene(text: &str) -> Scene {
     Scene::from_toml_str(text, &SceneOrigin::Text).unwrap_or_else(|e| panic!("{e}\n{text}"))
@@ -202,12 +202,18 @@ fn particles_at_the_same_position_give_no_division_by_zero() {
         let snap = b.snapshot().unwrap();
         assert!(all_finite(&snap), "{}", b.adapter());
         // Agrees with the reference after one step.
-        match &reference {
-            None => reference = Some(f),
-            Some(r) => {
-                for i in 0..r.densities.len() {
-                    assert!((f.densities[i] - r.densities[i]).abs() < 1e-5 * r.densities[i], "{} particle {i}", b.adapter());
-                }
+        agrees_with_reference(&mut reference, f, &b.adapter());
+    }
+}
+
+/// Keeps the first backend's fields as the reference and checks the others' densities against
+/// it to within 1e-5.
+fn agrees_with_reference(reference: &mut Option<StepFields>, f: StepFields, adapter: &str) {
+    match reference {
+        None => *reference = Some(f),
+        Some(r) => {
+            for i in 0..r.densities.len() {
+                assert!((f.densities[i] - r.densities[i]).abs() < 1e-5 * r.densities[i], "{adapter} particle {i}");
             }
         }
     }
@@ -229,14 +235,7 @@ fn all_particles_in_one_grid_cell() {
         b.step(49).unwrap();
         assert!(b.health().unwrap().is_ok(), "{}", b.adapter());
         assert!(all_finite(&b.snapshot().unwrap()));
-        match &reference {
-            None => reference = Some(f),
-            Some(r) => {
-                for i in 0..r.densities.len() {
-                    assert!((f.densities[i] - r.densities[i]).abs() < 1e-5 * r.densities[i], "{} particle {i}", b.adapter());
-                }
-            }
-        }
+        agrees_with_reference(&mut reference, f, &b.adapter());
     }
 }
 
