@@ -96,7 +96,7 @@ pub fn parse_range(s: &str) -> Result<(f32, f32), String> {
 }
 
 /// The simulation's particle buffers, in whatever order the simulation keeps them (all four in
-/// the same order): positions and velocities as vec4<f32>, densities and pressures as f32.
+/// the same order): positions and velocities as `vec4<f32>`, densities and pressures as `f32`.
 #[derive(Clone, Debug)]
 pub struct ParticleBuffers {
     pub positions: wgpu::Buffer,
