@@ -11,6 +11,7 @@ pub mod compare;
 pub mod cpu;
 pub mod gpu;
 pub mod output;
+pub mod plot;
 pub mod real;
 pub mod run;
 pub mod scene;
