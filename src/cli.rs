@@ -25,6 +25,8 @@ pub enum Command {
     Adapters,
     /// Run the GPU and the f64 CPU reference from the same state and compare every field.
     Compare(CompareArgs),
+    /// Run the validation cases against measurements and exact solutions; exit code 1 when one fails.
+    Validate(crate::validate::ValidateArgs),
 }
 
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
@@ -103,6 +105,7 @@ pub fn main() -> i32 {
     let result = match cli.command.unwrap_or(Command::Run(RunArgs::default())) {
         Command::Run(args) => cmd_run(&args),
         Command::Compare(args) => cmd_compare(&args),
+        Command::Validate(args) => crate::validate::cmd_validate(&args),
         Command::Adapters => {
             let lines = crate::gpu::device::describe_adapters();
             if lines.is_empty() {

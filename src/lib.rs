@@ -16,6 +16,7 @@ pub mod real;
 pub mod run;
 pub mod scene;
 pub mod sim;
+pub mod validate;
 
 pub use scene::{Scene, SceneError};
 pub use sim::{Backend, Health, Snapshot};
