@@ -29,6 +29,8 @@ pub enum Command {
     View(ViewArgs),
     /// Measure speed against accuracy: one scene under many settings against a reference run.
     Tradeoff(crate::tradeoff::TradeoffArgs),
+    /// Run the validation cases against measurements and exact solutions; exit code 1 when one fails.
+    Validate(crate::validate::ValidateArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -194,6 +196,7 @@ pub fn main() -> i32 {
         Command::Compare(args) => cmd_compare(&args),
         Command::View(args) => cmd_view(&args),
         Command::Tradeoff(args) => crate::tradeoff::cmd_tradeoff(&args),
+        Command::Validate(args) => crate::validate::cmd_validate(&args),
         Command::Adapters => {
             let lines = crate::gpu::device::describe_adapters();
             if lines.is_empty() {

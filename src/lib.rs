@@ -30,6 +30,7 @@ pub mod simulation;
 pub mod splishsplash;
 pub mod surface;
 pub mod tradeoff;
+pub mod validate;
 #[cfg(feature = "view")]
 pub mod view;
 

@@ -264,7 +264,7 @@ impl Plot {
             if let Some(labels) = &s.labels {
                 let font = ("sans-serif", 13).into_font().color(&colour);
                 chart.draw_series(
-                    pts.iter().zip(labels).map(|(&p, l)| EmptyElement::at(p) + Text::new(l.clone(), (radius as i32 + 3, -(radius as i32) - 12), font.clone())),
+                    pts.iter().zip(labels).map(|(&p, l)| EmptyElement::at(p) + Text::new(l.clone(), (radius + 3, -radius - 12), font.clone())),
                 )?;
             }
         }
