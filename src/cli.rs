@@ -284,6 +284,9 @@ fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
 
 #[cfg(feature = "view")]
 fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
+    if args.picture.style == crate::render::Style::Mesh {
+        return Err(InputError("--style mesh is for `wgsph run --frames` (the surface is reconstructed on the host, too slowly for a window); `wgsph view` takes --style particles or surface".into()).into());
+    }
     let mut scene = load_scene(&args.scene)?;
     if let Some(n) = args.particles {
         scene = scene.with_fluid_particles(n);

@@ -84,6 +84,22 @@ pub fn reconstruct(positions: &[[f64; 3]], p: &SurfaceParameters) -> anyhow::Res
     })
 }
 
+/// Unit normals at the vertices of `mesh`: area-weighted means of the adjacent triangles' normals
+/// (splashsurf_lib's `TriMesh3d::vertex_normals`), oriented by the triangles' winding. A vertex
+/// with no triangle of non-zero area gets the zero vector.
+pub fn vertex_normals(mesh: &SurfaceMesh) -> Vec<[f32; 3]> {
+    let tri_mesh = splashsurf_lib::mesh::TriMesh3d::<f32> {
+        vertices: mesh.vertices.iter().map(|v| Vector3::new(v[0], v[1], v[2])).collect(),
+        triangles: mesh.triangles.iter().map(|t| t.map(|i| i as usize)).collect(),
+    };
+    // The sequential version: its sums are in a fixed order, so pictures repeat exactly.
+    tri_mesh
+        .vertex_normals()
+        .iter()
+        .map(|n| if n.iter().all(|c| c.is_finite()) { [n.x, n.y, n.z] } else { [0.0; 3] })
+        .collect()
+}
+
 /// The mesh file of a step: `DIR/surface/step_000123.obj`.
 pub fn mesh_file(out: &Path, step: u64, format: MeshFormat) -> PathBuf {
     out.join("surface").join(format!("step_{step:06}.{}", format.extension()))

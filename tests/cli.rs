@@ -142,6 +142,38 @@ fn run_writes_frames_of_the_asked_size() {
 }
 
 #[test]
+fn run_writes_frames_of_the_surface_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    if common::contexts().is_empty() {
+        return;
+    }
+    let out = wgsph(
+        &["run", "hydrostatic", "--steps", "10", "--out", "o", "--frames", "f", "--frame-every", "10", "--resolution", "160x90", "--style", "mesh"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut names: Vec<String> =
+        std::fs::read_dir(dir.path().join("f")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    names.sort();
+    assert_eq!(names, ["frame_00000.png", "frame_00001.png"]);
+    let img = image::open(dir.path().join("f/frame_00001.png")).unwrap().to_rgb8();
+    assert_eq!((img.width(), img.height()), (160, 90));
+    // The fluid is drawn: a good share of the pixels are bluer than the background.
+    let blue = img.pixels().filter(|p| p[2] as i32 > p[0] as i32 + 30).count();
+    assert!(blue > 160 * 90 / 50, "only {blue} blue pixels");
+}
+
+#[cfg(feature = "view")]
+#[test]
+fn the_viewer_refuses_the_mesh_style() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = wgsph(&["view", "hydrostatic", "--style", "mesh"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--style mesh") && err.contains("particles or surface"), "{err}");
+}
+
+#[test]
 fn bad_picture_options_are_refused_with_what_is_allowed() {
     let dir = tempfile::tempdir().unwrap();
     for (flag, value, expect) in [

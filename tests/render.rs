@@ -1,5 +1,6 @@
 //! Rendered pictures on every adapter: size, content where the particles project, motion,
-//! a surface without holes, determinism, and the host-upload path of the CPU backend.
+//! a surface without holes (screen-space and mesh), determinism, and the host-upload path of the
+//! CPU backend.
 
 mod common;
 
@@ -165,6 +166,50 @@ fn the_surface_of_a_resting_block_has_no_holes() {
         let outside = pixels_through_box(&r.camera, &r.bounds, 320, 200, Vec3::splat(-0.1), Vec3::splat(1.1));
         let spill = (0..mask.len()).filter(|&i| mask[i] && outside.binary_search(&i).is_err()).count();
         assert_eq!(spill, 0, "{}: {spill} surface pixels outside the block", ctx.describe());
+    }
+}
+
+/// A picture of the reconstructed surface mesh of the scene's initial state.
+fn mesh_picture(ctx: &GpuContext, scene: &Scene) -> (Picture, Offscreen) {
+    let init = scene.initial_state();
+    let solver = GpuSolver::new(ctx.clone(), &scene.params(), &init).unwrap();
+    let mut offscreen = Offscreen::new(ctx, options(Style::Mesh), scene, &init.wall_positions);
+    let mut cpu = CpuSolver::<f64>::new(&scene.params(), &init);
+    offscreen.renderer.reconstruct_mesh(&cpu.snapshot()).unwrap();
+    let (_, particles) = solver.gpu_particles().unwrap();
+    let picture = offscreen.picture(&particles).unwrap();
+    (picture, offscreen)
+}
+
+#[test]
+fn the_mesh_of_a_resting_block_has_no_holes_and_repeats_exactly() {
+    for ctx in common::contexts() {
+        let scene = block(10, 0.05, 0.0, false);
+        let (picture, mut offscreen) = mesh_picture(&ctx, &scene);
+        let mask = covered(&picture);
+        let r = &offscreen.renderer;
+        // The block's particle centres span [0.05, 0.95]: every ray through its inside must hit the mesh.
+        let inside = pixels_through_box(&r.camera, &r.bounds, 320, 200, Vec3::splat(0.1), Vec3::splat(0.9));
+        assert!(inside.len() > 2000, "{}: the block covers only {} pixels", ctx.describe(), inside.len());
+        let holes = inside.iter().filter(|&&i| !mask[i]).count();
+        assert_eq!(holes, 0, "{}: {holes} background pixels inside the block's mesh", ctx.describe());
+        let outside = pixels_through_box(&r.camera, &r.bounds, 320, 200, Vec3::splat(-0.1), Vec3::splat(1.1));
+        let spill = (0..mask.len()).filter(|&i| mask[i] && outside.binary_search(&i).is_err()).count();
+        assert_eq!(spill, 0, "{}: {spill} mesh pixels outside the block", ctx.describe());
+        // Lit faces differ in shade: the mesh is shaded, not a flat silhouette.
+        let shades: std::collections::BTreeSet<[u8; 4]> =
+            inside.iter().map(|&i| picture.pixel((i % 320) as u32, (i / 320) as u32)).collect();
+        assert!(shades.len() > 20, "{}: only {} distinct colours on the mesh", ctx.describe(), shades.len());
+        // Reconstructing and drawing the same state again gives the same picture.
+        let mut cpu = CpuSolver::<f64>::new(&scene.params(), &scene.initial_state());
+        offscreen.renderer.reconstruct_mesh(&cpu.snapshot()).unwrap();
+        let particles = offscreen.renderer.upload(&cpu.snapshot());
+        let again = offscreen.picture(&particles).unwrap();
+        assert!(picture == again, "{}: the same mesh rendered twice differs", ctx.describe());
+        // An empty mesh draws nothing.
+        offscreen.renderer.upload_mesh(&[], &[], &[]);
+        let empty = offscreen.picture(&particles).unwrap();
+        assert!(covered(&empty).iter().all(|&m| !m), "{}: an empty mesh drew pixels", ctx.describe());
     }
 }
 

@@ -211,7 +211,18 @@ impl FrameRecorder {
 
     /// Draws the backend's current state and queues the picture for writing.
     pub fn capture(&mut self, backend: &mut dyn Backend) -> anyhow::Result<()> {
-        let particles = particles_of(backend, &mut self.offscreen.renderer)?;
+        let renderer = &mut self.offscreen.renderer;
+        let particles = if renderer.options.style == super::Style::Mesh {
+            // The surface is reconstructed on the host, from a snapshot.
+            let s = backend.snapshot()?;
+            renderer.reconstruct_mesh(&s)?;
+            match backend.gpu_particles() {
+                Some((_, p)) => p,
+                None => renderer.upload(&s),
+            }
+        } else {
+            particles_of(backend, renderer)?
+        };
         let (buffer, submission) = self.offscreen.submit(&particles);
         let state = Arc::new(AtomicU8::new(MAP_PENDING));
         let flag = state.clone();

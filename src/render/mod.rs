@@ -1,8 +1,9 @@
 //! Rendering of the particles with wgpu: sphere impostors coloured by a field (the `particles`
 //! style) or a screen-space fluid surface (the `surface` style), drawn straight from the
-//! simulation's GPU buffers, into an offscreen texture (frame dumps) or a window (`wgsph view`).
-//! The shaders are wgsl/render_particles.wgsl, wgsl/render_range.wgsl and
-//! wgsl/render_surface.wgsl.
+//! simulation's GPU buffers, into an offscreen texture (frame dumps) or a window (`wgsph view`);
+//! or the fluid surface reconstructed as a triangle mesh (the `mesh` style, frame dumps only).
+//! The shaders are wgsl/render_particles.wgsl, wgsl/render_range.wgsl,
+//! wgsl/render_surface.wgsl and wgsl/render_mesh.wgsl.
 
 pub mod camera;
 pub mod frames;
@@ -19,6 +20,7 @@ const COMMON_WGSL: &str = include_str!("../../wgsl/render_common.wgsl");
 const PARTICLES_WGSL: &str = include_str!("../../wgsl/render_particles.wgsl");
 const RANGE_WGSL: &str = include_str!("../../wgsl/render_range.wgsl");
 const SURFACE_WGSL: &str = include_str!("../../wgsl/render_surface.wgsl");
+const MESH_WGSL: &str = include_str!("../../wgsl/render_mesh.wgsl");
 
 /// The colour of the empty background, linear RGB (matches the surface shader's background).
 pub const BACKGROUND: [f64; 3] = [0.02, 0.025, 0.035];
@@ -32,6 +34,9 @@ pub enum Style {
     Particles,
     /// A smoothed liquid surface (screen-space fluid rendering).
     Surface,
+    /// The fluid surface reconstructed as a triangle mesh (as `--surface-mesh-every` writes it),
+    /// shaded; for frame dumps.
+    Mesh,
 }
 
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum, Default)]
@@ -162,6 +167,18 @@ pub struct Renderer {
     surface: Option<(SurfacePipelines, SurfaceTargets)>,
     /// Buffers of particles handed over from the host (the CPU backend).
     uploaded: Option<ParticleBuffers>,
+    /// The pipeline and the last uploaded mesh of the mesh style.
+    mesh: Option<MeshDraw>,
+}
+
+/// The mesh style's pipeline, its reconstruction parameters and the mesh to draw.
+struct MeshDraw {
+    pipeline: wgpu::RenderPipeline,
+    parameters: crate::surface::SurfaceParameters,
+    /// Interleaved position and normal per vertex (6 f32).
+    vertices: Option<wgpu::Buffer>,
+    indices: Option<wgpu::Buffer>,
+    index_count: u32,
 }
 
 fn field_is_vector(c: ColorBy) -> bool {
@@ -482,6 +499,36 @@ impl Renderer {
             (pipelines, targets)
         });
 
+        let mesh = (options.style == Style::Mesh).then(|| {
+            let mesh_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("render_mesh"),
+                source: wgpu::ShaderSource::Wgsl(with_common(MESH_WGSL).into()),
+            });
+            const VERTEX: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
+            let buffers =
+                [Some(wgpu::VertexBufferLayout { array_stride: 24, step_mode: wgpu::VertexStepMode::Vertex, attributes: &VERTEX })];
+            MeshDraw {
+                pipeline: render_pipeline(
+                    device,
+                    PipelineSpec {
+                        label: "fluid mesh",
+                        module: &mesh_module,
+                        layout: &pipeline_layout,
+                        vertex: "vs_mesh",
+                        buffers: &buffers,
+                        fragment: "fs_mesh",
+                        target: opaque.clone(),
+                        depth: depth_state(wgpu::CompareFunction::Less, true),
+                        constants: &[],
+                    },
+                ),
+                parameters: crate::surface::SurfaceParameters::for_scene(&scene.params(), scene.physics.particle_spacing),
+                vertices: None,
+                indices: None,
+                index_count: 0,
+            }
+        });
+
         let wall_data: Vec<[f32; 4]> = walls.iter().map(|&p| vec4_of(p, 0.0)).collect();
         let walls_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("render walls"),
@@ -510,6 +557,7 @@ impl Renderer {
             depth_format,
             surface,
             uploaded: None,
+            mesh,
             options,
         }
     }
@@ -560,6 +608,42 @@ impl Renderer {
         u
     }
 
+    /// Hands a triangle mesh (positions, unit normals per vertex, triangles as vertex indices) to
+    /// the mesh style; the next pictures draw it. Does nothing in the other styles.
+    pub fn upload_mesh(&mut self, vertices: &[[f32; 3]], normals: &[[f32; 3]], triangles: &[[u32; 3]]) {
+        assert_eq!(vertices.len(), normals.len(), "one normal per vertex");
+        let Some(m) = &mut self.mesh else { return };
+        let interleaved: Vec<[f32; 6]> =
+            vertices.iter().zip(normals).map(|(p, n)| [p[0], p[1], p[2], n[0], n[1], n[2]]).collect();
+        // Buffers grow to fit and are reused while they do.
+        let fit = |buffer: &mut Option<wgpu::Buffer>, bytes: &[u8], usage: wgpu::BufferUsages, label: &str| {
+            if buffer.as_ref().is_none_or(|b| b.size() < bytes.len() as u64) {
+                *buffer = Some(self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: (bytes.len() as u64).max(16),
+                    usage: usage | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }));
+            }
+            if !bytes.is_empty() {
+                self.queue.write_buffer(buffer.as_ref().expect("made above"), 0, bytes);
+            }
+        };
+        fit(&mut m.vertices, bytemuck::cast_slice(&interleaved), wgpu::BufferUsages::VERTEX, "render mesh vertices");
+        fit(&mut m.indices, bytemuck::cast_slice(triangles), wgpu::BufferUsages::INDEX, "render mesh indices");
+        m.index_count = 3 * triangles.len() as u32;
+    }
+
+    /// For the mesh style: reconstructs the fluid surface of `s` (as `--surface-mesh-every`
+    /// does) and uploads it. Does nothing in the other styles.
+    pub fn reconstruct_mesh(&mut self, s: &Snapshot) -> anyhow::Result<()> {
+        let Some(m) = &self.mesh else { return Ok(()) };
+        let mesh = crate::surface::reconstruct(&s.positions, &m.parameters)?;
+        let normals = crate::surface::vertex_normals(&mesh);
+        self.upload_mesh(&mesh.vertices, &normals, &mesh.triangles);
+        Ok(())
+    }
+
     fn field<'a>(&self, p: &'a ParticleBuffers) -> &'a wgpu::Buffer {
         match self.options.color_by {
             ColorBy::Speed => &p.velocities,
@@ -590,11 +674,11 @@ impl Renderer {
     }
 
     /// Records one picture of `particles` into `target` (a view of a texture of the colour
-    /// format and the size of the options).
+    /// format and the size of the options). The mesh style draws the last uploaded mesh instead.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView, particles: &ParticleBuffers) {
         self.queue.write_buffer(&self.frame, 0, bytemuck::bytes_of(&self.frame_uniform()));
         let n = particles.count;
-        if self.options.range.is_none() && n > 0 {
+        if self.options.range.is_none() && n > 0 && self.mesh.is_none() {
             self.queue.write_buffer(&self.range_params, 0, bytemuck::cast_slice(&[n, field_is_vector(self.options.color_by) as u32, 0, 0]));
             encoder.clear_buffer(&self.range_keys, 0, None);
             let group = crate::gpu::pipelines::bind_group(
@@ -688,6 +772,23 @@ impl Renderer {
             pass.set_pipeline(&p.composite);
             pass.set_bind_group(0, &t.groups[0], &[]);
             pass.draw(0..3, 0..1);
+            self.draw_walls(&mut pass);
+        } else if let Some(m) = &self.mesh {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("fluid mesh"),
+                color_attachments: &[Some(color(target, wgpu::LoadOp::Clear(clear)))],
+                depth_stencil_attachment: Some(depth_clear),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            if let (Some(vertices), Some(indices), true) = (&m.vertices, &m.indices, m.index_count > 0) {
+                pass.set_pipeline(&m.pipeline);
+                pass.set_bind_group(0, &self.frame_group, &[]);
+                pass.set_vertex_buffer(0, vertices.slice(..));
+                pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..m.index_count, 0, 0..1);
+            }
             self.draw_walls(&mut pass);
         } else {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
