@@ -74,6 +74,9 @@ pub fn reconstruct(positions: &[[f64; 3]], p: &SurfaceParameters) -> anyhow::Res
         splashsurf_lib::Parameters::<f32>::new(p.particle_radius as f32, p.compact_support_radius as f32, p.cube_size as f32);
     parameters.rest_density = p.rest_density as f32;
     parameters.iso_surface_threshold = p.iso_surface_threshold as f32;
+    // Threads would make the order of vertices and triangles vary from run to run; one thread
+    // gives the same mesh (and so the same files and pictures) for the same particles.
+    parameters.enable_multi_threading = false;
     let reconstruction = splashsurf_lib::reconstruct_surface::<i64, f32>(&points, &parameters)
         .map_err(|e| anyhow::anyhow!("surface reconstruction failed: {e}"))?;
     let mesh = reconstruction.mesh;
