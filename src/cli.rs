@@ -29,6 +29,8 @@ pub enum Command {
     View(ViewArgs),
     /// Measure speed against accuracy: one scene under many settings against a reference run.
     Tradeoff(crate::tradeoff::TradeoffArgs),
+    /// Time each compute stage of the GPU step; bandwidth, interactions/s and memory per particle.
+    Profile(crate::profile::ProfileArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -194,6 +196,7 @@ pub fn main() -> i32 {
         Command::Compare(args) => cmd_compare(&args),
         Command::View(args) => cmd_view(&args),
         Command::Tradeoff(args) => crate::tradeoff::cmd_tradeoff(&args),
+        Command::Profile(args) => crate::profile::cmd_profile(&args),
         Command::Adapters => {
             let lines = crate::gpu::device::describe_adapters();
             if lines.is_empty() {
