@@ -1,6 +1,7 @@
 //! One time step of the GPU and CPU paths for the `dam_break` scene and a resting block, at
 //! 10 k fluid particles (and 100 k where the adapter allows it in reasonable time: set
-//! WGSPH_BENCH_LARGE=1). Throughput is reported in fluid particle-steps per second.
+//! WGSPH_BENCH_LARGE=1, and 1 M with WGSPH_BENCH_HUGE=1). Throughput is reported in fluid
+//! particle-steps per second; the bytes of GPU memory per fluid particle are printed.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::time::{Duration, Instant};
@@ -13,7 +14,9 @@ fn scenes() -> Vec<(&'static str, Scene)> {
 }
 
 fn sizes() -> Vec<u64> {
-    if std::env::var_os("WGSPH_BENCH_LARGE").is_some() {
+    if std::env::var_os("WGSPH_BENCH_HUGE").is_some() {
+        vec![10_000, 100_000, 1_000_000]
+    } else if std::env::var_os("WGSPH_BENCH_LARGE").is_some() {
         vec![10_000, 100_000]
     } else {
         vec![10_000]
@@ -32,6 +35,11 @@ fn bench_step(c: &mut Criterion) {
             if let Ok(ctx) = GpuContext::new() {
                 let adapter = ctx.describe();
                 let mut gpu = GpuSolver::new(ctx, &p, &init).unwrap();
+                println!(
+                    "gpu/{name}/{fluid}/{adapter}: {} bytes of GPU memory, {:.1} bytes per fluid particle",
+                    gpu.memory_bytes(),
+                    gpu.memory_bytes() as f64 / fluid as f64
+                );
                 group.bench_function(format!("gpu/{name}/{fluid}/{adapter}"), |b| {
                     b.iter_custom(|iters| {
                         let t = Instant::now();

@@ -31,6 +31,8 @@ pub enum Command {
     Tradeoff(crate::tradeoff::TradeoffArgs),
     /// Run the validation cases against measurements and exact solutions; exit code 1 when one fails.
     Validate(crate::validate::ValidateArgs),
+    /// Time each compute stage of the GPU step; bandwidth, interactions/s and memory per particle.
+    Profile(crate::profile::ProfileArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -197,6 +199,7 @@ pub fn main() -> i32 {
         Command::View(args) => cmd_view(&args),
         Command::Tradeoff(args) => crate::tradeoff::cmd_tradeoff(&args),
         Command::Validate(args) => crate::validate::cmd_validate(&args),
+        Command::Profile(args) => crate::profile::cmd_profile(&args),
         Command::Adapters => {
             let lines = crate::gpu::device::describe_adapters();
             if lines.is_empty() {

@@ -20,6 +20,7 @@ pub mod export;
 pub mod gpu;
 pub mod output;
 pub mod plot;
+pub mod profile;
 pub mod real;
 pub mod render;
 pub mod run;

@@ -13,6 +13,9 @@ use crate::sim::{Backend, BackendState, DtStats, Health, Snapshot, StepFields};
 use encase::{ShaderType, UniformBuffer};
 use wgpu::util::DeviceExt;
 
+mod profiled;
+pub use profiled::PROFILED_STAGES;
+
 /// A WGSL `vec4<T>` for encase (which has no glam support of its own).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Vec4<T>(pub [T; 4]);
