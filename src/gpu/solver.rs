@@ -454,19 +454,25 @@ impl GpuSolver {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("step"), timestamp_writes: None });
         self.dispatch_particles(&mut pass, &self.pipelines.density, &g.density);
         self.dispatch_particles(&mut pass, &self.pipelines.forces, &g.forces);
+        self.record_integration(&mut pass, g);
+        drop(pass);
+        self.current = 1 - parity;
+        self.accel_state = self.current;
+    }
+
+    /// The integration with its bookkeeping: the adaptive step's reduction and choice of dt,
+    /// the integration itself and the per-step status update.
+    fn record_integration(&self, pass: &mut wgpu::ComputePass, g: &ParityBindGroups) {
         if let Some((reduce, choose)) = &self.pipelines.adaptive {
-            self.dispatch_particles(&mut pass, reduce, &g.integrate);
+            self.dispatch_particles(pass, reduce, &g.integrate);
             pass.set_pipeline(&choose.pipeline);
             pass.set_bind_group(0, &g.integrate, &[]);
             pass.dispatch_workgroups(1, 1, 1);
         }
-        self.dispatch_particles(&mut pass, &self.pipelines.integrate, &g.integrate);
+        self.dispatch_particles(pass, &self.pipelines.integrate, &g.integrate);
         pass.set_pipeline(&self.pipelines.finish_step.pipeline);
         pass.set_bind_group(0, &self.finish_group, &[]);
         pass.dispatch_workgroups(1, 1, 1);
-        drop(pass);
-        self.current = 1 - parity;
-        self.accel_state = self.current;
     }
 
     fn set_viscosity(&mut self, nu: f64) {

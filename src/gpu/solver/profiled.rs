@@ -82,19 +82,8 @@ impl GpuSolver {
         let mut pass = timed_pass(encoder, queries, &mut ran, 5);
         self.dispatch_particles(&mut pass, &self.pipelines.forces, &g.forces);
         drop(pass);
-        // The integration with its bookkeeping: the adaptive step's reduction and choice of dt,
-        // and the per-step status update.
         let mut pass = timed_pass(encoder, queries, &mut ran, 6);
-        if let Some((reduce, choose)) = &self.pipelines.adaptive {
-            self.dispatch_particles(&mut pass, reduce, &g.integrate);
-            pass.set_pipeline(&choose.pipeline);
-            pass.set_bind_group(0, &g.integrate, &[]);
-            pass.dispatch_workgroups(1, 1, 1);
-        }
-        self.dispatch_particles(&mut pass, &self.pipelines.integrate, &g.integrate);
-        pass.set_pipeline(&self.pipelines.finish_step.pipeline);
-        pass.set_bind_group(0, &self.finish_group, &[]);
-        pass.dispatch_workgroups(1, 1, 1);
+        self.record_integration(&mut pass, g);
         drop(pass);
         self.current = 1 - parity;
         self.accel_state = self.current;
