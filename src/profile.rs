@@ -77,7 +77,7 @@ pub struct Profile {
 /// Bytes each stage of `PROFILED_STAGES` must read and write per step, for `n` fluid particles,
 /// `w` walls and `cells` grid cells: every array element the stage touches counted once (the
 /// compulsory traffic; neighbour loads are assumed to hit the cache after their first load, so
-/// this is a lower bound). vec4<f32> = 16 bytes, u32/f32 = 4 bytes.
+/// this is a lower bound). `vec4<f32>` = 16 bytes, `u32`/`f32` = 4 bytes.
 pub fn stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool) -> [u64; 7] {
     let starts = (cells + 1) * 4;
     let walls = if w > 0 { w * 16 + starts } else { 0 };
