@@ -73,3 +73,27 @@ fn particles_too_many_for_the_adapter_exit_2_before_allocating() {
     assert!(err.contains("max_storage_buffer_binding_size") || err.contains("max_buffer_size"), "{err}");
     assert!(!dir.path().join("o/snapshots/step_000000.csv").exists());
 }
+
+#[test]
+fn streamed_csv_snapshots_equal_the_whole_array_ones_byte_for_byte() {
+    use wgsph::sim::Backend;
+    for ctx in common::contexts() {
+        let scene = Scene::load("dam_break").unwrap().with_fluid_particles(700);
+        let mut solver = GpuSolver::new(ctx.clone(), &scene.params(), &scene.initial_state()).unwrap();
+        solver.step(5).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let whole = dir.path().join("whole.csv");
+        let snapshot = solver.snapshot().unwrap();
+        wgsph::output::write_snapshot_csv(&whole, &snapshot).unwrap();
+        let expected = std::fs::read(&whole).unwrap();
+        // 7: pieces that split every array unevenly and more than MAX_PASSES passes' worth of
+        // pieces; 1 << 20: one piece, one pass.
+        for chunk in [1, 7, 64, wgsph::gpu::solver::STREAM_CHUNK] {
+            let path = dir.path().join(format!("streamed_{chunk}.csv"));
+            let s = solver.write_snapshot_csv_streamed(&path, chunk).unwrap();
+            assert_eq!(std::fs::read(&path).unwrap(), expected, "chunk {chunk} on {}", ctx.describe());
+            assert_eq!((s.step, s.particles), (5, snapshot.len() as u64));
+            assert_eq!(s.max_speed, snapshot.max_speed());
+        }
+    }
+}

@@ -16,6 +16,8 @@ use wgpu::util::DeviceExt;
 
 mod profiled;
 pub use profiled::PROFILED_STAGES;
+mod stream;
+pub use stream::{StreamedSnapshot, MAX_PASSES, STREAM_CHUNK};
 
 /// A WGSL `vec4<T>` for encase (which has no glam support of its own).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -724,6 +726,9 @@ impl Backend for GpuSolver {
             densities: unpermute(&ids, rho.iter().map(|&v| v as f64)),
             pressures: unpermute(&ids, p.iter().map(|&v| v as f64)),
         })
+    }
+    fn write_csv_streamed(&mut self, path: &std::path::Path) -> Option<anyhow::Result<f64>> {
+        Some(self.write_snapshot_csv_streamed(path, STREAM_CHUNK).map(|s| s.max_speed))
     }
     fn gpu_particles(&self) -> Option<(GpuContext, crate::render::ParticleBuffers)> {
         let st = &self.state[self.current];
