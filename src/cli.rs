@@ -221,7 +221,8 @@ pub fn main() -> i32 {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
-            if e.downcast_ref::<SceneError>().is_some() || e.downcast_ref::<InputError>().is_some() {
+            let too_big = e.downcast_ref::<crate::gpu::memory::GpuMemoryError>().is_some();
+            if too_big || e.downcast_ref::<SceneError>().is_some() || e.downcast_ref::<InputError>().is_some() {
                 2
             } else {
                 1
@@ -237,18 +238,23 @@ pub fn load_scene(name: &str) -> anyhow::Result<Scene> {
 /// Builds the backend a run asked for.
 pub fn make_backend(scene: &Scene, choice: BackendChoice, precision: Precision) -> anyhow::Result<Box<dyn Backend>> {
     let params = scene.params();
-    let initial = scene.initial_state();
     let cpu = |precision| -> Box<dyn Backend> {
+        let initial = scene.initial_state();
         match precision {
             Precision::F64 => Box::new(CpuSolver::<f64>::new(&params, &initial)),
             Precision::F32 => Box::new(CpuSolver::<f32>::new(&params, &initial)),
         }
     };
+    // The GPU's limits are checked before the particles are created on the host.
+    let gpu = |ctx: GpuContext| -> anyhow::Result<Box<dyn Backend>> {
+        crate::gpu::memory::MemoryPlan::for_scene(scene).check(&ctx)?;
+        Ok(Box::new(GpuSolver::new(ctx, &params, &scene.initial_state())?))
+    };
     match choice {
         BackendChoice::Cpu => Ok(cpu(precision)),
-        BackendChoice::Gpu => Ok(Box::new(GpuSolver::new(GpuContext::new()?, &params, &initial)?)),
+        BackendChoice::Gpu => gpu(GpuContext::new()?),
         BackendChoice::Auto => match GpuContext::new() {
-            Ok(ctx) => Ok(Box::new(GpuSolver::new(ctx, &params, &initial)?)),
+            Ok(ctx) => gpu(ctx),
             Err(e) => {
                 eprintln!("warning: {e:#}; falling back to the cpu backend");
                 Ok(cpu(precision))

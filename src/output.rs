@@ -41,10 +41,16 @@ pub fn write_snapshot_csv(path: &Path, s: &Snapshot) -> anyhow::Result<()> {
         for i in 0..s.len() {
             let p = s.positions[i];
             let v = s.velocities[i];
-            writeln!(w, "{},{},{},{},{},{},{},{}", p[0], p[1], p[2], v[0], v[1], v[2], s.densities[i], s.pressures[i])?;
+            write_snapshot_row(w, &[p[0], p[1], p[2], v[0], v[1], v[2], s.densities[i], s.pressures[i]])?;
         }
         Ok(())
     })
+}
+
+/// One particle's line of a snapshot CSV: the values of `SNAPSHOT_HEADER` (also what the
+/// streamed GPU writer uses, so both write the same bytes).
+pub fn write_snapshot_row(w: &mut dyn Write, v: &[f64; 8]) -> std::io::Result<()> {
+    writeln!(w, "{},{},{},{},{},{},{},{}", v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
 }
 
 /// Reads a snapshot CSV written by `write_snapshot_csv`.

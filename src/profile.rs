@@ -136,6 +136,7 @@ pub fn neighbour_pairs(params: &Params, fluid: &[[f64; 3]], walls: &[[f64; 3]]) 
 
 /// Profiles `steps` steps of `scene` on `ctx` (after 2 warm-up steps).
 pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64) -> anyhow::Result<Profile> {
+    crate::gpu::memory::MemoryPlan::for_scene(scene).check(&ctx)?;
     let params = scene.params();
     let initial = scene.initial_state();
     let (n, w) = (initial.fluid_positions.len() as u64, initial.wall_positions.len() as u64);

@@ -138,11 +138,22 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut max_speed = resumed.max_speed;
     let mut failure = None;
     let mut writer = crate::checkpoint::snapshot_writer(opts, start)?;
-    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Snapshot> {
+    // CSV alone is streamed where the backend can (the GPU): no host copy of every array.
+    let csv_only = opts.formats.iter().all(|&f| f == SnapshotFormat::Csv);
+    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
+        if csv_only {
+            let path = crate::export::snapshot_file(&opts.out, backend.steps_done(), SnapshotFormat::Csv);
+            if let Some(speed) = backend.write_csv_streamed(&path) {
+                *max_speed = speed?;
+                log::info!("wrote {}", path.display());
+                *last = Some(path);
+                return Ok(None);
+            }
+        }
         let s = backend.snapshot()?;
         *max_speed = s.max_speed();
         *last = Some(writer.write(&s)?);
-        Ok(s)
+        Ok(Some(s))
     };
     let surface = crate::surface::SurfaceParameters::for_scene(&params, scene.physics.particle_spacing);
     let write_surface = |backend: &mut dyn Backend, snapshot: Option<Snapshot>| -> anyhow::Result<()> {
@@ -156,7 +167,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     if opts.resumed.is_none() {
         let s = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
         if opts.surface_mesh_every > 0 {
-            write_surface(backend, Some(s))?;
+            write_surface(backend, s)?;
         }
     }
     let mut frames = match &opts.frames {
@@ -208,7 +219,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         }
         let mut snapshot = None;
         if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
-            snapshot = Some(write_snap(backend, &mut last_snapshot, &mut max_speed)?);
+            snapshot = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
         }
         if opts.surface_mesh_every > 0 && step % opts.surface_mesh_every == 0 {
             write_surface(backend, snapshot)?;

@@ -127,6 +127,12 @@ pub trait Backend {
     /// Reads the health counters (a few bytes on the GPU).
     fn health(&mut self) -> anyhow::Result<Health>;
     fn snapshot(&mut self) -> anyhow::Result<Snapshot>;
+    /// Writes the snapshot CSV of the current state to `path` in pieces, without one host copy
+    /// of every array, and returns its maximum speed; `None` where the backend has no streamed
+    /// path (the caller then writes [`Backend::snapshot`]).
+    fn write_csv_streamed(&mut self, _path: &std::path::Path) -> Option<anyhow::Result<f64>> {
+        None
+    }
     /// Density, pressure and acceleration computed by the last step, in original particle
     /// order (read before a snapshot, which re-evaluates density for the new positions).
     fn step_fields(&mut self) -> anyhow::Result<StepFields>;

@@ -74,6 +74,7 @@ impl Simulation {
     /// the adapter's storage-buffer limits for large scenes.
     pub fn gpu_on(scene: Scene, context: GpuContext) -> anyhow::Result<Self> {
         scene.validate(&SceneOrigin::Text)?;
+        crate::gpu::memory::MemoryPlan::for_scene(&scene).check(&context)?;
         let solver = GpuSolver::new(context, &scene.params(), &scene.initial_state())?;
         Ok(Simulation { scene, solver: Solver::Gpu(Box::new(solver)) })
     }

@@ -1,6 +1,7 @@
 //! The GPU path: device, structure-of-arrays buffers, the WGSL pipelines and their dispatch order.
 
 pub mod device;
+pub mod memory;
 pub mod pipelines;
 pub mod scan;
 pub mod solver;

@@ -22,11 +22,11 @@ impl Scan {
         let mut sums = Vec::new();
         let mut levels = Vec::new();
         let mut level_len = len;
-        loop {
-            let blocks = level_len.div_ceil(SCAN_BLOCK as u64).max(1);
+        for sum_bytes in Scan::sum_buffer_bytes(len) {
+            let blocks = sum_bytes / 4;
             let sum_buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("scan block sums"),
-                size: blocks * 4,
+                size: sum_bytes,
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             });
@@ -47,12 +47,24 @@ impl Scan {
             );
             levels.push((bg, level_len));
             sums.push(sum_buffer);
-            if blocks == 1 {
-                break;
-            }
             level_len = blocks;
         }
         Scan { scan_blocks, add_offsets, levels, _sums: sums, max_per_dim: device.limits().max_compute_workgroups_per_dimension }
+    }
+
+    /// Bytes of the block-sum buffer of each level of a scan of `len` values, lowest first: one
+    /// u32 per block, up to the level that fits in one block.
+    pub fn sum_buffer_bytes(len: u64) -> Vec<u64> {
+        let mut out = Vec::new();
+        let mut level_len = len;
+        loop {
+            let blocks = level_len.div_ceil(SCAN_BLOCK as u64).max(1);
+            out.push(blocks * 4);
+            if blocks == 1 {
+                return out;
+            }
+            level_len = blocks;
+        }
     }
 
     /// Bytes of the block-sum buffers.

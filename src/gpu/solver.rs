@@ -3,6 +3,7 @@
 //! for or created inside it.
 
 use super::device::GpuContext;
+use super::memory::MemoryPlan;
 use super::pipelines::{bind_group, constants, dispatch_size, stage, Stage, Use, WORKGROUP_SIZE};
 use super::scan::Scan;
 use crate::cpu::common::{GridR, KernelCoefficients};
@@ -15,6 +16,8 @@ use wgpu::util::DeviceExt;
 
 mod profiled;
 pub use profiled::PROFILED_STAGES;
+mod stream;
+pub use stream::{StreamedSnapshot, MAX_PASSES, STREAM_CHUNK};
 
 /// A WGSL `vec4<T>` for encase (which has no glam support of its own).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -165,6 +168,7 @@ pub const STEPS_PER_SUBMIT: u64 = 32;
 /// The status buffer: health counters, and the adaptive step's maxima, dt and time (see
 /// wgsl/integrate.wgsl).
 const STATUS_WORDS: u64 = 12;
+pub(super) const STATUS_BYTES: u64 = STATUS_WORDS * 4;
 const NO_BAD_STEP: u32 = u32::MAX;
 
 pub struct GpuSolver {
@@ -235,16 +239,12 @@ impl GpuSolver {
     pub fn new(ctx: GpuContext, params: &Params, initial: &InitialState) -> anyhow::Result<Self> {
         let n = initial.fluid_positions.len() as u64;
         let cells = params.grid.cell_count() as u64;
-        for (what, bytes) in [
-            ("the fluid positions (16 bytes per particle)", n * 16),
-            ("the wall positions (16 bytes per particle)", initial.wall_positions.len() as u64 * 16),
-            ("the cell starts (4 bytes per grid cell)", (cells + 1) * 4),
-        ] {
-            ctx.check_storage_binding(what, bytes)?;
-        }
-        let device = &ctx.device;
         let viscosity = params.viscosity_at_step(0);
         let gpu_params = GpuParams::new(params, n as u32, initial.wall_positions.len() as u32, viscosity);
+        // Every buffer is checked against the device's limits before the first is created.
+        let plan = MemoryPlan::new(n, Some(initial.wall_positions.len() as u64), cells, gpu_params.bytes().len() as u64);
+        plan.check(&ctx)?;
+        let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("params"),
             contents: &gpu_params.bytes(),
@@ -374,12 +374,7 @@ impl GpuSolver {
             &[u.clone(), b(&state[0].positions), b(&state[0].velocities), b(&accelerations), b(&status)],
         );
         let dispatch = dispatch_size(n, WORKGROUP_SIZE, device.limits().max_compute_workgroups_per_dimension);
-        let memory = [&uniform, &keys, &ranks, &unordered, &starts, &densities, &pressures, &accelerations, &status, &wall_positions, &wall_starts_buf]
-            .iter()
-            .map(|b| b.size())
-            .chain(state.iter().flat_map(|s| [s.positions.size(), s.velocities.size(), s.ids.size()]))
-            .sum::<u64>()
-            + scan.bytes();
+        let memory = plan.total();
         Ok(GpuSolver {
             params: params.clone(),
             fluid_count: n as u32,
@@ -552,9 +547,20 @@ impl GpuSolver {
         Ok(words.try_into().expect("status has STATUS_WORDS words"))
     }
 
-    /// Bytes of every buffer the solver allocated on the device.
+    /// Bytes of every buffer the solver allocated on the device (its [`MemoryPlan`]'s total).
     pub fn memory_bytes(&self) -> u64 {
         self.memory
+    }
+
+    /// Bytes of the buffers as created, summed from the buffers themselves (to check the plan).
+    pub fn allocated_bytes(&self) -> u64 {
+        let s = self;
+        [&s.uniform, &s._keys, &s._ranks, &s._unordered, &s.starts, &s.densities, &s.pressures, &s.accelerations, &s.status, &s._wall_positions, &s._wall_starts]
+            .iter()
+            .map(|b| b.size())
+            .chain(s.state.iter().flat_map(|st| [st.positions.size(), st.velocities.size(), st.ids.size()]))
+            .sum::<u64>()
+            + s.scan.bytes()
     }
 }
 
@@ -720,6 +726,9 @@ impl Backend for GpuSolver {
             densities: unpermute(&ids, rho.iter().map(|&v| v as f64)),
             pressures: unpermute(&ids, p.iter().map(|&v| v as f64)),
         })
+    }
+    fn write_csv_streamed(&mut self, path: &std::path::Path) -> Option<anyhow::Result<f64>> {
+        Some(self.write_snapshot_csv_streamed(path, STREAM_CHUNK).map(|s| s.max_speed))
     }
     fn gpu_particles(&self) -> Option<(GpuContext, crate::render::ParticleBuffers)> {
         let st = &self.state[self.current];
