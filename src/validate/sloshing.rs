@@ -2,7 +2,7 @@
 //!
 //! Water at rest depth H in a slab tank of length L (wall particles backed by planes, gravity)
 //! is given the velocity field of the first sloshing mode of linear potential flow,
-//! phi = A cos(k x) cosh(k y) with k = pi / L (Lamb 1932, Sec. 257): u = -A k sin(k x) cosh(k y),
+//! phi = A cos(k x) cosh(k y) with k = pi / L (standing surface waves, Lamb, Hydrodynamics, Ch. IX): u = -A k sin(k x) cosh(k y),
 //! v = A k cos(k x) sinh(k y). It is divergence free and has no normal velocity at the side walls
 //! and the floor, so the start is not impulsive. The total energy
 //! E = kinetic + potential + elastic (`conservation::energy`) can then only decay, through
@@ -22,7 +22,7 @@ pub const SURFACE_SPEED: f64 = 0.3;
 /// Simulated time: about two periods of the first mode (0.8 s).
 pub const END_TIME: f64 = 1.6;
 
-/// The tank: 0.4 m x 0.3 m, water 0.15 m deep, 8 particles per 0.08 m at the default resolution
+/// The tank: 0.4 m x 0.3 m, water 0.15 m deep, particle spacing 0.01 m at the default resolution
 /// (s = 0.01 m; coarse 0.02 m, fine 0.005 m).
 pub fn sloshing_tank(resolution: Resolution, alpha: f64, boundary_pressure: BoundaryPressure) -> Tank {
     let s = 0.01 / resolution.refinement();
