@@ -29,6 +29,7 @@ fn drop_scene() -> Scene {
             viscosity: 0.01,
             viscosity_schedule: vec![],
             boundary_friction: 0.0,
+            boundary_pressure: Default::default(),
             gravity: [0.0, -9.81, 0.0],
         },
         time: Time::fixed(2.5e-4, 0.5),

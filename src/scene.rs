@@ -115,6 +115,18 @@ pub struct Domain {
     pub max: [f64; 3],
 }
 
+/// The pressure a wall particle pushes a fluid particle with.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BoundaryPressure {
+    /// The wall mirrors the fluid particle: 2 max(p_i, 0) / rho_i^2 (p_w = p_i, rho_w = rho_i).
+    #[default]
+    Mirror,
+    /// p_i / rho_i^2: the gradient of the elastic energy that the density summation over wall
+    /// particles defines, so that walls neither create nor destroy energy (Akinci et al. 2012).
+    Consistent,
+}
+
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum Kernel {
@@ -168,6 +180,9 @@ pub struct Physics {
     /// Scales the viscosity term between fluid and wall particles: 1 = no-slip, 0 = free slip.
     #[serde(default = "default_boundary_friction")]
     pub boundary_friction: f64,
+    /// The wall particles' pressure term (see `BoundaryPressure`).
+    #[serde(default)]
+    pub boundary_pressure: BoundaryPressure,
     #[serde(default = "default_gravity")]
     pub gravity: [f64; 3],
 }
@@ -390,6 +405,7 @@ pub struct Params {
     /// (start time, nu) pairs in time order; the first starts at 0.
     pub viscosity: Vec<(f64, f64)>,
     pub boundary_friction: f64,
+    pub boundary_pressure: BoundaryPressure,
     pub gravity: [f64; 3],
     pub dt: f64,
     pub end_time: f64,
@@ -829,6 +845,7 @@ impl Scene {
             clamp_negative_pressure: p.clamp_negative_pressure,
             viscosity,
             boundary_friction: p.boundary_friction,
+            boundary_pressure: p.boundary_pressure,
             gravity: p.gravity,
             dt: self.time.dt,
             end_time: self.time.end_time,

@@ -451,6 +451,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             // SPlisHSPlasH's boundary viscosity is a coefficient of its own; wgsph scales the
             // fluid's by boundary_friction.
             boundary_friction: if fluid.viscosity > 0.0 { fluid.viscosity_boundary / fluid.viscosity } else { 0.0 },
+            boundary_pressure: Default::default(),
             gravity,
         },
         time: Time::fixed(dt, end_time),

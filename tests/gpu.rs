@@ -184,3 +184,23 @@ fn a_scene_too_big_for_the_adapter_is_refused_naming_adapter_and_limit() {
         assert!(e.contains(&ctx.info.name) && e.contains("max_storage_buffer_binding_size") && e.contains("fluid positions"), "{e}");
     }
 }
+
+/// The consistent wall pressure (p_i / rho_i^2) agrees between the GPU and the CPU, and the
+/// GPU's specialisation constant takes effect: its step differs from the CPU's mirrored one.
+#[test]
+fn consistent_wall_pressure_agrees_with_the_cpu_path() {
+    for ctx in common::contexts() {
+        let name = ctx.describe();
+        let mut consistent = small_scene("cubic_spline", "tait", true);
+        consistent.physics.boundary_pressure = wgsph::scene::BoundaryPressure::Consistent;
+        let (p, init) = (consistent.params(), consistent.initial_state());
+        let device = GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
+        let c = gpu_against_cpu(device, &consistent, 1, &ONE_STEP);
+        assert!(c.field("acceleration").max < 1e-4 && c.passed(), "{name}:\n{}", c.table());
+        let mut gpu = GpuSolver::new(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &p, &init).unwrap();
+        let mirror = small_scene("cubic_spline", "tait", true);
+        let mut cpu_mirror = CpuSolver::<f64>::new(&mirror.params(), &mirror.initial_state());
+        let c = step_and_compare(&mut gpu, &mut cpu_mirror, 1, &ONE_STEP).unwrap();
+        assert!(!c.passed() && c.field("acceleration").max > 1e-3, "{name}: the wall pressure made no difference:\n{}", c.table());
+    }
+}

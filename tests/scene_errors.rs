@@ -138,3 +138,13 @@ fn camera_fields_are_checked() {
         assert!(e.contains("tank.toml") && e.contains(field) && e.contains(allowed), "{camera}: {e}");
     }
 }
+
+#[test]
+fn boundary_pressure_is_mirror_by_default_and_checked() {
+    use wgsph::scene::BoundaryPressure;
+    assert_eq!(Scene::from_toml_str(GOOD, &SceneOrigin::Text).unwrap().params().boundary_pressure, BoundaryPressure::Mirror);
+    let consistent = GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_pressure = \"consistent\"");
+    assert_eq!(Scene::from_toml_str(&consistent, &SceneOrigin::Text).unwrap().params().boundary_pressure, BoundaryPressure::Consistent);
+    let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_pressure = \"mirrored\""));
+    assert!(e.contains("tank.toml") && e.contains("mirrored") && e.contains("mirror") && e.contains("consistent"), "{e}");
+}

@@ -26,7 +26,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let rho_i = densities[i];
     let p_i = pressures[i];
     let pi_over = p_i / (rho_i * rho_i);
-    let wall_p_over = 2.0 * max(p_i, 0.0) / (rho_i * rho_i);
+    let wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), pi_over, CONSISTENT_WALL_PRESSURE);
     let c = cell_coords(xi);
     // Sums without their constant factors, applied once at the end.
     var fluid_pressure = vec3<f32>(0.0);

@@ -4,7 +4,7 @@
 use super::common::{cell_coords, GridR, KernelCoefficients};
 use super::Neighbours;
 use crate::real::{Real, V3};
-use crate::scene::Kernel;
+use crate::scene::{BoundaryPressure, Kernel};
 use rayon::prelude::*;
 
 pub struct ForcesInput<'a, R> {
@@ -14,6 +14,7 @@ pub struct ForcesInput<'a, R> {
     pub viscosity: R,
     pub rest_density: R,
     pub boundary_friction: R,
+    pub boundary_pressure: BoundaryPressure,
     pub gravity: V3<R>,
     pub fluid: Neighbours<'a, R>,
     pub velocities: &'a [V3<R>],
@@ -30,9 +31,12 @@ pub struct ForcesInput<'a, R> {
 /// lap W_ik (u_k - u_i), symmetric in i and k so that it conserves momentum exactly; for the
 /// cubic spline, whose Laplacian changes sign, 2 (d + 2) nu rho0 sum_k m_k/(rho_i rho_k)
 /// (u_ik . x_ik) / (|x_ik|^2 + 0.01 h^2) grad W_ik (Monaghan 2005, Eq. 6.3).
-/// A wall particle mirrors the fluid particle's pressure (p_w = max(p_i, 0), rho_w = rho_i; as in
-/// Akinci et al. 2012), so walls only push, and it takes part in viscosity at rest with the
-/// volume m_w/rho_i, scaled by the boundary friction.
+/// A wall particle pushes with `boundary_pressure`: `Mirror` mirrors the fluid particle's
+/// pressure (p_w = max(p_i, 0), rho_w = rho_i, giving 2 max(p_i, 0)/rho_i^2), so walls only push;
+/// `Consistent` uses p_i/rho_i^2 (Akinci et al. 2012, Eq. 10 with volumes m_w/rho0), the
+/// gradient of sum_i m_i e(rho_i) through the wall particles' share of rho_i, so that the walls
+/// do no net work over a cycle of compression and release. A wall particle takes part in
+/// viscosity at rest with the volume m_w/rho_i, scaled by the boundary friction.
 pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     let kernel = input.kernel;
     let cubic = kernel.kind == Kernel::CubicSpline;
@@ -48,7 +52,10 @@ pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
         let rho_i = input.densities[i];
         let p_i = input.pressures[i];
         let pi_over = p_i / (rho_i * rho_i);
-        let wall_p_over = R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i);
+        let wall_p_over = match input.boundary_pressure {
+            BoundaryPressure::Mirror => R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i),
+            BoundaryPressure::Consistent => pi_over,
+        };
         let c = cell_coords(input.grid, xi);
         // Sums without the constant factors, which are applied once at the end.
         let mut fluid_pressure = V3::zero();

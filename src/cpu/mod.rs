@@ -191,6 +191,7 @@ impl<R: Real> CpuSolver<R> {
             viscosity: R::of(p.viscosity_at_step(self.step)),
             rest_density: R::of(p.rest_density),
             boundary_friction: R::of(p.boundary_friction),
+            boundary_pressure: p.boundary_pressure,
             gravity: V3::from64(p.gravity),
             fluid: Neighbours { positions: &self.positions, starts: &self.starts },
             velocities: &self.velocities,

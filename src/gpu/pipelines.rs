@@ -1,6 +1,6 @@
 //! Shader assembly, bind-group layouts and compute pipelines, built once per scene.
 
-use crate::scene::{EquationOfState, Kernel, Params};
+use crate::scene::{BoundaryPressure, EquationOfState, Kernel, Params};
 
 /// Shared definitions, prepended to each stage (WGSL has no include).
 pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
@@ -76,6 +76,7 @@ pub fn constants(params: &Params) -> Vec<(&'static str, f64)> {
         ("KERNEL", match params.kernel { Kernel::Mueller => 0.0, Kernel::CubicSpline => 1.0 }),
         ("EOS", match params.eos { EquationOfState::Linear => 0.0, EquationOfState::Tait => 1.0 }),
         ("CLAMP_NEGATIVE_PRESSURE", flag(params.clamp_negative_pressure)),
+        ("CONSISTENT_WALL_PRESSURE", flag(params.boundary_pressure == BoundaryPressure::Consistent)),
         ("VISCOSITY", flag(params.uses_viscosity())),
         ("PLANES", flag(!params.planes.is_empty())),
         ("GRAVITY", flag(params.uses_gravity())),

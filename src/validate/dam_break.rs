@@ -12,6 +12,7 @@ use super::data::{self, relative_errors};
 use super::scenes::{WALL_LAYERS, H_OVER_SPACING, sample_steps, Tank, GRAVITY, SLAB_SPACINGS};
 use super::{write_csv, CaseReport, Case, Figure, MakeBackend, Resolution, Sampler};
 use crate::plot::{Corner, Plot};
+use crate::scene::BoundaryPressure;
 use crate::scene::Kernel;
 use std::path::Path;
 
@@ -63,6 +64,7 @@ pub fn column_tank(name: &str, a: f64, length: f64, resolution: Resolution, end_
         walls: true,
         planes: true,
         wall_layers: WALL_LAYERS,
+        boundary_pressure: BoundaryPressure::Mirror,
     }
 }
 

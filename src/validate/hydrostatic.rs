@@ -11,6 +11,7 @@
 use super::scenes::{WALL_LAYERS, sample_steps, Tank, GRAVITY, H_OVER_SPACING};
 use super::{write_csv, Case, CaseReport, Figure, MakeBackend, Resolution, Sampler};
 use crate::plot::{Corner, Mark, Plot};
+use crate::scene::BoundaryPressure;
 use crate::scene::Kernel;
 use std::path::Path;
 
@@ -51,6 +52,7 @@ pub fn tank(resolution: Resolution) -> Tank {
         walls: true,
         planes: true,
         wall_layers: WALL_LAYERS,
+        boundary_pressure: BoundaryPressure::Mirror,
     }
 }
 

@@ -11,6 +11,7 @@ pub mod dam_break;
 pub mod data;
 pub mod hydrostatic;
 pub mod scenes;
+pub mod sloshing;
 
 use crate::cli::{BackendChoice, InputError};
 use crate::output::write_atomic;

@@ -5,7 +5,7 @@
 //! particle spacings, and dt = 0.25 h / c0 (CFL number 0.25 on the speed of sound).
 //! A 3D run of a 2D experiment is a slab four particle spacings deep between walls in z.
 
-use crate::scene::{Boundary, Domain, EquationOfState, FluidBlock, Kernel, Physics, Scene, SceneOrigin, Time, WallParticles};
+use crate::scene::{Boundary, BoundaryPressure, Domain, EquationOfState, FluidBlock, Kernel, Physics, Scene, SceneOrigin, Time, WallParticles};
 
 pub const GRAVITY: f64 = 9.81;
 /// Support radius in particle spacings.
@@ -44,6 +44,8 @@ pub struct Tank {
     pub planes: bool,
     /// Layers of wall particles.
     pub wall_layers: u32,
+    /// The wall particles' pressure term.
+    pub boundary_pressure: BoundaryPressure,
 }
 
 impl Tank {
@@ -102,6 +104,7 @@ impl Tank {
                 viscosity: self.viscosity(),
                 viscosity_schedule: Vec::new(),
                 boundary_friction: 0.0,
+                boundary_pressure: self.boundary_pressure,
                 gravity: self.gravity,
             },
             time: Time::fixed(self.dt(), self.end_time),
