@@ -581,21 +581,29 @@ pub struct ParticleBuffers<'a> {
     pub count: u32,
 }
 
-/// Copies `buffers` to mappable staging buffers and reads them back (waits for the GPU).
+/// Copies `buffers` (their first `bytes` each) to mappable staging buffers and reads them back
+/// (waits for the GPU).
 pub fn read_buffers(ctx: &GpuContext, buffers: &[(&wgpu::Buffer, u64)]) -> anyhow::Result<Vec<Vec<u8>>> {
+    let ranges: Vec<(&wgpu::Buffer, u64, u64)> = buffers.iter().map(|&(buffer, bytes)| (buffer, 0, bytes)).collect();
+    read_ranges(ctx, &ranges)
+}
+
+/// Copies byte ranges `(buffer, offset, bytes)` to mappable staging buffers and reads them back
+/// (waits for the GPU). Copies are made in whole 4-byte words, as wgpu requires.
+pub fn read_ranges(ctx: &GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> anyhow::Result<Vec<Vec<u8>>> {
     let device = &ctx.device;
     let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
-    let staging: Vec<wgpu::Buffer> = buffers
+    let staging: Vec<wgpu::Buffer> = ranges
         .iter()
-        .map(|(src, bytes)| {
-            let size = (*bytes).max(4).next_multiple_of(4);
+        .map(|&(src, offset, bytes)| {
+            let size = bytes.max(4).next_multiple_of(4);
             let dst = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("staging"),
                 size,
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            encoder.copy_buffer_to_buffer(src, 0, &dst, 0, size);
+            encoder.copy_buffer_to_buffer(src, offset, &dst, 0, size);
             dst
         })
         .collect();
@@ -614,11 +622,8 @@ pub fn read_buffers(ctx: &GpuContext, buffers: &[(&wgpu::Buffer, u64)]) -> anyho
     }
     let out = staging
         .iter()
-        .zip(buffers)
-        .map(|(s, (_, bytes))| {
-            let view = s.slice(..).get_mapped_range().expect("mapped above");
-            view[..*bytes as usize].to_vec()
-        })
+        .zip(ranges)
+        .map(|(s, &(_, _, bytes))| s.slice(..).get_mapped_range().expect("mapped above")[..bytes as usize].to_vec())
         .collect();
     for s in &staging {
         s.unmap();

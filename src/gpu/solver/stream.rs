@@ -10,7 +10,7 @@
 //! `32 * max(chunk, ceil(N / MAX_PASSES)) + 40 * chunk` bytes: about 4 bytes per particle for
 //! big runs, instead of the whole-array path's 40 bytes read back plus 64 in the snapshot.
 
-use super::GpuSolver;
+use super::{read_ranges, GpuSolver};
 use crate::output::{write_atomic, write_snapshot_row, SNAPSHOT_HEADER};
 use crate::sim::Backend;
 use std::path::Path;
@@ -80,42 +80,4 @@ impl GpuSolver {
         })?;
         Ok(StreamedSnapshot { step: self.steps, time: self.time(), particles: n, max_speed })
     }
-}
-
-/// Copies byte ranges `(buffer, offset, bytes)` to mappable staging buffers and reads them back
-/// (waits for the GPU).
-fn read_ranges(ctx: &crate::gpu::GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> anyhow::Result<Vec<Vec<u8>>> {
-    let device = &ctx.device;
-    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("streamed readback") });
-    let staging: Vec<wgpu::Buffer> = ranges
-        .iter()
-        .map(|&(src, offset, bytes)| {
-            let dst = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("streamed readback"),
-                size: bytes,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            encoder.copy_buffer_to_buffer(src, offset, &dst, 0, bytes);
-            dst
-        })
-        .collect();
-    ctx.queue.submit([encoder.finish()]);
-    let (tx, rx) = std::sync::mpsc::channel();
-    for (i, s) in staging.iter().enumerate() {
-        let tx = tx.clone();
-        s.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send((i, r));
-        });
-    }
-    device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None })?;
-    for _ in 0..staging.len() {
-        let (i, r) = rx.recv()?;
-        r.map_err(|e| anyhow::anyhow!("mapping streamed readback buffer {i} failed: {e}"))?;
-    }
-    let out = staging.iter().map(|s| s.slice(..).get_mapped_range().expect("mapped above").to_vec()).collect();
-    for s in &staging {
-        s.unmap();
-    }
-    Ok(out)
 }
