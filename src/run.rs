@@ -180,12 +180,12 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut step = start;
     let mut end = end;
     while step < end {
-        let next_snap = if opts.snapshot_every > 0 { (step / opts.snapshot_every + 1) * opts.snapshot_every } else { end };
-        let next_check = (step / opts.check_every.max(1) + 1) * opts.check_every.max(1);
-        let next_checkpoint = if opts.checkpoint_every > 0 { (step / opts.checkpoint_every + 1) * opts.checkpoint_every } else { end };
-        let next_mesh = if opts.surface_mesh_every > 0 { (step / opts.surface_mesh_every + 1) * opts.surface_mesh_every } else { end };
-        let next_frame = frames.as_ref().map_or(end, |f| (step / f.every + 1) * f.every);
-        let mut target = end.min(next_snap).min(next_check).min(next_checkpoint).min(next_frame).min(next_mesh);
+        // The next step at which anything is due (an interval of 0 is never due).
+        let next = |every: u64| if every > 0 { (step / every + 1) * every } else { end };
+        let mut target = [opts.snapshot_every, opts.check_every.max(1), opts.checkpoint_every, opts.surface_mesh_every, frames.as_ref().map_or(0, |f| f.every)]
+            .into_iter()
+            .map(next)
+            .fold(end, u64::min);
         if let Some(t_end) = opts.end_time {
             // Adaptive dt: steps of about half the time left, at the current dt, so that the
             // run ends at the first step reaching t_end.
@@ -197,21 +197,23 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         }
         backend.step(target - step)?;
         step = backend.steps_done();
-        if opts.end_time.is_some_and(|t_end| backend.time() >= t_end) {
+        // With adaptive dt the time is read from the GPU: once per batch.
+        let time = backend.time();
+        if opts.end_time.is_some_and(|t_end| time >= t_end) {
             end = step;
         }
         let health = backend.health()?;
         if let Some(b) = &bar {
             match opts.end_time {
-                Some(t_end) => b.set_position((1000.0 * backend.time() / t_end).min(1000.0) as u64),
+                Some(t_end) => b.set_position((1000.0 * time / t_end).min(1000.0) as u64),
                 None => b.set_position(step - start),
             }
-            b.set_message(format!("t = {:.3}", backend.time()));
+            b.set_message(format!("t = {time:.3}"));
         }
         if !health.is_ok() {
             failure = Some(if params.adaptive.is_some() {
                 let last = Params { dt: backend.dt_stats()?.last, ..params.clone() };
-                diagnose_at(&last, &health, max_speed, backend.time())
+                diagnose_at(&last, &health, max_speed, time)
             } else {
                 diagnose(&params, &health, max_speed)
             });

@@ -12,44 +12,11 @@ use wgsph::sim::Backend;
 
 /// A jittered block moving in a tank of wall particles with a plane, gravity and viscosity.
 fn small_scene(time_options: &str) -> Scene {
-    Scene::from_toml_str(&small_text(time_options), &SceneOrigin::Text).unwrap()
+    common::scene_from(&small_text(time_options))
 }
 
 fn small_text(time_options: &str) -> String {
-    format!(
-        r#"
-        name = "small"
-        [domain]
-        min = [-0.1, -0.1, -0.1]
-        max = [0.7, 0.9, 0.3]
-        [physics]
-        smoothing_length = 0.04
-        particle_spacing = 0.02
-        equation_of_state = "tait"
-        speed_of_sound = 20.0
-        clamp_negative_pressure = true
-        viscosity = 0.005
-        boundary_friction = 0.5
-        [time]
-        dt = 0.0004
-        end_time = 1.0
-        {time_options}
-        [[fluid]]
-        min = [0.0, 0.0, 0.0]
-        max = [0.2, 0.3, 0.2]
-        jitter = 0.1
-        velocity = [0.3, 0.0, 0.0]
-        [[boundary]]
-        type = "container"
-        min = [0.0, 0.0, 0.0]
-        max = [0.6, 0.5, 0.2]
-        [[boundary]]
-        type = "plane"
-        point = [0.5, 0.0, 0.0]
-        normal = [-1.0, 0.0, 0.0]
-        restitution = 0.5
-        "#
-    )
+    common::small_scene_text("mueller", "tait", true, "", time_options)
 }
 
 #[test]

@@ -9,9 +9,7 @@ use wgsph::run::{run, RunOptions};
 use wgsph::scene::{InitialState, Scene, SceneOrigin};
 use wgsph::sim::{Backend, StepFields};
 
-fn scene(text: &str) -> Scene {
-    Scene::from_toml_str(text, &SceneOrigin::Text).unwrap_or_else(|e| panic!("{e}\n{text}"))
-}
+use common::scene_from as scene;
 
 /// A block of 6 x 8 x 4 fluid particles in a closed tank of wall particles, backed by planes on
 /// the tank's inner faces. h = 0.04, c0 = 20 m/s: the CFL number dt (c0 + |v|) / h is 0.1 at

@@ -9,48 +9,13 @@ use wgsph::cpu::{prefix_sum::prefix_sum, sort_by_cell, CpuSolver};
 use wgsph::gpu::scan::exclusive_scan;
 use wgsph::gpu::{GpuContext, GpuSolver};
 use wgsph::real::V3;
-use wgsph::scene::{Scene, SceneOrigin};
+use wgsph::scene::Scene;
 use wgsph::sim::Backend;
 
 /// A small scene for each model combination: a jittered block in a tank of wall particles with
 /// a plane, gravity, viscosity and a viscosity schedule.
 fn small_scene(kernel: &str, eos: &str, clamp: bool) -> Scene {
-    let text = format!(
-        r#"
-        name = "small"
-        [domain]
-        min = [-0.1, -0.1, -0.1]
-        max = [0.7, 0.9, 0.3]
-        [physics]
-        smoothing_length = 0.04
-        particle_spacing = 0.02
-        kernel = "{kernel}"
-        equation_of_state = "{eos}"
-        speed_of_sound = 20.0
-        clamp_negative_pressure = {clamp}
-        viscosity = 0.005
-        viscosity_schedule = [{{ time = 0.002, viscosity = 0.001 }}]
-        boundary_friction = 0.5
-        [time]
-        dt = 0.0004
-        end_time = 1.0
-        [[fluid]]
-        min = [0.0, 0.0, 0.0]
-        max = [0.2, 0.3, 0.2]
-        jitter = 0.1
-        velocity = [0.3, 0.0, 0.0]
-        [[boundary]]
-        type = "container"
-        min = [0.0, 0.0, 0.0]
-        max = [0.6, 0.5, 0.2]
-        [[boundary]]
-        type = "plane"
-        point = [0.5, 0.0, 0.0]
-        normal = [-1.0, 0.0, 0.0]
-        restitution = 0.5
-        "#
-    );
-    Scene::from_toml_str(&text, &SceneOrigin::Text).unwrap()
+    common::scene_from(&common::small_scene_text(kernel, eos, clamp, "viscosity_schedule = [{ time = 0.002, viscosity = 0.001 }]", ""))
 }
 
 /// Runs `steps` steps on the GPU and on the f64 CPU path from the scene's initial state and

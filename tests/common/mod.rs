@@ -4,6 +4,7 @@
 
 use wgsph::gpu::device::compute_adapters;
 use wgsph::gpu::GpuContext;
+use wgsph::scene::{Scene, SceneOrigin};
 
 /// A device on every adapter found. With none, the test is skipped with a visible message,
 /// unless WGSPH_REQUIRE_GPU is set (CI sets it, so a missing driver fails there).
@@ -17,4 +18,50 @@ pub fn contexts() -> Vec<GpuContext> {
         eprintln!("SKIPPED: no GPU adapter with compute shaders (install mesa-vulkan-drivers for lavapipe)");
     }
     list
+}
+
+/// The text of a small scene for GPU-against-CPU checks: a jittered block moving in a tank of
+/// wall particles with a plane, gravity and viscosity. `physics_extra` and `time_extra` are
+/// lines added to the `[physics]` and `[time]` tables.
+pub fn small_scene_text(kernel: &str, eos: &str, clamp: bool, physics_extra: &str, time_extra: &str) -> String {
+    format!(
+        r#"
+        name = "small"
+        [domain]
+        min = [-0.1, -0.1, -0.1]
+        max = [0.7, 0.9, 0.3]
+        [physics]
+        smoothing_length = 0.04
+        particle_spacing = 0.02
+        kernel = "{kernel}"
+        equation_of_state = "{eos}"
+        speed_of_sound = 20.0
+        clamp_negative_pressure = {clamp}
+        viscosity = 0.005
+        {physics_extra}
+        boundary_friction = 0.5
+        [time]
+        dt = 0.0004
+        end_time = 1.0
+        {time_extra}
+        [[fluid]]
+        min = [0.0, 0.0, 0.0]
+        max = [0.2, 0.3, 0.2]
+        jitter = 0.1
+        velocity = [0.3, 0.0, 0.0]
+        [[boundary]]
+        type = "container"
+        min = [0.0, 0.0, 0.0]
+        max = [0.6, 0.5, 0.2]
+        [[boundary]]
+        type = "plane"
+        point = [0.5, 0.0, 0.0]
+        normal = [-1.0, 0.0, 0.0]
+        restitution = 0.5
+        "#
+    )
+}
+
+pub fn scene_from(text: &str) -> Scene {
+    Scene::from_toml_str(text, &SceneOrigin::Text).unwrap_or_else(|e| panic!("{e}\n{text}"))
 }
