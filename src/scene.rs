@@ -700,7 +700,7 @@ impl Scene {
             let need = count * CPU_BYTES_PER_PARTICLE + cells * 8;
             if need > avail {
                 return Err(err(origin, "fluid", format!(
-                    "{count} particles and {cells} cells need about {} MiB of host memory; {} MiB are available",
+                    "{count} particles (fluid and walls) and {cells} cells need about {} MiB of host memory; {} MiB are available",
                     need >> 20, avail >> 20)));
             }
         }
@@ -783,8 +783,8 @@ impl Scene {
         self.fluid.iter().map(|b| lattice_counts(b.min, b.max, s).iter().product::<u64>()).sum()
     }
 
-    /// Particle count (fluid and walls, walls over-estimated by their bounding shell) computed
-    /// from the lattice sizes, without creating the particles.
+    /// Particle count (fluid and walls, walls over-estimated by the full shell of their box,
+    /// top included) computed from the lattice sizes, without creating the particles.
     pub fn estimated_particle_count(&self) -> u64 {
         let s = self.physics.particle_spacing;
         let mut n = self.fluid_particle_count();
@@ -793,7 +793,9 @@ impl Scene {
                 let ws = walls.spacing.unwrap_or(s);
                 let l = self.wall_layers(walls) as f64 * ws;
                 let (lo, hi) = ([min[0] - l, min[1] - l, min[2] - l], [max[0] + l, max[1] + l, max[2] + l]);
-                n += lattice_counts(lo, hi, ws).iter().product::<u64>();
+                let outer = lattice_counts(lo, hi, ws).iter().product::<u64>();
+                let inner = lattice_counts(*min, *max, ws).iter().map(|&c| c.saturating_sub(2)).product::<u64>();
+                n += outer.saturating_sub(inner);
             }
         }
         n

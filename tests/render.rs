@@ -250,3 +250,32 @@ fn colour_follows_the_chosen_field_and_range() {
         assert!(high[0] > high[2] && high[1] > high[2], "{}: high end not yellow: {high:?}", ctx.describe());
     }
 }
+
+#[test]
+fn the_automatic_colour_range_covers_every_segment_of_a_split_field() {
+    for ctx in common::contexts() {
+        let split = ctx.clone().with_storage_segment_bytes(wgsph::gpu::device::MIN_SEGMENT_BYTES).unwrap();
+        // 17^3 = 4913 particles: the speeds (vec4s) fill more than one 4096-value segment.
+        let scene = block(17, 0.0, 0.0, false);
+        let mut cpu = CpuSolver::<f64>::new(&scene.params(), &scene.initial_state());
+        let mut snapshot = cpu.snapshot();
+        assert!(snapshot.len() > 4096);
+        // Every particle at rest but the last, which alone sets the top of the range: a range
+        // taken from the first segment alone would be [0, 0] and colour the block differently.
+        let last = snapshot.len() - 1;
+        snapshot.velocities[last] = [1.0, 0.0, 0.0];
+        let pictures: Vec<Picture> = [&ctx, &split]
+            .into_iter()
+            .map(|c| {
+                let mut o = Offscreen::new(c, options(Style::Particles), &scene, &[]);
+                let particles = o.renderer.upload(&snapshot);
+                o.picture(&particles).unwrap()
+            })
+            .collect();
+        assert!(pictures[0].rgba == pictures[1].rgba, "{}: the split field gives another picture", ctx.describe());
+        // And the whole-field picture is the one of the range [0, 1] set by hand.
+        let mut fixed = Offscreen::new(&ctx, RenderOptions { range: Some((0.0, 1.0)), ..options(Style::Particles) }, &scene, &[]);
+        let particles = fixed.renderer.upload(&snapshot);
+        assert!(fixed.picture(&particles).unwrap().rgba == pictures[0].rgba, "{}: automatic range is not [0, 1]", ctx.describe());
+    }
+}

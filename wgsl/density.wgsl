@@ -1,14 +1,14 @@
 // Density by kernel summation over fluid and wall neighbours (report Eq. 5) and pressure from
 // the equation of state (Eq. 8 or 9). Twin of src/cpu/density.rs.
 
-@group(0) @binding(1) var<storage, read> positions: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> starts: array<u32>;
-@group(0) @binding(3) var<storage, read> wall_positions: array<vec4<f32>>;  // w: mass
-@group(0) @binding(4) var<storage, read> wall_starts: array<u32>;
-@group(0) @binding(5) var<storage, read_write> densities: array<f32>;
-@group(0) @binding(6) var<storage, read_write> pressures: array<f32>;
+//! array positions: vec4<f32>, read
+//! array starts: u32, read
+//! array wall_positions: vec4<f32>, read
+//! array wall_starts: u32, read
+//! array densities: f32, read_write
+//! array pressures: f32, read_write
 // [4]: the largest density so far, as float bits (positive floats order like their bits).
-@group(0) @binding(7) var<storage, read_write> status: array<atomic<u32>>;
+//! array status: u32, atomic, whole
 
 var<workgroup> group_max: atomic<u32>;
 
@@ -24,27 +24,27 @@ fn main(
     workgroupBarrier();
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let xi = positions[i].xyz;
+        let xi = positions_at(i).xyz;
         let c = cell_coords(xi);
         var fluid_sum = 0.0;
         var wall_sum = 0.0;
         for (var run = 0u; run < 9u; run++) {
             let cells = stencil_run(c, run);
-            for (var j = starts[cells.x]; j < starts[cells.y]; j++) {
-                let d = xi - positions[j].xyz;
+            for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
+                let d = xi - positions_at(j).xyz;
                 fluid_sum += kernel_w(dot(d, d));
             }
             if (WALLS) {
-                for (var j = wall_starts[cells.x]; j < wall_starts[cells.y]; j++) {
-                    let w = wall_positions[j];
+                for (var j = wall_starts_at(cells.x); j < wall_starts_at(cells.y); j++) {
+                    let w = wall_positions_at(j);  // w: mass
                     let d = xi - w.xyz;
                     wall_sum += w.w * kernel_w(dot(d, d));
                 }
             }
         }
         let rho = params.fluid_mass * fluid_sum + wall_sum;
-        densities[i] = rho;
-        pressures[i] = eos_pressure(rho);
+        densities_set(i, rho);
+        pressures_set(i, eos_pressure(rho));
         if (is_finite_f32(rho) && rho > 0.0) {
             atomicMax(&group_max, bitcast<u32>(rho));
         }

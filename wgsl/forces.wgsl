@@ -3,14 +3,14 @@
 // gravity.
 // Twin of src/cpu/forces.rs, which explains the wall and viscosity models.
 
-@group(0) @binding(1) var<storage, read> positions: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> velocities: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> densities: array<f32>;
-@group(0) @binding(4) var<storage, read> pressures: array<f32>;
-@group(0) @binding(5) var<storage, read> starts: array<u32>;
-@group(0) @binding(6) var<storage, read> wall_positions: array<vec4<f32>>;  // w: mass
-@group(0) @binding(7) var<storage, read> wall_starts: array<u32>;
-@group(0) @binding(8) var<storage, read_write> accelerations: array<vec4<f32>>;
+//! array positions: vec4<f32>, read
+//! array velocities: vec4<f32>, read
+//! array densities: f32, read
+//! array pressures: f32, read
+//! array starts: u32, read
+//! array wall_positions: vec4<f32>, read
+//! array wall_starts: u32, read
+//! array accelerations: vec4<f32>, read_write
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -21,10 +21,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let cubic = KERNEL == 1u;
     let viscous = VISCOSITY && params.viscosity > 0.0;
     let eps = 0.01 * params.h2;
-    let xi = positions[i].xyz;
-    let ui = velocities[i].xyz;
-    let rho_i = densities[i];
-    let p_i = pressures[i];
+    let xi = positions_at(i).xyz;
+    let ui = velocities_at(i).xyz;
+    let rho_i = densities_at(i);
+    let p_i = pressures_at(i);
     let pi_over = p_i / (rho_i * rho_i);
     let wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), pi_over, CONSISTENT_WALL_PRESSURE);
     let c = cell_coords(xi);
@@ -35,20 +35,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     var wall_visc = vec3<f32>(0.0);
     for (var run = 0u; run < 9u; run++) {
         let cells = stencil_run(c, run);
-        for (var j = starts[cells.x]; j < starts[cells.y]; j++) {
-            let rij = xi - positions[j].xyz;
+        for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
+            let rij = xi - positions_at(j).xyz;
             let r2 = dot(rij, rij);
             if (r2 >= params.h2) {
                 continue;
             }
             let r = sqrt(r2);
             let grad = kernel_grad(rij, r);
-            let rho_j = densities[j];
-            let pj_over = pressures[j] / (rho_j * rho_j);
+            let rho_j = densities_at(j);
+            let pj_over = pressures_at(j) / (rho_j * rho_j);
             fluid_pressure -= grad * (pi_over + pj_over);
             if (viscous) {
                 let inv_rho = 1.0 / rho_j;
-                let uij = ui - velocities[j].xyz;
+                let uij = ui - velocities_at(j).xyz;
                 if (cubic) {
                     fluid_visc += grad * (inv_rho * dot(uij, rij) / (r2 + eps));
                 } else {
@@ -57,8 +57,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             }
         }
         if (WALLS) {
-            for (var j = wall_starts[cells.x]; j < wall_starts[cells.y]; j++) {
-                let w = wall_positions[j];
+            for (var j = wall_starts_at(cells.x); j < wall_starts_at(cells.y); j++) {
+                let w = wall_positions_at(j);  // w: mass
                 let rij = xi - w.xyz;
                 let r2 = dot(rij, rij);
                 if (r2 >= params.h2) {
@@ -83,5 +83,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (GRAVITY) {
         a += params.gravity.xyz;
     }
-    accelerations[i] = vec4<f32>(a, 0.0);
+    accelerations_set(i, vec4<f32>(a, 0.0));
 }

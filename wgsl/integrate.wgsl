@@ -2,15 +2,15 @@
 // with adaptive dt also the reduction of the largest speed and acceleration and the choice of dt.
 // Twin of src/cpu/integrate.rs.
 
-@group(0) @binding(1) var<storage, read_write> positions: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read_write> velocities: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> accelerations: array<vec4<f32>>;
+//! array positions: vec4<f32>, read_write
+//! array velocities: vec4<f32>, read_write
+//! array accelerations: vec4<f32>, read
 // [0] steps done, [1] non-finite particles this step, [2] escaped particles this step,
 // [3] first bad step (0xffffffff: none), [4] largest density (float bits).
 // Adaptive dt only (float bits): [5] largest |v| and [6] largest |a| of this step, [7] this
 // step's dt, [8] simulated time and [9] its Kahan compensation (time = [8] - [9]), [10] smallest
 // and [11] largest dt so far.
-@group(0) @binding(4) var<storage, read_write> status: array<atomic<u32>>;
+//! array status: u32, atomic, whole
 
 fn step_dt() -> f32 {
     if (ADAPTIVE_DT) {
@@ -26,9 +26,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let dt = step_dt();
-    var v = velocities[i].xyz;
-    var x = positions[i].xyz;
-    v += accelerations[i].xyz * dt;
+    var v = velocities_at(i).xyz;
+    var x = positions_at(i).xyz;
+    v += accelerations_at(i).xyz * dt;
     x += v * dt;
     // A plane puts a particle behind it back on it and removes (or reflects, with restitution)
     // the velocity into it, so that no particle is lost through it.
@@ -45,8 +45,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             }
         }
     }
-    positions[i] = vec4<f32>(x, 0.0);
-    velocities[i] = vec4<f32>(v, 0.0);
+    positions_set(i, vec4<f32>(x, 0.0));
+    velocities_set(i, vec4<f32>(v, 0.0));
     let finite = is_finite_vec3(x) && is_finite_vec3(v);
     if (!finite) {
         atomicAdd(&status[1], 1u);
@@ -74,8 +74,8 @@ fn reduce_maxima(
     workgroupBarrier();
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let speed = length(velocities[i].xyz);
-        let accel = length(accelerations[i].xyz);
+        let speed = length(velocities_at(i).xyz);
+        let accel = length(accelerations_at(i).xyz);
         if (is_finite_f32(speed)) {
             atomicMax(&group_speed, bitcast<u32>(speed));
         }

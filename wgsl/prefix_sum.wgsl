@@ -5,8 +5,10 @@
 
 const SCAN_BLOCK: u32 = 2u * WORKGROUP_SIZE;
 
-@group(0) @binding(1) var<storage, read_write> data: array<u32>;
-@group(0) @binding(2) var<storage, read_write> block_sums: array<u32>;
+// Bound by the host per segment of the cell array (src/gpu/scan.rs): `data` is one segment of
+// whole blocks, `block_sums` the totals of that segment's blocks.
+//! array data: u32, read_write, whole
+//! array block_sums: u32, read_write, whole
 
 var<workgroup> partial: array<u32, WORKGROUP_SIZE>;
 

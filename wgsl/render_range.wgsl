@@ -39,7 +39,9 @@ fn main(
     }
     workgroupBarrier();
     let i = gid.x + gid.y * groups.x * 256u;
-    if (i < range_params.count) {
+    // The host binds the field one segment at a time: the binding's length bounds the count.
+    let stride = select(1u, 4u, range_params.vector == 1u);
+    if (i < min(range_params.count, arrayLength(&values) / stride)) {
         var v: f32;
         if (range_params.vector == 1u) {
             v = length(vec3<f32>(values[4u * i], values[4u * i + 1u], values[4u * i + 2u]));

@@ -12,7 +12,17 @@ pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub info: wgpu::AdapterInfo,
+    /// Bytes per storage binding of a split array (see [`GpuContext::storage_segment_bytes`]).
+    segment_bytes: u64,
 }
+
+/// The smallest segment a storage array may be split into: the scan of the cell counts needs
+/// segments of whole 256-value blocks whose block totals start at 256-byte aligned offsets.
+pub const MIN_SEGMENT_BYTES: u64 = 1 << 16;
+
+/// Environment variable that lowers the segment size (to run split storage arrays on a small
+/// scene, or to emulate an adapter with smaller bindings).
+pub const SEGMENT_BYTES_VAR: &str = "WGSPH_STORAGE_SEGMENT_BYTES";
 
 /// No usable adapter, or one that cannot hold the scene.
 #[derive(Debug, thiserror::Error)]
@@ -119,7 +129,45 @@ impl GpuContext {
             trace: wgpu::Trace::Off,
         }))
         .with_context(|| format!("cannot open a device on adapter '{}' ({:?})", info.name, info.backend))?;
-        Ok(GpuContext { adapter, device, queue, info })
+        let natural = Self::natural_segment_bytes(&device.limits());
+        let ctx = GpuContext { adapter, device, queue, info, segment_bytes: natural };
+        match std::env::var(SEGMENT_BYTES_VAR) {
+            Ok(v) => {
+                let bytes = v.trim().parse::<u64>().map_err(|_| {
+                    anyhow::anyhow!("{SEGMENT_BYTES_VAR}='{v}' is not a number of bytes; allowed: a power of two from {MIN_SEGMENT_BYTES} to {natural}")
+                })?;
+                ctx.with_storage_segment_bytes(bytes).with_context(|| format!("{SEGMENT_BYTES_VAR}='{v}'"))
+            }
+            Err(_) => Ok(ctx),
+        }
+    }
+
+    /// The largest power of two that one storage binding and one buffer may hold.
+    fn natural_segment_bytes(l: &wgpu::Limits) -> u64 {
+        let most = (l.max_storage_buffer_binding_size as u64).min(l.max_buffer_size);
+        1u64 << (63 - most.max(1).leading_zeros())
+    }
+
+    /// Bytes of one storage binding of an array split into segments: the largest power of two
+    /// within the adapter's `max_storage_buffer_binding_size`, unless lowered. Arrays longer than
+    /// one segment are bound as several ranges of one buffer (src/gpu/pipelines.rs), so the
+    /// binding limit never bounds the particle count; `max_buffer_size` and memory still do.
+    pub fn storage_segment_bytes(&self) -> u64 {
+        self.segment_bytes
+    }
+
+    /// The same device with storage arrays split into segments of `bytes` (a power of two from
+    /// [`MIN_SEGMENT_BYTES`] up to the adapter's own segment size): a small scene then runs the
+    /// split-array path that only big scenes need otherwise.
+    pub fn with_storage_segment_bytes(mut self, bytes: u64) -> anyhow::Result<Self> {
+        let natural = Self::natural_segment_bytes(&self.device.limits());
+        let align = self.device.limits().min_storage_buffer_offset_alignment as u64;
+        anyhow::ensure!(
+            bytes.is_power_of_two() && (MIN_SEGMENT_BYTES..=natural).contains(&bytes) && bytes % align == 0,
+            "storage segment of {bytes} bytes: allowed is a power of two from {MIN_SEGMENT_BYTES} to {natural} (the adapter's largest) bytes"
+        );
+        self.segment_bytes = bytes;
+        Ok(self)
     }
 
     /// Fails with a message naming the adapter and the limit when a buffer of `bytes` cannot be

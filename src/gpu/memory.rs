@@ -18,8 +18,9 @@ pub struct PlannedBuffer {
     pub bytes: u64,
     /// Bytes per fluid particle (0 for buffers that do not grow with the fluid).
     pub bytes_per_fluid_particle: u64,
-    /// Bound as one storage buffer (all but the uniform block).
-    pub storage: bool,
+    /// Bound whole as one storage binding (the others are the uniform block and the arrays bound
+    /// in segments).
+    pub single_binding: bool,
 }
 
 /// Every buffer the solver allocates for a scene.
@@ -64,10 +65,10 @@ impl MemoryPlan {
     /// cells; `uniform_bytes` is the size of the parameter block.
     pub fn new(fluid: u64, walls: Option<u64>, cells: u64, uniform_bytes: u64) -> MemoryPlan {
         let w = walls.unwrap_or(0);
-        let per_fluid = |label, per: u64| PlannedBuffer { label, bytes: padded(fluid * per), bytes_per_fluid_particle: per, storage: true };
-        let fixed = |label, bytes| PlannedBuffer { label, bytes, bytes_per_fluid_particle: 0, storage: true };
+        let per_fluid = |label, per: u64| PlannedBuffer { label, bytes: padded(fluid * per), bytes_per_fluid_particle: per, single_binding: false };
+        let fixed = |label, bytes| PlannedBuffer { label, bytes, bytes_per_fluid_particle: 0, single_binding: false };
         let mut buffers = vec![
-            PlannedBuffer { label: "params", bytes: uniform_bytes, bytes_per_fluid_particle: 0, storage: false },
+            PlannedBuffer { label: "params", bytes: uniform_bytes, bytes_per_fluid_particle: 0, single_binding: false },
             fixed("wall positions", padded(w * 16)),
             // Without walls the shaders never read the per-cell wall array.
             fixed("wall cell starts", padded(if w > 0 { (cells + 1) * 4 } else { 0 })),
@@ -84,7 +85,7 @@ impl MemoryPlan {
             per_fluid("densities", 4),
             per_fluid("pressures", 4),
             per_fluid("accelerations", 16),
-            fixed("status", padded(super::solver::STATUS_BYTES)),
+            PlannedBuffer { label: "status", bytes: padded(super::solver::STATUS_BYTES), bytes_per_fluid_particle: 0, single_binding: true },
         ];
         buffers.extend(Scan::sum_buffer_bytes(cells + 1).into_iter().map(|bytes| fixed("scan block sums", bytes)));
         MemoryPlan { fluid, walls, cells, buffers }
@@ -102,14 +103,14 @@ impl MemoryPlan {
     }
 
     /// Fails, naming the adapter, the particle count, the total bytes and the limit, when a
-    /// buffer exceeds `max_buffer_size` or a storage buffer `max_storage_buffer_binding_size`.
+    /// buffer exceeds `max_buffer_size` or a buffer bound whole `max_storage_buffer_binding_size`.
     pub fn check(&self, ctx: &GpuContext) -> Result<(), GpuMemoryError> {
         let l = ctx.device.limits();
         let binding = l.max_storage_buffer_binding_size as u64;
         for b in &self.buffers {
             let over = if b.bytes > l.max_buffer_size {
                 Some(("max_buffer_size", l.max_buffer_size))
-            } else if b.storage && b.bytes > binding {
+            } else if b.single_binding && b.bytes > binding {
                 Some(("max_storage_buffer_binding_size", binding))
             } else {
                 None

@@ -1,29 +1,38 @@
 //! The multi-level exclusive scan (wgsl/prefix_sum.wgsl) over a buffer of u32, for any length.
 
-use super::pipelines::{bind_group, dispatch_size, stage, Stage, Use, SCAN_BLOCK};
+use super::pipelines::{dispatch_size, stage, Stage, SCAN_BLOCK};
+use super::GpuContext;
 use std::num::NonZeroU64;
 
 /// The levels of a scan of `len` values held in `data`: level 0 scans the data in blocks, each
-/// higher level scans the block totals of the level below, until one block remains.
+/// higher level scans the block totals of the level below, until one block remains. A level
+/// longer than one storage segment (`GpuContext::storage_segment_bytes`) is scanned segment by
+/// segment: a segment holds whole blocks, so its block totals are a contiguous, aligned range of
+/// the level above, and the levels above make the result one scan of the whole array.
 pub struct Scan {
     scan_blocks: Stage,
     add_offsets: Stage,
-    /// (bind group, values at this level) per level, lowest first.
-    levels: Vec<(wgpu::BindGroup, u64)>,
+    /// (bind group, values of its segment) per segment, per level, lowest level first.
+    levels: Vec<Vec<(wgpu::BindGroup, u64)>>,
     _sums: Vec<wgpu::Buffer>,
     max_per_dim: u32,
 }
 
+fn range(buffer: &wgpu::Buffer, first: u64, count: u64) -> wgpu::BindingResource<'_> {
+    wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset: first * 4, size: NonZeroU64::new(count * 4) })
+}
+
 impl Scan {
-    pub fn new(device: &wgpu::Device, uniform: &wgpu::Buffer, data: &wgpu::Buffer, len: u64) -> Scan {
-        let uses = [Use::Uniform, Use::ReadWrite, Use::ReadWrite];
-        let scan_blocks = stage(device, "prefix_sum", "scan_blocks", &uses, &[]);
-        let add_offsets = stage(device, "prefix_sum", "add_block_offsets", &uses, &[]);
-        let mut sums = Vec::new();
+    pub fn new(ctx: &GpuContext, uniform: &wgpu::Buffer, data: &wgpu::Buffer, len: u64) -> Result<Scan, super::device::GpuError> {
+        let device = &ctx.device;
+        let scan_blocks = stage(ctx, "prefix_sum", "scan_blocks", &[0, 0], &[])?;
+        let add_offsets = stage(ctx, "prefix_sum", "add_block_offsets", &[0, 0], &[])?;
+        let segment = ctx.storage_segment_bytes() / 4;
+        let block = SCAN_BLOCK as u64;
+        let mut sums: Vec<wgpu::Buffer> = Vec::new();
         let mut levels = Vec::new();
         let mut level_len = len;
         for sum_bytes in Scan::sum_buffer_bytes(len) {
-            let blocks = sum_bytes / 4;
             let sum_buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("scan block sums"),
                 size: sum_bytes,
@@ -31,25 +40,21 @@ impl Scan {
                 mapped_at_creation: false,
             });
             let source = if levels.is_empty() { data } else { sums.last().unwrap() };
-            let bg = bind_group(
-                device,
-                "scan level",
-                &scan_blocks.layout,
-                &[
-                    uniform.as_entire_binding(),
-                    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: source,
-                        offset: 0,
-                        size: NonZeroU64::new(level_len * 4),
-                    }),
-                    sum_buffer.as_entire_binding(),
-                ],
-            );
-            levels.push((bg, level_len));
+            let mut segments = Vec::new();
+            for first in (0..level_len).step_by(segment as usize) {
+                let count = segment.min(level_len - first);
+                let bg = scan_blocks.bind_group_of(
+                    device,
+                    "scan level",
+                    &[uniform.as_entire_binding(), range(source, first, count), range(&sum_buffer, first / block, count.div_ceil(block))],
+                );
+                segments.push((bg, count));
+            }
+            levels.push(segments);
             sums.push(sum_buffer);
-            level_len = blocks;
+            level_len = sum_bytes / 4;
         }
-        Scan { scan_blocks, add_offsets, levels, _sums: sums, max_per_dim: device.limits().max_compute_workgroups_per_dimension }
+        Ok(Scan { scan_blocks, add_offsets, levels, _sums: sums, max_per_dim: device.limits().max_compute_workgroups_per_dimension })
     }
 
     /// Bytes of the block-sum buffer of each level of a scan of `len` values, lowest first: one
@@ -75,13 +80,13 @@ impl Scan {
     /// Records the scan into a compute pass.
     pub fn record(&self, pass: &mut wgpu::ComputePass) {
         pass.set_pipeline(&self.scan_blocks.pipeline);
-        for (bg, len) in &self.levels {
+        for (bg, len) in self.levels.iter().flatten() {
             let (x, y) = dispatch_size(*len, SCAN_BLOCK, self.max_per_dim);
             pass.set_bind_group(0, bg, &[]);
             pass.dispatch_workgroups(x, y, 1);
         }
         pass.set_pipeline(&self.add_offsets.pipeline);
-        for (bg, len) in self.levels.iter().rev().skip(1) {
+        for (bg, len) in self.levels.iter().rev().skip(1).flatten() {
             let (x, y) = dispatch_size(*len, SCAN_BLOCK, self.max_per_dim);
             pass.set_bind_group(0, bg, &[]);
             pass.dispatch_workgroups(x, y, 1);
@@ -106,7 +111,7 @@ pub fn exclusive_scan(ctx: &super::GpuContext, values: &[u32]) -> anyhow::Result
         contents: bytemuck::cast_slice(&data),
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
     });
-    let scan = Scan::new(device, &uniform, &buffer, data.len() as u64);
+    let scan = Scan::new(ctx, &uniform, &buffer, data.len() as u64)?;
     let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scan") });
     {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scan"), timestamp_writes: None });

@@ -4,7 +4,7 @@
 
 use super::device::GpuContext;
 use super::memory::MemoryPlan;
-use super::pipelines::{bind_group, constants, dispatch_size, stage, Stage, Use, WORKGROUP_SIZE};
+use super::pipelines::{constants, dispatch_size, stage, Stage, WORKGROUP_SIZE};
 use super::scan::Scan;
 use crate::cpu::common::{GridR, KernelCoefficients};
 use crate::cpu::sort_by_cell;
@@ -226,10 +226,6 @@ fn storage_init(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Bu
     })
 }
 
-fn b(buf: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
-    buf.as_entire_binding()
-}
-
 fn vec4s(points: &[[f64; 3]], w: impl Fn(usize) -> f32) -> Vec<[f32; 4]> {
     points.iter().enumerate().map(|(i, p)| [p[0] as f32, p[1] as f32, p[2] as f32, w(i)]).collect()
 }
@@ -242,8 +238,33 @@ impl GpuSolver {
         let viscosity = params.viscosity_at_step(0);
         let gpu_params = GpuParams::new(params, n as u32, initial.wall_positions.len() as u32, viscosity);
         // Every buffer is checked against the device's limits before the first is created.
-        let plan = MemoryPlan::new(n, Some(initial.wall_positions.len() as u64), cells, gpu_params.bytes().len() as u64);
+        let w = initial.wall_positions.len() as u64;
+        let plan = MemoryPlan::new(n, Some(w), cells, gpu_params.bytes().len() as u64);
         plan.check(&ctx)?;
+        // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
+        let has_walls = w > 0;
+        let wall_cells = if has_walls { cells + 1 } else { 0 };
+
+        // The pipelines come first: they check that the stages' bindings (one per segment of
+        // each array) fit the adapter before any buffer exists.
+        let mut k = constants(params);
+        k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
+        let c1 = cells + 1;
+        let integrate_lens = [n, n, n, 0];
+        let pipelines = Pipelines {
+            bin_count: stage(&ctx, "bin_count", "main", &[n, n, n, c1], &k)?,
+            bin_scatter: stage(&ctx, "bin_scatter", "main", &[n, n, c1, n], &k)?,
+            reorder: stage(&ctx, "reorder", "main", &[n, c1, n, n, n, n, n, n, n], &k)?,
+            density: stage(&ctx, "density", "main", &[n, c1, w, wall_cells, n, n, 0], &k)?,
+            forces: stage(&ctx, "forces", "main", &[n, n, n, n, c1, w, wall_cells, n], &k)?,
+            integrate: stage(&ctx, "integrate", "main", &integrate_lens, &k)?,
+            finish_step: stage(&ctx, "integrate", "finish_step", &integrate_lens, &k)?,
+            adaptive: match params.adaptive {
+                Some(_) => Some((stage(&ctx, "integrate", "reduce_maxima", &integrate_lens, &k)?, stage(&ctx, "integrate", "choose_dt", &integrate_lens, &k)?)),
+                None => None,
+            },
+        };
+
         let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("params"),
@@ -258,8 +279,6 @@ impl GpuSolver {
         let walls_sorted: Vec<[f64; 3]> = wall_order.iter().map(|&i| initial.wall_positions[i as usize]).collect();
         let wall_masses: Vec<f32> = wall_order.iter().map(|&i| initial.wall_masses[i as usize] as f32).collect();
         let wall_positions = storage_init(device, "wall positions", bytemuck::cast_slice(&vec4s(&walls_sorted, |i| wall_masses[i])));
-        // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
-        let has_walls = !initial.wall_positions.is_empty();
         let wall_starts = if has_walls { wall_starts } else { Vec::new() };
         let wall_starts_buf = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
 
@@ -287,92 +306,40 @@ impl GpuSolver {
         status_init[3] = NO_BAD_STEP;
         status_init[10] = f32::INFINITY.to_bits();
         let status = storage_init(device, "status", bytemuck::cast_slice(&status_init));
-        let scan = Scan::new(device, &uniform, &starts, cells + 1);
+        let scan = Scan::new(&ctx, &uniform, &starts, cells + 1)?;
 
-        let mut k = constants(params);
-        k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
-        use Use::*;
-        let integrate_uses = [Uniform, ReadWrite, ReadWrite, Read, ReadWrite];
-        let pipelines = Pipelines {
-            bin_count: stage(device, "bin_count", "main", &[Uniform, Read, ReadWrite, ReadWrite, ReadWrite], &k),
-            bin_scatter: stage(device, "bin_scatter", "main", &[Uniform, Read, Read, Read, ReadWrite], &k),
-            reorder: stage(
-                device,
-                "reorder",
-                "main",
-                &[Uniform, Read, Read, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite],
-                &k,
-            ),
-            density: stage(device, "density", "main", &[Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite], &k),
-            forces: stage(device, "forces", "main", &[Uniform, Read, Read, Read, Read, Read, Read, Read, ReadWrite], &k),
-            integrate: stage(device, "integrate", "main", &integrate_uses, &k),
-            finish_step: stage(device, "integrate", "finish_step", &integrate_uses, &k),
-            adaptive: params.adaptive.map(|_| {
-                (stage(device, "integrate", "reduce_maxima", &integrate_uses, &k), stage(device, "integrate", "choose_dt", &integrate_uses, &k))
-            }),
-        };
         let state = [state0, state1];
-        let u = uniform.as_entire_binding();
+        let u = &uniform;
+        let p = &pipelines;
         let make_parity = |c: usize| {
             let (src, dst) = (&state[c], &state[1 - c]);
             ParityBindGroups {
-                bin_count: bind_group(device, "bin_count", &pipelines.bin_count.layout, &[u.clone(), b(&src.positions), b(&keys), b(&ranks), b(&starts)]),
-                reorder: bind_group(
+                bin_count: p.bin_count.bind_group(device, "bin_count", u, &[&src.positions, &keys, &ranks, &starts]),
+                reorder: p.reorder.bind_group(
                     device,
                     "reorder",
-                    &pipelines.reorder.layout,
-                    &[
-                        u.clone(),
-                        b(&keys),
-                        b(&starts),
-                        b(&unordered),
-                        b(&src.positions),
-                        b(&src.velocities),
-                        b(&src.ids),
-                        b(&dst.positions),
-                        b(&dst.velocities),
-                        b(&dst.ids),
-                    ],
+                    u,
+                    &[&keys, &starts, &unordered, &src.positions, &src.velocities, &src.ids, &dst.positions, &dst.velocities, &dst.ids],
                 ),
-                density: bind_group(
+                density: p.density.bind_group(
                     device,
                     "density",
-                    &pipelines.density.layout,
-                    &[u.clone(), b(&dst.positions), b(&starts), b(&wall_positions), b(&wall_starts_buf), b(&densities), b(&pressures), b(&status)],
+                    u,
+                    &[&dst.positions, &starts, &wall_positions, &wall_starts_buf, &densities, &pressures, &status],
                 ),
-                forces: bind_group(
+                forces: p.forces.bind_group(
                     device,
                     "forces",
-                    &pipelines.forces.layout,
-                    &[
-                        u.clone(),
-                        b(&dst.positions),
-                        b(&dst.velocities),
-                        b(&densities),
-                        b(&pressures),
-                        b(&starts),
-                        b(&wall_positions),
-                        b(&wall_starts_buf),
-                        b(&accelerations),
-                    ],
+                    u,
+                    &[&dst.positions, &dst.velocities, &densities, &pressures, &starts, &wall_positions, &wall_starts_buf, &accelerations],
                 ),
-                integrate: bind_group(
-                    device,
-                    "integrate",
-                    &pipelines.integrate.layout,
-                    &[u.clone(), b(&dst.positions), b(&dst.velocities), b(&accelerations), b(&status)],
-                ),
+                integrate: p.integrate.bind_group(device, "integrate", u, &[&dst.positions, &dst.velocities, &accelerations, &status]),
             }
         };
         let groups = [make_parity(0), make_parity(1)];
-        let scatter_group =
-            bind_group(device, "bin_scatter", &pipelines.bin_scatter.layout, &[u.clone(), b(&keys), b(&ranks), b(&starts), b(&unordered)]);
-        let finish_group = bind_group(
-            device,
-            "finish_step",
-            &pipelines.finish_step.layout,
-            &[u.clone(), b(&state[0].positions), b(&state[0].velocities), b(&accelerations), b(&status)],
-        );
+        let scatter_group = p.bin_scatter.bind_group(device, "bin_scatter", u, &[&keys, &ranks, &starts, &unordered]);
+        let finish_group =
+            p.finish_step.bind_group(device, "finish_step", u, &[&state[0].positions, &state[0].velocities, &accelerations, &status]);
         let dispatch = dispatch_size(n, WORKGROUP_SIZE, device.limits().max_compute_workgroups_per_dimension);
         let memory = plan.total();
         Ok(GpuSolver {

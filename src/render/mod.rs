@@ -146,6 +146,8 @@ struct SurfacePipelines {
 pub struct Renderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
+    /// Bytes per storage binding of the colour-range reduction (`GpuContext::storage_segment_bytes`).
+    segment_bytes: u64,
     pub options: RenderOptions,
     pub camera: Camera,
     pub bounds: Bounds,
@@ -539,6 +541,7 @@ impl Renderer {
         Renderer {
             device: device.clone(),
             queue: queue.clone(),
+            segment_bytes: ctx.storage_segment_bytes(),
             camera,
             bounds,
             fluid_radius,
@@ -681,21 +684,29 @@ impl Renderer {
         if self.options.range.is_none() && n > 0 && self.mesh.is_none() {
             self.queue.write_buffer(&self.range_params, 0, bytemuck::cast_slice(&[n, field_is_vector(self.options.color_by) as u32, 0, 0]));
             encoder.clear_buffer(&self.range_keys, 0, None);
-            let group = crate::gpu::pipelines::bind_group(
-                &self.device,
-                "render_range",
-                &self.range_layout,
-                &[self.range_params.as_entire_binding(), self.field(particles).as_entire_binding(), self.range_keys.as_entire_binding()],
-            );
-            let (x, y) = crate::gpu::pipelines::dispatch_size(
-                n as u64,
-                RANGE_WORKGROUP as u32,
-                self.device.limits().max_compute_workgroups_per_dimension,
-            );
+            // One dispatch per segment of the field, so that no binding exceeds the adapter's
+            // storage binding size however many particles there are.
+            let value_bytes = if field_is_vector(self.options.color_by) { 16 } else { 4 };
+            let per_segment = self.segment_bytes / value_bytes;
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("colour range"), timestamp_writes: None });
             pass.set_pipeline(&self.range_pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups(x, y, 1);
+            for first in (0..n as u64).step_by(per_segment as usize) {
+                let count = per_segment.min(n as u64 - first);
+                let values = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: self.field(particles),
+                    offset: first * value_bytes,
+                    size: std::num::NonZeroU64::new(count * value_bytes),
+                });
+                let group = crate::gpu::pipelines::bind_group(
+                    &self.device,
+                    "render_range",
+                    &self.range_layout,
+                    &[self.range_params.as_entire_binding(), values, self.range_keys.as_entire_binding()],
+                );
+                let (x, y) = crate::gpu::pipelines::dispatch_size(count, RANGE_WORKGROUP as u32, self.device.limits().max_compute_workgroups_per_dimension);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            }
             drop(pass);
             encoder.copy_buffer_to_buffer(&self.range_keys, 0, &self.frame, RANGE_KEYS_OFFSET, 8);
         }
