@@ -41,7 +41,8 @@ fn drop_scene() -> Scene {
 
 /// Steps `frames` frames of `steps_per_frame` steps on `context`, copying the positions into
 /// the program's own vertex buffer after each frame. Returns the vertex buffer's last contents
-/// (x, y, z, w per particle, in the solver's order) and the ids that order them.
+/// (x, y, z per particle in the solver's order, with the particle's original index as the u32
+/// bits of w) and those indices.
 fn run(context: GpuContext, frames: u32, steps_per_frame: u64) -> anyhow::Result<(Vec<[f32; 4]>, Vec<u32>, wgsph::Snapshot)> {
     let mut sim = Simulation::gpu_on(drop_scene(), context)?;
     let n = sim.fluid_count() as u64;
@@ -64,11 +65,12 @@ fn run(context: GpuContext, frames: u32, steps_per_frame: u64) -> anyhow::Result
             println!("frame {frame}: t = {:.4} s", sim.time());
         }
     }
-    let ids = sim.particle_buffers().expect("on the GPU").ids.clone();
     let ctx = sim.gpu_context().expect("on the GPU");
-    let data = wgsph::gpu::solver::read_buffers(ctx, &[(&vertices, n * 16), (&ids, n * 4)])?;
+    let data = wgsph::gpu::solver::read_buffers(ctx, &[(&vertices, n * 16)])?;
     let snapshot = sim.snapshot()?;
-    Ok((bytemuck::pod_collect_to_vec(&data[0]), bytemuck::pod_collect_to_vec(&data[1]), snapshot))
+    let vertices: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
+    let ids = vertices.iter().map(|v| v[3].to_bits()).collect();
+    Ok((vertices, ids, snapshot))
 }
 
 fn main() -> anyhow::Result<()> {

@@ -29,10 +29,23 @@ pub struct ProfileArgs {
     /// Steps to time (after 2 warm-up steps).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub steps: u64,
+    /// Run the forces and the integration as two passes even with fixed dt (to measure what
+    /// fusing them gains).
+    #[arg(long)]
+    pub unfused: bool,
     /// Also write the numbers to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,
 }
+
+/// The rows of a profile whose forces and integration are one pass: the fused pass is timed as
+/// `forces_integrate`, and what remains of the integration pass (one thread updating the step's
+/// status words) as `bookkeeping`.
+pub const FUSED_STAGE_NAMES: [&str; 7] = ["bin_count", "prefix_sum", "bin_scatter", "reorder", "density", "forces_integrate", "bookkeeping"];
+
+/// The status words one thread reads and writes after each step (wgsl/integrate.wgsl
+/// finish_step).
+const BOOKKEEPING_BYTES: u64 = 24;
 
 /// One row of the profile.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -78,7 +91,9 @@ pub struct Profile {
 /// `w` walls and `cells` grid cells: every array element the stage touches counted once (the
 /// compulsory traffic; neighbour loads are assumed to hit the cache after their first load, so
 /// this is a lower bound). `vec4<f32>` = 16 bytes, `u32`/`f32` = 4 bytes.
-pub fn stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool) -> [u64; 7] {
+/// `fused`: the forces and the integration run as one pass (rows `forces_integrate` and
+/// `bookkeeping`).
+pub fn stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool, fused: bool) -> [u64; 7] {
     let starts = (cells + 1) * 4;
     let walls = if w > 0 { w * 16 + starts } else { 0 };
     [
@@ -89,15 +104,17 @@ pub fn stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool) -> [u64; 7] {
         4 * starts,
         // bin_scatter: keys, ranks and a cell start in; the unordered slot out.
         n * 12 + n * 4,
-        // reorder: keys, starts, slots and the state (position, velocity, id) in; state out.
-        n * 12 + n * 36 + n * 36,
+        // reorder: keys, starts, slots and the state (position with id, velocity) in; state out.
+        n * 12 + n * 32 + n * 32,
         // density: positions and cell starts (and walls) in; density and pressure out.
         n * 16 + starts + walls + n * 8,
-        // forces: positions, velocities, densities, pressures, starts (and walls) in; accelerations out.
-        n * 40 + starts + walls + n * 16,
-        // integrate: positions, velocities read and written, accelerations read (again by the
-        // adaptive reduction of |v|max and |a|max).
-        n * 64 + n * 16 + if adaptive { n * 32 } else { 0 },
+        // forces: positions, velocities, densities, pressures, starts (and walls) in;
+        // accelerations out, or with fusion the new positions and velocities.
+        n * 40 + starts + walls + if fused { n * 32 } else { n * 16 },
+        // integrate: positions, velocities and accelerations in, positions and velocities out
+        // (the accelerations and velocities read again by the adaptive reduction of |v|max and
+        // |a|max); with fusion only the step's status words.
+        if fused { BOOKKEEPING_BYTES } else { n * 80 + if adaptive { n * 32 } else { 0 } },
     ]
 }
 
@@ -135,23 +152,24 @@ pub fn neighbour_pairs(params: &Params, fluid: &[[f64; 3]], walls: &[[f64; 3]]) 
 }
 
 /// Profiles `steps` steps of `scene` on `ctx` (after 2 warm-up steps).
-pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64) -> anyhow::Result<Profile> {
+pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: crate::gpu::GpuOptions) -> anyhow::Result<Profile> {
     crate::gpu::memory::MemoryPlan::for_scene(scene).check(&ctx)?;
     let params = scene.params();
     let initial = scene.initial_state();
     let (n, w) = (initial.fluid_positions.len() as u64, initial.wall_positions.len() as u64);
     anyhow::ensure!(n > 0, "the scene {} has no fluid particles to profile", scene.name);
-    let mut gpu = GpuSolver::new(ctx, &params, &initial)?;
+    let mut gpu = GpuSolver::with_options(ctx, &params, &initial, options)?;
     let pairs_before = neighbour_pairs(&params, &initial.fluid_positions, &initial.wall_positions);
     gpu.advance(2);
     gpu.wait()?;
     let cells = params.grid.cell_count() as u64;
-    let bytes = stage_bytes(n, w, cells, params.adaptive.is_some());
+    let bytes = stage_bytes(n, w, cells, params.adaptive.is_some(), gpu.fused());
+    let names = if gpu.fused() { FUSED_STAGE_NAMES } else { PROFILED_STAGES };
 
     let (timing, times_ns): (&str, Vec<(String, f64, u64)>) = match gpu.profile_stages(steps)? {
         Some(totals) => (
             "timestamp queries",
-            PROFILED_STAGES.iter().zip(totals).zip(bytes).map(|((s, t), b)| (s.to_string(), t / steps as f64, b)).collect(),
+            names.iter().zip(totals).zip(bytes).map(|((s, t), b)| (s.to_string(), t / steps as f64, b)).collect(),
         ),
         None => {
             let mut total = 0.0;
@@ -219,14 +237,14 @@ impl Profile {
             "{}: {} fluid + {} wall particles, {} cells, {} steps on {}\ntiming: {}\n",
             self.scene, self.fluid_particles, self.wall_particles, self.grid_cells, self.steps, self.adapter, self.timing
         );
-        s += &format!("{:<12} {:>12} {:>8} {:>14} {:>10}\n", "stage", "µs/step", "share %", "bytes/step", "GB/s");
+        s += &format!("{:<16} {:>12} {:>8} {:>14} {:>10}\n", "stage", "µs/step", "share %", "bytes/step", "GB/s");
         for st in &self.stages {
             s += &format!(
-                "{:<12} {:>12.1} {:>8.1} {:>14} {:>10.2}\n",
+                "{:<16} {:>12.1} {:>8.1} {:>14} {:>10.2}\n",
                 st.stage, st.time_us, st.share_percent, st.bytes_per_step, st.bandwidth_gb_s
             );
         }
-        s += &format!("{:<12} {:>12.1} {:>8.1}\n", "total", self.step_time_us, 100.0);
+        s += &format!("{:<16} {:>12.1} {:>8.1}\n", "total", self.step_time_us, 100.0);
         s += &format!("host wall-clock per step (normal path): {:.1} µs\n", self.host_step_time_us);
         s += &format!("particle-steps/s: {:.3e}\n", self.particle_steps_per_second);
         s += &format!("neighbour pairs per step: {}; interactions/s (PIPS): {:.3e}\n", self.neighbour_pairs, self.interactions_per_second);
@@ -242,7 +260,8 @@ pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
         scene = scene.with_fluid_particles(n);
         scene.validate(&crate::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
     }
-    let profile = profile(GpuContext::new()?, &scene, args.steps)?;
+    let options = crate::gpu::GpuOptions { fuse_forces_and_integration: !args.unfused };
+    let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
     print!("{}", profile.table());
     if let Some(path) = &args.out {
         crate::output::write_atomic(path, |w| {

@@ -5,8 +5,8 @@ mod common;
 
 use std::process::Command;
 use wgsph::gpu::solver::PROFILED_STAGES;
-use wgsph::gpu::GpuSolver;
-use wgsph::profile::{neighbour_pairs, profile, Profile};
+use wgsph::gpu::{GpuOptions, GpuSolver};
+use wgsph::profile::{neighbour_pairs, profile, Profile, FUSED_STAGE_NAMES};
 use wgsph::Scene;
 
 fn small_dam_break() -> Scene {
@@ -16,14 +16,14 @@ fn small_dam_break() -> Scene {
 #[test]
 fn stage_times_are_positive_and_shares_sum_to_100() {
     let scene = small_dam_break();
-    for ctx in common::contexts() {
+    for (ctx, fuse) in common::contexts().into_iter().flat_map(|c| [(c.clone(), true), (c, false)]) {
         let adapter = ctx.describe();
         let timestamps = ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let p = profile(ctx, &scene, 3).unwrap();
+        let p = profile(ctx, &scene, 3, GpuOptions { fuse_forces_and_integration: fuse }).unwrap();
         let names: Vec<&str> = p.stages.iter().map(|s| s.stage.as_str()).collect();
         if timestamps {
             assert_eq!(p.timing, "timestamp queries", "{adapter}");
-            assert_eq!(names, PROFILED_STAGES, "{adapter}");
+            assert_eq!(names, if fuse { FUSED_STAGE_NAMES } else { PROFILED_STAGES }, "{adapter}");
         } else {
             assert_eq!(names, ["step"], "{adapter}");
         }
@@ -47,12 +47,13 @@ fn stage_times_are_positive_and_shares_sum_to_100() {
 fn profiled_steps_match_normal_steps() {
     let scene = small_dam_break();
     let (params, initial) = (scene.params(), scene.initial_state());
-    for ctx in common::contexts() {
+    for (ctx, fuse) in common::contexts().into_iter().flat_map(|c| [(c.clone(), true), (c, false)]) {
         if !ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
             continue;
         }
-        let mut normal = GpuSolver::new(ctx.clone(), &params, &initial).unwrap();
-        let mut profiled = GpuSolver::new(ctx.clone(), &params, &initial).unwrap();
+        let options = GpuOptions { fuse_forces_and_integration: fuse };
+        let mut normal = GpuSolver::with_options(ctx.clone(), &params, &initial, options).unwrap();
+        let mut profiled = GpuSolver::with_options(ctx.clone(), &params, &initial, options).unwrap();
         normal.advance(4);
         let times = profiled.profile_stages(4).unwrap().expect("the device has timestamps");
         assert!(times.iter().all(|&t| t > 0.0), "{times:?}");
@@ -105,7 +106,7 @@ fn profile_command_prints_the_table_and_writes_json() {
     }
     if p.timing == "timestamp queries" {
         let names: Vec<&str> = p.stages.iter().map(|s| s.stage.as_str()).collect();
-        assert_eq!(names, PROFILED_STAGES);
+        assert_eq!(names, FUSED_STAGE_NAMES);
     }
 }
 

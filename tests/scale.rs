@@ -21,6 +21,7 @@ fn the_memory_figure_is_the_plan_and_matches_the_buffers_created() {
                 Some(initial.wall_positions.len() as u64),
                 params.grid.cell_count() as u64,
                 wgsph::gpu::solver::GpuParams::default().bytes().len() as u64,
+                params.adaptive.is_some(),
             );
             assert_eq!(solver.memory_bytes(), plan.total(), "{name} on {}", ctx.describe());
             assert_eq!(solver.allocated_bytes(), plan.total(), "{name} on {}", ctx.describe());
@@ -33,8 +34,8 @@ fn a_plan_over_the_buffer_limit_is_refused_naming_adapter_particles_bytes_and_li
     for ctx in common::contexts() {
         // Arrays are bound in segments, so only max_buffer_size bounds one array.
         let fit = ctx.device.limits().max_buffer_size / 16;
-        assert!(MemoryPlan::new(fit, Some(0), 1000, 256).check(&ctx).is_ok(), "{} particles fit {}", fit, ctx.describe());
-        let plan = MemoryPlan::new(fit + 1, Some(0), 1000, 256);
+        assert!(MemoryPlan::new(fit, Some(0), 1000, 256, false).check(&ctx).is_ok(), "{} particles fit {}", fit, ctx.describe());
+        let plan = MemoryPlan::new(fit + 1, Some(0), 1000, 256, false);
         let e = plan.check(&ctx).unwrap_err();
         let msg = e.to_string();
         assert_eq!((e.particles, e.total), (fit + 1, plan.total()));
@@ -173,5 +174,30 @@ fn streamed_csv_snapshots_equal_the_whole_array_ones_byte_for_byte() {
             assert_eq!((s.step, s.particles), (5, snapshot.len() as u64));
             assert_eq!(s.max_speed, snapshot.max_speed());
         }
+    }
+}
+
+#[test]
+fn fused_forces_and_integration_step_bit_for_bit_like_two_passes_with_less_memory() {
+    use wgsph::gpu::GpuOptions;
+    use wgsph::sim::Backend;
+    for ctx in common::contexts() {
+        let scene = common::scene_from(&common::small_scene_text("cubic_spline", "tait", false, "", ""));
+        let (params, initial) = (scene.params(), scene.initial_state());
+        let mut fused = GpuSolver::new(ctx.clone(), &params, &initial).unwrap();
+        let mut two_pass = GpuSolver::with_options(ctx.clone(), &params, &initial, GpuOptions { fuse_forces_and_integration: false }).unwrap();
+        assert!(fused.fused() && !two_pass.fused());
+        // The accelerations array (16 bytes per fluid particle) is what fusion saves.
+        let n = initial.fluid_positions.len() as u64;
+        assert_eq!(two_pass.memory_bytes() - fused.memory_bytes(), 16 * n);
+        for solver in [&mut fused, &mut two_pass] {
+            solver.step(30).unwrap();
+        }
+        // The accelerations of the fused step, evaluated again on request, are the two-pass ones.
+        let (fa, fb) = (fused.step_fields().unwrap(), two_pass.step_fields().unwrap());
+        assert!(fa == fb, "{}: step fields differ", ctx.describe());
+        let (a, b) = (fused.snapshot().unwrap(), two_pass.snapshot().unwrap());
+        assert!(a.positions == b.positions && a.velocities == b.velocities, "{}: states differ", ctx.describe());
+        assert!(a.positions != initial.fluid_positions);
     }
 }

@@ -12,12 +12,8 @@
 //! array wall_starts: u32, read
 //! array accelerations: vec4<f32>, read_write
 
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = thread_index(gid, groups);
-    if (i >= params.fluid_count) {
-        return;
-    }
+// The acceleration of fluid particle i.
+fn particle_acceleration(i: u32) -> vec3<f32> {
     let cubic = KERNEL == 1u;
     let viscous = VISCOSITY && params.viscosity > 0.0;
     let eps = 0.01 * params.h2;
@@ -83,5 +79,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (GRAVITY) {
         a += params.gravity.xyz;
     }
-    accelerations_set(i, vec4<f32>(a, 0.0));
+    return a;
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn forces(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        accelerations_set(i, vec4<f32>(particle_acceleration(i), 0.0));
+    }
 }

@@ -1,10 +1,14 @@
 // Symplectic Euler (v += dt a, then x += dt v), the analytic planes, and the health counters;
 // with adaptive dt also the reduction of the largest speed and acceleration and the choice of dt.
-// Twin of src/cpu/integrate.rs.
+// Twin of src/cpu/integrate.rs. The new state goes to the other buffer of the pair (the one
+// the binning read from), so that a stage fused with the forces (forces_integrate.wgsl) can
+// write it while other threads still read the neighbours' old state.
 
-//! array positions: vec4<f32>, read_write
-//! array velocities: vec4<f32>, read_write
+//! array positions: vec4<f32>, read
+//! array velocities: vec4<f32>, read
 //! array accelerations: vec4<f32>, read
+//! array positions_out: vec4<f32>, read_write
+//! array velocities_out: vec4<f32>, read_write
 // [0] steps done, [1] non-finite particles this step, [2] escaped particles this step,
 // [3] first bad step (0xffffffff: none), [4] largest density (float bits).
 // Adaptive dt only (float bits): [5] largest |v| and [6] largest |a| of this step, [7] this
@@ -19,16 +23,13 @@ fn step_dt() -> f32 {
     return params.dt;
 }
 
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = thread_index(gid, groups);
-    if (i >= params.fluid_count) {
-        return;
-    }
-    let dt = step_dt();
+// Advances fluid particle i with acceleration a over dt into the output arrays. The w component
+// of the position (the particle's original index, as bits) is carried over untouched.
+fn advance_particle(i: u32, a: vec3<f32>, dt: f32) {
+    let old = positions_at(i);
     var v = velocities_at(i).xyz;
-    var x = positions_at(i).xyz;
-    v += accelerations_at(i).xyz * dt;
+    var x = old.xyz;
+    v += a * dt;
     x += v * dt;
     // A plane puts a particle behind it back on it and removes (or reflects, with restitution)
     // the velocity into it, so that no particle is lost through it.
@@ -45,13 +46,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             }
         }
     }
-    positions_set(i, vec4<f32>(x, 0.0));
-    velocities_set(i, vec4<f32>(v, 0.0));
+    positions_out_set(i, vec4<f32>(x, old.w));
+    velocities_out_set(i, vec4<f32>(v, 0.0));
     let finite = is_finite_vec3(x) && is_finite_vec3(v);
     if (!finite) {
         atomicAdd(&status[1], 1u);
     } else if (any(x < params.domain_min.xyz) || any(x > params.domain_max.xyz)) {
         atomicAdd(&status[2], 1u);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn integrate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        advance_particle(i, accelerations_at(i).xyz, step_dt());
     }
 }
 

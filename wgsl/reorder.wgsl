@@ -1,6 +1,8 @@
 // Cell binning, step 4 of 4: each particle's slot in its cell is the number of particles of the
 // cell with a smaller current index (so the order inside a cell never depends on thread timing,
-// as in a stable counting sort), and its state is gathered into that slot.
+// as in a stable counting sort), and its state is gathered into that slot. The particle's
+// original index travels in the w component of its position (as u32 bits), so it needs no
+// array of its own.
 // Twin of src/cpu/reorder.rs.
 
 //! array keys: u32, read
@@ -8,10 +10,8 @@
 //! array unordered: u32, read
 //! array positions_in: vec4<f32>, read
 //! array velocities_in: vec4<f32>, read
-//! array ids_in: u32, read
 //! array positions_out: vec4<f32>, read_write
 //! array velocities_out: vec4<f32>, read_write
-//! array ids_out: u32, read_write
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -29,5 +29,4 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let dest = begin + rank;
     positions_out_set(dest, positions_in_at(i));
     velocities_out_set(dest, velocities_in_at(i));
-    ids_out_set(dest, ids_in_at(i));
 }

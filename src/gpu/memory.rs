@@ -62,8 +62,10 @@ fn padded(bytes: u64) -> u64 {
 
 impl MemoryPlan {
     /// The buffers of a solver with `fluid` particles, `walls` wall particles and `cells` grid
-    /// cells; `uniform_bytes` is the size of the parameter block.
-    pub fn new(fluid: u64, walls: Option<u64>, cells: u64, uniform_bytes: u64) -> MemoryPlan {
+    /// cells; `uniform_bytes` is the size of the parameter block. `accelerations`: whether the
+    /// step keeps an accelerations array (adaptive dt; with fixed dt the forces and the
+    /// integration are one pass).
+    pub fn new(fluid: u64, walls: Option<u64>, cells: u64, uniform_bytes: u64, accelerations: bool) -> MemoryPlan {
         let w = walls.unwrap_or(0);
         let per_fluid = |label, per: u64| PlannedBuffer { label, bytes: padded(fluid * per), bytes_per_fluid_particle: per, single_binding: false };
         let fixed = |label, bytes| PlannedBuffer { label, bytes, bytes_per_fluid_particle: 0, single_binding: false };
@@ -72,21 +74,22 @@ impl MemoryPlan {
             fixed("wall positions", padded(w * 16)),
             // Without walls the shaders never read the per-cell wall array.
             fixed("wall cell starts", padded(if w > 0 { (cells + 1) * 4 } else { 0 })),
+            // The particles' ids ride in the w of the positions.
             per_fluid("positions 0", 16),
             per_fluid("velocities 0", 16),
-            per_fluid("ids 0", 4),
             per_fluid("positions 1", 16),
             per_fluid("velocities 1", 16),
-            per_fluid("ids 1", 4),
             per_fluid("cell keys", 4),
-            per_fluid("ranks in cell", 4),
-            per_fluid("unordered cell slots", 4),
             fixed("cell starts", padded((cells + 1) * 4)),
+            // Also the binning's unordered slots and ranks, dead by the time density is written.
             per_fluid("densities", 4),
             per_fluid("pressures", 4),
-            per_fluid("accelerations", 16),
+            fixed("placeholder", 16),
             PlannedBuffer { label: "status", bytes: padded(super::solver::STATUS_BYTES), bytes_per_fluid_particle: 0, single_binding: true },
         ];
+        if accelerations {
+            buffers.push(per_fluid("accelerations", 16));
+        }
         buffers.extend(Scan::sum_buffer_bytes(cells + 1).into_iter().map(|bytes| fixed("scan block sums", bytes)));
         MemoryPlan { fluid, walls, cells, buffers }
     }
@@ -94,7 +97,8 @@ impl MemoryPlan {
     /// The plan of a scene from its lattice sizes, before any particle is created on the host
     /// (walls not counted: they are known only once generated).
     pub fn for_scene(scene: &Scene) -> MemoryPlan {
-        MemoryPlan::new(scene.fluid_particle_count(), None, scene.grid().cell_count() as u64, super::solver::GpuParams::default().bytes().len() as u64)
+        let uniform = super::solver::GpuParams::default().bytes().len() as u64;
+        MemoryPlan::new(scene.fluid_particle_count(), None, scene.grid().cell_count() as u64, uniform, scene.time.adaptive)
     }
 
     /// Bytes of all buffers.

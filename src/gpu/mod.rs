@@ -7,4 +7,4 @@ pub mod scan;
 pub mod solver;
 
 pub use device::{GpuContext, GpuError};
-pub use solver::{GpuSolver, ParticleBuffers};
+pub use solver::{GpuOptions, GpuSolver, ParticleBuffers};

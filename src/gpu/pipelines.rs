@@ -14,6 +14,8 @@ pub const STAGES: &[(&str, &str)] = &[
     ("density", include_str!("../../wgsl/density.wgsl")),
     ("forces", include_str!("../../wgsl/forces.wgsl")),
     ("integrate", include_str!("../../wgsl/integrate.wgsl")),
+    // Assembled after forces and integrate: their fused entry point.
+    ("forces_integrate", include_str!("../../wgsl/forces_integrate.wgsl")),
 ];
 
 /// Threads per workgroup of the particle stages (WORKGROUP_SIZE in common.wgsl).
@@ -229,10 +231,42 @@ pub fn check_bindings(ctx: &super::GpuContext, stage: &str, storage_bindings: u6
 /// Builds the pipeline of `entry` in stage file `name`, whose `//! array` declarations have
 /// `lens` elements each: one binding per segment (see [`ArrayDecl`]).
 pub fn stage(ctx: &super::GpuContext, name: &str, entry: &str, lens: &[u64], constants: &[(&str, f64)]) -> Result<Stage, super::device::GpuError> {
+    stage_of(ctx, &[name], entry, lens, constants)
+}
+
+/// The `//! array` declarations of several stage files assembled into one module: each array
+/// once, in order of first appearance, read_write if any file writes it.
+pub fn merged_array_decls(files: &[&str]) -> Vec<ArrayDecl> {
+    let mut decls: Vec<ArrayDecl> = Vec::new();
+    for d in files.iter().flat_map(|f| array_decls(f)) {
+        match decls.iter_mut().find(|e| e.name == d.name) {
+            Some(e) => {
+                assert!(e.ty == d.ty && e.whole == d.whole && (e.access == Access::Atomic) == (d.access == Access::Atomic), "array '{}' declared twice differently", d.name);
+                if d.access == Access::ReadWrite {
+                    e.access = Access::ReadWrite;
+                }
+            }
+            None => decls.push(d),
+        }
+    }
+    decls
+}
+
+/// Storage bindings that the module of `names` needs for arrays of `lens` elements.
+pub fn storage_bindings(ctx: &super::GpuContext, names: &[&str], lens: &[u64]) -> u64 {
+    let texts: Vec<&str> = names.iter().map(|name| STAGES.iter().find(|s| s.0 == *name).unwrap_or_else(|| panic!("no stage {name}")).1).collect();
+    merged_array_decls(&texts).iter().zip(lens).map(|(d, &len)| d.segments(len, ctx.storage_segment_bytes())).sum()
+}
+
+/// Like [`stage`], for a module assembled from several stage files (a fused stage).
+pub fn stage_of(ctx: &super::GpuContext, names: &[&str], entry: &str, lens: &[u64], constants: &[(&str, f64)]) -> Result<Stage, super::device::GpuError> {
     let device = &ctx.device;
     let segment_bytes = ctx.storage_segment_bytes();
-    let stage_text = STAGES.iter().find(|s| s.0 == name).unwrap_or_else(|| panic!("no stage {name}")).1;
-    let decls = array_decls(stage_text);
+    let texts: Vec<&str> = names.iter().map(|name| STAGES.iter().find(|s| s.0 == *name).unwrap_or_else(|| panic!("no stage {name}")).1).collect();
+    let stage_text = texts.join("\n");
+    let name = names.join("+");
+    let name = name.as_str();
+    let decls = merged_array_decls(&texts);
     assert_eq!(decls.len(), lens.len(), "stage {name}: {} arrays declared, {} lengths given", decls.len(), lens.len());
     let segments: Vec<u64> = decls.iter().zip(lens).map(|(d, &len)| d.segments(len, segment_bytes)).collect();
     check_bindings(ctx, name, segments.iter().sum())?;

@@ -4,7 +4,7 @@
 
 use super::device::GpuContext;
 use super::memory::MemoryPlan;
-use super::pipelines::{constants, dispatch_size, stage, Stage, WORKGROUP_SIZE};
+use super::pipelines::{constants, dispatch_size, stage, stage_of, storage_bindings, Stage, WORKGROUP_SIZE};
 use super::scan::Scan;
 use crate::cpu::common::{GridR, KernelCoefficients};
 use crate::cpu::sort_by_cell;
@@ -134,11 +134,12 @@ impl GpuParams {
     }
 }
 
-/// Particle state that is reordered every step (ping-pong pair).
+/// Particle state (ping-pong pair): the binning gathers one buffer of the pair into the other in
+/// cell order, and the integration writes the next state back into the first. The w component
+/// of a position holds the particle's original index as u32 bits.
 struct StateBuffers {
     positions: wgpu::Buffer,
     velocities: wgpu::Buffer,
-    ids: wgpu::Buffer,
 }
 
 /// Bind groups of one parity: reading state `c`, writing state `1 - c`.
@@ -146,8 +147,8 @@ struct ParityBindGroups {
     bin_count: wgpu::BindGroup,
     reorder: wgpu::BindGroup,
     density: wgpu::BindGroup,
-    forces: wgpu::BindGroup,
-    integrate: wgpu::BindGroup,
+    /// The integration (after `forces`, adaptive dt) or the fused forces and integration.
+    advance: wgpu::BindGroup,
 }
 
 struct Pipelines {
@@ -155,11 +156,16 @@ struct Pipelines {
     bin_scatter: Stage,
     reorder: Stage,
     density: Stage,
+    /// The forces alone: every step with adaptive dt; otherwise only when the accelerations are
+    /// asked for (`step_fields`).
     forces: Stage,
-    integrate: Stage,
+    /// `integrate` (adaptive dt) or `forces_and_integrate` (fixed dt, see `fused`).
+    advance: Stage,
     finish_step: Stage,
     /// Adaptive dt only: the reduction of |v|max and |a|max, and the choice of dt.
     adaptive: Option<(Stage, Stage)>,
+    /// Forces and integration in one pass (fixed dt): no accelerations array.
+    fused: bool,
 }
 
 /// Steps per command buffer: enough to amortise submission, few enough to check health often.
@@ -170,6 +176,15 @@ pub const STEPS_PER_SUBMIT: u64 = 32;
 const STATUS_WORDS: u64 = 12;
 pub(super) const STATUS_BYTES: u64 = STATUS_WORDS * 4;
 const NO_BAD_STEP: u32 = u32::MAX;
+
+/// The stage files of the fused forces and integration.
+const FUSED_STAGE: &[&str] = &["forces", "integrate", "forces_integrate"];
+
+/// The accelerations array with the forces' bind groups of each parity.
+struct Accelerations {
+    buffer: wgpu::Buffer,
+    groups: [wgpu::BindGroup; 2],
+}
 
 pub struct GpuSolver {
     ctx: GpuContext,
@@ -182,19 +197,25 @@ pub struct GpuSolver {
     state: [StateBuffers; 2],
     /// Which of `state` holds the current particles.
     current: usize,
-    /// Which of `state` orders the accelerations of the last step.
-    accel_state: usize,
-    _keys: wgpu::Buffer,
-    _ranks: wgpu::Buffer,
-    _unordered: wgpu::Buffer,
+    /// Which of `state` the densities and pressures (and accelerations, when valid) belong to:
+    /// the state the last step or refresh evaluated them on.
+    fields_state: usize,
+    /// Whether `accelerations` holds the accelerations of `fields_state`.
+    accelerations_valid: bool,
+    keys: wgpu::Buffer,
     /// Cell counts, scanned in place into cell starts (cells + 1 values).
     starts: wgpu::Buffer,
+    /// Also the binning's unordered cell slots (u32), which are dead once the state is reordered.
     densities: wgpu::Buffer,
+    /// Also the binning's ranks in cell (u32), dead once the slots are scattered.
     pressures: wgpu::Buffer,
-    accelerations: wgpu::Buffer,
+    /// Every step with adaptive dt; with fixed dt created on the first `step_fields`.
+    accelerations: Option<Accelerations>,
+    /// Bound where a fused stage declares the accelerations it does not use.
+    placeholder: wgpu::Buffer,
     status: wgpu::Buffer,
-    _wall_positions: wgpu::Buffer,
-    _wall_starts: wgpu::Buffer,
+    wall_positions: wgpu::Buffer,
+    wall_starts: wgpu::Buffer,
     scan: Scan,
     pipelines: Pipelines,
     groups: [ParityBindGroups; 2],
@@ -230,39 +251,83 @@ fn vec4s(points: &[[f64; 3]], w: impl Fn(usize) -> f32) -> Vec<[f32; 4]> {
     points.iter().enumerate().map(|(i, p)| [p[0] as f32, p[1] as f32, p[2] as f32, w(i)]).collect()
 }
 
+/// Positions as vec4s whose w holds each particle's id as u32 bits.
+fn positions_with_ids(points: &[[f64; 3]], ids: impl Fn(usize) -> u32) -> Vec<[f32; 4]> {
+    vec4s(points, |i| f32::from_bits(ids(i)))
+}
+
+/// The ids carried in the w components of positions read back from the GPU.
+fn ids_of(positions: &[[f32; 4]]) -> Vec<u32> {
+    positions.iter().map(|p| p[3].to_bits()).collect()
+}
+
+/// Choices of the GPU step that do not change its results.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GpuOptions {
+    /// Fuse the forces and the integration into one pass when dt is fixed (the default): the
+    /// same values, without the accelerations array and a second pass over the state.
+    pub fuse_forces_and_integration: bool,
+}
+
+impl Default for GpuOptions {
+    fn default() -> Self {
+        GpuOptions { fuse_forces_and_integration: true }
+    }
+}
+
 impl GpuSolver {
     /// Uploads a scene's particles and builds every pipeline and bind group.
     pub fn new(ctx: GpuContext, params: &Params, initial: &InitialState) -> anyhow::Result<Self> {
+        Self::with_options(ctx, params, initial, GpuOptions::default())
+    }
+
+    /// Like [`GpuSolver::new`], with `options`.
+    pub fn with_options(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions) -> anyhow::Result<Self> {
         let n = initial.fluid_positions.len() as u64;
         let cells = params.grid.cell_count() as u64;
         let viscosity = params.viscosity_at_step(0);
         let gpu_params = GpuParams::new(params, n as u32, initial.wall_positions.len() as u32, viscosity);
         // Every buffer is checked against the device's limits before the first is created.
         let w = initial.wall_positions.len() as u64;
-        let plan = MemoryPlan::new(n, Some(w), cells, gpu_params.bytes().len() as u64);
-        plan.check(&ctx)?;
         // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
         let has_walls = w > 0;
         let wall_cells = if has_walls { cells + 1 } else { 0 };
+        let c1 = cells + 1;
+        // The fused module binds forces.wgsl's arrays, then integrate.wgsl's new ones; its
+        // accelerations slot gets a placeholder.
+        let fused_lens = [n, n, n, n, c1, w, wall_cells, 0, n, n, 0];
+        // Forces and integration are fused with fixed dt, unless the fused stage's bindings
+        // exceed the adapter's (arrays in many segments): then they run as two passes.
+        let fused = options.fuse_forces_and_integration
+            && params.adaptive.is_none()
+            && storage_bindings(&ctx, FUSED_STAGE, &fused_lens) <= ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
+        let plan = MemoryPlan::new(n, Some(w), cells, gpu_params.bytes().len() as u64, !fused);
+        plan.check(&ctx)?;
 
         // The pipelines come first: they check that the stages' bindings (one per segment of
         // each array) fit the adapter before any buffer exists.
         let mut k = constants(params);
         k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
-        let c1 = cells + 1;
-        let integrate_lens = [n, n, n, 0];
+        let integrate_lens = [n, n, n, n, n, 0];
+        let forces_lens = [n, n, n, n, c1, w, wall_cells, n];
         let pipelines = Pipelines {
             bin_count: stage(&ctx, "bin_count", "main", &[n, n, n, c1], &k)?,
             bin_scatter: stage(&ctx, "bin_scatter", "main", &[n, n, c1, n], &k)?,
-            reorder: stage(&ctx, "reorder", "main", &[n, c1, n, n, n, n, n, n, n], &k)?,
+            reorder: stage(&ctx, "reorder", "main", &[n, c1, n, n, n, n, n], &k)?,
             density: stage(&ctx, "density", "main", &[n, c1, w, wall_cells, n, n, 0], &k)?,
-            forces: stage(&ctx, "forces", "main", &[n, n, n, n, c1, w, wall_cells, n], &k)?,
-            integrate: stage(&ctx, "integrate", "main", &integrate_lens, &k)?,
-            finish_step: stage(&ctx, "integrate", "finish_step", &integrate_lens, &k)?,
+            forces: stage(&ctx, "forces", "forces", &forces_lens, &k)?,
+            advance: if fused {
+                stage_of(&ctx, FUSED_STAGE, "forces_and_integrate", &fused_lens, &k)?
+            } else {
+                stage(&ctx, "integrate", "integrate", &integrate_lens, &k)?
+            },
+            // One thread on the status words: its accelerations slot gets the placeholder.
+            finish_step: stage(&ctx, "integrate", "finish_step", &[n, n, 0, n, n, 0], &k)?,
             adaptive: match params.adaptive {
                 Some(_) => Some((stage(&ctx, "integrate", "reduce_maxima", &integrate_lens, &k)?, stage(&ctx, "integrate", "choose_dt", &integrate_lens, &k)?)),
                 None => None,
             },
+            fused,
         };
 
         let device = &ctx.device;
@@ -280,28 +345,24 @@ impl GpuSolver {
         let wall_masses: Vec<f32> = wall_order.iter().map(|&i| initial.wall_masses[i as usize] as f32).collect();
         let wall_positions = storage_init(device, "wall positions", bytemuck::cast_slice(&vec4s(&walls_sorted, |i| wall_masses[i])));
         let wall_starts = if has_walls { wall_starts } else { Vec::new() };
-        let wall_starts_buf = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
+        let wall_starts = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
 
-        let positions = vec4s(&initial.fluid_positions, |_| 0.0);
+        let positions = positions_with_ids(&initial.fluid_positions, |i| i as u32);
         let velocities = vec4s(&initial.fluid_velocities, |_| 0.0);
-        let ids: Vec<u32> = (0..n as u32).collect();
         let state0 = StateBuffers {
             positions: storage_init(device, "positions 0", bytemuck::cast_slice(&positions)),
             velocities: storage_init(device, "velocities 0", bytemuck::cast_slice(&velocities)),
-            ids: storage_init(device, "ids 0", bytemuck::cast_slice(&ids)),
         };
         let state1 = StateBuffers {
             positions: storage(device, "positions 1", n * 16, wgpu::BufferUsages::empty()),
             velocities: storage(device, "velocities 1", n * 16, wgpu::BufferUsages::empty()),
-            ids: storage(device, "ids 1", n * 4, wgpu::BufferUsages::empty()),
         };
         let keys = storage(device, "cell keys", n * 4, wgpu::BufferUsages::empty());
-        let ranks = storage(device, "ranks in cell", n * 4, wgpu::BufferUsages::empty());
-        let unordered = storage(device, "unordered cell slots", n * 4, wgpu::BufferUsages::empty());
         let starts = storage(device, "cell starts", (cells + 1) * 4, wgpu::BufferUsages::empty());
         let densities = storage(device, "densities", n * 4, wgpu::BufferUsages::empty());
         let pressures = storage(device, "pressures", n * 4, wgpu::BufferUsages::empty());
-        let accelerations = storage(device, "accelerations", n * 16, wgpu::BufferUsages::empty());
+        let placeholder = storage(device, "placeholder", 16, wgpu::BufferUsages::empty());
+        let accelerations = (!fused).then(|| storage(device, "accelerations", n * 16, wgpu::BufferUsages::empty()));
         let mut status_init = [0u32; STATUS_WORDS as usize];
         status_init[3] = NO_BAD_STEP;
         status_init[10] = f32::INFINITY.to_bits();
@@ -311,68 +372,129 @@ impl GpuSolver {
         let state = [state0, state1];
         let u = &uniform;
         let p = &pipelines;
+        // The binning's slots and ranks live in the density and pressure arrays (see the fields).
+        let (unordered, ranks) = (&densities, &pressures);
         let make_parity = |c: usize| {
             let (src, dst) = (&state[c], &state[1 - c]);
             ParityBindGroups {
-                bin_count: p.bin_count.bind_group(device, "bin_count", u, &[&src.positions, &keys, &ranks, &starts]),
+                bin_count: p.bin_count.bind_group(device, "bin_count", u, &[&src.positions, &keys, ranks, &starts]),
                 reorder: p.reorder.bind_group(
                     device,
                     "reorder",
                     u,
-                    &[&keys, &starts, &unordered, &src.positions, &src.velocities, &src.ids, &dst.positions, &dst.velocities, &dst.ids],
+                    &[&keys, &starts, unordered, &src.positions, &src.velocities, &dst.positions, &dst.velocities],
                 ),
-                density: p.density.bind_group(
-                    device,
-                    "density",
-                    u,
-                    &[&dst.positions, &starts, &wall_positions, &wall_starts_buf, &densities, &pressures, &status],
-                ),
-                forces: p.forces.bind_group(
-                    device,
-                    "forces",
-                    u,
-                    &[&dst.positions, &dst.velocities, &densities, &pressures, &starts, &wall_positions, &wall_starts_buf, &accelerations],
-                ),
-                integrate: p.integrate.bind_group(device, "integrate", u, &[&dst.positions, &dst.velocities, &accelerations, &status]),
+                density: p.density.bind_group(device, "density", u, &[&src.positions, &starts, &wall_positions, &wall_starts, &densities, &pressures, &status]),
+                advance: if fused {
+                    p.advance.bind_group(
+                        device,
+                        "forces_and_integrate",
+                        u,
+                        &[
+                            &src.positions,
+                            &src.velocities,
+                            &densities,
+                            &pressures,
+                            &starts,
+                            &wall_positions,
+                            &wall_starts,
+                            &placeholder,
+                            &dst.positions,
+                            &dst.velocities,
+                            &status,
+                        ],
+                    )
+                } else {
+                    let a = accelerations.as_ref().expect("made without fusion");
+                    p.advance.bind_group(device, "integrate", u, &[&src.positions, &src.velocities, a, &dst.positions, &dst.velocities, &status])
+                },
             }
         };
         let groups = [make_parity(0), make_parity(1)];
-        let scatter_group = p.bin_scatter.bind_group(device, "bin_scatter", u, &[&keys, &ranks, &starts, &unordered]);
-        let finish_group =
-            p.finish_step.bind_group(device, "finish_step", u, &[&state[0].positions, &state[0].velocities, &accelerations, &status]);
+        let scatter_group = p.bin_scatter.bind_group(device, "bin_scatter", u, &[&keys, ranks, &starts, unordered]);
+        let finish_group = p.finish_step.bind_group(
+            device,
+            "finish_step",
+            u,
+            &[&state[0].positions, &state[0].velocities, &placeholder, &state[1].positions, &state[1].velocities, &status],
+        );
         let dispatch = dispatch_size(n, WORKGROUP_SIZE, device.limits().max_compute_workgroups_per_dimension);
         let memory = plan.total();
-        Ok(GpuSolver {
+        let mut solver = GpuSolver {
             params: params.clone(),
             fluid_count: n as u32,
-            wall_count: initial.wall_positions.len() as u32,
+            wall_count: w as u32,
             uniform,
             uniform_viscosity: viscosity,
             state,
             current: 0,
-            accel_state: 0,
-            _keys: keys,
-            _ranks: ranks,
-            _unordered: unordered,
+            fields_state: 0,
+            accelerations_valid: false,
+            keys,
             starts,
             densities,
             pressures,
-            accelerations,
+            accelerations: None,
+            placeholder,
             status,
-            _wall_positions: wall_positions,
-            _wall_starts: wall_starts_buf,
+            wall_positions,
+            wall_starts,
             scan,
-            pipelines,
             groups,
+            pipelines,
             scatter_group,
             finish_group,
             steps: 0,
             dispatch,
             memory,
             ctx,
-        })
+        };
+        if let Some(buffer) = accelerations {
+            solver.accelerations = Some(solver.forces_groups(buffer));
+        }
+        Ok(solver)
     }
 
+    /// The forces' bind groups of both parities, writing into `buffer`.
+    fn forces_groups(&self, buffer: wgpu::Buffer) -> Accelerations {
+        let device = &self.ctx.device;
+        let group = |c: usize| {
+            let st = &self.state[c];
+            self.pipelines.forces.bind_group(
+                device,
+                "forces",
+                &self.uniform,
+                &[&st.positions, &st.velocities, &self.densities, &self.pressures, &self.starts, &self.wall_positions, &self.wall_starts, &buffer],
+            )
+        };
+        let groups = [group(0), group(1)];
+        Accelerations { buffer, groups }
+    }
+
+    /// Makes `accelerations` hold the accelerations of `fields_state`: with fixed dt the fused
+    /// step keeps them in registers, so they are evaluated again here (same inputs, same
+    /// shader code: the same values), into an array created on first use.
+    fn ensure_accelerations(&mut self) {
+        if self.accelerations_valid {
+            return;
+        }
+        if self.accelerations.is_none() {
+            let buffer = storage(&self.ctx.device, "accelerations", self.fluid_count as u64 * 16, wgpu::BufferUsages::empty());
+            self.accelerations = Some(self.forces_groups(buffer));
+        }
+        let acc = self.accelerations.as_ref().expect("made above");
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("accelerations") });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("forces"), timestamp_writes: None });
+        self.dispatch_particles(&mut pass, &self.pipelines.forces, &acc.groups[self.fields_state]);
+        drop(pass);
+        self.ctx.queue.submit([encoder.finish()]);
+        self.accelerations_valid = true;
+    }
+
+    /// Whether forces and integration run as one pass (fixed dt).
+    pub fn fused(&self) -> bool {
+        self.pipelines.fused
+    }
     /// Blocks until the GPU has finished everything submitted (for timing).
     pub fn wait(&self) -> anyhow::Result<()> {
         self.ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None })?;
@@ -390,8 +512,8 @@ impl GpuSolver {
     }
 
     /// Records the binning (count, scan, scatter, reorder) of the current state into the other
-    /// buffer of the pair, and flips `current`.
-    fn record_bin(&self, encoder: &mut wgpu::CommandEncoder) {
+    /// buffer of the pair, which becomes the current one.
+    fn record_bin(&mut self, encoder: &mut wgpu::CommandEncoder) {
         encoder.clear_buffer(&self.starts, 0, None);
         let g = &self.groups[self.current];
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("binning"), timestamp_writes: None });
@@ -400,38 +522,52 @@ impl GpuSolver {
         self.dispatch_particles(&mut pass, &self.pipelines.bin_scatter, &self.scatter_group);
         self.dispatch_particles(&mut pass, &self.pipelines.reorder, &g.reorder);
         drop(pass);
+        self.current = 1 - self.current;
     }
 
-    /// Records one full step. The neighbour grid is rebuilt every `rebuild_every` steps; in
-    /// between, the stages work on the current buffers in place with the cells of the last
-    /// rebuild (the bind groups of the other parity write to them).
+    /// Whether the step about to run rebuilds the neighbour grid (every `rebuild_every` steps;
+    /// in between, the stages use the cells of the last rebuild).
+    fn rebuilds(&self) -> bool {
+        self.steps % self.params.rebuild_every.max(1) as u64 == 0
+    }
+
+    /// Records one full step: the binning (when due) into the other buffer of the pair, the
+    /// fields on it, and the integration back into the first.
     fn record_step(&mut self, encoder: &mut wgpu::CommandEncoder) {
-        let rebuild = self.steps % self.params.rebuild_every.max(1) as u64 == 0;
-        let parity = if rebuild { self.current } else { 1 - self.current };
-        if rebuild {
+        if self.rebuilds() {
             self.record_bin(encoder);
         }
+        let read = self.current;
         encoder.clear_buffer(&self.status, 4, Some(8));
-        let g = &self.groups[parity];
+        let g = &self.groups[read];
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("step"), timestamp_writes: None });
         self.dispatch_particles(&mut pass, &self.pipelines.density, &g.density);
-        self.dispatch_particles(&mut pass, &self.pipelines.forces, &g.forces);
+        if let Some(acc) = self.accelerations.as_ref().filter(|_| !self.pipelines.fused) {
+            self.dispatch_particles(&mut pass, &self.pipelines.forces, &acc.groups[read]);
+        }
         self.record_integration(&mut pass, g);
         drop(pass);
-        self.current = 1 - parity;
-        self.accel_state = self.current;
+        self.finish_step(read);
+    }
+
+    /// The bookkeeping after a step that read state `read` and wrote the other one.
+    fn finish_step(&mut self, read: usize) {
+        self.current = 1 - read;
+        self.fields_state = read;
+        self.accelerations_valid = !self.pipelines.fused;
     }
 
     /// The integration with its bookkeeping: the adaptive step's reduction and choice of dt,
-    /// the integration itself and the per-step status update.
+    /// the integration itself (fused with the forces for fixed dt) and the per-step status
+    /// update.
     fn record_integration(&self, pass: &mut wgpu::ComputePass, g: &ParityBindGroups) {
         if let Some((reduce, choose)) = &self.pipelines.adaptive {
-            self.dispatch_particles(pass, reduce, &g.integrate);
+            self.dispatch_particles(pass, reduce, &g.advance);
             pass.set_pipeline(&choose.pipeline);
-            pass.set_bind_group(0, &g.integrate, &[]);
+            pass.set_bind_group(0, &g.advance, &[]);
             pass.dispatch_workgroups(1, 1, 1);
         }
-        self.dispatch_particles(pass, &self.pipelines.integrate, &g.integrate);
+        self.dispatch_particles(pass, &self.pipelines.advance, &g.advance);
         pass.set_pipeline(&self.pipelines.finish_step.pipeline);
         pass.set_bind_group(0, &self.finish_group, &[]);
         pass.dispatch_workgroups(1, 1, 1);
@@ -473,12 +609,12 @@ impl GpuSolver {
     /// evaluates density and pressure for it, without advancing time.
     fn refresh_fields(&mut self) {
         let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("refresh") });
-        let parity = self.current;
         self.record_bin(&mut encoder);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("density"), timestamp_writes: None });
-        self.dispatch_particles(&mut pass, &self.pipelines.density, &self.groups[parity].density);
+        self.dispatch_particles(&mut pass, &self.pipelines.density, &self.groups[self.current].density);
         drop(pass);
-        self.current = 1 - parity;
+        self.fields_state = self.current;
+        self.accelerations_valid = false;
         self.ctx.queue.submit([encoder.finish()]);
     }
 
@@ -488,20 +624,19 @@ impl GpuSolver {
         self.refresh_fields();
         let n = self.fluid_count as u64;
         let cells = self.params.grid.cell_count() as u64;
-        let data = read_buffers(&self.ctx, &[(&self.state[self.current].ids, n * 4), (&self.starts, (cells + 1) * 4)])?;
-        Ok((bytemuck::pod_collect_to_vec(&data[0]), bytemuck::pod_collect_to_vec(&data[1])))
+        let data = read_buffers(&self.ctx, &[(&self.state[self.current].positions, n * 16), (&self.starts, (cells + 1) * 4)])?;
+        Ok((ids_of(bytemuck::cast_slice(&data[0])), bytemuck::pod_collect_to_vec(&data[1])))
     }
 
     /// The buffers holding the current particle state (they alternate between two pairs as the
-    /// solver steps: ask again after stepping). Particles are in cell order; `ids` maps each
-    /// slot to the particle's original index. `densities` and `pressures` are in the same order
-    /// after a snapshot.
+    /// solver steps: ask again after stepping). Particles are in cell order; the w component of
+    /// each position holds the particle's original index as u32 bits. `densities` and
+    /// `pressures` are in the same order after a snapshot.
     pub fn particle_buffers(&self) -> ParticleBuffers<'_> {
         let st = &self.state[self.current];
         ParticleBuffers {
             positions: &st.positions,
             velocities: &st.velocities,
-            ids: &st.ids,
             densities: &self.densities,
             pressures: &self.pressures,
             count: self.fluid_count,
@@ -522,10 +657,13 @@ impl GpuSolver {
     /// Bytes of the buffers as created, summed from the buffers themselves (to check the plan).
     pub fn allocated_bytes(&self) -> u64 {
         let s = self;
-        [&s.uniform, &s._keys, &s._ranks, &s._unordered, &s.starts, &s.densities, &s.pressures, &s.accelerations, &s.status, &s._wall_positions, &s._wall_starts]
-            .iter()
+        // With fixed dt the accelerations exist only after `step_fields` asked for them.
+        let planned_accelerations = s.accelerations.as_ref().filter(|_| !s.pipelines.fused).map(|a| &a.buffer);
+        [&s.uniform, &s.keys, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
+            .into_iter()
+            .chain(planned_accelerations)
             .map(|b| b.size())
-            .chain(s.state.iter().flat_map(|st| [st.positions.size(), st.velocities.size(), st.ids.size()]))
+            .chain(s.state.iter().flat_map(|st| [st.positions.size(), st.velocities.size()]))
             .sum::<u64>()
             + s.scan.bytes()
     }
@@ -534,12 +672,11 @@ impl GpuSolver {
 /// The GPU buffers of the particle state, for rendering or post-processing on the GPU.
 #[derive(Clone, Copy, Debug)]
 pub struct ParticleBuffers<'a> {
-    /// `array<vec4<f32>>`: x, y, z, 0.
+    /// `array<vec4<f32>>`: x, y, z, and in w the original index of the particle in each slot
+    /// (u32 bits).
     pub positions: &'a wgpu::Buffer,
     /// `array<vec4<f32>>`: vx, vy, vz, 0.
     pub velocities: &'a wgpu::Buffer,
-    /// `array<u32>`: the original index of the particle in each slot.
-    pub ids: &'a wgpu::Buffer,
     /// `array<f32>`.
     pub densities: &'a wgpu::Buffer,
     /// `array<f32>`.
@@ -678,18 +815,12 @@ impl Backend for GpuSolver {
         self.refresh_fields();
         let n = self.fluid_count as u64;
         let st = &self.state[self.current];
-        let data = read_buffers(&self.ctx, &[
-            (&st.positions, n * 16),
-            (&st.velocities, n * 16),
-            (&st.ids, n * 4),
-            (&self.densities, n * 4),
-            (&self.pressures, n * 4),
-        ])?;
-        let ids: Vec<u32> = bytemuck::pod_collect_to_vec(&data[2]);
+        let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16), (&self.densities, n * 4), (&self.pressures, n * 4)])?;
         let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
+        let ids = ids_of(&pos);
         let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
-        let rho: Vec<f32> = bytemuck::pod_collect_to_vec(&data[3]);
-        let p: Vec<f32> = bytemuck::pod_collect_to_vec(&data[4]);
+        let rho: Vec<f32> = bytemuck::pod_collect_to_vec(&data[2]);
+        let p: Vec<f32> = bytemuck::pod_collect_to_vec(&data[3]);
         Ok(Snapshot {
             step: self.steps,
             time: self.time(),
@@ -718,7 +849,7 @@ impl Backend for GpuSolver {
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
         let n = self.fluid_count as u64;
         let st = &self.state[self.current];
-        let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16), (&st.ids, n * 4)])?;
+        let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16)])?;
         let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
         let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
         let status = self.read_status()?;
@@ -728,7 +859,7 @@ impl Backend for GpuSolver {
             step: self.steps,
             positions: pos.iter().map(widen).collect(),
             velocities: vel.iter().map(widen).collect(),
-            ids: bytemuck::pod_collect_to_vec(&data[2]),
+            ids: ids_of(&pos),
             non_finite: status[1] as u64,
             escaped: status[2] as u64,
             first_bad_step: (status[3] != NO_BAD_STEP).then_some(status[3] as u64),
@@ -740,14 +871,13 @@ impl Backend for GpuSolver {
     }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         state.check_fits("gpu", self.fluid_count as usize)?;
-        // The w components are 0, as the integration writes them.
-        let pos = vec4s(&state.positions, |_| 0.0);
+        // The w components: the ids in positions, 0 in velocities, as the integration writes them.
+        let pos = positions_with_ids(&state.positions, |i| state.ids[i]);
         let vel = vec4s(&state.velocities, |_| 0.0);
         let st = &self.state[0];
         let q = &self.ctx.queue;
         q.write_buffer(&st.positions, 0, bytemuck::cast_slice(&pos));
         q.write_buffer(&st.velocities, 0, bytemuck::cast_slice(&vel));
-        q.write_buffer(&st.ids, 0, bytemuck::cast_slice(&state.ids));
         anyhow::ensure!(
             state.gpu_status.len() == STATUS_WORDS as usize,
             "the state holds {} status words; this solver has {STATUS_WORDS}",
@@ -757,19 +887,22 @@ impl Backend for GpuSolver {
         q.write_buffer(&self.status, 0, bytemuck::cast_slice(status));
         q.submit([]);
         self.current = 0;
-        self.accel_state = 0;
+        self.fields_state = 0;
+        self.accelerations_valid = false;
         self.steps = state.step;
         Ok(())
     }
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {
         let n = self.fluid_count as u64;
+        self.ensure_accelerations();
+        let acc = &self.accelerations.as_ref().expect("ensured").buffer;
         let data = read_buffers(&self.ctx, &[
             (&self.densities, n * 4),
             (&self.pressures, n * 4),
-            (&self.accelerations, n * 16),
-            (&self.state[self.accel_state].ids, n * 4),
+            (acc, n * 16),
+            (&self.state[self.fields_state].positions, n * 16),
         ])?;
-        let ids: Vec<u32> = bytemuck::pod_collect_to_vec(&data[3]);
+        let ids = ids_of(bytemuck::cast_slice(&data[3]));
         let rho: Vec<f32> = bytemuck::pod_collect_to_vec(&data[0]);
         let p: Vec<f32> = bytemuck::pod_collect_to_vec(&data[1]);
         let acc: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[2]);

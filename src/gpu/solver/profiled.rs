@@ -54,11 +54,11 @@ impl GpuSolver {
     }
 
     /// Records one step like `record_step`, one timed pass per stage; returns which stages ran.
+    /// With fixed dt the forces and the integration are one pass, timed as `forces`; the
+    /// `integrate` pass then holds only the step's one-thread bookkeeping.
     fn record_profiled_step(&mut self, encoder: &mut wgpu::CommandEncoder, queries: &wgpu::QuerySet) -> [bool; 7] {
-        let rebuild = self.steps % self.params.rebuild_every.max(1) as u64 == 0;
-        let parity = if rebuild { self.current } else { 1 - self.current };
         let mut ran = [false; 7];
-        if rebuild {
+        if self.rebuilds() {
             encoder.clear_buffer(&self.starts, 0, None);
             let g = &self.groups[self.current];
             let mut pass = timed_pass(encoder, queries, &mut ran, 0);
@@ -73,20 +73,37 @@ impl GpuSolver {
             let mut pass = timed_pass(encoder, queries, &mut ran, 3);
             self.dispatch_particles(&mut pass, &self.pipelines.reorder, &g.reorder);
             drop(pass);
+            self.current = 1 - self.current;
         }
+        let read = self.current;
         encoder.clear_buffer(&self.status, 4, Some(8));
-        let g = &self.groups[parity];
+        let g = &self.groups[read];
         let mut pass = timed_pass(encoder, queries, &mut ran, 4);
         self.dispatch_particles(&mut pass, &self.pipelines.density, &g.density);
         drop(pass);
         let mut pass = timed_pass(encoder, queries, &mut ran, 5);
-        self.dispatch_particles(&mut pass, &self.pipelines.forces, &g.forces);
+        if self.pipelines.fused {
+            self.dispatch_particles(&mut pass, &self.pipelines.advance, &g.advance);
+        } else {
+            let acc = self.accelerations.as_ref().expect("kept without fusion");
+            self.dispatch_particles(&mut pass, &self.pipelines.forces, &acc.groups[read]);
+        }
         drop(pass);
         let mut pass = timed_pass(encoder, queries, &mut ran, 6);
-        self.record_integration(&mut pass, g);
+        if let Some((reduce, choose)) = &self.pipelines.adaptive {
+            self.dispatch_particles(&mut pass, reduce, &g.advance);
+            pass.set_pipeline(&choose.pipeline);
+            pass.set_bind_group(0, &g.advance, &[]);
+            pass.dispatch_workgroups(1, 1, 1);
+        }
+        if !self.pipelines.fused {
+            self.dispatch_particles(&mut pass, &self.pipelines.advance, &g.advance);
+        }
+        pass.set_pipeline(&self.pipelines.finish_step.pipeline);
+        pass.set_bind_group(0, &self.finish_group, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
         drop(pass);
-        self.current = 1 - parity;
-        self.accel_state = self.current;
+        self.finish_step(read);
         ran
     }
 }

@@ -1,12 +1,12 @@
 //! CSV snapshots streamed from the GPU in pieces, so a big run never needs one host copy of
 //! every array.
 //!
-//! The GPU keeps the particles in cell order, with `ids` giving each slot's original index; the
-//! file lists them in original order. The rows are written in passes over ranges of original
-//! indices: each pass reads the five arrays (ids, positions, velocities, densities, pressures)
-//! back in pieces of `chunk` slots through small staging buffers, keeps the values whose id falls
-//! in the pass's range (32 bytes per particle of the range), then formats and appends them. At
-//! most [`MAX_PASSES`] passes are made, so the host holds
+//! The GPU keeps the particles in cell order, with each position's w giving the slot's original
+//! index; the file lists them in original order. The rows are written in passes over ranges of
+//! original indices: each pass reads the four arrays (positions with ids, velocities, densities,
+//! pressures) back in pieces of `chunk` slots through small staging buffers, keeps the values
+//! whose id falls in the pass's range (32 bytes per particle of the range), then formats and
+//! appends them. At most [`MAX_PASSES`] passes are made, so the host holds
 //! `32 * max(chunk, ceil(N / MAX_PASSES)) + 40 * chunk` bytes: about 4 bytes per particle for
 //! big runs, instead of the whole-array path's 40 bytes read back plus 64 in the snapshot.
 
@@ -40,7 +40,7 @@ impl GpuSolver {
         let chunk = chunk.max(1);
         let per_pass = chunk.max(n.div_ceil(MAX_PASSES)).max(1);
         let st = &self.state[self.current];
-        let buffers = [(&st.ids, 4u64), (&st.positions, 16), (&st.velocities, 16), (&self.densities, 4), (&self.pressures, 4)];
+        let buffers = [(&st.positions, 16u64), (&st.velocities, 16), (&self.densities, 4), (&self.pressures, 4)];
         let mut rows = vec![[0f32; 8]; per_pass.min(n) as usize];
         let (mut bad, mut max_speed) = (0u64, 0f64);
         write_atomic(path, |w| {
@@ -51,12 +51,12 @@ impl GpuSolver {
                     let count = chunk.min(n - slot);
                     let ranges: Vec<_> = buffers.iter().map(|&(b, size)| (b, slot * size, count * size)).collect();
                     let data = read_ranges(&self.ctx, &ranges).map_err(std::io::Error::other)?;
-                    let ids: &[u32] = bytemuck::cast_slice(&data[0]);
-                    let pos: &[[f32; 4]] = bytemuck::cast_slice(&data[1]);
-                    let vel: &[[f32; 4]] = bytemuck::cast_slice(&data[2]);
-                    let (rho, p): (&[f32], &[f32]) = (bytemuck::cast_slice(&data[3]), bytemuck::cast_slice(&data[4]));
-                    for (j, &id) in ids.iter().enumerate() {
-                        let id = id as u64;
+                    let pos: &[[f32; 4]] = bytemuck::cast_slice(&data[0]);
+                    let vel: &[[f32; 4]] = bytemuck::cast_slice(&data[1]);
+                    let (rho, p): (&[f32], &[f32]) = (bytemuck::cast_slice(&data[2]), bytemuck::cast_slice(&data[3]));
+                    for (j, x) in pos.iter().enumerate() {
+                        // The particle's original index rides in w as u32 bits.
+                        let id = x[3].to_bits() as u64;
                         if (first..end).contains(&id) {
                             let (x, v) = (pos[j], vel[j]);
                             rows[(id - first) as usize] = [x[0], x[1], x[2], v[0], v[1], v[2], rho[j], p[j]];

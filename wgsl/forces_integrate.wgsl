@@ -1,0 +1,13 @@
+// The forces and the integration in one pass, for fixed dt: each particle's acceleration stays in
+// registers instead of going through a 16-byte-per-particle array, and the state is read once
+// instead of twice. Assembled by the host after forces.wgsl and integrate.wgsl (whose arrays it
+// binds); twin of src/cpu/forces.rs followed by src/cpu/integrate.rs. Adaptive dt cannot be
+// fused: it needs every particle's acceleration before it can choose the step.
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn forces_and_integrate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        advance_particle(i, particle_acceleration(i), params.dt);
+    }
+}
