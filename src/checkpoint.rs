@@ -6,7 +6,9 @@
 //! (u32), then the payload: [`Checkpoint`] serialised with postcard. A checkpoint from another
 //! format or wgsph version, or one whose checksum or length does not match, is refused. The file
 //! is written beside its target and renamed over it, so the previous checkpoint stays intact
-//! until the new one is complete.
+//! until the new one is complete. The payload is written as it is serialised and its length and
+//! checksum filled in at the end, so a backend can stream its state in pieces
+//! ([`Backend::write_state_streamed`]); reading takes the whole file.
 
 use crate::cli::{InputError, RunArgs};
 use crate::cpu::CpuSolver;
@@ -262,7 +264,7 @@ pub fn capture(
 ) -> anyhow::Result<Checkpoint> {
     Ok(Checkpoint {
         scene_toml: scene.to_toml(),
-        run: record(backend, opts, end_step, last_snapshot, max_speed),
+        run: run_record(backend, opts, end_step, last_snapshot, max_speed),
         state: backend.save_state()?,
     })
 }
@@ -279,7 +281,7 @@ pub fn save(
     max_speed: f64,
     path: &Path,
 ) -> anyhow::Result<()> {
-    let run = record(backend, opts, end_step, last_snapshot, max_speed);
+    let run = run_record(backend, opts, end_step, last_snapshot, max_speed);
     write_with_state(path, &scene.to_toml(), &run, |w| match backend.write_state_streamed(w) {
         Some(written) => written,
         None => {
@@ -290,7 +292,7 @@ pub fn save(
 }
 
 /// The settings of the run, as a checkpoint records them.
-fn record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_snapshot: Option<&Path>, max_speed: f64) -> RunRecord {
+pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_snapshot: Option<&Path>, max_speed: f64) -> RunRecord {
     RunRecord {
         end_step,
         snapshot_every: opts.snapshot_every,
