@@ -6,14 +6,16 @@
 //! (u32), then the payload: [`Checkpoint`] serialised with postcard. A checkpoint from another
 //! format or wgsph version, or one whose checksum or length does not match, is refused. The file
 //! is written beside its target and renamed over it, so the previous checkpoint stays intact
-//! until the new one is complete.
+//! until the new one is complete. The payload is written as it is serialised and its length and
+//! checksum filled in at the end, so a backend can stream its state in pieces
+//! ([`Backend::write_state_streamed`]); reading takes the whole file.
 
 use crate::cli::{InputError, RunArgs};
 use crate::cpu::CpuSolver;
 use crate::gpu::{GpuContext, GpuSolver};
 use crate::sim::Backend;
 use crate::export::{SnapshotFormat, SnapshotWriter};
-use crate::output::write_atomic;
+use crate::output::AtomicFile;
 use crate::run::{run, ResumedRun, RunOptions};
 use crate::scene::{Scene, SceneOrigin};
 use crate::sim::BackendState;
@@ -73,17 +75,74 @@ pub enum CheckpointError {
 
 /// Writes a checkpoint atomically.
 pub fn write(path: &Path, c: &Checkpoint) -> anyhow::Result<()> {
-    let payload = postcard::to_stdvec(c).context("cannot serialise the checkpoint")?;
-    let crc = crc32fast::hash(&payload);
-    write_atomic(path, |w| {
-        w.write_all(MAGIC)?;
-        w.write_all(&FORMAT_VERSION.to_le_bytes())?;
-        w.write_all(&(WGSPH_VERSION.len() as u16).to_le_bytes())?;
-        w.write_all(WGSPH_VERSION.as_bytes())?;
-        w.write_all(&(payload.len() as u64).to_le_bytes())?;
-        w.write_all(&crc.to_le_bytes())?;
-        w.write_all(&payload)
+    write_with_state(path, &c.scene_toml, &c.run, |w| {
+        postcard::to_io(&c.state, w).context("cannot serialise the checkpoint")?;
+        Ok(())
     })
+}
+
+/// Writes a checkpoint atomically whose state `write_state` serialises (with postcard, as
+/// [`BackendState`]) into the writer it is given, in pieces if it likes: the payload goes to
+/// the file as it comes, and its length and checksum are filled into the header at the end.
+pub fn write_with_state(
+    path: &Path,
+    scene_toml: &str,
+    run: &RunRecord,
+    write_state: impl FnOnce(&mut dyn std::io::Write) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    use std::io::{Seek, SeekFrom, Write};
+    let mut file = AtomicFile::create(path)?;
+    let cannot = || format!("cannot write {}", path.display());
+    file.write_all(MAGIC).with_context(cannot)?;
+    file.write_all(&FORMAT_VERSION.to_le_bytes()).with_context(cannot)?;
+    file.write_all(&(WGSPH_VERSION.len() as u16).to_le_bytes()).with_context(cannot)?;
+    file.write_all(WGSPH_VERSION.as_bytes()).with_context(cannot)?;
+    let length_at = file.stream_position().with_context(cannot)?;
+    file.write_all(&[0; 12]).with_context(cannot)?;
+    let mut payload = Payload { out: &mut file, crc: crc32fast::Hasher::new(), len: 0, failure: None };
+    // Checkpoint's fields in order: postcard writes a struct as its fields one after the other.
+    let written = match postcard::to_io(&(scene_toml, run), &mut payload) {
+        Ok(_) => write_state(&mut payload),
+        Err(e) => Err(anyhow::Error::from(e).context("cannot serialise the checkpoint")),
+    };
+    if let Some(e) = payload.failure.take() {
+        return Err(e).with_context(cannot);
+    }
+    written?;
+    let (len, crc) = (payload.len, payload.crc.finalize());
+    file.seek(SeekFrom::Start(length_at)).with_context(cannot)?;
+    file.write_all(&len.to_le_bytes()).with_context(cannot)?;
+    file.write_all(&crc.to_le_bytes()).with_context(cannot)?;
+    file.commit()
+}
+
+/// The payload on its way to the file: counted and checksummed as it is written.
+struct Payload<'a> {
+    out: &'a mut AtomicFile,
+    crc: crc32fast::Hasher,
+    len: u64,
+    /// The first write error (postcard reports only that the output failed).
+    failure: Option<std::io::Error>,
+}
+
+impl std::io::Write for Payload<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match self.out.write(buf) {
+            Ok(n) => {
+                self.crc.update(&buf[..n]);
+                self.len += n as u64;
+                Ok(n)
+            }
+            Err(e) => {
+                let again = std::io::Error::new(e.kind(), e.to_string());
+                self.failure.get_or_insert(e);
+                Err(again)
+            }
+        }
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
 }
 
 /// Reads and checks a checkpoint.
@@ -205,21 +264,48 @@ pub fn capture(
 ) -> anyhow::Result<Checkpoint> {
     Ok(Checkpoint {
         scene_toml: scene.to_toml(),
-        run: RunRecord {
-            end_step,
-            snapshot_every: opts.snapshot_every,
-            check_every: opts.check_every,
-            checkpoint_every: opts.checkpoint_every,
-            formats: opts.formats.clone(),
-            adapter: backend.adapter(),
-            last_snapshot: last_snapshot.map(|p| p.display().to_string()),
-            max_speed,
-            end_time: opts.end_time,
-            surface_mesh_every: opts.surface_mesh_every,
-            surface_mesh_format: opts.surface_mesh_format,
-        },
+        run: run_record(backend, opts, end_step, last_snapshot, max_speed),
         state: backend.save_state()?,
     })
+}
+
+/// Writes the checkpoint of a run's current state to `path`: the same bytes as [`write`] of
+/// [`capture`], with the state streamed in pieces where the backend can (the GPU), so that no
+/// host copy of every array is made.
+pub fn save(
+    backend: &mut dyn Backend,
+    scene: &Scene,
+    opts: &RunOptions,
+    end_step: u64,
+    last_snapshot: Option<&Path>,
+    max_speed: f64,
+    path: &Path,
+) -> anyhow::Result<()> {
+    let run = run_record(backend, opts, end_step, last_snapshot, max_speed);
+    write_with_state(path, &scene.to_toml(), &run, |w| match backend.write_state_streamed(w) {
+        Some(written) => written,
+        None => {
+            postcard::to_io(&backend.save_state()?, w).context("cannot serialise the checkpoint")?;
+            Ok(())
+        }
+    })
+}
+
+/// The settings of the run, as a checkpoint records them.
+pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_snapshot: Option<&Path>, max_speed: f64) -> RunRecord {
+    RunRecord {
+        end_step,
+        snapshot_every: opts.snapshot_every,
+        check_every: opts.check_every,
+        checkpoint_every: opts.checkpoint_every,
+        formats: opts.formats.clone(),
+        adapter: backend.adapter(),
+        last_snapshot: last_snapshot.map(|p| p.display().to_string()),
+        max_speed,
+        end_time: opts.end_time,
+        surface_mesh_every: opts.surface_mesh_every,
+        surface_mesh_format: opts.surface_mesh_format,
+    }
 }
 
 /// The snapshot writer of a run; a resumed run keeps the series index up to its first step.

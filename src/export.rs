@@ -10,6 +10,8 @@ use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+pub mod stream;
+
 /// A snapshot file format (`--format`).
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
@@ -110,18 +112,10 @@ impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
 /// `x y z vx vy vz density pressure` (single precision: what Blender and splashsurf read) and
 /// header comments `step N` and `time T`.
 pub fn write_ply(path: &Path, s: &Snapshot) -> anyhow::Result<()> {
-    use ply_rs_bw::ply::{Addable, ElementDef, Encoding, Ply, PropertyDef, PropertyType, ScalarType};
+    use ply_rs_bw::ply::Ply;
     refuse_non_finite(path, s)?;
     let mut ply = Ply::<PlyVertex>::new();
-    ply.header.encoding = Encoding::BinaryLittleEndian;
-    ply.header.comments.push("wgsph particle snapshot".into());
-    ply.header.comments.push(format!("step {}", s.step));
-    ply.header.comments.push(format!("time {}", s.time));
-    let mut vertex = ElementDef::new("vertex".into());
-    for p in PLY_PROPERTIES {
-        vertex.properties.add(PropertyDef::new(p.into(), PropertyType::Scalar(ScalarType::Float)));
-    }
-    ply.header.elements.add(vertex);
+    ply.header = ply_header(s.step, s.time, s.len());
     let vertices: Vec<PlyVertex> = (0..s.len())
         .map(|i| {
             let (p, v) = (s.positions[i], s.velocities[i]);
@@ -131,6 +125,24 @@ pub fn write_ply(path: &Path, s: &Snapshot) -> anyhow::Result<()> {
     ply.payload.insert("vertex".into(), vertices);
     let writer = ply_rs_bw::writer::Writer::<PlyVertex>::new();
     write_atomic(path, |mut w| writer.write_ply(&mut w, &mut ply).map(|_| ()))
+}
+
+/// The header of a PLY snapshot of `particles` vertices (shared by the streamed writer, so that
+/// both write the same bytes).
+fn ply_header(step: u64, time: f64, particles: usize) -> ply_rs_bw::ply::Header {
+    use ply_rs_bw::ply::{Addable, ElementDef, Encoding, Header, PropertyDef, PropertyType, ScalarType};
+    let mut header = Header::new();
+    header.encoding = Encoding::BinaryLittleEndian;
+    header.comments.push("wgsph particle snapshot".into());
+    header.comments.push(format!("step {step}"));
+    header.comments.push(format!("time {time}"));
+    let mut vertex = ElementDef::new("vertex".into());
+    vertex.count = particles;
+    for p in PLY_PROPERTIES {
+        vertex.properties.add(PropertyDef::new(p.into(), PropertyType::Scalar(ScalarType::Float)));
+    }
+    header.elements.add(vertex);
+    header
 }
 
 /// Writes a snapshot in one format.
@@ -223,16 +235,39 @@ impl SnapshotWriter {
         self.out.join("snapshots").join(VTK_SERIES_NAME)
     }
 
+    /// Writes the backend's current state in every format through its streamed path, without
+    /// one host copy of every array; returns the path of the first format's file and the
+    /// largest speed, or `None` where the backend has no streamed path.
+    pub fn write_streamed(&mut self, backend: &mut dyn crate::sim::Backend) -> Option<anyhow::Result<(PathBuf, f64)>> {
+        let step = backend.steps_done();
+        let files: Vec<(SnapshotFormat, PathBuf)> = self.formats.iter().map(|&f| (f, snapshot_file(&self.out, step, f))).collect();
+        let written = backend.write_snapshot_streamed(&files)?;
+        Some(written.and_then(|s| {
+            for (f, path) in &files {
+                if *f == SnapshotFormat::Vtk {
+                    self.add_to_series(path, s.time)?;
+                }
+                log::info!("wrote {}", path.display());
+            }
+            let (_, first) = files.into_iter().next().ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))?;
+            Ok((first, s.max_speed))
+        }))
+    }
+
+    fn add_to_series(&mut self, vtk_file: &Path, time: f64) -> anyhow::Result<()> {
+        let name = vtk_file.file_name().expect("a file name").to_string_lossy().into_owned();
+        let index = self.series_path();
+        self.series.add_and_write(&index, name, time)
+    }
+
     /// Writes `s` in every format; returns the path of the first format's file.
     pub fn write(&mut self, s: &Snapshot) -> anyhow::Result<PathBuf> {
         let mut first = None;
-        for &f in &self.formats {
+        for f in self.formats.clone() {
             let path = snapshot_file(&self.out, s.step, f);
             write_snapshot(&path, f, s)?;
             if f == SnapshotFormat::Vtk {
-                let name = path.file_name().expect("a file name").to_string_lossy().into_owned();
-                let index = self.series_path();
-                self.series.add_and_write(&index, name, s.time)?;
+                self.add_to_series(&path, s.time)?;
             }
             log::info!("wrote {}", path.display());
             first.get_or_insert(path);

@@ -138,17 +138,11 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut max_speed = resumed.max_speed;
     let mut failure = None;
     let mut writer = crate::checkpoint::snapshot_writer(opts, start)?;
-    // CSV alone is streamed where the backend can (the GPU): no host copy of every array.
-    let csv_only = opts.formats.iter().all(|&f| f == SnapshotFormat::Csv);
     let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
-        if csv_only {
-            let path = crate::export::snapshot_file(&opts.out, backend.steps_done(), SnapshotFormat::Csv);
-            if let Some(speed) = backend.write_csv_streamed(&path) {
-                *max_speed = speed?;
-                log::info!("wrote {}", path.display());
-                *last = Some(path);
-                return Ok(None);
-            }
+        // Streamed where the backend can (the GPU): no host copy of every array.
+        if let Some(written) = writer.write_streamed(backend) {
+            (*last, *max_speed) = written.map(|(path, speed)| (Some(path), speed))?;
+            return Ok(None);
         }
         let s = backend.snapshot()?;
         *max_speed = s.max_speed();
@@ -232,9 +226,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             }
         }
         if opts.checkpoint_every > 0 && step % opts.checkpoint_every == 0 {
-            let c = crate::checkpoint::capture(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
             let path = opts.out.join(crate::checkpoint::CHECKPOINT_FILE);
-            crate::checkpoint::write(&path, &c)?;
+            crate::checkpoint::save(backend, scene, opts, end, last_snapshot.as_deref(), max_speed, &path)?;
             log::info!("wrote {} at step {step}", path.display());
         }
     }

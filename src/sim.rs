@@ -127,10 +127,19 @@ pub trait Backend {
     /// Reads the health counters (a few bytes on the GPU).
     fn health(&mut self) -> anyhow::Result<Health>;
     fn snapshot(&mut self) -> anyhow::Result<Snapshot>;
-    /// Writes the snapshot CSV of the current state to `path` in pieces, without one host copy
-    /// of every array, and returns its maximum speed; `None` where the backend has no streamed
-    /// path (the caller then writes [`Backend::snapshot`]).
-    fn write_csv_streamed(&mut self, _path: &std::path::Path) -> Option<anyhow::Result<f64>> {
+    /// Writes the snapshot of the current state in every `(format, path)` given, in pieces,
+    /// without one host copy of every array; `None` where the backend has no streamed path (the
+    /// caller then writes [`Backend::snapshot`]).
+    fn write_snapshot_streamed(
+        &mut self,
+        _files: &[(crate::export::SnapshotFormat, std::path::PathBuf)],
+    ) -> Option<anyhow::Result<crate::export::stream::StreamedSnapshot>> {
+        None
+    }
+    /// Writes the postcard encoding of the state [`Backend::save_state`] returns to `w`, in
+    /// pieces, without one host copy of every array; `None` where the backend has no streamed
+    /// path.
+    fn write_state_streamed(&mut self, _w: &mut dyn std::io::Write) -> Option<anyhow::Result<()>> {
         None
     }
     /// Density, pressure and acceleration computed by the last step, in original particle

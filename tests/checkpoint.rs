@@ -68,6 +68,12 @@ impl Backend for FailingAt<'_> {
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
         self.inner.save_state()
     }
+    fn write_snapshot_streamed(&mut self, files: &[(SnapshotFormat, std::path::PathBuf)]) -> Option<anyhow::Result<wgsph::export::stream::StreamedSnapshot>> {
+        self.inner.write_snapshot_streamed(files)
+    }
+    fn write_state_streamed(&mut self, w: &mut dyn std::io::Write) -> Option<anyhow::Result<()>> {
+        self.inner.write_state_streamed(w)
+    }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         self.inner.restore_state(state)
     }

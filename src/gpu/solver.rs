@@ -830,8 +830,11 @@ impl Backend for GpuSolver {
             pressures: unpermute(&ids, p.iter().map(|&v| v as f64)),
         })
     }
-    fn write_csv_streamed(&mut self, path: &std::path::Path) -> Option<anyhow::Result<f64>> {
-        Some(self.write_snapshot_csv_streamed(path, STREAM_CHUNK).map(|s| s.max_speed))
+    fn write_snapshot_streamed(&mut self, files: &[(crate::export::SnapshotFormat, std::path::PathBuf)]) -> Option<anyhow::Result<StreamedSnapshot>> {
+        Some(self.write_snapshot_in_pieces(files, STREAM_CHUNK))
+    }
+    fn write_state_streamed(&mut self, w: &mut dyn std::io::Write) -> Option<anyhow::Result<()>> {
+        Some(self.write_state_in_pieces(w, STREAM_CHUNK))
     }
     fn gpu_particles(&self) -> Option<(GpuContext, crate::render::ParticleBuffers)> {
         let st = &self.state[self.current];
