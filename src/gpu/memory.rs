@@ -79,9 +79,9 @@ impl MemoryPlan {
             per_fluid("velocities 0", 16),
             per_fluid("positions 1", 16),
             per_fluid("velocities 1", 16),
-            per_fluid("cell keys", 4),
             fixed("cell starts", padded((cells + 1) * 4)),
-            // Also the binning's unordered slots and ranks, dead by the time density is written.
+            // Also the binning's unordered slots and cell keys, dead by the time density is
+            // written; its ranks live in the velocities the reorder then writes.
             per_fluid("densities", 4),
             per_fluid("pressures", 4),
             fixed("placeholder", 16),

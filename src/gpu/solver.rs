@@ -145,6 +145,7 @@ struct StateBuffers {
 /// Bind groups of one parity: reading state `c`, writing state `1 - c`.
 struct ParityBindGroups {
     bin_count: wgpu::BindGroup,
+    bin_scatter: wgpu::BindGroup,
     reorder: wgpu::BindGroup,
     density: wgpu::BindGroup,
     /// The integration (after `forces`, adaptive dt) or the fused forces and integration.
@@ -202,12 +203,11 @@ pub struct GpuSolver {
     fields_state: usize,
     /// Whether `accelerations` holds the accelerations of `fields_state`.
     accelerations_valid: bool,
-    keys: wgpu::Buffer,
     /// Cell counts, scanned in place into cell starts (cells + 1 values).
     starts: wgpu::Buffer,
     /// Also the binning's unordered cell slots (u32), which are dead once the state is reordered.
     densities: wgpu::Buffer,
-    /// Also the binning's ranks in cell (u32), dead once the slots are scattered.
+    /// Also the binning's cell keys (u32), which are dead once the state is reordered.
     pressures: wgpu::Buffer,
     /// Every step with adaptive dt; with fixed dt created on the first `step_fields`.
     accelerations: Option<Accelerations>,
@@ -219,7 +219,6 @@ pub struct GpuSolver {
     scan: Scan,
     pipelines: Pipelines,
     groups: [ParityBindGroups; 2],
-    scatter_group: wgpu::BindGroup,
     finish_group: wgpu::BindGroup,
     steps: u64,
     dispatch: (u32, u32),
@@ -357,7 +356,6 @@ impl GpuSolver {
             positions: storage(device, "positions 1", n * 16, wgpu::BufferUsages::empty()),
             velocities: storage(device, "velocities 1", n * 16, wgpu::BufferUsages::empty()),
         };
-        let keys = storage(device, "cell keys", n * 4, wgpu::BufferUsages::empty());
         let starts = storage(device, "cell starts", (cells + 1) * 4, wgpu::BufferUsages::empty());
         let densities = storage(device, "densities", n * 4, wgpu::BufferUsages::empty());
         let pressures = storage(device, "pressures", n * 4, wgpu::BufferUsages::empty());
@@ -372,17 +370,22 @@ impl GpuSolver {
         let state = [state0, state1];
         let u = &uniform;
         let p = &pipelines;
-        // The binning's slots and ranks live in the density and pressure arrays (see the fields).
-        let (unordered, ranks) = (&densities, &pressures);
+        // The binning's arrays live in arrays that are dead while it runs: the cell keys and the
+        // unordered slots in the pressures and densities (written again only after the reorder),
+        // the ranks in the velocities of the state being gathered into (written by the reorder,
+        // after the scatter has read the ranks).
+        let (keys, unordered) = (&pressures, &densities);
         let make_parity = |c: usize| {
             let (src, dst) = (&state[c], &state[1 - c]);
+            let ranks = &dst.velocities;
             ParityBindGroups {
-                bin_count: p.bin_count.bind_group(device, "bin_count", u, &[&src.positions, &keys, ranks, &starts]),
+                bin_count: p.bin_count.bind_group(device, "bin_count", u, &[&src.positions, keys, ranks, &starts]),
+                bin_scatter: p.bin_scatter.bind_group(device, "bin_scatter", u, &[keys, ranks, &starts, unordered]),
                 reorder: p.reorder.bind_group(
                     device,
                     "reorder",
                     u,
-                    &[&keys, &starts, unordered, &src.positions, &src.velocities, &dst.positions, &dst.velocities],
+                    &[keys, &starts, unordered, &src.positions, &src.velocities, &dst.positions, &dst.velocities],
                 ),
                 density: p.density.bind_group(device, "density", u, &[&src.positions, &starts, &wall_positions, &wall_starts, &densities, &pressures, &status]),
                 advance: if fused {
@@ -411,7 +414,6 @@ impl GpuSolver {
             }
         };
         let groups = [make_parity(0), make_parity(1)];
-        let scatter_group = p.bin_scatter.bind_group(device, "bin_scatter", u, &[&keys, ranks, &starts, unordered]);
         let finish_group = p.finish_step.bind_group(
             device,
             "finish_step",
@@ -430,7 +432,6 @@ impl GpuSolver {
             current: 0,
             fields_state: 0,
             accelerations_valid: false,
-            keys,
             starts,
             densities,
             pressures,
@@ -442,7 +443,6 @@ impl GpuSolver {
             scan,
             groups,
             pipelines,
-            scatter_group,
             finish_group,
             steps: 0,
             dispatch,
@@ -519,7 +519,7 @@ impl GpuSolver {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("binning"), timestamp_writes: None });
         self.dispatch_particles(&mut pass, &self.pipelines.bin_count, &g.bin_count);
         self.scan.record(&mut pass);
-        self.dispatch_particles(&mut pass, &self.pipelines.bin_scatter, &self.scatter_group);
+        self.dispatch_particles(&mut pass, &self.pipelines.bin_scatter, &g.bin_scatter);
         self.dispatch_particles(&mut pass, &self.pipelines.reorder, &g.reorder);
         drop(pass);
         self.current = 1 - self.current;
@@ -659,7 +659,7 @@ impl GpuSolver {
         let s = self;
         // With fixed dt the accelerations exist only after `step_fields` asked for them.
         let planned_accelerations = s.accelerations.as_ref().filter(|_| !s.pipelines.fused).map(|a| &a.buffer);
-        [&s.uniform, &s.keys, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
+        [&s.uniform, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
             .into_iter()
             .chain(planned_accelerations)
             .map(|b| b.size())

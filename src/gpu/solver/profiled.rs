@@ -68,7 +68,7 @@ impl GpuSolver {
             self.scan.record(&mut pass);
             drop(pass);
             let mut pass = timed_pass(encoder, queries, &mut ran, 2);
-            self.dispatch_particles(&mut pass, &self.pipelines.bin_scatter, &self.scatter_group);
+            self.dispatch_particles(&mut pass, &self.pipelines.bin_scatter, &g.bin_scatter);
             drop(pass);
             let mut pass = timed_pass(encoder, queries, &mut ran, 3);
             self.dispatch_particles(&mut pass, &self.pipelines.reorder, &g.reorder);
