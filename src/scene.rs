@@ -656,14 +656,7 @@ impl Scene {
                     if walls.layers == Some(0) {
                         return Err(err(origin, format!("{f}.layers"), "is 0; must be at least 1"));
                     }
-                    let layers = self.wall_layers(walls) as f64;
-                    let (lo, hi) = match b {
-                        Boundary::Container { .. } => (
-                            [min[0] - layers * s, min[1] - layers * s, min[2] - layers * s],
-                            [max[0] + layers * s, max[1] + layers * s, max[2] + layers * s],
-                        ),
-                        _ => (*min, *max),
-                    };
+                    let (lo, hi) = self.wall_span(b).expect("a container or a box");
                     if !inside(lo) || !inside(hi) {
                         return Err(err(origin, &f, format!(
                             "its wall particles span {lo:?}..{hi:?}, outside the domain {:?}..{:?}; enlarge the domain",
@@ -768,7 +761,29 @@ impl Scene {
                 }
             }
         }
+        // Coarser wall layers are thicker: the domain grows where they would stick out of it.
+        for b in &s.boundary {
+            if let Some((lo, hi)) = s.wall_span(b) {
+                for a in 0..3 {
+                    s.domain.min[a] = s.domain.min[a].min(lo[a]);
+                    s.domain.max[a] = s.domain.max[a].max(hi[a]);
+                }
+            }
+        }
         s
+    }
+
+    /// The region a container's or a box's wall particles occupy: a container's walls lie
+    /// outside its faces, `layers` spacings deep; a box's inside it.
+    pub fn wall_span(&self, b: &Boundary) -> Option<([f64; 3], [f64; 3])> {
+        match b {
+            Boundary::Container { min, max, walls, .. } => {
+                let d = self.wall_layers(walls) as f64 * walls.spacing.unwrap_or(self.physics.particle_spacing);
+                Some(([min[0] - d, min[1] - d, min[2] - d], [max[0] + d, max[1] + d, max[2] + d]))
+            }
+            Boundary::Box { min, max, .. } => Some((*min, *max)),
+            _ => None,
+        }
     }
 
     /// The scene refined or coarsened to about `fluid_particles` fluid particles.
