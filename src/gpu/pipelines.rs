@@ -302,14 +302,17 @@ impl Stage {
         let mut resources = vec![uniform.as_entire_binding()];
         for ((decl, len), buffer) in self.arrays.iter().zip(buffers) {
             let bytes = decl.element_bytes();
-            let count = decl.segments(*len, self.segment_bytes);
-            if decl.whole || count == 1 {
+            // A whole array, or an empty one (its buffer is a 16-byte stand-in), is bound as its
+            // buffer; the others exactly as long as the array, in segments: a buffer may be
+            // longer than the array it holds (an array kept in another array's dead storage).
+            if decl.whole || *len == 0 {
                 resources.push(buffer.as_entire_binding());
                 continue;
             }
             let seg = decl.segment_len(self.segment_bytes);
-            for s in 0..count {
+            for s in 0..decl.segments(*len, self.segment_bytes) {
                 let elements = seg.min(len - s * seg);
+                assert!(elements * bytes <= self.segment_bytes && (s * seg + elements) * bytes <= buffer.size(), "array {} of {label}", decl.name);
                 resources.push(wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                     buffer,
                     offset: s * seg * bytes,
