@@ -29,10 +29,14 @@ pub struct ProfileArgs {
     /// Steps to time (after 2 warm-up steps).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub steps: u64,
-    /// Run the forces and the integration as two passes even with fixed dt (to measure what
-    /// fusing them gains).
-    #[arg(long)]
+    /// Run the forces and the integration as two passes with fixed dt (the default on software
+    /// adapters), to measure what fusing them gains.
+    #[arg(long, conflicts_with = "fused")]
     pub unfused: bool,
+    /// Run the forces and the integration as one pass with fixed dt (the default on hardware
+    /// adapters).
+    #[arg(long)]
+    pub fused: bool,
     /// Also write the numbers to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,
@@ -260,7 +264,8 @@ pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
         scene = scene.with_fluid_particles(n);
         scene.validate(&crate::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
     }
-    let options = crate::gpu::GpuOptions { fuse_forces_and_integration: !args.unfused };
+    let fuse = if args.fused { Some(true) } else if args.unfused { Some(false) } else { None };
+    let options = crate::gpu::GpuOptions { fuse_forces_and_integration: fuse };
     let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
     print!("{}", profile.table());
     if let Some(path) = &args.out {

@@ -21,7 +21,7 @@ fn the_memory_figure_is_the_plan_and_matches_the_buffers_created() {
                 Some(initial.wall_positions.len() as u64),
                 params.grid.cell_count() as u64,
                 wgsph::gpu::solver::GpuParams::default().bytes().len() as u64,
-                params.adaptive.is_some(),
+                !solver.fused(),
             );
             assert_eq!(solver.memory_bytes(), plan.total(), "{name} on {}", ctx.describe());
             assert_eq!(solver.allocated_bytes(), plan.total(), "{name} on {}", ctx.describe());
@@ -185,9 +185,13 @@ fn fused_forces_and_integration_step_bit_for_bit_like_two_passes_with_less_memor
     for ctx in common::contexts() {
         let scene = common::scene_from(&common::small_scene_text("cubic_spline", "tait", false, "", ""));
         let (params, initial) = (scene.params(), scene.initial_state());
-        let mut fused = GpuSolver::new(ctx.clone(), &params, &initial).unwrap();
-        let mut two_pass = GpuSolver::with_options(ctx.clone(), &params, &initial, GpuOptions { fuse_forces_and_integration: false }).unwrap();
+        let option = |fuse| GpuOptions { fuse_forces_and_integration: Some(fuse) };
+        let mut fused = GpuSolver::with_options(ctx.clone(), &params, &initial, option(true)).unwrap();
+        let mut two_pass = GpuSolver::with_options(ctx.clone(), &params, &initial, option(false)).unwrap();
         assert!(fused.fused() && !two_pass.fused());
+        // By default only a hardware adapter fuses (on a software one the fused pass is slower).
+        let default = GpuSolver::new(ctx.clone(), &params, &initial).unwrap();
+        assert_eq!(default.fused(), ctx.info.device_type != wgpu::DeviceType::Cpu, "{}", ctx.describe());
         // The accelerations array (16 bytes per fluid particle) is what fusion saves.
         let n = initial.fluid_positions.len() as u64;
         assert_eq!(two_pass.memory_bytes() - fused.memory_bytes(), 16 * n);
