@@ -37,6 +37,11 @@ pub struct ProfileArgs {
     /// adapters).
     #[arg(long)]
     pub fused: bool,
+    /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes
+    /// (`density=64,forces=256`; stages: bin_count, bin_scatter, reorder, density, forces,
+    /// integrate). Default 128.
+    #[arg(long, value_name = "SIZES")]
+    pub workgroup_size: Option<crate::gpu::WorkgroupSizes>,
     /// Also write the numbers to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,
@@ -265,7 +270,7 @@ pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
         scene.validate(&crate::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
     }
     let fuse = if args.fused { Some(true) } else if args.unfused { Some(false) } else { None };
-    let options = crate::gpu::GpuOptions { fuse_forces_and_integration: fuse };
+    let options = crate::gpu::GpuOptions { fuse_forces_and_integration: fuse, workgroup_sizes: args.workgroup_size.unwrap_or_default() };
     let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
     print!("{}", profile.table());
     if let Some(path) = &args.out {

@@ -19,7 +19,7 @@ fn stage_times_are_positive_and_shares_sum_to_100() {
     for (ctx, fuse) in common::contexts().into_iter().flat_map(|c| [(c.clone(), true), (c, false)]) {
         let adapter = ctx.describe();
         let timestamps = ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let p = profile(ctx, &scene, 3, GpuOptions { fuse_forces_and_integration: Some(fuse) }).unwrap();
+        let p = profile(ctx, &scene, 3, GpuOptions { fuse_forces_and_integration: Some(fuse), ..Default::default() }).unwrap();
         let names: Vec<&str> = p.stages.iter().map(|s| s.stage.as_str()).collect();
         if timestamps {
             assert_eq!(p.timing, "timestamp queries", "{adapter}");
@@ -51,7 +51,7 @@ fn profiled_steps_match_normal_steps() {
         if !ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
             continue;
         }
-        let options = GpuOptions { fuse_forces_and_integration: Some(fuse) };
+        let options = GpuOptions { fuse_forces_and_integration: Some(fuse), ..Default::default() };
         let mut normal = GpuSolver::with_options(ctx.clone(), &params, &initial, options).unwrap();
         let mut profiled = GpuSolver::with_options(ctx.clone(), &params, &initial, options).unwrap();
         normal.advance(4);

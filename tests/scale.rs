@@ -185,7 +185,7 @@ fn fused_forces_and_integration_step_bit_for_bit_like_two_passes_with_less_memor
     for ctx in common::contexts() {
         let scene = common::scene_from(&common::small_scene_text("cubic_spline", "tait", false, "", ""));
         let (params, initial) = (scene.params(), scene.initial_state());
-        let option = |fuse| GpuOptions { fuse_forces_and_integration: Some(fuse) };
+        let option = |fuse| GpuOptions { fuse_forces_and_integration: Some(fuse), ..Default::default() };
         let mut fused = GpuSolver::with_options(ctx.clone(), &params, &initial, option(true)).unwrap();
         let mut two_pass = GpuSolver::with_options(ctx.clone(), &params, &initial, option(false)).unwrap();
         assert!(fused.fused() && !two_pass.fused());
@@ -220,4 +220,35 @@ fn a_coarsened_scene_grows_its_domain_to_hold_thicker_walls() {
     // Refined, the thinner walls fit: the domain stays as written.
     let refined = fine.with_fluid_particles(100_000);
     assert_eq!((refined.domain.min, refined.domain.max), (fine.domain.min, fine.domain.max));
+}
+
+#[test]
+fn workgroup_sizes_per_stage_change_no_value_and_oversized_ones_are_refused() {
+    use wgsph::gpu::{GpuOptions, WorkgroupSizes};
+    use wgsph::sim::Backend;
+    for ctx in common::contexts() {
+        // Adaptive dt too: its reduction of the largest speed and acceleration runs per workgroup.
+        for time_extra in ["", "adaptive = true"] {
+            let scene = common::scene_from(&common::small_scene_text("mueller", "tait", true, "", time_extra));
+            let (params, initial) = (scene.params(), scene.initial_state());
+            let run = |sizes: WorkgroupSizes| {
+                let options = GpuOptions { workgroup_sizes: sizes, ..Default::default() };
+                let mut solver = GpuSolver::with_options(ctx.clone(), &params, &initial, options).unwrap();
+                solver.step(20).unwrap();
+                (solver.snapshot().unwrap(), solver.dt_stats().unwrap())
+            };
+            let reference = run(WorkgroupSizes::default());
+            for sizes in ["32", "density=64,forces=256,integrate=32,reorder=256"] {
+                let got = run(sizes.parse().unwrap());
+                assert!(got == reference, "{} with {sizes} ({time_extra}): another result", ctx.describe());
+            }
+        }
+        let l = ctx.device.limits();
+        let too_many = 2 * l.max_compute_workgroup_size_x.min(l.max_compute_invocations_per_workgroup);
+        let scene = Scene::load("dam_break").unwrap().with_fluid_particles(300);
+        let options = GpuOptions { workgroup_sizes: WorkgroupSizes { density: too_many, ..Default::default() }, ..Default::default() };
+        let e = GpuSolver::with_options(ctx.clone(), &scene.params(), &scene.initial_state(), options).err().expect("refused");
+        let msg = format!("{e:#}");
+        assert!(msg.contains("'density'") && msg.contains(&too_many.to_string()) && msg.contains(&ctx.info.name), "{msg}");
+    }
 }

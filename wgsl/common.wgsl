@@ -14,7 +14,8 @@ override PLANES: bool = true;                   // the scene has analytic planes
 override GRAVITY: bool = true;                  // gravity is not zero
 override ADAPTIVE_DT: bool = false;             // dt chosen on the GPU every step (integrate.wgsl)
 
-const WORKGROUP_SIZE: u32 = 128u;
+// Threads per workgroup of a particle stage, chosen per stage by the host (GpuOptions).
+override WORKGROUP_SIZE: u32 = 128u;
 const MAX_PLANES: u32 = 8u;
 
 struct Params {

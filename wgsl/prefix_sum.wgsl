@@ -3,20 +3,22 @@
 // same way one level up, and added back (a multi-level scan, Blelloch 1990 / Harris et al. 2007).
 // Twin of src/cpu/prefix_sum.rs. Exact: integer arithmetic in a fixed order.
 
-const SCAN_BLOCK: u32 = 2u * WORKGROUP_SIZE;
+// The scan keeps its own workgroup size: its workgroup array is sized by it.
+const SCAN_WORKGROUP_SIZE: u32 = 128u;
+const SCAN_BLOCK: u32 = 2u * SCAN_WORKGROUP_SIZE;
 
 // Bound by the host per segment of the cell array (src/gpu/scan.rs): `data` is one segment of
 // whole blocks, `block_sums` the totals of that segment's blocks.
 //! array data: u32, read_write, whole
 //! array block_sums: u32, read_write, whole
 
-var<workgroup> partial: array<u32, WORKGROUP_SIZE>;
+var<workgroup> partial: array<u32, SCAN_WORKGROUP_SIZE>;
 
 fn group_index(wid: vec3<u32>, groups: vec3<u32>) -> u32 {
     return wid.x + wid.y * groups.x;
 }
 
-@compute @workgroup_size(WORKGROUP_SIZE)
+@compute @workgroup_size(SCAN_WORKGROUP_SIZE)
 fn scan_blocks(
     @builtin(local_invocation_id) lid: vec3<u32>,
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -38,7 +40,7 @@ fn scan_blocks(
     // Inclusive Hillis-Steele scan of the pair sums.
     partial[t] = a + b;
     workgroupBarrier();
-    for (var offset = 1u; offset < WORKGROUP_SIZE; offset *= 2u) {
+    for (var offset = 1u; offset < SCAN_WORKGROUP_SIZE; offset *= 2u) {
         var add = 0u;
         if (t >= offset) {
             add = partial[t - offset];
@@ -54,12 +56,12 @@ fn scan_blocks(
     if (i1 < n) {
         data[i1] = before + a;
     }
-    if (t == WORKGROUP_SIZE - 1u && block < arrayLength(&block_sums)) {
+    if (t == SCAN_WORKGROUP_SIZE - 1u && block < arrayLength(&block_sums)) {
         block_sums[block] = partial[t];
     }
 }
 
-@compute @workgroup_size(WORKGROUP_SIZE)
+@compute @workgroup_size(SCAN_WORKGROUP_SIZE)
 fn add_block_offsets(
     @builtin(local_invocation_id) lid: vec3<u32>,
     @builtin(workgroup_id) wid: vec3<u32>,

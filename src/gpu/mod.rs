@@ -5,6 +5,8 @@ pub mod memory;
 pub mod pipelines;
 pub mod scan;
 pub mod solver;
+pub mod workgroups;
 
 pub use device::{GpuContext, GpuError};
 pub use solver::{GpuOptions, GpuSolver, ParticleBuffers};
+pub use workgroups::WorkgroupSizes;

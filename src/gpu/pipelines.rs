@@ -18,10 +18,12 @@ pub const STAGES: &[(&str, &str)] = &[
     ("forces_integrate", include_str!("../../wgsl/forces_integrate.wgsl")),
 ];
 
-/// Threads per workgroup of the particle stages (WORKGROUP_SIZE in common.wgsl).
+/// Default threads per workgroup of the particle stages (WORKGROUP_SIZE in common.wgsl, a
+/// pipeline-overridable constant set per stage).
 pub const WORKGROUP_SIZE: u32 = 128;
-/// Values per workgroup of the scan (SCAN_BLOCK in prefix_sum.wgsl).
-pub const SCAN_BLOCK: u32 = 2 * WORKGROUP_SIZE;
+/// Values per workgroup of the scan (SCAN_BLOCK in prefix_sum.wgsl, whose workgroups have
+/// SCAN_WORKGROUP_SIZE = 128 threads).
+pub const SCAN_BLOCK: u32 = 256;
 
 /// How a binding is used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -206,6 +208,8 @@ pub struct Stage {
     pub layout: wgpu::BindGroupLayout,
     /// The declared arrays with their lengths in elements.
     arrays: Vec<(ArrayDecl, u64)>,
+    /// Threads per workgroup (the `WORKGROUP_SIZE` constant it was built with).
+    pub threads_per_group: u32,
     segment_bytes: u64,
 }
 
@@ -291,7 +295,8 @@ pub fn stage_of(ctx: &super::GpuContext, names: &[&str], entry: &str, lens: &[u6
         compilation_options: wgpu::PipelineCompilationOptions { constants, zero_initialize_workgroup_memory: true },
         cache: None,
     });
-    Ok(Stage { pipeline, layout, arrays: decls.into_iter().zip(lens.iter().copied()).collect(), segment_bytes })
+    let threads_per_group = constants.iter().find(|c| c.0 == "WORKGROUP_SIZE").map_or(WORKGROUP_SIZE, |c| c.1 as u32);
+    Ok(Stage { pipeline, layout, arrays: decls.into_iter().zip(lens.iter().copied()).collect(), segment_bytes, threads_per_group })
 }
 
 impl Stage {

@@ -4,7 +4,7 @@
 
 use super::device::GpuContext;
 use super::memory::MemoryPlan;
-use super::pipelines::{constants, dispatch_size, stage, stage_of, storage_bindings, Stage, WORKGROUP_SIZE};
+use super::pipelines::{constants, dispatch_size, stage, stage_of, storage_bindings, Stage};
 use super::scan::Scan;
 use crate::cpu::common::{GridR, KernelCoefficients};
 use crate::cpu::sort_by_cell;
@@ -221,7 +221,8 @@ pub struct GpuSolver {
     groups: [ParityBindGroups; 2],
     finish_group: wgpu::BindGroup,
     steps: u64,
-    dispatch: (u32, u32),
+    /// The adapter's `max_compute_workgroups_per_dimension`.
+    max_groups_per_dim: u32,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
 }
@@ -269,6 +270,8 @@ pub struct GpuOptions {
     /// WARP), where the fused pass measured 3-20 % slower, unless only the fused step fits the
     /// adapter's buffers.
     pub fuse_forces_and_integration: Option<bool>,
+    /// Threads per workgroup of each particle stage.
+    pub workgroup_sizes: super::workgroups::WorkgroupSizes,
 }
 
 impl GpuSolver {
@@ -308,23 +311,34 @@ impl GpuSolver {
         // each array) fit the adapter before any buffer exists.
         let mut k = constants(params);
         k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
+        let ws = options.workgroup_sizes;
+        ws.check(&ctx)?;
+        // The constants of a stage with `size` threads per workgroup.
+        let sized = |size: u32| {
+            let mut c = k.clone();
+            c.push(("WORKGROUP_SIZE", size as f64));
+            c
+        };
         let integrate_lens = [n, n, n, n, n, 0];
         let forces_lens = [n, n, n, n, c1, w, wall_cells, n];
         let pipelines = Pipelines {
-            bin_count: stage(&ctx, "bin_count", "main", &[n, n, n, c1], &k)?,
-            bin_scatter: stage(&ctx, "bin_scatter", "main", &[n, n, c1, n], &k)?,
-            reorder: stage(&ctx, "reorder", "main", &[n, c1, n, n, n, n, n], &k)?,
-            density: stage(&ctx, "density", "main", &[n, c1, w, wall_cells, n, n, 0], &k)?,
-            forces: stage(&ctx, "forces", "forces", &forces_lens, &k)?,
+            bin_count: stage(&ctx, "bin_count", "main", &[n, n, n, c1], &sized(ws.bin_count))?,
+            bin_scatter: stage(&ctx, "bin_scatter", "main", &[n, n, c1, n], &sized(ws.bin_scatter))?,
+            reorder: stage(&ctx, "reorder", "main", &[n, c1, n, n, n, n, n], &sized(ws.reorder))?,
+            density: stage(&ctx, "density", "main", &[n, c1, w, wall_cells, n, n, 0], &sized(ws.density))?,
+            forces: stage(&ctx, "forces", "forces", &forces_lens, &sized(ws.forces))?,
             advance: if fused {
-                stage_of(&ctx, FUSED_STAGE, "forces_and_integrate", &fused_lens, &k)?
+                stage_of(&ctx, FUSED_STAGE, "forces_and_integrate", &fused_lens, &sized(ws.forces))?
             } else {
-                stage(&ctx, "integrate", "integrate", &integrate_lens, &k)?
+                stage(&ctx, "integrate", "integrate", &integrate_lens, &sized(ws.integrate))?
             },
             // One thread on the status words: its accelerations slot gets the placeholder.
             finish_step: stage(&ctx, "integrate", "finish_step", &[n, n, 0, n, n, 0], &k)?,
             adaptive: match params.adaptive {
-                Some(_) => Some((stage(&ctx, "integrate", "reduce_maxima", &integrate_lens, &k)?, stage(&ctx, "integrate", "choose_dt", &integrate_lens, &k)?)),
+                Some(_) => Some((
+                    stage(&ctx, "integrate", "reduce_maxima", &integrate_lens, &sized(ws.integrate))?,
+                    stage(&ctx, "integrate", "choose_dt", &integrate_lens, &k)?,
+                )),
                 None => None,
             },
             fused,
@@ -421,7 +435,7 @@ impl GpuSolver {
             u,
             &[&state[0].positions, &state[0].velocities, &placeholder, &state[1].positions, &state[1].velocities, &status],
         );
-        let dispatch = dispatch_size(n, WORKGROUP_SIZE, device.limits().max_compute_workgroups_per_dimension);
+        let max_groups_per_dim = device.limits().max_compute_workgroups_per_dimension;
         let memory = plan.total();
         let mut solver = GpuSolver {
             params: params.clone(),
@@ -446,7 +460,7 @@ impl GpuSolver {
             pipelines,
             finish_group,
             steps: 0,
-            dispatch,
+            max_groups_per_dim,
             memory,
             ctx,
         };
@@ -509,7 +523,8 @@ impl GpuSolver {
     fn dispatch_particles(&self, pass: &mut wgpu::ComputePass, stage: &Stage, group: &wgpu::BindGroup) {
         pass.set_pipeline(&stage.pipeline);
         pass.set_bind_group(0, group, &[]);
-        pass.dispatch_workgroups(self.dispatch.0, self.dispatch.1, 1);
+        let (x, y) = dispatch_size(self.fluid_count as u64, stage.threads_per_group, self.max_groups_per_dim);
+        pass.dispatch_workgroups(x, y, 1);
     }
 
     /// Records the binning (count, scan, scatter, reorder) of the current state into the other
