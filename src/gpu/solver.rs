@@ -659,6 +659,13 @@ impl GpuSolver {
         }
     }
 
+    /// The status words, checked to count as many steps as the host did (for saved states).
+    pub(super) fn counted_status(&self) -> anyhow::Result<[u32; STATUS_WORDS as usize]> {
+        let status = self.read_status()?;
+        anyhow::ensure!(status[0] as u64 == self.steps % (1 << 32), "the GPU counted {} steps, the host {}", status[0], self.steps);
+        Ok(status)
+    }
+
     fn read_status(&self) -> anyhow::Result<[u32; STATUS_WORDS as usize]> {
         let data = read_buffers(&self.ctx, &[(&self.status, STATUS_WORDS * 4)])?;
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
@@ -751,6 +758,16 @@ pub fn read_ranges(ctx: &GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> an
     Ok(out)
 }
 
+/// The health counters in the status words (wgsl/integrate.wgsl).
+pub(super) fn health_of(s: &[u32]) -> Health {
+    Health {
+        non_finite: s[1] as u64,
+        escaped: s[2] as u64,
+        first_bad_step: (s[3] != NO_BAD_STEP).then_some(s[3] as u64),
+        max_density: f32::from_bits(s[4]) as f64,
+    }
+}
+
 fn unpermute<T: Copy + Default>(ids: &[u32], values: impl Iterator<Item = T>) -> Vec<T> {
     let mut out = vec![T::default(); ids.len()];
     for (slot, v) in values.enumerate() {
@@ -819,13 +836,7 @@ impl Backend for GpuSolver {
         Some(self.memory)
     }
     fn health(&mut self) -> anyhow::Result<Health> {
-        let s = self.read_status()?;
-        Ok(Health {
-            non_finite: s[1] as u64,
-            escaped: s[2] as u64,
-            first_bad_step: (s[3] != NO_BAD_STEP).then_some(s[3] as u64),
-            max_density: f32::from_bits(s[4]) as f64,
-        })
+        Ok(health_of(&self.read_status()?))
     }
     fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
         self.refresh_fields();
@@ -866,27 +877,10 @@ impl Backend for GpuSolver {
         ))
     }
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
-        let n = self.fluid_count as u64;
-        let st = &self.state[self.current];
-        let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16)])?;
-        let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
-        let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
-        let status = self.read_status()?;
-        anyhow::ensure!(status[0] as u64 == self.steps % (1 << 32), "the GPU counted {} steps, the host {}", status[0], self.steps);
-        Ok(BackendState {
-            kind: "gpu".into(),
-            step: self.steps,
-            positions: pos.iter().map(widen).collect(),
-            velocities: vel.iter().map(widen).collect(),
-            ids: ids_of(&pos),
-            non_finite: status[1] as u64,
-            escaped: status[2] as u64,
-            first_bad_step: (status[3] != NO_BAD_STEP).then_some(status[3] as u64),
-            max_density: f32::from_bits(status[4]) as f64,
-            time: 0.0,
-            dt_min_max_last: [0.0; 3],
-            gpu_status: status.to_vec(),
-        })
+        // One description of the saved state: the encoding the checkpoints stream, decoded.
+        let mut bytes = Vec::new();
+        self.write_state_in_pieces(&mut bytes, STREAM_CHUNK)?;
+        postcard::from_bytes(&bytes).map_err(|e| anyhow::anyhow!("cannot decode the GPU state: {e}"))
     }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         state.check_fits("gpu", self.fluid_count as usize)?;

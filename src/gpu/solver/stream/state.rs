@@ -3,7 +3,7 @@
 //! `chunk` particles at a time, so the host holds one piece instead of every array (52 bytes per
 //! particle as f64, plus the readback).
 
-use super::super::{read_ranges, widen, GpuSolver, NO_BAD_STEP};
+use super::super::{health_of, read_ranges, widen, GpuSolver};
 use serde::ser::{Error as _, Serialize, SerializeSeq, Serializer};
 use std::cell::RefCell;
 
@@ -79,8 +79,8 @@ impl GpuSolver {
     /// Writes the postcard encoding of the state [`crate::sim::Backend::save_state`] returns
     /// (the same bytes) to `w`, reading the particle arrays back `chunk` particles at a time.
     pub fn write_state_in_pieces(&mut self, w: &mut dyn std::io::Write, chunk: u64) -> anyhow::Result<()> {
-        let status = self.read_status()?;
-        anyhow::ensure!(status[0] as u64 == self.steps % (1 << 32), "the GPU counted {} steps, the host {}", status[0], self.steps);
+        let status = self.counted_status()?;
+        let h = health_of(&status);
         let failure = RefCell::new(None);
         let st = &self.state[self.current];
         let array = |buffer, element| GpuArray { solver: self, buffer, element, chunk: chunk.max(1), failure: &failure };
@@ -90,10 +90,10 @@ impl GpuSolver {
             positions: array(&st.positions, Element::Vec3),
             velocities: array(&st.velocities, Element::Vec3),
             ids: array(&st.positions, Element::Ids),
-            non_finite: status[1] as u64,
-            escaped: status[2] as u64,
-            first_bad_step: (status[3] != NO_BAD_STEP).then_some(status[3] as u64),
-            max_density: f32::from_bits(status[4]) as f64,
+            non_finite: h.non_finite,
+            escaped: h.escaped,
+            first_bad_step: h.first_bad_step,
+            max_density: h.max_density,
             time: 0.0,
             dt_min_max_last: [0.0; 3],
             gpu_status: &status,
