@@ -42,6 +42,13 @@ pub struct ProfileArgs {
     /// integrate). Default 128.
     #[arg(long, value_name = "SIZES")]
     pub workgroup_size: Option<crate::gpu::WorkgroupSizes>,
+    /// Steps recorded into one command buffer on the normal path (default 32).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps_per_submit: Option<u64>,
+    /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 cells (to measure
+    /// what the runs gain).
+    #[arg(long)]
+    pub single_cells: bool,
     /// Also write the numbers to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,
@@ -86,6 +93,9 @@ pub struct Profile {
     /// Wall-clock time per step of the normal path (STEPS_PER_SUBMIT steps per submission,
     /// one wait at the end), µs.
     pub host_step_time_us: f64,
+    /// Wall-clock time per step with a host round trip after every step (submit one step, wait
+    /// for it), µs: what the normal path saves by not waiting.
+    pub host_step_time_with_waits_us: f64,
     pub particle_steps_per_second: f64,
     /// Distinct pairs within the kernel support per step (fluid-fluid counted once, plus
     /// fluid-wall), the mean of the first and last state.
@@ -195,6 +205,12 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: crate::gpu::
     gpu.advance(steps);
     gpu.wait()?;
     let host_step_time_us = t.elapsed().as_secs_f64() * 1e6 / steps as f64;
+    let t = Instant::now();
+    for _ in 0..steps {
+        gpu.advance(1);
+        gpu.wait()?;
+    }
+    let host_step_time_with_waits_us = t.elapsed().as_secs_f64() * 1e6 / steps as f64;
 
     let health = gpu.health()?;
     anyhow::ensure!(
@@ -231,6 +247,7 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: crate::gpu::
         stages,
         step_time_us: step_ns / 1e3,
         host_step_time_us,
+        host_step_time_with_waits_us,
         particle_steps_per_second: n as f64 / (step_ns * 1e-9),
         neighbour_pairs,
         interactions_per_second: neighbour_pairs as f64 / (step_ns * 1e-9),
@@ -255,6 +272,7 @@ impl Profile {
         }
         s += &format!("{:<16} {:>12.1} {:>8.1}\n", "total", self.step_time_us, 100.0);
         s += &format!("host wall-clock per step (normal path): {:.1} µs\n", self.host_step_time_us);
+        s += &format!("host wall-clock per step with a wait after every step: {:.1} µs\n", self.host_step_time_with_waits_us);
         s += &format!("particle-steps/s: {:.3e}\n", self.particle_steps_per_second);
         s += &format!("neighbour pairs per step: {}; interactions/s (PIPS): {:.3e}\n", self.neighbour_pairs, self.interactions_per_second);
         s += &format!("GPU memory: {} bytes, {:.1} bytes per particle\n", self.gpu_memory_bytes, self.gpu_bytes_per_particle);
@@ -270,7 +288,12 @@ pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
         scene.validate(&crate::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
     }
     let fuse = if args.fused { Some(true) } else if args.unfused { Some(false) } else { None };
-    let options = crate::gpu::GpuOptions { fuse_forces_and_integration: fuse, workgroup_sizes: args.workgroup_size.unwrap_or_default() };
+    let options = crate::gpu::GpuOptions {
+        fuse_forces_and_integration: fuse,
+        workgroup_sizes: args.workgroup_size.unwrap_or_default(),
+        steps_per_submit: args.steps_per_submit.unwrap_or(0),
+        single_cells: args.single_cells,
+    };
     let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
     print!("{}", profile.table());
     if let Some(path) = &args.out {

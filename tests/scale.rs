@@ -252,3 +252,27 @@ fn workgroup_sizes_per_stage_change_no_value_and_oversized_ones_are_refused() {
         assert!(msg.contains("'density'") && msg.contains(&too_many.to_string()) && msg.contains(&ctx.info.name), "{msg}");
     }
 }
+
+#[test]
+fn single_cell_stencils_and_steps_per_submission_change_no_value() {
+    use wgsph::gpu::GpuOptions;
+    use wgsph::sim::Backend;
+    for ctx in common::contexts() {
+        let scene = common::scene_from(&common::small_scene_text("cubic_spline", "linear", false, "", ""));
+        let (params, initial) = (scene.params(), scene.initial_state());
+        let run = |options: GpuOptions| {
+            let mut solver = GpuSolver::with_options(ctx.clone(), &params, &initial, options).unwrap();
+            solver.step(40).unwrap();
+            (solver.snapshot().unwrap(), solver.step_fields().unwrap())
+        };
+        let reference = run(GpuOptions::default());
+        assert!(reference.0.positions != initial.fluid_positions);
+        for options in [
+            GpuOptions { single_cells: true, ..Default::default() },
+            GpuOptions { steps_per_submit: 1, ..Default::default() },
+            GpuOptions { steps_per_submit: 7, single_cells: true, ..Default::default() },
+        ] {
+            assert!(run(options) == reference, "{} with {options:?}: another result", ctx.describe());
+        }
+    }
+}

@@ -28,7 +28,7 @@ fn main(
         let c = cell_coords(xi);
         var fluid_sum = 0.0;
         var wall_sum = 0.0;
-        for (var run = 0u; run < 9u; run++) {
+        for (var run = 0u; run < stencil_span_count(); run++) {
             let cells = stencil_run(c, run);
             for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
                 let d = xi - positions_at(j).xyz;

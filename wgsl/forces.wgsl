@@ -29,7 +29,7 @@ fn particle_acceleration(i: u32) -> vec3<f32> {
     var fluid_visc = vec3<f32>(0.0);
     var wall_pressure = vec3<f32>(0.0);
     var wall_visc = vec3<f32>(0.0);
-    for (var run = 0u; run < 9u; run++) {
+    for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);
         for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
             let rij = xi - positions_at(j).xyz;

@@ -223,6 +223,8 @@ pub struct GpuSolver {
     steps: u64,
     /// The adapter's `max_compute_workgroups_per_dimension`.
     max_groups_per_dim: u32,
+    /// Steps per command buffer.
+    steps_per_submit: u64,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
 }
@@ -272,6 +274,11 @@ pub struct GpuOptions {
     pub fuse_forces_and_integration: Option<bool>,
     /// Threads per workgroup of each particle stage.
     pub workgroup_sizes: super::workgroups::WorkgroupSizes,
+    /// Steps recorded into one command buffer (0: [`STEPS_PER_SUBMIT`]).
+    pub steps_per_submit: u64,
+    /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 (to measure what
+    /// the runs gain; the same values).
+    pub single_cells: bool,
 }
 
 impl GpuSolver {
@@ -311,6 +318,7 @@ impl GpuSolver {
         // each array) fit the adapter before any buffer exists.
         let mut k = constants(params);
         k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
+        k.push(("STENCIL_RUNS", if options.single_cells { 0.0 } else { 1.0 }));
         let ws = options.workgroup_sizes;
         ws.check(&ctx)?;
         // The constants of a stage with `size` threads per workgroup.
@@ -461,6 +469,7 @@ impl GpuSolver {
             finish_group,
             steps: 0,
             max_groups_per_dim,
+            steps_per_submit: if options.steps_per_submit == 0 { STEPS_PER_SUBMIT } else { options.steps_per_submit },
             memory,
             ctx,
         };
@@ -597,8 +606,9 @@ impl GpuSolver {
         }
     }
 
-    /// Advances `n` steps, `STEPS_PER_SUBMIT` per command buffer; a viscosity change from the
-    /// schedule starts a new command buffer after a uniform write.
+    /// Advances `n` steps, `STEPS_PER_SUBMIT` (or `GpuOptions::steps_per_submit`) per command
+    /// buffer; a viscosity change from the schedule starts a new command buffer after a uniform
+    /// write.
     pub fn advance(&mut self, n: u64) {
         let mut left = n;
         // Without a schedule the viscosity never changes: no per-step look-up.
@@ -608,7 +618,7 @@ impl GpuSolver {
             self.set_viscosity(nu);
             let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
             let mut batch = 0;
-            while batch < left.min(STEPS_PER_SUBMIT) {
+            while batch < left.min(self.steps_per_submit) {
                 if scheduled && batch > 0 && self.params.viscosity_at_step(self.steps) != nu {
                     break;
                 }
