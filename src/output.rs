@@ -27,7 +27,12 @@ impl AtomicFile {
     pub fn create(path: &Path) -> anyhow::Result<Self> {
         let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create directory {}", dir.display()))?;
-        let tmp = tempfile::NamedTempFile::new_in(dir).with_context(|| format!("cannot create a file in {}", dir.display()))?;
+        let mut builder = tempfile::Builder::new();
+        // Temporary files are private (0600) by default; an output file gets the permissions any
+        // new file would (0666 less the umask).
+        #[cfg(unix)]
+        builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+        let tmp = builder.tempfile_in(dir).with_context(|| format!("cannot create a file in {}", dir.display()))?;
         Ok(AtomicFile { path: path.to_path_buf(), out: std::io::BufWriter::new(tmp) })
     }
 

@@ -82,3 +82,26 @@ fn quiet_prints_nothing_and_rust_log_sets_the_level() {
     assert!(o.status.success());
     assert!(stderr(&o).contains("INFO") && stderr(&o).contains("step_000002.csv"), "{}", stderr(&o));
 }
+
+/// Output files are written through private temporary files; once in place they have the
+/// permissions of any new file (0666 less the umask), not the temporary file's 0600.
+#[cfg(unix)]
+#[test]
+fn outputs_get_the_permissions_of_new_files() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let bin = env!("CARGO_BIN_EXE_wgsph");
+    for (umask, mode) in [("022", 0o644), ("027", 0o640)] {
+        let out = format!("o{umask}");
+        let status = std::process::Command::new("sh")
+            .args(["-c", &format!("umask {umask}; exec '{bin}' run seed --steps 2 --backend cpu --quiet --out {out}")])
+            .current_dir(dir.path())
+            .status()
+            .unwrap();
+        assert!(status.success());
+        for file in ["summary.json", "scene.toml", "snapshots/step_000000.csv"] {
+            let got = std::fs::metadata(dir.path().join(&out).join(file)).unwrap().permissions().mode() & 0o777;
+            assert_eq!(got, mode, "{file} with umask {umask}: {got:o}");
+        }
+    }
+}
