@@ -86,6 +86,8 @@ pub struct RunArgs {
     /// Float type of the CPU backend (the GPU always runs f32).
     #[arg(long, value_enum, default_value_t = Precision::F64)]
     pub precision: Precision,
+    #[command(flatten)]
+    pub gpu: crate::gpu::workgroups::GpuTuning,
     /// Output directory.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
@@ -221,7 +223,9 @@ pub fn main() -> i32 {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
-            let too_big = e.downcast_ref::<crate::gpu::memory::GpuMemoryError>().is_some();
+            // A scene or a setting beyond what the adapter allows is bad input too.
+            let too_big = e.downcast_ref::<crate::gpu::memory::GpuMemoryError>().is_some()
+                || matches!(e.downcast_ref::<crate::gpu::GpuError>(), Some(crate::gpu::GpuError::Limit { .. }));
             if too_big || e.downcast_ref::<SceneError>().is_some() || e.downcast_ref::<InputError>().is_some() {
                 2
             } else {
@@ -236,7 +240,7 @@ pub fn load_scene(name: &str) -> anyhow::Result<Scene> {
 }
 
 /// Builds the backend a run asked for.
-pub fn make_backend(scene: &Scene, choice: BackendChoice, precision: Precision) -> anyhow::Result<Box<dyn Backend>> {
+pub fn make_backend(scene: &Scene, choice: BackendChoice, precision: Precision, gpu_options: crate::gpu::GpuOptions) -> anyhow::Result<Box<dyn Backend>> {
     let params = scene.params();
     let cpu = |precision| -> Box<dyn Backend> {
         let initial = scene.initial_state();
@@ -248,7 +252,7 @@ pub fn make_backend(scene: &Scene, choice: BackendChoice, precision: Precision) 
     // The GPU's limits are checked before the particles are created on the host.
     let gpu = |ctx: GpuContext| -> anyhow::Result<Box<dyn Backend>> {
         crate::gpu::memory::MemoryPlan::for_scene(scene).check(&ctx)?;
-        Ok(Box::new(GpuSolver::new(ctx, &params, &scene.initial_state())?))
+        Ok(Box::new(GpuSolver::with_options(ctx, &params, &scene.initial_state(), gpu_options)?))
     };
     match choice {
         BackendChoice::Cpu => Ok(cpu(precision)),
@@ -346,7 +350,7 @@ fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
     crate::rundir::write_scene_copy(&args.out, &scene)?;
     // With adaptive dt a run to a time has no step count known in advance.
     let end_time = (params.adaptive.is_some() && args.steps.is_none()).then(|| args.time.unwrap_or(params.end_time));
-    let mut backend = make_backend(&scene, args.backend, args.precision)?;
+    let mut backend = make_backend(&scene, args.backend, args.precision, args.gpu.options())?;
     let opts = RunOptions {
         steps: if end_time.is_some() { u64::MAX / 4 } else { steps },
         out: args.out.clone(),

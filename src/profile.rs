@@ -29,22 +29,8 @@ pub struct ProfileArgs {
     /// Steps to time (after 2 warm-up steps).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub steps: u64,
-    /// Run the forces and the integration as two passes with fixed dt (the default on software
-    /// adapters), to measure what fusing them gains.
-    #[arg(long, conflicts_with = "fused")]
-    pub unfused: bool,
-    /// Run the forces and the integration as one pass with fixed dt (the default on hardware
-    /// adapters).
-    #[arg(long)]
-    pub fused: bool,
-    /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes
-    /// (`density=64,forces=256`; stages: bin_count, bin_scatter, reorder, density, forces,
-    /// integrate). Default 128.
-    #[arg(long, value_name = "SIZES")]
-    pub workgroup_size: Option<crate::gpu::WorkgroupSizes>,
-    /// Steps recorded into one command buffer on the normal path (default 32).
-    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
-    pub steps_per_submit: Option<u64>,
+    #[command(flatten)]
+    pub tuning: crate::gpu::workgroups::GpuTuning,
     /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 cells (to measure
     /// what the runs gain).
     #[arg(long)]
@@ -287,13 +273,7 @@ pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
         scene = scene.with_fluid_particles(n);
         scene.validate(&crate::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
     }
-    let fuse = if args.fused { Some(true) } else if args.unfused { Some(false) } else { None };
-    let options = crate::gpu::GpuOptions {
-        fuse_forces_and_integration: fuse,
-        workgroup_sizes: args.workgroup_size.unwrap_or_default(),
-        steps_per_submit: args.steps_per_submit.unwrap_or(0),
-        single_cells: args.single_cells,
-    };
+    let options = crate::gpu::GpuOptions { single_cells: args.single_cells, ..args.tuning.options() };
     let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
     print!("{}", profile.table());
     if let Some(path) = &args.out {

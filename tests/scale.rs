@@ -276,3 +276,32 @@ fn single_cell_stencils_and_steps_per_submission_change_no_value() {
         }
     }
 }
+
+#[test]
+fn run_tuning_flags_change_no_output_and_bad_sizes_exit_2() {
+    if common::contexts().is_empty() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let run = |out: &str, extra: &[&str]| {
+        let mut args = vec!["run", "dam_break", "--particles", "500", "--steps", "6", "--snapshot-every", "6", "--backend", "gpu", "--quiet", "--out", out];
+        args.extend_from_slice(extra);
+        let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(&args).current_dir(dir.path()).output().unwrap();
+        (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    assert_eq!(run("plain", &[]).0, Some(0));
+    for (i, flags) in [&["--fused", "--workgroup-size", "64", "--steps-per-submit", "2"][..], &["--unfused", "--workgroup-size", "density=32,forces=256"][..]]
+        .into_iter()
+        .enumerate()
+    {
+        let out = format!("tuned{i}");
+        assert_eq!(run(&out, flags).0, Some(0), "{flags:?}");
+        let file = "snapshots/step_000006.csv";
+        assert!(std::fs::read(dir.path().join("plain").join(file)).unwrap() == std::fs::read(dir.path().join(&out).join(file)).unwrap(), "{flags:?}");
+    }
+    for (flags, names) in [(&["--workgroup-size", "pressure=64"][..], "'pressure'"), (&["--workgroup-size", "0"][..], "'0'"), (&["--fused", "--unfused"][..], "--unfused")] {
+        let (code, err) = run("bad", flags);
+        assert_eq!(code, Some(2), "{flags:?}: {err}");
+        assert!(err.contains(names), "{flags:?}: {err}");
+    }
+}

@@ -59,21 +59,26 @@ impl WorkgroupSizes {
         ]
     }
 
-    /// Fails, naming the stage, its size and the adapter's limits, when a size exceeds what the
+    /// Fails, naming the adapter, the stage, its size and the limit, when a size exceeds what the
     /// adapter allows (`max_compute_workgroup_size_x`, `max_compute_invocations_per_workgroup`).
-    pub fn check(&self, ctx: &super::GpuContext) -> anyhow::Result<()> {
+    pub fn check(&self, ctx: &super::GpuContext) -> Result<(), super::GpuError> {
         let l = ctx.device.limits();
-        let most = l.max_compute_workgroup_size_x.min(l.max_compute_invocations_per_workgroup);
-        for (stage, size) in self.values() {
-            anyhow::ensure!(
-                size <= most,
-                "workgroup size {size} of stage '{stage}' exceeds what adapter '{}' allows: at most {most} threads (max_compute_workgroup_size_x {}, max_compute_invocations_per_workgroup {})",
-                ctx.info.name,
-                l.max_compute_workgroup_size_x,
-                l.max_compute_invocations_per_workgroup
-            );
+        let (limit, have) = if l.max_compute_workgroup_size_x <= l.max_compute_invocations_per_workgroup {
+            ("max_compute_workgroup_size_x", l.max_compute_workgroup_size_x)
+        } else {
+            ("max_compute_invocations_per_workgroup", l.max_compute_invocations_per_workgroup)
+        };
+        match self.values().into_iter().find(|&(_, size)| size > have) {
+            Some((stage, size)) => Err(super::GpuError::Limit {
+                adapter: ctx.info.name.clone(),
+                backend: format!("{:?}", ctx.info.backend),
+                what: format!("the workgroup size of stage '{stage}'"),
+                limit,
+                need: size as u64,
+                have: have as u64,
+            }),
+            None => Ok(()),
         }
-        Ok(())
     }
 }
 
@@ -106,6 +111,39 @@ impl FromStr for WorkgroupSizes {
             *out.slot(stage).ok_or_else(|| format!("'{stage}' is not a stage with a workgroup size; allowed: {}", TUNABLE_STAGES.join(", ")))? = n;
         }
         Ok(out)
+    }
+}
+
+/// The GPU step's tuning options of `wgsph run` and `wgsph profile` (none changes a value).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct GpuTuning {
+    /// Run the forces and the integration as two passes with fixed dt (the default on software
+    /// adapters).
+    #[arg(long, conflicts_with = "fused")]
+    pub unfused: bool,
+    /// Run the forces and the integration as one pass with fixed dt (the default on hardware
+    /// adapters).
+    #[arg(long)]
+    pub fused: bool,
+    /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes
+    /// (`density=64,forces=256`; stages: bin_count, bin_scatter, reorder, density, forces,
+    /// integrate). Default 128.
+    #[arg(long, value_name = "SIZES")]
+    pub workgroup_size: Option<WorkgroupSizes>,
+    /// Steps recorded into one command buffer (default 32).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps_per_submit: Option<u64>,
+}
+
+impl GpuTuning {
+    /// The solver options these flags ask for.
+    pub fn options(&self) -> super::GpuOptions {
+        super::GpuOptions {
+            fuse_forces_and_integration: if self.fused { Some(true) } else if self.unfused { Some(false) } else { None },
+            workgroup_sizes: self.workgroup_size.unwrap_or_default(),
+            steps_per_submit: self.steps_per_submit.unwrap_or(0),
+            single_cells: false,
+        }
     }
 }
 
