@@ -93,7 +93,13 @@ mod tests {
     #[test]
     fn the_programs_vertex_buffer_holds_the_simulated_positions() {
         for adapter in wgsph::gpu::device::compute_adapters() {
-            let context = wgsph::gpu::GpuContext::from_adapter(adapter).unwrap();
+            // The program's own device, as it would open it for its window.
+            let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+                required_limits: adapter.limits(),
+                ..Default::default()
+            }))
+            .unwrap();
+            let context = wgsph::gpu::GpuContext::from_device(adapter, device, queue).unwrap();
             let (vertices, ids, snapshot) = super::run(context, 3, 8).unwrap();
             assert_eq!(snapshot.step, 24);
             assert_eq!(vertices.len(), snapshot.len());

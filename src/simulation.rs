@@ -70,12 +70,18 @@ impl Simulation {
     }
 
     /// The scene on the GPU, on a device the caller opened (for example the one it renders
-    /// with: build a [`GpuContext`] from its adapter, device and queue). The device should have
-    /// the adapter's storage-buffer limits for large scenes.
+    /// with: [`GpuContext::from_device`] of its adapter, device and queue). The device should
+    /// have the adapter's storage-buffer limits for large scenes.
     pub fn gpu_on(scene: Scene, context: GpuContext) -> anyhow::Result<Self> {
+        Self::gpu_with(scene, context, crate::gpu::GpuOptions::default())
+    }
+
+    /// Like [`Simulation::gpu_on`], with the GPU step's tuning options (fusion, workgroup
+    /// sizes, steps per submission; none changes a value).
+    pub fn gpu_with(scene: Scene, context: GpuContext, options: crate::gpu::GpuOptions) -> anyhow::Result<Self> {
         scene.validate(&SceneOrigin::Text)?;
         crate::gpu::memory::MemoryPlan::for_scene(&scene).check(&context)?;
-        let solver = GpuSolver::new(context, &scene.params(), &scene.initial_state())?;
+        let solver = GpuSolver::with_options(context, &scene.params(), &scene.initial_state(), options)?;
         Ok(Simulation { scene, solver: Solver::Gpu(Box::new(solver)) })
     }
 

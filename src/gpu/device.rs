@@ -129,6 +129,14 @@ impl GpuContext {
             trace: wgpu::Trace::Off,
         }))
         .with_context(|| format!("cannot open a device on adapter '{}' ({:?})", info.name, info.backend))?;
+        Self::from_device(adapter, device, queue)
+    }
+
+    /// A context of a device the caller opened itself on `adapter` (for example the one it
+    /// renders with). The device should have the adapter's storage-buffer limits for large
+    /// scenes. `WGSPH_STORAGE_SEGMENT_BYTES` is honoured as in [`GpuContext::new`].
+    pub fn from_device(adapter: wgpu::Adapter, device: wgpu::Device, queue: wgpu::Queue) -> anyhow::Result<Self> {
+        let info = adapter.get_info();
         let natural = Self::natural_segment_bytes(&device.limits());
         let ctx = GpuContext { adapter, device, queue, info, segment_bytes: natural };
         match std::env::var(SEGMENT_BYTES_VAR) {
