@@ -269,7 +269,7 @@ pub fn capture(
     })
 }
 
-/// Writes the checkpoint of a run's current state to `path`: the same bytes as [`write`] of
+/// Writes the checkpoint of a run's current state to `path`: the same bytes as [`write()`] of
 /// [`capture`], with the state streamed in pieces where the backend can (the GPU), so that no
 /// host copy of every array is made.
 pub fn save(
