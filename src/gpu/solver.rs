@@ -258,6 +258,24 @@ fn positions_with_ids(points: &[[f64; 3]], ids: impl Fn(usize) -> u32) -> Vec<[f
     vec4s(points, |i| f32::from_bits(ids(i)))
 }
 
+/// Writes positions (with the ids `id(i)` in their w) and velocities (w = 0, as the integration
+/// writes them) into `state`, `STREAM_CHUNK` particles at a time with a submission after each
+/// piece, so the host converts and stages one piece instead of two whole `vec4` arrays
+/// (32 bytes per particle).
+fn upload_state(ctx: &GpuContext, state: &StateBuffers, positions: &[[f64; 3]], velocities: &[[f64; 3]], id: impl Fn(usize) -> u32) {
+    let chunk = STREAM_CHUNK as usize;
+    for first in (0..positions.len()).step_by(chunk) {
+        let end = (first + chunk).min(positions.len());
+        let pos = positions_with_ids(&positions[first..end], |i| id(first + i));
+        let vel = vec4s(&velocities[first..end], |_| 0.0);
+        ctx.queue.write_buffer(&state.positions, first as u64 * 16, bytemuck::cast_slice(&pos));
+        ctx.queue.write_buffer(&state.velocities, first as u64 * 16, bytemuck::cast_slice(&vel));
+        ctx.queue.submit([]);
+        // Lets the device free the piece's staging memory before the next one.
+        let _ = ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None });
+    }
+}
+
 /// The ids carried in the w components of positions read back from the GPU.
 fn ids_of(positions: &[[f32; 4]]) -> Vec<u32> {
     positions.iter().map(|p| p[3].to_bits()).collect()
@@ -369,12 +387,11 @@ impl GpuSolver {
         let wall_starts = if has_walls { wall_starts } else { Vec::new() };
         let wall_starts = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
 
-        let positions = positions_with_ids(&initial.fluid_positions, |i| i as u32);
-        let velocities = vec4s(&initial.fluid_velocities, |_| 0.0);
         let state0 = StateBuffers {
-            positions: storage_init(device, "positions 0", bytemuck::cast_slice(&positions)),
-            velocities: storage_init(device, "velocities 0", bytemuck::cast_slice(&velocities)),
+            positions: storage(device, "positions 0", n * 16, wgpu::BufferUsages::empty()),
+            velocities: storage(device, "velocities 0", n * 16, wgpu::BufferUsages::empty()),
         };
+        upload_state(&ctx, &state0, &initial.fluid_positions, &initial.fluid_velocities, |i| i as u32);
         let state1 = StateBuffers {
             positions: storage(device, "positions 1", n * 16, wgpu::BufferUsages::empty()),
             velocities: storage(device, "velocities 1", n * 16, wgpu::BufferUsages::empty()),
@@ -894,13 +911,8 @@ impl Backend for GpuSolver {
     }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         state.check_fits("gpu", self.fluid_count as usize)?;
-        // The w components: the ids in positions, 0 in velocities, as the integration writes them.
-        let pos = positions_with_ids(&state.positions, |i| state.ids[i]);
-        let vel = vec4s(&state.velocities, |_| 0.0);
-        let st = &self.state[0];
+        upload_state(&self.ctx, &self.state[0], &state.positions, &state.velocities, |i| state.ids[i]);
         let q = &self.ctx.queue;
-        q.write_buffer(&st.positions, 0, bytemuck::cast_slice(&pos));
-        q.write_buffer(&st.velocities, 0, bytemuck::cast_slice(&vel));
         anyhow::ensure!(
             state.gpu_status.len() == STATUS_WORDS as usize,
             "the state holds {} status words; this solver has {STATUS_WORDS}",
