@@ -8,7 +8,7 @@
 //! is written beside its target and renamed over it, so the previous checkpoint stays intact
 //! until the new one is complete. The payload is written as it is serialised and its length and
 //! checksum filled in at the end, so a backend can stream its state in pieces
-//! ([`Backend::write_state_streamed`]); reading takes the whole file.
+//! ([`Backend::write_state_streamed`]); reading streams the file too (a checksum pass, then decoding), holding only the decoded state.
 
 use crate::cli::{InputError, RunArgs};
 use crate::cpu::CpuSolver;
@@ -145,36 +145,62 @@ impl std::io::Write for Payload<'_> {
     }
 }
 
-/// Reads and checks a checkpoint.
+/// Reads and checks a checkpoint, streaming the file: one pass checks the payload's length
+/// and checksum, a second decodes it, so the host never holds the file's bytes besides the
+/// state decoded from them.
 pub fn read(path: &Path) -> Result<Checkpoint, CheckpointError> {
+    use std::io::{BufReader, Read, Seek, SeekFrom};
     let p = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io { path: p.clone(), source })?;
+    let io = |source| CheckpointError::Io { path: p.clone(), source };
     let corrupt = |why: &str| CheckpointError::Corrupt { path: p.clone(), why: why.into() };
-    let mut rest: &[u8] = &bytes;
-    let mut take = |n: usize| -> Option<&[u8]> {
-        let (a, b) = rest.split_at_checked(n)?;
-        rest = b;
-        Some(a)
+    let file = std::fs::File::open(path).map_err(io)?;
+    let file_len = file.metadata().map_err(io)?.len();
+    let mut r = BufReader::with_capacity(1 << 20, file);
+    // Reads exactly n bytes of the header; None when the file ends first.
+    let mut take = |n: usize| -> Result<Option<Vec<u8>>, CheckpointError> {
+        let mut bytes = vec![0; n];
+        match r.read_exact(&mut bytes) {
+            Ok(()) => Ok(Some(bytes)),
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => Ok(None),
+            Err(e) => Err(io(e)),
+        }
     };
-    if take(8) != Some(MAGIC.as_slice()) {
+    if take(8)?.as_deref() != Some(MAGIC.as_slice()) {
         return Err(CheckpointError::NotACheckpoint(p));
     }
     let truncated = || corrupt("the file is truncated");
-    let format = u32::from_le_bytes(take(4).ok_or_else(truncated)?.try_into().expect("4 bytes"));
-    let len = u16::from_le_bytes(take(2).ok_or_else(truncated)?.try_into().expect("2 bytes")) as usize;
-    let version = String::from_utf8_lossy(take(len).ok_or_else(truncated)?).into_owned();
+    let format = u32::from_le_bytes(take(4)?.ok_or_else(truncated)?.try_into().expect("4 bytes"));
+    let len = u16::from_le_bytes(take(2)?.ok_or_else(truncated)?.try_into().expect("2 bytes")) as usize;
+    let version = String::from_utf8_lossy(&take(len)?.ok_or_else(truncated)?).into_owned();
     if format != FORMAT_VERSION || version != WGSPH_VERSION {
         return Err(CheckpointError::OtherVersion { path: p, version, format });
     }
-    let payload_len = u64::from_le_bytes(take(8).ok_or_else(truncated)?.try_into().expect("8 bytes"));
-    let crc = u32::from_le_bytes(take(4).ok_or_else(truncated)?.try_into().expect("4 bytes"));
-    if rest.len() as u64 != payload_len {
-        return Err(corrupt(&format!("the payload has {} bytes, the header says {payload_len}", rest.len())));
+    let payload_len = u64::from_le_bytes(take(8)?.ok_or_else(truncated)?.try_into().expect("8 bytes"));
+    let crc = u32::from_le_bytes(take(4)?.ok_or_else(truncated)?.try_into().expect("4 bytes"));
+    let payload_at = (8 + 4 + 2 + len + 8 + 4) as u64;
+    let have = file_len - payload_at;
+    if have != payload_len {
+        return Err(corrupt(&format!("the payload has {have} bytes, the header says {payload_len}")));
     }
-    if crc32fast::hash(rest) != crc {
+    let mut hasher = crc32fast::Hasher::new();
+    let mut piece = vec![0u8; 1 << 20];
+    loop {
+        let n = r.read(&mut piece).map_err(io)?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&piece[..n]);
+    }
+    if hasher.finalize() != crc {
         return Err(corrupt("checksum mismatch"));
     }
-    postcard::from_bytes(rest).map_err(|e| corrupt(&format!("cannot decode the payload: {e}")))
+    r.seek(SeekFrom::Start(payload_at)).map_err(io)?;
+    // Room for the payload's strings (the scene's TOML and the run's names), which postcard
+    // decodes through this buffer; the particle arrays go straight into the state.
+    let mut scratch = vec![0u8; (payload_len as usize).min(16 << 20)];
+    postcard::from_io((r.take(payload_len), scratch.as_mut_slice()))
+        .map(|(c, _)| c)
+        .map_err(|e| corrupt(&format!("cannot decode the payload: {e}")))
 }
 
 /// `wgsph run --resume DIR`: continues the run in DIR from its checkpoint, to the end it was
