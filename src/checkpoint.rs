@@ -8,7 +8,8 @@
 //! is written beside its target and renamed over it, so the previous checkpoint stays intact
 //! until the new one is complete. The payload is written as it is serialised and its length and
 //! checksum filled in at the end, so a backend can stream its state in pieces
-//! ([`Backend::write_state_streamed`]); reading streams the file too (a checksum pass, then decoding), holding only the decoded state.
+//! ([`Backend::write_state_streamed`]); reading streams the file too (a checksum pass, then
+//! decoding), holding only the decoded state.
 
 use crate::cli::{InputError, RunArgs};
 use crate::cpu::CpuSolver;
