@@ -160,12 +160,13 @@ struct Pipelines {
     /// The forces alone: every step with adaptive dt; otherwise only when the accelerations are
     /// asked for (`step_fields`).
     forces: Stage,
-    /// `integrate` (adaptive dt) or `forces_and_integrate` (fixed dt, see `fused`).
+    /// `integrate` (two passes) or `forces_and_integrate` (fused, see `fused`).
     advance: Stage,
     finish_step: Stage,
     /// Adaptive dt only: the reduction of |v|max and |a|max, and the choice of dt.
     adaptive: Option<(Stage, Stage)>,
-    /// Forces and integration in one pass (fixed dt): no accelerations array.
+    /// Forces and integration in one pass (fixed dt only; see `GpuOptions`): no accelerations
+    /// array.
     fused: bool,
 }
 
@@ -209,7 +210,7 @@ pub struct GpuSolver {
     densities: wgpu::Buffer,
     /// Also the binning's cell keys (u32), which are dead once the state is reordered.
     pressures: wgpu::Buffer,
-    /// Every step with adaptive dt; with fixed dt created on the first `step_fields`.
+    /// Every step with two passes; with the fused step created on the first `step_fields`.
     accelerations: Option<Accelerations>,
     /// Bound where a fused stage declares the accelerations it does not use.
     placeholder: wgpu::Buffer,
@@ -512,7 +513,7 @@ impl GpuSolver {
         Accelerations { buffer, groups }
     }
 
-    /// Makes `accelerations` hold the accelerations of `fields_state`: with fixed dt the fused
+    /// Makes `accelerations` hold the accelerations of `fields_state`: the fused
     /// step keeps them in registers, so they are evaluated again here (same inputs, same
     /// shader code: the same values), into an array created on first use.
     fn ensure_accelerations(&mut self) {
@@ -532,7 +533,7 @@ impl GpuSolver {
         self.accelerations_valid = true;
     }
 
-    /// Whether forces and integration run as one pass (fixed dt).
+    /// Whether forces and integration run as one pass.
     pub fn fused(&self) -> bool {
         self.pipelines.fused
     }
@@ -600,7 +601,7 @@ impl GpuSolver {
     }
 
     /// The integration with its bookkeeping: the adaptive step's reduction and choice of dt,
-    /// the integration itself (fused with the forces for fixed dt) and the per-step status
+    /// the integration itself (fused with the forces, or after them) and the per-step status
     /// update.
     fn record_integration(&self, pass: &mut wgpu::ComputePass, g: &ParityBindGroups) {
         if let Some((reduce, choose)) = &self.pipelines.adaptive {
@@ -707,7 +708,7 @@ impl GpuSolver {
     /// Bytes of the buffers as created, summed from the buffers themselves (to check the plan).
     pub fn allocated_bytes(&self) -> u64 {
         let s = self;
-        // With fixed dt the accelerations exist only after `step_fields` asked for them.
+        // With the fused step the accelerations exist only after `step_fields` asked for them.
         let planned_accelerations = s.accelerations.as_ref().filter(|_| !s.pipelines.fused).map(|a| &a.buffer);
         [&s.uniform, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
             .into_iter()

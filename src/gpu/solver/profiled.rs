@@ -54,7 +54,7 @@ impl GpuSolver {
     }
 
     /// Records one step like `record_step`, one timed pass per stage; returns which stages ran.
-    /// With fixed dt the forces and the integration are one pass, timed as `forces`; the
+    /// With the fused step the forces and the integration are one pass, timed as `forces`; the
     /// `integrate` pass then holds only the step's one-thread bookkeeping.
     fn record_profiled_step(&mut self, encoder: &mut wgpu::CommandEncoder, queries: &wgpu::QuerySet) -> [bool; 7] {
         let mut ran = [false; 7];
