@@ -178,27 +178,6 @@ impl GpuContext {
         Ok(self)
     }
 
-    /// Fails with a message naming the adapter and the limit when a buffer of `bytes` cannot be
-    /// bound as one storage buffer.
-    pub fn check_storage_binding(&self, what: &str, bytes: u64) -> Result<(), GpuError> {
-        let l = self.device.limits();
-        let err = |limit, have| GpuError::Limit {
-            adapter: self.info.name.clone(),
-            backend: format!("{:?}", self.info.backend),
-            what: what.into(),
-            limit,
-            need: bytes,
-            have,
-        };
-        if bytes > l.max_storage_buffer_binding_size as u64 {
-            return Err(err("max_storage_buffer_binding_size", l.max_storage_buffer_binding_size as u64));
-        }
-        if bytes > l.max_buffer_size {
-            return Err(err("max_buffer_size", l.max_buffer_size));
-        }
-        Ok(())
-    }
-
     pub fn describe(&self) -> String {
         format!("{} ({:?}, {:?})", self.info.name, self.info.backend, self.info.device_type)
     }

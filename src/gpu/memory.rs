@@ -94,8 +94,10 @@ impl MemoryPlan {
         MemoryPlan { fluid, walls, cells, buffers }
     }
 
-    /// The plan of a scene from its lattice sizes, before any particle is created on the host
-    /// (walls not counted: they are known only once generated).
+    /// The plan of a scene from its lattice sizes, before any particle is created on the host:
+    /// a lower bound (walls not counted, as they are known only once generated; the fused step's
+    /// arrays unless the scene has adaptive dt). The solver checks its exact plan again before
+    /// it allocates.
     pub fn for_scene(scene: &Scene) -> MemoryPlan {
         let uniform = super::solver::GpuParams::default().bytes().len() as u64;
         MemoryPlan::new(scene.fluid_particle_count(), None, scene.grid().cell_count() as u64, uniform, scene.time.adaptive)

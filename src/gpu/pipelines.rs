@@ -256,23 +256,37 @@ pub fn merged_array_decls(files: &[&str]) -> Vec<ArrayDecl> {
     decls
 }
 
+/// The texts of the stage files `names`.
+fn stage_texts(names: &[&str]) -> Vec<&'static str> {
+    names.iter().map(|name| STAGES.iter().find(|s| s.0 == *name).unwrap_or_else(|| panic!("no stage {name}")).1).collect()
+}
+
+/// Bindings of each array of `decls` with `lens` elements.
+fn segment_counts(decls: &[ArrayDecl], lens: &[u64], segment_bytes: u64) -> Vec<u64> {
+    decls.iter().zip(lens).map(|(d, &len)| d.segments(len, segment_bytes)).collect()
+}
+
 /// Storage bindings that the module of `names` needs for arrays of `lens` elements.
 pub fn storage_bindings(ctx: &super::GpuContext, names: &[&str], lens: &[u64]) -> u64 {
-    let texts: Vec<&str> = names.iter().map(|name| STAGES.iter().find(|s| s.0 == *name).unwrap_or_else(|| panic!("no stage {name}")).1).collect();
-    merged_array_decls(&texts).iter().zip(lens).map(|(d, &len)| d.segments(len, ctx.storage_segment_bytes())).sum()
+    segment_counts(&merged_array_decls(&stage_texts(names)), lens, ctx.storage_segment_bytes()).iter().sum()
+}
+
+/// A binding of `bytes` bytes of `buffer` from `offset`.
+pub fn buffer_range(buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> wgpu::BindingResource<'_> {
+    wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size: std::num::NonZeroU64::new(bytes) })
 }
 
 /// Like [`stage`], for a module assembled from several stage files (a fused stage).
 pub fn stage_of(ctx: &super::GpuContext, names: &[&str], entry: &str, lens: &[u64], constants: &[(&str, f64)]) -> Result<Stage, super::device::GpuError> {
     let device = &ctx.device;
     let segment_bytes = ctx.storage_segment_bytes();
-    let texts: Vec<&str> = names.iter().map(|name| STAGES.iter().find(|s| s.0 == *name).unwrap_or_else(|| panic!("no stage {name}")).1).collect();
+    let texts = stage_texts(names);
     let stage_text = texts.join("\n");
     let name = names.join("+");
     let name = name.as_str();
     let decls = merged_array_decls(&texts);
     assert_eq!(decls.len(), lens.len(), "stage {name}: {} arrays declared, {} lengths given", decls.len(), lens.len());
-    let segments: Vec<u64> = decls.iter().zip(lens).map(|(d, &len)| d.segments(len, segment_bytes)).collect();
+    let segments = segment_counts(&decls, lens, segment_bytes);
     check_bindings(ctx, name, segments.iter().sum())?;
     let source = format!("{COMMON}\n{}\n{stage_text}", array_bindings_wgsl(&decls, &segments, segment_bytes));
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(name), source: wgpu::ShaderSource::Wgsl(source.into()) });
@@ -318,11 +332,7 @@ impl Stage {
             for s in 0..decl.segments(*len, self.segment_bytes) {
                 let elements = seg.min(len - s * seg);
                 assert!(elements * bytes <= self.segment_bytes && (s * seg + elements) * bytes <= buffer.size(), "array {} of {label}", decl.name);
-                resources.push(wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer,
-                    offset: s * seg * bytes,
-                    size: std::num::NonZeroU64::new(elements * bytes),
-                }));
+                resources.push(buffer_range(buffer, s * seg * bytes, elements * bytes));
             }
         }
         bind_group(device, label, &self.layout, &resources)

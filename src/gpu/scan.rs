@@ -1,8 +1,7 @@
 //! The multi-level exclusive scan (wgsl/prefix_sum.wgsl) over a buffer of u32, for any length.
 
-use super::pipelines::{dispatch_size, stage, Stage, SCAN_BLOCK};
+use super::pipelines::{buffer_range, dispatch_size, stage, Stage, SCAN_BLOCK};
 use super::GpuContext;
-use std::num::NonZeroU64;
 
 /// The levels of a scan of `len` values held in `data`: level 0 scans the data in blocks, each
 /// higher level scans the block totals of the level below, until one block remains. A level
@@ -18,8 +17,9 @@ pub struct Scan {
     max_per_dim: u32,
 }
 
+/// `count` u32 values of `buffer` from value `first`.
 fn range(buffer: &wgpu::Buffer, first: u64, count: u64) -> wgpu::BindingResource<'_> {
-    wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset: first * 4, size: NonZeroU64::new(count * 4) })
+    buffer_range(buffer, first * 4, count * 4)
 }
 
 impl Scan {

@@ -692,11 +692,7 @@ impl Renderer {
             pass.set_pipeline(&self.range_pipeline);
             for first in (0..n as u64).step_by(per_segment as usize) {
                 let count = per_segment.min(n as u64 - first);
-                let values = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: self.field(particles),
-                    offset: first * value_bytes,
-                    size: std::num::NonZeroU64::new(count * value_bytes),
-                });
+                let values = crate::gpu::pipelines::buffer_range(self.field(particles), first * value_bytes, count * value_bytes);
                 let group = crate::gpu::pipelines::bind_group(
                     &self.device,
                     "render_range",
