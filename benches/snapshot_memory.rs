@@ -11,12 +11,16 @@
 //!
 //! `cargo bench --bench snapshot_memory` (`WGSPH_BENCH_PARTICLES`, default 1 000 000).
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use std::process::Command;
-use wgsph::export::SnapshotFormat;
-use wgsph::gpu::solver::STREAM_CHUNK;
-use wgsph::gpu::{GpuContext, GpuSolver};
-use wgsph::run::RunOptions;
-use wgsph::{Backend, Scene};
+use wgsph::io::snapshot::format::SnapshotFormat;
+use wgsph::solver::gpu::buffers::STREAM_CHUNK;
+use wgsph::solver::gpu::GpuContext;
+use wgsph::app::run::RunOptions;
+use wgsph::solver::Backend;
+use wgsph::model::scene::Scene;
 
 const CASES: [&str; 5] = ["csv", "vtk", "ply", "checkpoint", "resume"];
 
@@ -29,7 +33,7 @@ fn status_kib(field: &str) -> u64 {
 /// Runs one case in this process and prints `bytes-per-particle particles`.
 fn run_case(case: &str, path: &str, chunk: u64, particles: u64) {
     let scene = Scene::builtin("dam_break").unwrap().with_fluid_particles(particles);
-    let mut solver = GpuSolver::new(GpuContext::new().unwrap(), &scene.params(), &scene.initial_state()).unwrap();
+    let mut solver = common::gpu(GpuContext::new().unwrap(), &scene);
     let n = solver.fluid_count() as f64;
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join(format!("out.{case}"));
@@ -38,24 +42,24 @@ fn run_case(case: &str, path: &str, chunk: u64, particles: u64) {
     // first writes it, which is not the writer's memory.
     solver.step(1).unwrap();
     solver.health().unwrap();
+    let record = wgsph::app::run::run_record(&solver, &opts, 2, None, 0.0);
     if case == "resume" {
-        wgsph::checkpoint::save(&mut solver, &scene, &opts, 2, None, 0.0, &out).unwrap();
+        wgsph::io::checkpoint::save(&mut solver, &scene.to_toml(), &record, &out).unwrap();
     }
     std::fs::write("/proc/self/clear_refs", "5").expect("resetting the peak RSS mark");
     let before = status_kib("VmRSS:");
     match (case, path) {
         ("resume", _) => {
-            let c = wgsph::checkpoint::read(&out).unwrap();
+            let c = wgsph::io::checkpoint::read(&out).unwrap();
             solver.restore_state(&c.state).unwrap();
             solver.wait().unwrap();
         }
         ("checkpoint", "whole") => {
-            let c = wgsph::checkpoint::capture(&mut solver, &scene, &opts, 2, None, 0.0).unwrap();
-            wgsph::checkpoint::write(&out, &c).unwrap();
+            let c = wgsph::io::checkpoint::capture(&mut solver, &scene.to_toml(), record).unwrap();
+            wgsph::io::checkpoint::write(&out, &c).unwrap();
         }
         ("checkpoint", _) => {
-            let record = wgsph::checkpoint::run_record(&solver, &opts, 2, None, 0.0);
-            wgsph::checkpoint::write_with_state(&out, &scene.to_toml(), &record, |w| solver.write_state_in_pieces(w, chunk)).unwrap();
+            wgsph::io::checkpoint::write_with_state(&out, &scene.to_toml(), &record, |w| wgsph::io::checkpoint::write_state_in_pieces(&mut solver, w, chunk)).unwrap();
         }
         (format, path) => {
             let format = match format {
@@ -65,9 +69,10 @@ fn run_case(case: &str, path: &str, chunk: u64, particles: u64) {
             };
             if path == "whole" {
                 let s = solver.snapshot().unwrap();
-                wgsph::export::write_snapshot(&out, format, &s).unwrap();
+                wgsph::io::snapshot::write_snapshot(&out, format, &s).unwrap();
             } else {
-                solver.write_snapshot_in_pieces(&[(format, out.clone())], chunk).unwrap();
+                let (n, step, time) = (solver.fluid_count() as u64, solver.steps_done(), solver.time());
+                wgsph::io::snapshot::write_rows(&[(format, out.clone())], n, step, time, |v| solver.visit_rows_in_pieces(chunk, v)).unwrap();
             }
         }
     }

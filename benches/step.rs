@@ -3,11 +3,13 @@
 //! WGSPH_BENCH_LARGE=1, and 1 M with WGSPH_BENCH_HUGE=1). Throughput is reported in fluid
 //! particle-steps per second; the bytes of GPU memory per fluid particle are printed.
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::time::{Duration, Instant};
-use wgsph::cpu::CpuSolver;
-use wgsph::gpu::{GpuContext, GpuSolver};
-use wgsph::scene::Scene;
+use wgsph::solver::gpu::GpuContext;
+use wgsph::model::scene::Scene;
 
 fn scenes() -> Vec<(&'static str, Scene)> {
     vec![("dam_break", Scene::builtin("dam_break").unwrap()), ("resting_block", Scene::builtin("hydrostatic").unwrap())]
@@ -29,12 +31,12 @@ fn bench_step(c: &mut Criterion) {
     for (name, base) in scenes() {
         for &n in &sizes() {
             let scene = base.with_fluid_particles(n);
-            let (p, init) = (scene.params(), scene.initial_state());
+            let init = scene.initial_state();
             let fluid = init.fluid_positions.len() as u64;
             group.throughput(Throughput::Elements(fluid));
             if let Ok(ctx) = GpuContext::new() {
                 let adapter = ctx.describe();
-                let mut gpu = GpuSolver::new(ctx, &p, &init).unwrap();
+                let mut gpu = common::gpu(ctx, &scene);
                 println!(
                     "gpu/{name}/{fluid}/{adapter}: {} bytes of GPU memory, {:.1} bytes per fluid particle",
                     gpu.memory_bytes(),
@@ -49,9 +51,9 @@ fn bench_step(c: &mut Criterion) {
                     })
                 });
             }
-            let mut cpu32 = CpuSolver::<f32>::new(&p, &init);
+            let mut cpu32 = common::cpu::<f32>(&scene);
             group.bench_function(format!("cpu_f32/{name}/{fluid}"), |b| b.iter(|| cpu32.step_once()));
-            let mut cpu64 = CpuSolver::<f64>::new(&p, &init);
+            let mut cpu64 = common::cpu::<f64>(&scene);
             group.bench_function(format!("cpu_f64/{name}/{fluid}"), |b| b.iter(|| cpu64.step_once()));
         }
     }

@@ -3,11 +3,14 @@
 //! switched on) at a time, from the initial state. The GPU pipelines are specialised per scene and the CPU path skips
 //! unused terms, so the difference between two rows is what the term costs.
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use std::time::{Duration, Instant};
-use wgsph::cpu::CpuSolver;
-use wgsph::gpu::{GpuContext, GpuSolver};
-use wgsph::scene::{Boundary, Scene};
+use wgsph::solver::gpu::GpuContext;
+use wgsph::model::scene::Boundary;
+use wgsph::model::scene::Scene;
 
 fn variants() -> Vec<(&'static str, Scene)> {
     let base = Scene::builtin("dam_break").unwrap();
@@ -37,7 +40,7 @@ fn bench_terms(c: &mut Criterion) {
     let mut group = c.benchmark_group("terms");
     group.sample_size(10).measurement_time(Duration::from_secs(3)).warm_up_time(Duration::from_secs(1));
     for (name, scene) in variants() {
-        let (p, init) = (scene.params(), scene.initial_state());
+        let init = scene.initial_state();
         group.throughput(Throughput::Elements(init.fluid_positions.len() as u64));
         // Every sample starts from the scene's initial state (a fresh solver, built outside the
         // timing), so that the variants are timed on the same flow, not on states that drifted
@@ -47,7 +50,7 @@ fn bench_terms(c: &mut Criterion) {
             drop(ctx);
             group.bench_function(format!("gpu/{name}"), |b| {
                 b.iter_custom(|iters| {
-                    let mut gpu = GpuSolver::new(GpuContext::from_adapter(adapter.clone()).unwrap(), &p, &init).unwrap();
+                    let mut gpu = common::gpu(GpuContext::from_adapter(adapter.clone()).unwrap(), &scene);
                     gpu.wait().unwrap();
                     let t = Instant::now();
                     gpu.advance(iters);
@@ -57,7 +60,7 @@ fn bench_terms(c: &mut Criterion) {
             });
         }
         group.bench_function(format!("cpu_f32/{name}"), |b| {
-            b.iter_batched(|| CpuSolver::<f32>::new(&p, &init), |mut cpu| cpu.step_once(), BatchSize::LargeInput)
+            b.iter_batched(|| common::cpu::<f32>(&scene), |mut cpu| cpu.step_once(), BatchSize::LargeInput)
         });
     }
     group.finish();

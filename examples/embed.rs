@@ -4,9 +4,17 @@
 //!
 //! `cargo run --release --example embed`
 
-use wgsph::gpu::GpuContext;
-use wgsph::scene::{Boundary, Domain, EquationOfState, FluidBlock, Kernel, Physics, Time, WallParticles};
-use wgsph::{Scene, Simulation};
+use wgsph::solver::gpu::GpuContext;
+use wgsph::model::scene::Boundary;
+use wgsph::model::scene::Domain;
+use wgsph::model::scene::EquationOfState;
+use wgsph::model::scene::FluidBlock;
+use wgsph::model::scene::Kernel;
+use wgsph::model::scene::Physics;
+use wgsph::model::scene::Time;
+use wgsph::model::scene::WallParticles;
+use wgsph::model::scene::Scene;
+use wgsph::solver::Simulation;
 
 /// A 0.2 m cube of water dropped into a closed 0.5 m tank, built without a file.
 fn drop_scene() -> Scene {
@@ -58,7 +66,7 @@ fn run(context: GpuContext, frames: u32, steps_per_frame: u64) -> anyhow::Result
         sim.step(steps_per_frame)?;
         let buffers = sim.particle_buffers().expect("on the GPU");
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
-        encoder.copy_buffer_to_buffer(buffers.positions, 0, &vertices, 0, n * 16);
+        encoder.copy_buffer_to_buffer(&buffers.positions, 0, &vertices, 0, n * 16);
         // ... a render pass drawing `vertices` as points would go here ...
         sim.queue().expect("on the GPU").submit([encoder.finish()]);
         if frame % 10 == 0 {
@@ -66,7 +74,7 @@ fn run(context: GpuContext, frames: u32, steps_per_frame: u64) -> anyhow::Result
         }
     }
     let ctx = sim.gpu_context().expect("on the GPU");
-    let data = wgsph::gpu::solver::read_buffers(ctx, &[(&vertices, n * 16)])?;
+    let data = wgsph::solver::gpu::readback::read_buffers(ctx, &[(&vertices, n * 16)])?;
     let snapshot = sim.snapshot()?;
     let vertices: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
     let ids = vertices.iter().map(|v| v[3].to_bits()).collect();
@@ -92,14 +100,14 @@ fn main() -> anyhow::Result<()> {
 mod tests {
     #[test]
     fn the_programs_vertex_buffer_holds_the_simulated_positions() {
-        for adapter in wgsph::gpu::device::compute_adapters() {
+        for adapter in wgsph::solver::gpu::device::compute_adapters() {
             // The program's own device, as it would open it for its window.
             let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
                 required_limits: adapter.limits(),
                 ..Default::default()
             }))
             .unwrap();
-            let context = wgsph::gpu::GpuContext::from_device(adapter, device, queue).unwrap();
+            let context = wgsph::solver::gpu::GpuContext::from_device(adapter, device, queue).unwrap();
             let (vertices, ids, snapshot) = super::run(context, 3, 8).unwrap();
             assert_eq!(snapshot.step, 24);
             assert_eq!(vertices.len(), snapshot.len());

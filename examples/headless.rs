@@ -5,7 +5,9 @@
 //! (defaults: `dam_break`, 200 steps, 2000 particles; the GPU when there is one, else the CPU).
 
 use std::path::Path;
-use wgsph::{Scene, Simulation, Snapshot};
+use wgsph::model::scene::Scene;
+use wgsph::solver::Simulation;
+use wgsph::model::state::Snapshot;
 
 /// Runs `steps` steps of `scene_name` at about `particles` fluid particles and writes the last
 /// state to `vtk` (if given). Returns the first and the last snapshot.
@@ -15,7 +17,7 @@ fn run(scene_name: &str, steps: u64, particles: u64, vtk: Option<&Path>) -> anyh
         Ok(sim) => sim,
         Err(e) => {
             eprintln!("no GPU ({e:#}); running on the CPU");
-            Simulation::cpu(scene)
+            Simulation::cpu(scene)?
         }
     };
     println!("{}: {} fluid particles on {}", sim.scene().name, sim.fluid_count(), sim.adapter());
@@ -34,7 +36,7 @@ fn run(scene_name: &str, steps: u64, particles: u64, vtk: Option<&Path>) -> anyh
         health.max_density / sim.params().rest_density
     );
     if let Some(path) = vtk {
-        wgsph::export::write_vtk(path, &last)?;
+        wgsph::io::snapshot::vtk::write_vtk(path, &last)?;
         println!("wrote {}", path.display());
     }
     Ok((first, last))

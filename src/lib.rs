@@ -6,35 +6,24 @@
 //! Laplacian viscosity, gravity, wall particles and analytic planes, a uniform grid of cell size
 //! h and symplectic Euler.
 //!
+//! The crate is built in floors, each importing only the floors below it (docs/design.md):
+//! - [`model`]: what a scene, its constants and a state are (no GPU, no files);
+//! - [`solver`]: the [`Backend`] trait, the one builder [`solver::open`], and the GPU and CPU
+//!   twins that implement it;
+//! - [`io`]: files (snapshots, checkpoints, summaries, surface meshes);
+//! - [`viz`]: pictures (frames, the viewer, plots);
+//! - [`app`]: the `wgsph` command line, which nothing imports.
+//!
 //! Programs that embed the simulator start from [`Simulation`]: a [`Scene`] (from a file, a
 //! TOML string or built in code) on the GPU or the CPU, [`Simulation::step`],
 //! [`Simulation::snapshot`], and on the GPU the wgpu device and particle buffers for their own
-//! rendering. The `wgsph` command line is [`cli`]; snapshot files in other formats are
-//! [`export`]; checkpoints are [`checkpoint`].
+//! rendering.
 
-pub mod checkpoint;
-pub mod cli;
-pub mod compare;
-pub mod cpu;
-pub mod export;
-pub mod gpu;
-pub mod output;
-pub mod plot;
-pub mod profile;
-pub mod real;
-pub mod render;
-pub mod run;
-pub mod rundir;
-pub mod scene;
-pub mod sim;
-pub mod simulation;
-pub mod splishsplash;
-pub mod surface;
-pub mod tradeoff;
-pub mod validate;
-#[cfg(feature = "view")]
-pub mod view;
+pub mod app;
+pub mod io;
+pub mod model;
+pub mod solver;
+pub mod viz;
 
-pub use scene::{Scene, SceneError};
-pub use sim::{Backend, Health, Snapshot};
-pub use simulation::Simulation;
+pub use model::{Health, Scene, SceneError, Snapshot};
+pub use solver::{Backend, Simulation};

@@ -1,3 +1,3 @@
 fn main() {
-    std::process::exit(wgsph::cli::main());
+    std::process::exit(wgsph::app::main());
 }

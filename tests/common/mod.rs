@@ -1,10 +1,15 @@
-//! Helpers shared by the GPU tests: every test runs on every adapter with compute shaders.
+//! Helpers shared by the test programs: a device on every adapter (every GPU test runs on
+//! each), the scenes the tests build, and solvers made by the one builder.
 
 #![allow(dead_code)]
 
-use wgsph::gpu::device::compute_adapters;
-use wgsph::gpu::GpuContext;
-use wgsph::scene::{Scene, SceneOrigin};
+use wgsph::model::initial::InitialState;
+use wgsph::model::real::Real;
+use wgsph::model::scene::{Scene, SceneOrigin};
+use wgsph::solver::cpu::CpuSolver;
+use wgsph::solver::gpu::device::compute_adapters;
+use wgsph::solver::gpu::{GpuContext, GpuOptions, GpuSolver};
+use wgsph::solver::{open_with, BackendChoice, Precision};
 
 /// A device on every adapter found. With none, the test is skipped with a visible message,
 /// unless WGSPH_REQUIRE_GPU is set (CI sets it, so a missing driver fails there).
@@ -64,4 +69,37 @@ pub fn small_scene_text(kernel: &str, eos: &str, clamp: bool, physics_extra: &st
 
 pub fn scene_from(text: &str) -> Scene {
     Scene::from_toml_str(text, &SceneOrigin::Text).unwrap_or_else(|e| panic!("{e}\n{text}"))
+}
+
+/// The GPU solver of `scene` on the device `ctx`, built by the one builder
+/// ([`wgsph::solver::open`]).
+pub fn gpu(ctx: GpuContext, scene: &Scene) -> GpuSolver {
+    gpu_with(ctx, scene, None, GpuOptions::default()).expect("the scene opens on the GPU")
+}
+
+/// The GPU solver of `scene` from the particles `initial`.
+pub fn gpu_from(ctx: GpuContext, scene: &Scene, initial: &InitialState) -> GpuSolver {
+    gpu_with(ctx, scene, Some(initial.clone()), GpuOptions::default()).expect("the scene opens on the GPU")
+}
+
+/// The GPU solver of `scene` with `options` (and the particles `initial`, or the scene's own):
+/// the builder's error where it refuses.
+pub fn gpu_with(ctx: GpuContext, scene: &Scene, initial: Option<InitialState>, options: GpuOptions) -> anyhow::Result<GpuSolver> {
+    let choice = BackendChoice::gpu_on(ctx).with_gpu_options(options);
+    Ok(open_with(scene, initial, &choice)?.into_gpu().expect("a GPU was chosen"))
+}
+
+/// The CPU reference of `scene` in float type `R`.
+pub fn cpu<R: Real>(scene: &Scene) -> CpuSolver<R> {
+    cpu_open::<R>(scene, None)
+}
+
+/// The CPU reference of `scene` in float type `R`, from the particles `initial`.
+pub fn cpu_from<R: Real>(scene: &Scene, initial: &InitialState) -> CpuSolver<R> {
+    cpu_open::<R>(scene, Some(initial.clone()))
+}
+
+fn cpu_open<R: Real>(scene: &Scene, initial: Option<InitialState>) -> CpuSolver<R> {
+    let precision = if std::mem::size_of::<R>() == 4 { Precision::F32 } else { Precision::F64 };
+    open_with(scene, initial, &BackendChoice::cpu(precision)).expect("the scene opens on the CPU").into_cpu::<R>().expect("the chosen float type")
 }

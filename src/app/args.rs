@@ -1,0 +1,248 @@
+//! The command line's arguments (clap): the commands, their flags, and how flags map to the
+//! library's choices.
+
+use crate::io::snapshot::format::SnapshotFormat;
+use crate::io::surface::MeshFormat;
+use crate::solver::gpu::{GpuOptions, WorkgroupSizes};
+use crate::solver::{BackendChoice, Device, Precision};
+use crate::viz::render;
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+#[derive(Parser, Debug)]
+#[command(name = "wgsph", version, about = "SPH fluid simulation on the GPU (WGSL compute through wgpu) with a CPU reference")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Run a scene and write snapshots and a summary (the default command).
+    Run(RunArgs),
+    /// List the built-in scenes.
+    Scenes,
+    /// List the GPU adapters with their backend, type and the limits that matter.
+    Adapters,
+    /// Run the GPU and the f64 CPU reference from the same state and compare every field.
+    Compare(CompareArgs),
+    /// Open a window that runs a scene on the GPU and draws every frame (orbit camera, keys).
+    View(ViewArgs),
+    /// Measure speed against accuracy: one scene under many settings against a reference run.
+    Tradeoff(super::tradeoff::TradeoffArgs),
+    /// Run the validation cases against measurements and exact solutions; exit code 1 when one fails.
+    Validate(super::validate::ValidateArgs),
+    /// Time each compute stage of the GPU step; bandwidth, interactions/s and memory per particle.
+    Profile(super::profile::ProfileArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct ViewArgs {
+    /// A built-in scene name or a path to a scene TOML file.
+    #[arg(default_value = "dam_break")]
+    pub scene: String,
+    /// Refine or coarsen the scene to about N fluid particles.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub particles: Option<u64>,
+    /// Simulation steps per drawn frame (default: 1/60 s of simulated time, at most 64).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps_per_frame: Option<u64>,
+    #[command(flatten)]
+    pub picture: PictureArgs,
+    /// Save the last frame's picture (as presented) to this PNG file; needs --quit-after.
+    #[arg(long, value_name = "FILE", requires = "quit_after")]
+    pub screenshot: Option<PathBuf>,
+    /// Close the window after N frames.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub quit_after: Option<u64>,
+}
+
+/// `--backend`: which device runs the scene.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// The GPU when an adapter exists, else the CPU with a warning.
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+impl BackendArg {
+    pub fn device(self) -> Device {
+        match self {
+            BackendArg::Auto => Device::Auto,
+            BackendArg::Cpu => Device::Cpu,
+            BackendArg::Gpu => Device::Gpu,
+        }
+    }
+}
+
+/// `--precision`: the CPU path's float type.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PrecisionArg {
+    F64,
+    F32,
+}
+
+impl PrecisionArg {
+    pub fn precision(self) -> Precision {
+        match self {
+            PrecisionArg::F64 => Precision::F64,
+            PrecisionArg::F32 => Precision::F32,
+        }
+    }
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct RunArgs {
+    /// A built-in scene name (see `wgsph scenes`) or a path to a scene TOML file.
+    #[arg(default_value = "seed")]
+    pub scene: String,
+    /// Number of steps to run (default: up to the scene's end time).
+    #[arg(long, conflicts_with = "time")]
+    pub steps: Option<u64>,
+    /// Simulated time to run, in the scene's time unit.
+    #[arg(long)]
+    pub time: Option<f64>,
+    #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
+    pub backend: BackendArg,
+    /// Float type of the CPU backend (the GPU always runs f32).
+    #[arg(long, value_enum, default_value_t = PrecisionArg::F64)]
+    pub precision: PrecisionArg,
+    #[command(flatten)]
+    pub gpu: GpuTuning,
+    /// Output directory.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Write a snapshot every K steps (default: about 50 per run; 0: only the first and last).
+    #[arg(long)]
+    pub snapshot_every: Option<u64>,
+    /// Refine or coarsen the scene to about N fluid particles (spacings, h and dt scale together).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub particles: Option<u64>,
+    /// Check for NaN and escaped particles every K steps.
+    #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..))]
+    pub check_every: u64,
+    /// Snapshot formats, repeated or comma-separated: csv, vtk (ParaView, with a .vtk.series
+    /// index), ply (Blender, splashsurf).
+    #[arg(long = "format", value_enum, value_delimiter = ',', default_values_t = [SnapshotFormat::Csv])]
+    pub formats: Vec<SnapshotFormat>,
+    /// No progress bar and no summary line (warnings and errors are still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Replace the output directory if it exists and is not empty (otherwise that is refused).
+    #[arg(long)]
+    pub overwrite: bool,
+    /// Write the full state to DIR/checkpoint.wgsph every K steps (0: never).
+    #[arg(long, default_value_t = 0, value_name = "K")]
+    pub checkpoint_every: u64,
+    /// Continue the run in DIR from its checkpoint, to the end it was heading to (or for
+    /// --steps N / --time T more); scene and settings come from the checkpoint.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format", "frames"])]
+    pub resume: Option<PathBuf>,
+    /// Reconstruct the fluid surface (marching cubes over an SPH density field, splashsurf)
+    /// every K steps into DIR/surface/step_NNNNNN.obj (0: never).
+    #[arg(long, default_value_t = 0, value_name = "K")]
+    pub surface_mesh_every: u64,
+    /// File format of the surface meshes.
+    #[arg(long, value_enum, default_value_t = MeshFormat::Obj)]
+    pub surface_mesh_format: MeshFormat,
+    /// Write rendered pictures DIR/frame_00000.png, ... (every --frame-every steps).
+    #[arg(long, value_name = "DIR")]
+    pub frames: Option<PathBuf>,
+    /// A picture every K steps (default: about 100 per run).
+    #[arg(long, value_name = "K", requires = "frames", value_parser = clap::value_parser!(u64).range(1..))]
+    pub frame_every: Option<u64>,
+    #[command(flatten)]
+    pub picture: PictureArgs,
+}
+
+/// How pictures look (`run --frames` and `view`).
+#[derive(Args, Debug, Clone)]
+pub struct PictureArgs {
+    /// Picture size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = render::parse_resolution)]
+    pub resolution: (u32, u32),
+    #[arg(long, value_enum, default_value_t = render::Style::Particles)]
+    pub style: render::Style,
+    /// The field that colours the particles (viridis colour map).
+    #[arg(long, value_enum, default_value_t = render::ColorBy::Speed)]
+    pub color_by: render::ColorBy,
+    /// A fixed colour range MIN:MAX (default: each picture's smallest to largest value).
+    #[arg(long, value_name = "MIN:MAX", value_parser = render::parse_range)]
+    pub color_range: Option<(f32, f32)>,
+    #[arg(long, value_enum, default_value_t = render::Walls::Faint)]
+    pub walls: render::Walls,
+}
+
+impl PictureArgs {
+    pub fn options(&self) -> render::RenderOptions {
+        render::RenderOptions {
+            width: self.resolution.0,
+            height: self.resolution.1,
+            style: self.style,
+            color_by: self.color_by,
+            range: self.color_range,
+            walls: self.walls,
+        }
+    }
+}
+
+impl Default for RunArgs {
+    fn default() -> Self {
+        match Cli::parse_from(["wgsph", "run"]).command {
+            Some(Command::Run(args)) => args,
+            _ => unreachable!("`wgsph run` parses to the run command"),
+        }
+    }
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct CompareArgs {
+    /// A built-in scene name or a path to a scene TOML file.
+    #[arg(default_value = "seed")]
+    pub scene: String,
+    /// Steps of the second comparison (the first is after one step).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: u64,
+}
+
+
+impl RunArgs {
+    /// The backend these flags ask for.
+    pub fn backend_choice(&self) -> BackendChoice {
+        BackendChoice { device: self.backend.device(), precision: self.precision.precision(), gpu_options: self.gpu.options(), context: None }
+    }
+}
+
+/// The GPU step's tuning options of `wgsph run` and `wgsph profile` (none changes a value).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct GpuTuning {
+    /// Run the forces and the integration as two passes with fixed dt (the default on software
+    /// adapters).
+    #[arg(long, conflicts_with = "fused")]
+    pub unfused: bool,
+    /// Run the forces and the integration as one pass with fixed dt (the default on hardware
+    /// adapters).
+    #[arg(long)]
+    pub fused: bool,
+    /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes
+    /// (`density=64,forces=256`; stages: bin_count, bin_scatter, reorder, density, forces,
+    /// integrate). Default 128.
+    #[arg(long, value_name = "SIZES")]
+    pub workgroup_size: Option<WorkgroupSizes>,
+    /// Steps recorded into one command buffer (default 32).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps_per_submit: Option<u64>,
+}
+
+impl GpuTuning {
+    /// The solver options these flags ask for.
+    pub fn options(&self) -> GpuOptions {
+        GpuOptions {
+            fuse_forces_and_integration: if self.fused { Some(true) } else if self.unfused { Some(false) } else { None },
+            workgroup_sizes: self.workgroup_size.unwrap_or_default(),
+            steps_per_submit: self.steps_per_submit.unwrap_or(0),
+            single_cells: false,
+        }
+    }
+}

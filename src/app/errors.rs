@@ -1,0 +1,25 @@
+//! Errors in what the user gave, and the process exit codes: 0 success, 1 a run that went bad
+//! or a failed check, 2 bad input (a scene, a flag, an unusable path, a scene beyond the
+//! adapter's limits).
+
+use crate::io::rundir::RunDirError;
+use crate::model::scene::SceneError;
+use crate::solver::gpu::memory::GpuMemoryError;
+use crate::solver::gpu::GpuError;
+
+/// An error in what the user gave: exit code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct InputError(pub String);
+
+/// The exit code of a command that failed with `e`.
+pub fn exit_code(e: &anyhow::Error) -> i32 {
+    // A scene or a setting beyond what the adapter allows is bad input too.
+    let too_big = e.downcast_ref::<GpuMemoryError>().is_some() || matches!(e.downcast_ref::<GpuError>(), Some(GpuError::Limit { .. }));
+    let bad_input = e.downcast_ref::<SceneError>().is_some() || e.downcast_ref::<InputError>().is_some() || e.downcast_ref::<RunDirError>().is_some();
+    if too_big || bad_input {
+        2
+    } else {
+        1
+    }
+}

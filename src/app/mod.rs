@@ -1,0 +1,88 @@
+//! The `wgsph` command line: parsing, the commands, and the exit codes. Nothing imports this
+//! floor; it imports every other.
+
+pub mod args;
+pub mod compare;
+pub mod errors;
+pub mod profile;
+pub mod resume;
+pub mod run;
+pub mod tradeoff;
+pub mod validate;
+
+use crate::model::builtin::BUILTIN_SCENES;
+use crate::model::scene::{Scene, SceneOrigin};
+use args::{Cli, Command, RunArgs, ViewArgs};
+use clap::Parser;
+use errors::InputError;
+
+/// Parses the command line, runs it and returns the process exit code:
+/// 0 success, 1 a run that went bad or a failed check, 2 bad input.
+pub fn main() -> i32 {
+    let cli = Cli::parse();
+    let quiet = matches!(&cli.command, Some(Command::Run(a)) if a.quiet);
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(if quiet { "error" } else { "warn" })).init();
+    let result = match cli.command.unwrap_or(Command::Run(RunArgs::default())) {
+        Command::Run(args) => match &args.resume {
+            Some(dir) => resume::resume_run(dir, &args),
+            None => run::cmd_run(&args),
+        },
+        Command::Compare(args) => compare::cmd_compare(&args),
+        Command::View(args) => cmd_view(&args),
+        Command::Tradeoff(args) => tradeoff::cmd_tradeoff(&args),
+        Command::Validate(args) => validate::cmd_validate(&args),
+        Command::Profile(args) => profile::cmd_profile(&args),
+        Command::Adapters => {
+            let lines = crate::solver::gpu::device::describe_adapters();
+            if lines.is_empty() {
+                println!("no GPU adapter found");
+            }
+            for l in lines {
+                println!("{l}");
+            }
+            Ok(0)
+        }
+        Command::Scenes => {
+            for (name, description, _) in BUILTIN_SCENES {
+                println!("{name:<12} {description}");
+            }
+            Ok(0)
+        }
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            errors::exit_code(&e)
+        }
+    }
+}
+
+#[cfg(feature = "view")]
+fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
+    if args.picture.style == crate::viz::render::Style::Mesh {
+        return Err(InputError("--style mesh is for `wgsph run --frames` (the surface is reconstructed on the host, too slowly for a window); `wgsph view` takes --style particles or surface".into()).into());
+    }
+    let mut scene = Scene::load(&args.scene)?;
+    if let Some(n) = args.particles {
+        scene = scene.with_fluid_particles(n);
+        scene.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    }
+    let dt = scene.time.dt;
+    let steps_per_frame = args.steps_per_frame.unwrap_or_else(|| ((1.0 / 60.0 / dt).ceil() as u64).clamp(1, 64));
+    crate::viz::view::view(
+        scene,
+        crate::viz::view::ViewOptions {
+            picture: args.picture.options(),
+            steps_per_frame,
+            screenshot: args.screenshot.clone(),
+            quit_after: args.quit_after,
+        },
+    )
+}
+
+#[cfg(not(feature = "view"))]
+fn cmd_view(_: &ViewArgs) -> anyhow::Result<i32> {
+    Err(InputError("this wgsph was built without the `view` feature (a headless build); rebuild with default features for `wgsph view`".into()).into())
+}
+

@@ -1,0 +1,293 @@
+//! `wgsph profile`: the time of each compute stage of the GPU step, its share, an estimate of
+//! the memory traffic it needs, and the particle interactions per second (PIPS).
+//!
+//! Stage times come from timestamp queries (one timed compute pass per stage) where the device
+//! has `TIMESTAMP_QUERY`; elsewhere only whole steps are timed on the host (submit and wait).
+
+use super::args::GpuTuning;
+use super::errors::InputError;
+use crate::io::atomic::write_atomic;
+use crate::model::kernels::{sort_by_cell, KernelCoefficients};
+use crate::model::params::Params;
+use crate::model::real::V3;
+use crate::model::scene::{Scene, SceneOrigin};
+use crate::solver::gpu::memory::MemoryPlan;
+use crate::solver::gpu::schedule::PROFILED_STAGES;
+use crate::solver::gpu::{GpuContext, GpuOptions};
+use crate::solver::{open_with, Backend, BackendChoice};
+use clap::Args;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args, Debug, Clone)]
+pub struct ProfileArgs {
+    /// A built-in scene name or a path to a scene TOML file.
+    #[arg(default_value = "dam_break")]
+    pub scene: String,
+    /// Refine or coarsen the scene to about N fluid particles.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub particles: Option<u64>,
+    /// Steps to time (after 2 warm-up steps).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: u64,
+    #[command(flatten)]
+    pub tuning: GpuTuning,
+    /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 cells (to measure
+    /// what the runs gain).
+    #[arg(long)]
+    pub single_cells: bool,
+    /// Also write the numbers to this JSON file.
+    #[arg(long, value_name = "FILE.json")]
+    pub out: Option<PathBuf>,
+}
+
+/// The rows of a profile whose forces and integration are one pass: the fused pass is timed as
+/// `forces_integrate`, and what remains of the integration pass (one thread updating the step's
+/// status words) as `bookkeeping`.
+pub const FUSED_STAGE_NAMES: [&str; 7] = ["bin_count", "prefix_sum", "bin_scatter", "reorder", "density", "forces_integrate", "bookkeeping"];
+
+/// The status words one thread reads and writes after each step (wgsl/sim/integrate.wgsl
+/// finish_step).
+const BOOKKEEPING_BYTES: u64 = 24;
+
+/// One row of the profile.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct StageProfile {
+    pub stage: String,
+    /// Mean time per step, microseconds.
+    pub time_us: f64,
+    /// Share of the step time, percent.
+    pub share_percent: f64,
+    /// Estimated bytes the stage reads and writes per step (see `stage_bytes`).
+    pub bytes_per_step: u64,
+    /// bytes_per_step / time: the effective memory bandwidth, GB/s (1e9 bytes).
+    pub bandwidth_gb_s: f64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct Profile {
+    pub scene: String,
+    pub adapter: String,
+    /// "timestamp queries" or "host (whole steps, submit and wait)".
+    pub timing: String,
+    pub fluid_particles: u64,
+    pub wall_particles: u64,
+    pub grid_cells: u64,
+    pub steps: u64,
+    pub stages: Vec<StageProfile>,
+    /// GPU time of a step (the sum of the stages) or, with host timing, its wall-clock time, µs.
+    pub step_time_us: f64,
+    /// Wall-clock time per step of the normal path (STEPS_PER_SUBMIT steps per submission,
+    /// one wait at the end), µs.
+    pub host_step_time_us: f64,
+    /// Wall-clock time per step with a host round trip after every step (submit one step, wait
+    /// for it), µs: what the normal path saves by not waiting.
+    pub host_step_time_with_waits_us: f64,
+    pub particle_steps_per_second: f64,
+    /// Distinct pairs within the kernel support per step (fluid-fluid counted once, plus
+    /// fluid-wall), the mean of the first and last state.
+    pub neighbour_pairs: u64,
+    /// neighbour_pairs / step_time: particle interactions per second (PIPS).
+    pub interactions_per_second: f64,
+    pub gpu_memory_bytes: u64,
+    pub gpu_bytes_per_particle: f64,
+}
+
+/// Bytes each stage of `PROFILED_STAGES` must read and write per step, for `n` fluid particles,
+/// `w` walls and `cells` grid cells: every array element the stage touches counted once (the
+/// compulsory traffic; neighbour loads are assumed to hit the cache after their first load, so
+/// this is a lower bound). `vec4<f32>` = 16 bytes, `u32`/`f32` = 4 bytes.
+/// `fused`: the forces and the integration run as one pass (rows `forces_integrate` and
+/// `bookkeeping`).
+pub fn stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool, fused: bool) -> [u64; 7] {
+    let starts = (cells + 1) * 4;
+    let walls = if w > 0 { w * 16 + starts } else { 0 };
+    [
+        // bin_count: positions in; keys and ranks out; one atomic read-modify-write of a count.
+        n * 16 + n * 8 + n * 8,
+        // prefix_sum: the cell counts read and written by the block scan and again by the
+        // block-offset pass (the higher levels are 1/256 of that).
+        4 * starts,
+        // bin_scatter: keys, ranks and a cell start in; the unordered slot out.
+        n * 12 + n * 4,
+        // reorder: keys, starts, slots and the state (position with id, velocity) in; state out.
+        n * 12 + n * 32 + n * 32,
+        // density: positions and cell starts (and walls) in; density and pressure out.
+        n * 16 + starts + walls + n * 8,
+        // forces: positions, velocities, densities, pressures, starts (and walls) in;
+        // accelerations out, or with fusion the new positions and velocities.
+        n * 40 + starts + walls + if fused { n * 32 } else { n * 16 },
+        // integrate: positions, velocities and accelerations in, positions and velocities out
+        // (the accelerations and velocities read again by the adaptive reduction of |v|max and
+        // |a|max); with fusion only the step's status words.
+        if fused { BOOKKEEPING_BYTES } else { n * 80 + if adaptive { n * 32 } else { 0 } },
+    ]
+}
+
+/// Distinct pairs of particles closer than the kernel support: fluid-fluid pairs counted once,
+/// plus fluid-wall pairs (computed on the CPU in f64 with the same grid as the solver).
+pub fn neighbour_pairs(params: &Params, fluid: &[[f64; 3]], walls: &[[f64; 3]]) -> u64 {
+    let grid = params.grid;
+    let h2 = KernelCoefficients::<f64>::new(params.kernel, params.h).h2;
+    let sorted = |points: &[[f64; 3]]| {
+        let p: Vec<V3<f64>> = points.iter().map(|&x| V3::from64(x)).collect();
+        let (order, starts) = sort_by_cell(&grid, &p);
+        (order.iter().map(|&i| p[i as usize]).collect::<Vec<_>>(), starts)
+    };
+    let (fp, fs) = sorted(fluid);
+    let (wp, ws) = sorted(walls);
+    (0..fp.len())
+        .into_par_iter()
+        .map(|i| {
+            let xi = fp[i];
+            let mut count = 0u64;
+            for (k0, k1) in grid.stencil_runs(grid.cell_coords(xi)) {
+                // j > i: each fluid pair once.
+                for j in (fs[k0 as usize] as usize).max(i + 1)..fs[k1 as usize] as usize {
+                    count += ((xi - fp[j]).length_squared() < h2) as u64;
+                }
+                if !wp.is_empty() {
+                    for j in ws[k0 as usize] as usize..ws[k1 as usize] as usize {
+                        count += ((xi - wp[j]).length_squared() < h2) as u64;
+                    }
+                }
+            }
+            count
+        })
+        .sum()
+}
+
+/// Profiles `steps` steps of `scene` on `ctx` (after 2 warm-up steps).
+pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) -> anyhow::Result<Profile> {
+    // Before the particles are created on the host: a scene too big for the adapter fails at once.
+    MemoryPlan::for_scene(scene).check(&ctx)?;
+    let params = scene.params();
+    let initial = scene.initial_state();
+    let (n, w) = (initial.fluid_positions.len() as u64, initial.wall_positions.len() as u64);
+    anyhow::ensure!(n > 0, "the scene {} has no fluid particles to profile", scene.name);
+    let pairs_before = neighbour_pairs(&params, &initial.fluid_positions, &initial.wall_positions);
+    let walls = initial.wall_positions.clone();
+    let choice = BackendChoice::gpu_on(ctx).with_gpu_options(options);
+    let mut gpu = open_with(scene, Some(initial), &choice)?.into_gpu().expect("a GPU was chosen");
+    gpu.advance(2);
+    gpu.wait()?;
+    let cells = params.grid.cell_count() as u64;
+    let bytes = stage_bytes(n, w, cells, params.adaptive.is_some(), gpu.fused());
+    let names = if gpu.fused() { FUSED_STAGE_NAMES } else { PROFILED_STAGES };
+
+    let (timing, times_ns): (&str, Vec<(String, f64, u64)>) = match gpu.profile_stages(steps)? {
+        Some(totals) => (
+            "timestamp queries",
+            names.iter().zip(totals).zip(bytes).map(|((s, t), b)| (s.to_string(), t / steps as f64, b)).collect(),
+        ),
+        None => {
+            let mut total = 0.0;
+            for _ in 0..steps {
+                let t = Instant::now();
+                gpu.advance(1);
+                gpu.wait()?;
+                total += t.elapsed().as_secs_f64() * 1e9;
+            }
+            ("host (whole steps, submit and wait)", vec![("step".to_string(), total / steps as f64, bytes.iter().sum())])
+        }
+    };
+    let t = Instant::now();
+    gpu.advance(steps);
+    gpu.wait()?;
+    let host_step_time_us = t.elapsed().as_secs_f64() * 1e6 / steps as f64;
+    let t = Instant::now();
+    for _ in 0..steps {
+        gpu.advance(1);
+        gpu.wait()?;
+    }
+    let host_step_time_with_waits_us = t.elapsed().as_secs_f64() * 1e6 / steps as f64;
+
+    let health = gpu.health()?;
+    anyhow::ensure!(
+        health.non_finite == 0,
+        "the profiled run went bad: {} non-finite values (first at step {:?})",
+        health.non_finite,
+        health.first_bad_step
+    );
+    let last = gpu.snapshot()?;
+    let pairs_after = neighbour_pairs(&params, &last.positions, &walls);
+    let neighbour_pairs = (pairs_before + pairs_after) / 2;
+
+    let step_ns: f64 = times_ns.iter().map(|s| s.1).sum();
+    anyhow::ensure!(step_ns > 0.0, "the adapter reported a step time of 0 (its timestamps do not advance)");
+    let stages = times_ns
+        .into_iter()
+        .map(|(stage, ns, b)| StageProfile {
+            stage,
+            time_us: ns / 1e3,
+            share_percent: 100.0 * ns / step_ns,
+            bytes_per_step: b,
+            bandwidth_gb_s: if ns > 0.0 { b as f64 / ns } else { 0.0 },
+        })
+        .collect();
+    let memory = gpu.memory_bytes();
+    Ok(Profile {
+        scene: scene.name.clone(),
+        adapter: gpu.adapter(),
+        timing: timing.into(),
+        fluid_particles: n,
+        wall_particles: w,
+        grid_cells: cells,
+        steps,
+        stages,
+        step_time_us: step_ns / 1e3,
+        host_step_time_us,
+        host_step_time_with_waits_us,
+        particle_steps_per_second: n as f64 / (step_ns * 1e-9),
+        neighbour_pairs,
+        interactions_per_second: neighbour_pairs as f64 / (step_ns * 1e-9),
+        gpu_memory_bytes: memory,
+        gpu_bytes_per_particle: memory as f64 / n as f64,
+    })
+}
+
+impl Profile {
+    /// The table `wgsph profile` prints.
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "{}: {} fluid + {} wall particles, {} cells, {} steps on {}\ntiming: {}\n",
+            self.scene, self.fluid_particles, self.wall_particles, self.grid_cells, self.steps, self.adapter, self.timing
+        );
+        s += &format!("{:<16} {:>12} {:>8} {:>14} {:>10}\n", "stage", "µs/step", "share %", "bytes/step", "GB/s");
+        for st in &self.stages {
+            s += &format!(
+                "{:<16} {:>12.1} {:>8.1} {:>14} {:>10.2}\n",
+                st.stage, st.time_us, st.share_percent, st.bytes_per_step, st.bandwidth_gb_s
+            );
+        }
+        s += &format!("{:<16} {:>12.1} {:>8.1}\n", "total", self.step_time_us, 100.0);
+        s += &format!("host wall-clock per step (normal path): {:.1} µs\n", self.host_step_time_us);
+        s += &format!("host wall-clock per step with a wait after every step: {:.1} µs\n", self.host_step_time_with_waits_us);
+        s += &format!("particle-steps/s: {:.3e}\n", self.particle_steps_per_second);
+        s += &format!("neighbour pairs per step: {}; interactions/s (PIPS): {:.3e}\n", self.neighbour_pairs, self.interactions_per_second);
+        s += &format!("GPU memory: {} bytes, {:.1} bytes per particle\n", self.gpu_memory_bytes, self.gpu_bytes_per_particle);
+        s += "bytes/step: compulsory traffic estimated from the arrays each stage reads and writes (a lower bound)\n";
+        s
+    }
+}
+
+pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
+    let mut scene = Scene::load(&args.scene)?;
+    if let Some(n) = args.particles {
+        scene = scene.with_fluid_particles(n);
+        scene.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    }
+    let options = GpuOptions { single_cells: args.single_cells, ..args.tuning.options() };
+    let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
+    print!("{}", profile.table());
+    if let Some(path) = &args.out {
+        write_atomic(path, |w| {
+            serde_json::to_writer_pretty(&mut *w, &profile).map_err(std::io::Error::other)?;
+            writeln!(w)
+        })?;
+        println!("wrote {}", path.display());
+    }
+    Ok(0)
+}

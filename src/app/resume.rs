@@ -1,0 +1,87 @@
+//! `wgsph run --resume DIR`: continues the run in DIR from its checkpoint, bit for bit.
+
+use super::args::RunArgs;
+use super::errors::InputError;
+use super::run::{report_run, run, steps_for_time, ResumedRun, RunOptions};
+use crate::io::checkpoint::{read, Checkpoint, CHECKPOINT_FILE};
+use crate::io::summary::Summary;
+use crate::model::scene::{Scene, SceneOrigin};
+use crate::solver::{open, Backend, BackendChoice, Precision};
+use anyhow::Context;
+use std::path::{Path, PathBuf};
+
+/// Continues the run in `dir` from its checkpoint, to the end it was heading to, or for
+/// `--steps N` / `--time T` more.
+pub fn resume_run(dir: &Path, args: &RunArgs) -> anyhow::Result<i32> {
+    let path = dir.join(CHECKPOINT_FILE);
+    if !path.exists() {
+        return Err(InputError(format!(
+            "--resume {}: there is no checkpoint {} (write one with --checkpoint-every K)",
+            dir.display(),
+            path.display()
+        ))
+        .into());
+    }
+    let c = read(&path).map_err(|e| InputError(format!("--resume: {e}")))?;
+    let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::File(path.clone()))?;
+    let params = scene.params();
+    let step = c.state.step;
+    let end = match (args.steps, args.time) {
+        (Some(n), _) => step + n,
+        (None, Some(t)) => step + steps_for_time(&params, Some(t)),
+        (None, None) => c.run.end_step,
+    };
+    if end <= step {
+        return Err(InputError(format!(
+            "--resume {}: the run already reached step {step} (its end); give --steps N or --time T to continue further",
+            dir.display()
+        ))
+        .into());
+    }
+    let mut sim = open(&scene, &choice_of_kind(&c.state.kind)?)?;
+    let backend = sim.backend();
+    // The CPU path gives the same bits with any number of threads; a GPU may not on another adapter.
+    if c.state.kind == "gpu" && backend.adapter() != c.run.adapter {
+        eprintln!(
+            "warning: the checkpoint was computed on {}; this run uses {}: it continues the run, but not bit for bit as the original adapter would",
+            c.run.adapter,
+            backend.adapter()
+        );
+    }
+    let summary = resume_with(backend, dir, &c, end, !args.quiet)?;
+    report_run(&summary, dir, args.quiet)
+}
+
+/// Restores `c` into `backend` (a fresh one of the kind that saved it) and runs on to step
+/// `end`, writing into `dir` with the settings of the interrupted run.
+pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u64, progress: bool) -> anyhow::Result<Summary> {
+    let step = c.state.step;
+    backend.restore_state(&c.state).with_context(|| format!("cannot restore the checkpoint in {}", dir.display()))?;
+    log::info!("resuming {} at step {step} towards step {end}", dir.display());
+    let opts = RunOptions {
+        steps: end.saturating_sub(step),
+        out: dir.to_path_buf(),
+        snapshot_every: c.run.snapshot_every,
+        check_every: c.run.check_every,
+        progress,
+        formats: c.run.formats.clone(),
+        checkpoint_every: c.run.checkpoint_every,
+        resumed: Some(ResumedRun { last_snapshot: c.run.last_snapshot.as_ref().map(PathBuf::from), max_speed: c.run.max_speed }),
+        frames: None,
+        end_time: c.run.end_time,
+        surface_mesh_every: c.run.surface_mesh_every,
+        surface_mesh_format: c.run.surface_mesh_format,
+    };
+    let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::Text)?;
+    run(backend, &scene, &opts)
+}
+
+/// The backend of the kind that saved a state (`gpu`, `cpu f32`, `cpu f64`).
+pub fn choice_of_kind(kind: &str) -> anyhow::Result<BackendChoice> {
+    Ok(match kind {
+        "gpu" => BackendChoice::gpu(),
+        "cpu f64" => BackendChoice::cpu(Precision::F64),
+        "cpu f32" => BackendChoice::cpu(Precision::F32),
+        other => anyhow::bail!("the checkpoint names an unknown backend '{other}'"),
+    })
+}

@@ -1,0 +1,347 @@
+//! `wgsph run`: the run loop steps a backend, writes snapshots, checkpoints, frames and the
+//! summary, and stops with a diagnosis when the state goes bad.
+
+use super::args::RunArgs;
+use super::errors::InputError;
+use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
+use crate::io::rundir::{prepare_out_dir, write_scene_copy};
+use crate::io::snapshot::format::SnapshotFormat;
+use crate::io::snapshot::SnapshotWriter;
+use crate::io::summary::{write_summary, Summary};
+use crate::io::surface::{write_snapshot_surface, MeshFormat, SurfaceParameters};
+use crate::model::diagnosis::{diagnose, diagnose_at};
+use crate::model::params::Params;
+use crate::model::scene::{Scene, SceneOrigin};
+use crate::model::state::Snapshot;
+use crate::solver::{open, Backend};
+use crate::viz::render::frames::FrameRecorder;
+use crate::viz::render::RenderOptions;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Pictures to write during a run.
+#[derive(Clone, Debug)]
+pub struct FramesSpec {
+    pub dir: PathBuf,
+    /// A picture every this many steps (the first of the run and the last too).
+    pub every: u64,
+    pub options: RenderOptions,
+}
+
+pub struct RunOptions {
+    pub steps: u64,
+    pub out: PathBuf,
+    /// Write a snapshot every this many steps (0: only the first and the last).
+    pub snapshot_every: u64,
+    /// Read the health counters every this many steps.
+    pub check_every: u64,
+    pub progress: bool,
+    pub frames: Option<FramesSpec>,
+    /// Snapshot file formats (the first one is the summary's `last_snapshot`).
+    pub formats: Vec<SnapshotFormat>,
+    /// Write `DIR/checkpoint.wgsph` every this many steps (0: never).
+    pub checkpoint_every: u64,
+    /// Set when the run continues from a checkpoint: no first snapshot is written (the
+    /// interrupted run wrote it), and the VTK series index keeps the earlier snapshots.
+    pub resumed: Option<ResumedRun>,
+    /// With adaptive dt: stop at the first step that reaches this simulated time (`steps` is
+    /// then an upper bound).
+    pub end_time: Option<f64>,
+    /// Reconstruct the fluid surface every this many steps (0: never), into `DIR/surface/`.
+    pub surface_mesh_every: u64,
+    pub surface_mesh_format: MeshFormat,
+}
+
+/// What a resumed run takes over from the run that wrote its checkpoint.
+#[derive(Clone, Debug, Default)]
+pub struct ResumedRun {
+    pub last_snapshot: Option<PathBuf>,
+    pub max_speed: f64,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            steps: 0,
+            out: PathBuf::from("out"),
+            snapshot_every: 0,
+            check_every: 50,
+            progress: false,
+            formats: vec![SnapshotFormat::Csv],
+            checkpoint_every: 0,
+            resumed: None,
+            frames: None,
+            end_time: None,
+            surface_mesh_every: 0,
+            surface_mesh_format: MeshFormat::Obj,
+        }
+    }
+}
+
+/// Steps for a run of `time` seconds (or the scene's end time).
+pub fn steps_for_time(params: &Params, time: Option<f64>) -> u64 {
+    let t = time.unwrap_or(params.end_time);
+    ((t / params.dt) - 1e-9).ceil().max(0.0) as u64
+}
+
+/// Default snapshot interval: about 50 snapshots per run.
+pub fn default_snapshot_every(steps: u64) -> u64 {
+    (steps / 50).max(1)
+}
+
+/// Runs `opts.steps` steps, writing `out/snapshots/step_*.{csv,vtk,ply}`, `out/summary.json` and
+/// checkpoints.
+/// Returns the summary; `summary.failure` is set when the state went bad.
+pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summary> {
+    std::fs::create_dir_all(opts.out.join("snapshots"))?;
+    let params = backend.params().clone();
+    let start = backend.steps_done();
+    let end = start + opts.steps;
+    let bar = if opts.progress && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        // With adaptive dt the bar counts thousandths of the simulated time.
+        let b = indicatif::ProgressBar::new(if opts.end_time.is_some() { 1000 } else { opts.steps });
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} steps  {per_sec}  eta {eta}  {msg}")
+                .expect("valid template"),
+        );
+        Some(b)
+    } else {
+        None
+    };
+    let t0 = Instant::now();
+    let resumed = opts.resumed.clone().unwrap_or_default();
+    let mut last_snapshot: Option<PathBuf> = resumed.last_snapshot;
+    let mut max_speed = resumed.max_speed;
+    let mut failure = None;
+    let mut writer = snapshot_writer(opts, start)?;
+    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
+        // Streamed where the backend can (the GPU): no host copy of every array.
+        if let Some(written) = writer.write_streamed(backend) {
+            (*last, *max_speed) = written.map(|(path, speed)| (Some(path), speed))?;
+            return Ok(None);
+        }
+        let s = backend.snapshot()?;
+        *max_speed = s.max_speed();
+        *last = Some(writer.write(&s)?);
+        Ok(Some(s))
+    };
+    let surface = SurfaceParameters::for_scene(&params, scene.physics.particle_spacing);
+    let write_surface = |backend: &mut dyn Backend, snapshot: Option<Snapshot>| -> anyhow::Result<()> {
+        let s = match snapshot {
+            Some(s) => s,
+            None => backend.snapshot()?,
+        };
+        write_snapshot_surface(&opts.out, &s, &surface, opts.surface_mesh_format)?;
+        Ok(())
+    };
+    if opts.resumed.is_none() {
+        let s = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        if opts.surface_mesh_every > 0 {
+            write_surface(backend, s)?;
+        }
+    }
+    let mut frames = match &opts.frames {
+        Some(f) => Some(FrameRecorder::new(backend, scene, f.options.clone(), f.dir.clone(), f.every.max(1))?),
+        None => None,
+    };
+    if let Some(f) = &mut frames {
+        f.capture(backend)?;
+    }
+    let mut step = start;
+    let mut end = end;
+    while step < end {
+        // The next step at which anything is due (an interval of 0 is never due).
+        let next = |every: u64| if every > 0 { (step / every + 1) * every } else { end };
+        let mut target = [opts.snapshot_every, opts.check_every.max(1), opts.checkpoint_every, opts.surface_mesh_every, frames.as_ref().map_or(0, |f| f.every)]
+            .into_iter()
+            .map(next)
+            .fold(end, u64::min);
+        if let Some(t_end) = opts.end_time {
+            // Adaptive dt: steps of about half the time left, at the current dt, so that the
+            // run ends at the first step reaching t_end.
+            let dt = backend.dt_stats()?.last;
+            let left = t_end - backend.time();
+            // Before the first step there is no dt yet: take one.
+            let chunk = if dt > 0.0 { ((0.5 * left / dt).floor() as u64).max(1) } else { 1 };
+            target = target.min(step + chunk);
+        }
+        backend.step(target - step)?;
+        step = backend.steps_done();
+        // With adaptive dt the time is read from the GPU: once per batch.
+        let time = backend.time();
+        if opts.end_time.is_some_and(|t_end| time >= t_end) {
+            end = step;
+        }
+        let health = backend.health()?;
+        if let Some(b) = &bar {
+            match opts.end_time {
+                Some(t_end) => b.set_position((1000.0 * time / t_end).min(1000.0) as u64),
+                None => b.set_position(step - start),
+            }
+            b.set_message(format!("t = {time:.3}"));
+        }
+        if !health.is_ok() {
+            failure = Some(if params.adaptive.is_some() {
+                let last = Params { dt: backend.dt_stats()?.last, ..params.clone() };
+                diagnose_at(&last, &health, max_speed, time)
+            } else {
+                diagnose(&params, &health, max_speed)
+            });
+            break;
+        }
+        let mut snapshot = None;
+        if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
+            snapshot = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        }
+        if opts.surface_mesh_every > 0 && step % opts.surface_mesh_every == 0 {
+            write_surface(backend, snapshot)?;
+        }
+        if let Some(f) = &mut frames {
+            if step == end || step % f.every == 0 {
+                f.capture(backend)?;
+            }
+        }
+        if opts.checkpoint_every > 0 && step % opts.checkpoint_every == 0 {
+            let path = opts.out.join(CHECKPOINT_FILE);
+            let record = run_record(backend, opts, end, last_snapshot.as_deref(), max_speed);
+            checkpoint::save(backend, &scene.to_toml(), &record, &path)?;
+            log::info!("wrote {} at step {step}", path.display());
+        }
+    }
+    let frames_written = match frames {
+        Some(f) => f.finish()?,
+        None => 0,
+    };
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let wall_seconds = t0.elapsed().as_secs_f64();
+    let health = backend.health()?;
+    let steps = backend.steps_done() - start;
+    let dt_stats = backend.dt_stats()?;
+    let summary = Summary {
+        scene: scene.name.clone(),
+        backend: backend.kind().into(),
+        adapter: backend.adapter(),
+        fluid_particles: backend.fluid_count(),
+        wall_particles: backend.wall_count(),
+        steps,
+        sim_time: backend.time(),
+        dt: params.dt,
+        dt_min: dt_stats.min,
+        dt_max: dt_stats.max,
+        dt_mean: dt_stats.mean,
+        wall_seconds,
+        particle_steps_per_second: if wall_seconds > 0.0 { (steps as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
+        max_density_ratio: health.max_density / params.rest_density,
+        nan_count: health.non_finite,
+        escaped: health.escaped,
+        failure: failure.clone(),
+        last_snapshot: last_snapshot.as_ref().map(|p| p.display().to_string()),
+        frames: frames_written,
+    };
+    write_summary(&opts.out.join("summary.json"), &summary)?;
+    Ok(summary)
+}
+
+/// The one-line summary printed at the end of a run.
+pub fn summary_line(s: &Summary, out: &Path) -> String {
+    format!(
+        "{}: {} fluid + {} wall particles, {} steps to t = {:.4} (dt min/max/mean {:.3e}/{:.3e}/{:.3e}) on {} in {:.2} s ({:.3e} particle-steps/s), max rho/rho0 = {:.4}, nan = {}, escaped = {} -> {}",
+        s.scene, s.fluid_particles, s.wall_particles, s.steps, s.sim_time, s.dt_min, s.dt_max, s.dt_mean, s.adapter, s.wall_seconds,
+        s.particle_steps_per_second, s.max_density_ratio, s.nan_count, s.escaped, out.display()
+    )
+}
+
+/// `wgsph run` (without `--resume`): a new run.
+pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
+    if let Some(t) = args.time {
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
+        }
+    }
+    let mut scene = Scene::load(&args.scene)?;
+    if let Some(n) = args.particles {
+        scene = scene.with_fluid_particles(n);
+        scene.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    }
+    let params = scene.params();
+    let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
+    if args.checkpoint_every > 0 && params.rebuild_every > 1 {
+        return Err(InputError(format!(
+            "--checkpoint-every {} needs time.neighbour_rebuild_every = 1 (the scene has {}): between rebuilds the state depends on the grid of the last rebuild, which a checkpoint does not hold",
+            args.checkpoint_every, params.rebuild_every
+        ))
+        .into());
+    }
+    prepare_out_dir(&args.out, args.overwrite)?;
+    write_scene_copy(&args.out, &scene)?;
+    // With adaptive dt a run to a time has no step count known in advance.
+    let end_time = (params.adaptive.is_some() && args.steps.is_none()).then(|| args.time.unwrap_or(params.end_time));
+    let mut sim = open(&scene, &args.backend_choice())?;
+    let opts = RunOptions {
+        steps: if end_time.is_some() { u64::MAX / 4 } else { steps },
+        out: args.out.clone(),
+        snapshot_every: args.snapshot_every.unwrap_or_else(|| default_snapshot_every(steps)),
+        check_every: args.check_every,
+        progress: !args.quiet,
+        formats: args.formats.clone(),
+        checkpoint_every: args.checkpoint_every,
+        resumed: None,
+        frames: args.frames.as_ref().map(|dir| FramesSpec {
+            dir: dir.clone(),
+            every: args.frame_every.unwrap_or((steps / 100).max(1)),
+            options: args.picture.options(),
+        }),
+        end_time,
+        surface_mesh_every: args.surface_mesh_every,
+        surface_mesh_format: args.surface_mesh_format,
+    };
+    let summary = run(sim.backend(), &scene, &opts)?;
+    if let (Some(dir), false) = (&args.frames, args.quiet) {
+        println!("{} pictures in {}", summary.frames, dir.display());
+    }
+    report_run(&summary, &args.out, args.quiet)
+}
+
+/// Prints the end of a run (the summary line unless quiet; the failure, if any) and returns
+/// its exit code.
+pub fn report_run(summary: &Summary, out: &std::path::Path, quiet: bool) -> anyhow::Result<i32> {
+    if !quiet {
+        println!("{}", summary_line(summary, out));
+    }
+    if let Some(f) = &summary.failure {
+        eprintln!("error: the run stopped at {f}");
+        if let Some(s) = &summary.last_snapshot {
+            eprintln!("the last good snapshot is {s}; the summary is {}", out.join("summary.json").display());
+        }
+        return Ok(1);
+    }
+    Ok(0)
+}
+
+/// The snapshot writer of a run; a resumed run keeps the series index up to its first step.
+fn snapshot_writer(opts: &RunOptions, start_step: u64) -> anyhow::Result<SnapshotWriter> {
+    if opts.resumed.is_some() {
+        SnapshotWriter::resume(&opts.out, &opts.formats, start_step)
+    } else {
+        Ok(SnapshotWriter::new(&opts.out, &opts.formats))
+    }
+}
+
+/// The settings of the run, as a checkpoint records them.
+pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_snapshot: Option<&Path>, max_speed: f64) -> RunRecord {
+    RunRecord {
+        end_step,
+        snapshot_every: opts.snapshot_every,
+        check_every: opts.check_every,
+        checkpoint_every: opts.checkpoint_every,
+        formats: opts.formats.clone(),
+        adapter: backend.adapter(),
+        last_snapshot: last_snapshot.map(|p| p.display().to_string()),
+        max_speed,
+        end_time: opts.end_time,
+        surface_mesh_every: opts.surface_mesh_every,
+        surface_mesh_format: opts.surface_mesh_format,
+    }
+}

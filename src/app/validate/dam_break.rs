@@ -1,0 +1,231 @@
+//! The collapse of a water column twice as tall as wide: Martin & Moyce (1952) in dimensionless
+//! form and Koshizuka & Oka (1996) in metres.
+//!
+//! Measurement: the surge front is the largest x of the fluid particles within one support
+//! radius h of the floor that is reached from the back wall without a gap wider than h (so a
+//! drop thrown ahead is not the front), plus half a particle spacing (a particle stands for a
+//! cube of side s, so the water's edge lies s/2 beyond its centre; at t = 0 this gives exactly
+//! the column's width). The residual height is measured the same way upwards along the back
+//! wall: the particles within h of it, from the floor up to the first gap wider than h, plus s/2.
+
+use super::data::{self, relative_errors};
+use super::scenes::{WALL_LAYERS, H_OVER_SPACING, sample_steps, Tank, GRAVITY, SLAB_SPACINGS};
+use super::case::{write_csv, Case, CaseReport, Figure, MakeBackend, Resolution, Sampler};
+use crate::viz::plot::{Corner, Plot};
+use crate::model::scene::BoundaryPressure;
+use crate::model::scene::Kernel;
+use std::path::Path;
+
+/// Artificial viscosity coefficient of the dam breaks (nu = alpha h c0 / 8): low, as for a
+/// free-surface flow, still enough to keep the particles ordered.
+pub const ALPHA: f64 = 0.05;
+
+/// Column width a in particle spacings at each resolution.
+pub fn column_resolution(r: Resolution) -> f64 {
+    24.0 * r.refinement()
+}
+
+/// Comparison starts at T = t sqrt(2g/a) = 1: earlier, the measurements carry the gate's
+/// release (data/validation README).
+pub const T_FROM: f64 = 1.0;
+
+/// Tolerances: (RMS, max) relative error of the front and of the residual height.
+pub struct DamBreakTolerances {
+    pub front_rms: f64,
+    pub front_max: f64,
+    pub height_rms: f64,
+    pub height_max: f64,
+}
+
+pub fn tolerances(r: Resolution) -> DamBreakTolerances {
+    match r {
+        Resolution::Coarse => DamBreakTolerances { front_rms: 0.15, front_max: 0.25, height_rms: 0.2, height_max: 0.5 },
+        _ => DamBreakTolerances { front_rms: 0.15, front_max: 0.2, height_rms: 0.15, height_max: 0.4 },
+    }
+}
+
+/// A column `a` wide and 2a tall at the back wall of a closed tank `length` x `3a`.
+pub fn column_tank(name: &str, a: f64, length: f64, resolution: Resolution, end_time: f64) -> Tank {
+    let s = a / column_resolution(resolution);
+    // c0 = 10 sqrt(2 g H0), ten times the largest speed of the collapse (H0 = 2a).
+    let c0 = 10.0 * (2.0 * GRAVITY * 2.0 * a).sqrt();
+    let depth = SLAB_SPACINGS * s;
+    Tank {
+        name: name.into(),
+        spacing: s,
+        size: [length, 3.0 * a, depth],
+        fluid: vec![([0.0; 3], [a, 2.0 * a, depth], [0.0; 3])],
+        h_over_spacing: H_OVER_SPACING,
+        speed_of_sound: c0,
+        alpha: ALPHA,
+        end_time,
+        gravity: [0.0, -GRAVITY, 0.0],
+        kernel: Kernel::CubicSpline,
+        walls: true,
+        planes: true,
+        wall_layers: WALL_LAYERS,
+        boundary_pressure: BoundaryPressure::Mirror,
+    }
+}
+
+/// One sample of a collapse: time, front x, residual height at the back wall (metres).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CollapseSample {
+    pub time: f64,
+    pub front: f64,
+    pub height: f64,
+}
+
+/// Front and back-wall height of a snapshot (see the module documentation).
+pub fn measure(positions: &[[f64; 3]], h: f64, spacing: f64) -> (f64, f64) {
+    let floor: Vec<f64> = positions.iter().filter(|x| x[1] < h).map(|x| x[0]).collect();
+    let wall: Vec<f64> = positions.iter().filter(|x| x[0] < h).map(|x| x[1]).collect();
+    (contiguous_extent(floor, h) + 0.5 * spacing, contiguous_extent(wall, h) + 0.5 * spacing)
+}
+
+/// The farthest coordinate reached from the smallest one without a gap wider than `gap`:
+/// detached drops ahead of a front (or above a column) are not part of it.
+pub fn contiguous_extent(mut values: Vec<f64>, gap: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let mut end = match values.first() {
+        Some(&v) => v,
+        None => return f64::NAN,
+    };
+    for &v in &values[1..] {
+        if v - end > gap {
+            break;
+        }
+        end = v;
+    }
+    end
+}
+
+pub struct Collapse {
+    pub samples: Vec<CollapseSample>,
+    pub sampler: Sampler,
+    pub failure: Option<String>,
+    pub fluid_particles: usize,
+    pub adapter: String,
+    pub spacing: f64,
+}
+
+/// Runs a column collapse, sampling every `every` seconds.
+pub fn collapse(tank: &Tank, every: f64, make: &mut MakeBackend) -> anyhow::Result<Collapse> {
+    let scene = tank.scene()?;
+    let params = scene.params();
+    let mut backend = make(&scene, None)?;
+    let mut sampler = Sampler::new(&scene);
+    let mut samples = Vec::new();
+    let (h, s) = (params.h, tank.spacing);
+    let first = backend.snapshot()?;
+    let (front, height) = measure(&first.positions, h, s);
+    samples.push(CollapseSample { time: 0.0, front, height });
+    let steps = sample_steps(every, tank.end_time, params.dt);
+    let result = sampler.run(backend.as_mut(), steps, |snap| {
+        let (front, height) = measure(&snap.positions, h, s);
+        samples.push(CollapseSample { time: snap.time, front, height });
+    })?;
+    Ok(Collapse { samples, sampler, failure: result.err(), fluid_particles: backend.fluid_count(), adapter: backend.adapter(), spacing: s })
+}
+
+/// Martin & Moyce (1952): Z = x/a against T = t sqrt(2g/a), H = h/(2a) against tau = t sqrt(g/a).
+pub fn run_martin_moyce(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow::Result<CaseReport> {
+    // The experiment's column: a = 2.25 in (Martin & Moyce 1952).
+    let a = 0.05715;
+    let t_scale = (2.0 * GRAVITY / a).sqrt();
+    let tau_scale = (GRAVITY / a).sqrt();
+    let front_data = data::parse_xy(data::MARTIN_MOYCE_FRONT);
+    let height_data = data::parse_xy(data::MARTIN_MOYCE_HEIGHT);
+    let tau_end = height_data.last().map(|p| p.0).unwrap_or(7.4) + 0.1;
+    // A tank 8a long: the front (Z <= 4.1 in the data) runs free, and the bore reflected from
+    // the far wall does not reach the back wall within the measured residual heights.
+    let tank = column_tank("martin_moyce", a, 8.0 * a, resolution, tau_end / tau_scale);
+    let run = collapse(&tank, 0.05 / t_scale, make)?;
+    // A sample without any particle near the floor (NaN) would only come from a failed run.
+    let z: Vec<(f64, f64)> = run.samples.iter().map(|s| (s.time * t_scale, s.front / a)).filter(|p| p.1.is_finite()).collect();
+    let hh: Vec<(f64, f64)> = run.samples.iter().map(|s| (s.time * tau_scale, s.height / (2.0 * a))).filter(|p| p.1.is_finite()).collect();
+    let tol = tolerances(resolution);
+    let (zr, zm, _) = relative_errors(&z, &front_data, |t| t >= T_FROM);
+    // T >= 1 is tau >= 1/sqrt(2).
+    let (hr, hm, _) = relative_errors(&hh, &height_data, |tau| tau * std::f64::consts::SQRT_2 >= T_FROM);
+    let figures = vec![
+        Figure::new("front RMS relative error", zr, tol.front_rms),
+        Figure::new("front max relative error", zm, tol.front_max),
+        Figure::new("height RMS relative error", hr, tol.height_rms),
+        Figure::new("height max relative error", hm, tol.height_max),
+    ];
+    let name = Case::DamBreakMartinMoyce.name();
+    let plot = out.join(format!("{name}.png"));
+    let csv = out.join(format!("{name}.csv"));
+    let rows: Vec<Vec<f64>> = run
+        .samples
+        .iter()
+        .map(|s| vec![s.time, s.time * t_scale, s.time * tau_scale, s.front / a, s.height / (2.0 * a)])
+        .collect();
+    write_csv(&csv, &["t_s", "T", "tau", "Z", "H"], &rows)?;
+    let z_shown: Vec<(f64, f64)> = z.iter().copied().filter(|p| p.0 <= 4.0).collect();
+    Plot::new(
+        format!("Dam break, Martin & Moyce 1952 ({} particles, {})", run.fluid_particles, resolution.name()),
+        "T = t sqrt(2g/a) for Z,   tau = t sqrt(g/a) for H",
+        "Z = x_front / a,   H = h_column / 2a",
+    )
+    .line("Z, simulation", z_shown)
+    .points("Z, Martin & Moyce", front_data)
+    .line("H, simulation", hh)
+    .points("H, Martin & Moyce", height_data)
+    .legend(Corner::UpperRight)
+    .write_png(&plot)?;
+    Ok(report(Case::DamBreakMartinMoyce, resolution, run, figures, plot, csv))
+}
+
+/// Koshizuka & Oka (1996): a 1 m x 2 m column in a 4 m tank, the front in metres against time.
+pub fn run_koshizuka_oka(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow::Result<CaseReport> {
+    let a = 1.0;
+    let length = 4.0;
+    let measured = data::parse_xy(data::KOSHIZUKA_OKA_FRONT);
+    // To t = 0.8 s: past the last measurement and the impact on the far wall.
+    let tank = column_tank("koshizuka_oka", a, length, resolution, 0.8);
+    let run = collapse(&tank, 0.005, make)?;
+    let front: Vec<(f64, f64)> = run.samples.iter().map(|s| (s.time, s.front)).filter(|p| p.1.is_finite()).collect();
+    let t_from = T_FROM / (2.0 * GRAVITY / a).sqrt();
+    // Points beyond the far wall (x >= 4 m) cannot be reached in a 4 m tank.
+    let (rms, max, _) = relative_errors(
+        &front,
+        &measured.iter().copied().filter(|p| p.1 < length).collect::<Vec<_>>(),
+        |t| t >= t_from,
+    );
+    let tol = tolerances(resolution);
+    let figures = vec![Figure::new("front RMS relative error", rms, tol.front_rms), Figure::new("front max relative error", max, tol.front_max)];
+    let name = Case::DamBreakKoshizukaOka.name();
+    let plot = out.join(format!("{name}.png"));
+    let csv = out.join(format!("{name}.csv"));
+    let rows: Vec<Vec<f64>> = run.samples.iter().map(|s| vec![s.time, s.front, s.height]).collect();
+    write_csv(&csv, &["t_s", "front_m", "back_wall_height_m"], &rows)?;
+    Plot::new(
+        format!("Dam break, Koshizuka & Oka 1996 ({} particles, {})", run.fluid_particles, resolution.name()),
+        "t [s]",
+        "front position x [m]",
+    )
+    .line("simulation", front)
+    .points("Koshizuka & Oka", measured)
+    .y_range(0.8, 4.3)
+    .write_png(&plot)?;
+    Ok(report(Case::DamBreakKoshizukaOka, resolution, run, figures, plot, csv))
+}
+
+fn report(case: Case, resolution: Resolution, run: Collapse, figures: Vec<Figure>, plot: std::path::PathBuf, csv: std::path::PathBuf) -> CaseReport {
+    CaseReport {
+        case,
+        resolution,
+        fluid_particles: run.fluid_particles,
+        adapter: run.adapter,
+        figures,
+        wall_leaks: run.sampler.wall_leaks,
+        deepest_spacings: run.sampler.deepest / run.spacing,
+        checked_steps: run.sampler.checked_steps,
+        plot,
+        csv,
+        wall_seconds: 0.0,
+        failure: run.failure,
+    }
+}

@@ -1,0 +1,172 @@
+//! Water at rest in a tank: after settling, the pressure against depth is compared with
+//! rho0 g (H - y) and the density with the rest density.
+//!
+//! A 3D tank (a slab's walls in depth would stand in for part of every particle's pressure
+//! gradient). The pressure and density are averaged per particle over the last third of the run (sampled
+//! every 10 ms), which removes the small acoustic oscillation that remains of the settling,
+//! and then per horizontal layer one support radius h thick, over the particles more than h from
+//! the side walls. H is the depth the fluid's mass fills
+//! at the rest density (the initial block's height).
+
+use super::scenes::{WALL_LAYERS, sample_steps, Tank, GRAVITY, H_OVER_SPACING};
+use super::case::{write_csv, Case, CaseReport, Figure, MakeBackend, Resolution, Sampler};
+use crate::viz::plot::{Corner, Mark, Plot};
+use crate::model::scene::BoundaryPressure;
+use crate::model::scene::Kernel;
+use std::path::Path;
+
+/// Water depth H and tank width (m).
+pub const DEPTH: f64 = 0.4;
+/// Settling time, then the averaging window (s).
+pub const SETTLE: f64 = 0.8;
+pub const WINDOW: f64 = 0.4;
+
+pub fn layers(r: Resolution) -> f64 {
+    20.0 * r.refinement()
+}
+
+/// (pressure error below the surface layer, pressure error over the whole depth, density
+/// deviation below the surface layer, residual speed / sqrt(gH)).
+pub fn tolerances(r: Resolution) -> [f64; 4] {
+    match r {
+        Resolution::Coarse => [0.12, 0.12, 0.01, 0.05],
+        _ => [0.04, 0.04, 0.01, 0.05],
+    }
+}
+
+pub fn tank(resolution: Resolution) -> Tank {
+    let s = DEPTH / layers(resolution);
+    Tank {
+        name: "hydrostatic_validation".into(),
+        spacing: s,
+        size: [DEPTH, 1.25 * DEPTH, DEPTH],
+        fluid: vec![([0.0; 3], [DEPTH, DEPTH, DEPTH], [0.0; 3])],
+        // Ten times sqrt(2 g H), the speed a particle falling from the surface would reach.
+        h_over_spacing: H_OVER_SPACING,
+        speed_of_sound: 10.0 * (2.0 * GRAVITY * DEPTH).sqrt(),
+        // Strong: it is there to damp the settling, and leaves the state at rest unchanged.
+        alpha: 0.3,
+        end_time: SETTLE + WINDOW,
+        gravity: [0.0, -GRAVITY, 0.0],
+        kernel: Kernel::CubicSpline,
+        walls: true,
+        planes: true,
+        wall_layers: WALL_LAYERS,
+        boundary_pressure: BoundaryPressure::Mirror,
+    }
+}
+
+pub fn run(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow::Result<CaseReport> {
+    let tank = tank(resolution);
+    let scene = tank.scene()?;
+    let params = scene.params();
+    let mut backend = make(&scene, None)?;
+    let n = backend.fluid_count();
+    let mut sampler = Sampler::new(&scene);
+    let mut p_sum = vec![0.0; n];
+    let mut rho_sum = vec![0.0; n];
+    let mut y_sum = vec![0.0; n];
+    let mut x_sum = vec![[0.0; 3]; n];
+    let mut count = 0usize;
+    let mut last_speed = f64::NAN;
+    let settle_steps = super::scenes::steps_to(SETTLE, params.dt);
+    let mut steps: Vec<u64> = sample_steps(0.1, SETTLE, params.dt);
+    steps.extend(sample_steps(0.01, WINDOW, params.dt).into_iter().map(|k| k + settle_steps));
+    let result = sampler.run(backend.as_mut(), steps, |snap| {
+        if snap.step > settle_steps {
+            for i in 0..n {
+                p_sum[i] += snap.pressures[i];
+                rho_sum[i] += snap.densities[i];
+                y_sum[i] += snap.positions[i][1];
+                x_sum[i][0] += snap.positions[i][0];
+                x_sum[i][2] += snap.positions[i][2];
+            }
+            count += 1;
+            last_speed = snap.max_speed();
+        }
+    })?;
+    let rho0 = params.rest_density;
+    let g = GRAVITY;
+    let h = params.h;
+    let c = count.max(1) as f64;
+    let (p, rho, y): (Vec<f64>, Vec<f64>, Vec<f64>) =
+        ((0..n).map(|i| p_sum[i] / c).collect(), (0..n).map(|i| rho_sum[i] / c).collect(), (0..n).map(|i| y_sum[i] / c).collect());
+    // Layers one support radius h thick, by mean height: the resolution at which SPH defines a
+    // field (single particle layers alternate by a few percent of rho g H, an odd-even pattern
+    // of the settled lattice).
+    let nl = (DEPTH / h).ceil() as usize + 2;
+    let mut layer = vec![(0.0, 0.0, 0.0, 0usize); nl];
+    let mut x_mean = vec![[0.0; 3]; n];
+    for i in 0..n {
+        x_mean[i] = [x_sum[i][0] / c, y[i], x_sum[i][2] / c];
+    }
+    // The interior column: more than h from the side walls, where the walls' mirrored pressure
+    // would stand in for the fluid's own pressure gradient.
+    let interior = |x: [f64; 3]| x[0] > h && x[0] < DEPTH - h && x[2] > h && x[2] < DEPTH - h;
+    for i in (0..n).filter(|&i| interior(x_mean[i])) {
+        let k = ((y[i] / h).floor().max(0.0) as usize).min(nl - 1);
+        layer[k].0 += y[i];
+        layer[k].1 += p[i];
+        layer[k].2 += rho[i];
+        layer[k].3 += 1;
+    }
+    let scale = rho0 * g * DEPTH;
+    let mut rows = Vec::new();
+    let (mut err_interior, mut err_all, mut rho_dev) = (0.0f64, 0.0f64, 0.0f64);
+    for l in layer.iter().filter(|l| l.3 > 0) {
+        let m = l.3 as f64;
+        let (ly, lp, lrho) = (l.0 / m, l.1 / m, l.2 / m);
+        let expected = rho0 * g * (DEPTH - ly).max(0.0);
+        let e = (lp - expected).abs() / scale;
+        err_all = err_all.max(e);
+        if ly < DEPTH - h {
+            err_interior = err_interior.max(e);
+            rho_dev = rho_dev.max((lrho / rho0 - 1.0).abs());
+        }
+        rows.push(vec![ly, lp, expected, lrho / rho0, l.3 as f64]);
+    }
+    if count == 0 {
+        err_interior = f64::NAN;
+        err_all = f64::NAN;
+        rho_dev = f64::NAN;
+    }
+    let tol = tolerances(resolution);
+    let figures = vec![
+        Figure::new("pressure error / rho g H below the top h", err_interior, tol[0]),
+        Figure::new("pressure error / rho g H, whole depth", err_all, tol[1]),
+        Figure::new("layer density deviation from rest below the top h", rho_dev, tol[2]),
+        Figure::new("residual speed / sqrt(g H)", last_speed / (g * DEPTH).sqrt(), tol[3]),
+    ];
+    let name = Case::Hydrostatic.name();
+    let plot = out.join(format!("{name}.png"));
+    let csv = out.join(format!("{name}.csv"));
+    write_csv(&csv, &["y_m", "pressure_pa", "expected_pa", "density_over_rest", "particles"], &rows)?;
+    let exact = vec![(scale, 0.0), (0.0, DEPTH)];
+    Plot::new(format!("Hydrostatic pressure ({n} particles, {})", resolution.name()), "pressure [Pa]", "height y [m]")
+        .points("interior particles (time-averaged)", (0..n).filter(|&i| interior(x_mean[i])).map(|i| (p[i], y[i])).collect())
+        .series(crate::viz::plot::Series {
+            name: "layer means".into(),
+            points: rows.iter().map(|r| (r[1], r[0])).collect(),
+            mark: Mark::Points,
+            labels: None,
+            highlight: true,
+            color: None,
+        })
+        .line("rho0 g (H - y)", exact)
+        .legend(Corner::UpperRight)
+        .write_png(&plot)?;
+    Ok(CaseReport {
+        case: Case::Hydrostatic,
+        resolution,
+        fluid_particles: n,
+        adapter: backend.adapter(),
+        figures,
+        wall_leaks: sampler.wall_leaks,
+        deepest_spacings: sampler.deepest / tank.spacing,
+        checked_steps: sampler.checked_steps,
+        plot,
+        csv,
+        wall_seconds: 0.0,
+        failure: result.err(),
+    })
+}

@@ -1,0 +1,303 @@
+//! Checkpoints: the full state of a run in one file, `DIR/checkpoint.wgsph`, from which
+//! `wgsph run --resume DIR` continues bit for bit.
+//!
+//! Layout (little-endian): the magic `WGSPHCKP`, the format version (u32), the length (u16) and
+//! text of the wgsph version that wrote it, the payload length (u64), the payload's CRC-32
+//! (u32), then the payload: [`Checkpoint`] serialised with postcard. A checkpoint from another
+//! format or wgsph version, or one whose checksum or length does not match, is refused. The file
+//! is written beside its target and renamed over it, so the previous checkpoint stays intact
+//! until the new one is complete. The payload is written as it is serialised and its length and
+//! checksum filled in at the end, so a backend's state goes to the file in pieces as the backend
+//! hands them over ([`Backend::visit_state_array`]); reading streams the file too (a checksum
+//! pass, then decoding), holding only the decoded state. This is the file format alone: the
+//! resumed run is the app's (`app::resume`).
+
+use crate::io::atomic::AtomicFile;
+use crate::io::snapshot::format::SnapshotFormat;
+use crate::io::surface::MeshFormat;
+use crate::model::state::BackendState;
+use crate::solver::{Backend, StateArray, StatePiece};
+use anyhow::Context;
+use serde::ser::{Error as _, SerializeSeq, Serializer};
+use serde::{Deserialize, Serialize};
+use std::cell::RefCell;
+use std::path::Path;
+
+/// The checkpoint file in a run directory.
+pub const CHECKPOINT_FILE: &str = "checkpoint.wgsph";
+const MAGIC: &[u8; 8] = b"WGSPHCKP";
+/// Bumped whenever the payload's layout or meaning changes.
+pub const FORMAT_VERSION: u32 = 2;
+/// The wgsph version written into (and required of) checkpoints.
+pub const WGSPH_VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// What a run needs to continue: the scene, how the run was set up, and the backend's state.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Checkpoint {
+    /// The resolved scene as TOML (what `DIR/scene.toml` holds).
+    pub scene_toml: String,
+    pub run: RunRecord,
+    pub state: BackendState,
+}
+
+/// The settings of the run that wrote a checkpoint.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// The step the run was heading to.
+    pub end_step: u64,
+    pub snapshot_every: u64,
+    pub check_every: u64,
+    pub checkpoint_every: u64,
+    pub formats: Vec<SnapshotFormat>,
+    /// The adapter (or CPU float type) that computed the state.
+    pub adapter: String,
+    pub last_snapshot: Option<String>,
+    /// The largest speed in the last snapshot (for the diagnosis of a later blow-up).
+    pub max_speed: f64,
+    /// With adaptive dt, the simulated time the run was heading to.
+    pub end_time: Option<f64>,
+    pub surface_mesh_every: u64,
+    pub surface_mesh_format: MeshFormat,
+}
+
+/// A checkpoint that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    #[error("{path}: cannot read the checkpoint: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("{0}: not a wgsph checkpoint (wrong magic bytes)")]
+    NotACheckpoint(String),
+    #[error("{path}: written by wgsph {version} (checkpoint format {format}); this is wgsph {WGSPH_VERSION} (format {FORMAT_VERSION}), which only resumes its own checkpoints")]
+    OtherVersion { path: String, version: String, format: u32 },
+    #[error("{path}: the checkpoint is corrupt ({why}); it cannot be resumed")]
+    Corrupt { path: String, why: String },
+}
+
+/// Writes a checkpoint atomically.
+pub fn write(path: &Path, c: &Checkpoint) -> anyhow::Result<()> {
+    write_with_state(path, &c.scene_toml, &c.run, |w| {
+        postcard::to_io(&c.state, w).context("cannot serialise the checkpoint")?;
+        Ok(())
+    })
+}
+
+/// Writes a checkpoint atomically whose state `write_state` serialises (with postcard, as
+/// [`BackendState`]) into the writer it is given, in pieces if it likes: the payload goes to
+/// the file as it comes, and its length and checksum are filled into the header at the end.
+pub fn write_with_state(
+    path: &Path,
+    scene_toml: &str,
+    run: &RunRecord,
+    write_state: impl FnOnce(&mut dyn std::io::Write) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    use std::io::{Seek, SeekFrom, Write};
+    let mut file = AtomicFile::create(path)?;
+    let cannot = || format!("cannot write {}", path.display());
+    file.write_all(MAGIC).with_context(cannot)?;
+    file.write_all(&FORMAT_VERSION.to_le_bytes()).with_context(cannot)?;
+    file.write_all(&(WGSPH_VERSION.len() as u16).to_le_bytes()).with_context(cannot)?;
+    file.write_all(WGSPH_VERSION.as_bytes()).with_context(cannot)?;
+    let length_at = file.stream_position().with_context(cannot)?;
+    file.write_all(&[0; 12]).with_context(cannot)?;
+    let mut payload = Payload { out: &mut file, crc: crc32fast::Hasher::new(), len: 0, failure: None };
+    // Checkpoint's fields in order: postcard writes a struct as its fields one after the other.
+    let written = match postcard::to_io(&(scene_toml, run), &mut payload) {
+        Ok(_) => write_state(&mut payload),
+        Err(e) => Err(anyhow::Error::from(e).context("cannot serialise the checkpoint")),
+    };
+    if let Some(e) = payload.failure.take() {
+        return Err(e).with_context(cannot);
+    }
+    written?;
+    let (len, crc) = (payload.len, payload.crc.finalize());
+    file.seek(SeekFrom::Start(length_at)).with_context(cannot)?;
+    file.write_all(&len.to_le_bytes()).with_context(cannot)?;
+    file.write_all(&crc.to_le_bytes()).with_context(cannot)?;
+    file.commit()
+}
+
+/// The payload on its way to the file: counted and checksummed as it is written.
+struct Payload<'a> {
+    out: &'a mut AtomicFile,
+    crc: crc32fast::Hasher,
+    len: u64,
+    /// The first write error (postcard reports only that the output failed).
+    failure: Option<std::io::Error>,
+}
+
+impl std::io::Write for Payload<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match self.out.write(buf) {
+            Ok(n) => {
+                self.crc.update(&buf[..n]);
+                self.len += n as u64;
+                Ok(n)
+            }
+            Err(e) => {
+                let again = std::io::Error::new(e.kind(), e.to_string());
+                self.failure.get_or_insert(e);
+                Err(again)
+            }
+        }
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
+}
+
+/// Reads and checks a checkpoint, streaming the file: one pass checks the payload's length
+/// and checksum, a second decodes it, so the host never holds the file's bytes besides the
+/// state decoded from them.
+pub fn read(path: &Path) -> Result<Checkpoint, CheckpointError> {
+    use std::io::{BufReader, Read, Seek, SeekFrom};
+    let p = path.display().to_string();
+    let io = |source| CheckpointError::Io { path: p.clone(), source };
+    let corrupt = |why: &str| CheckpointError::Corrupt { path: p.clone(), why: why.into() };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let file_len = file.metadata().map_err(io)?.len();
+    let mut r = BufReader::with_capacity(1 << 20, file);
+    // Reads exactly n bytes of the header; None when the file ends first.
+    let mut take = |n: usize| -> Result<Option<Vec<u8>>, CheckpointError> {
+        let mut bytes = vec![0; n];
+        match r.read_exact(&mut bytes) {
+            Ok(()) => Ok(Some(bytes)),
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => Ok(None),
+            Err(e) => Err(io(e)),
+        }
+    };
+    if take(8)?.as_deref() != Some(MAGIC.as_slice()) {
+        return Err(CheckpointError::NotACheckpoint(p));
+    }
+    let truncated = || corrupt("the file is truncated");
+    let format = u32::from_le_bytes(take(4)?.ok_or_else(truncated)?.try_into().expect("4 bytes"));
+    let len = u16::from_le_bytes(take(2)?.ok_or_else(truncated)?.try_into().expect("2 bytes")) as usize;
+    let version = String::from_utf8_lossy(&take(len)?.ok_or_else(truncated)?).into_owned();
+    if format != FORMAT_VERSION || version != WGSPH_VERSION {
+        return Err(CheckpointError::OtherVersion { path: p, version, format });
+    }
+    let payload_len = u64::from_le_bytes(take(8)?.ok_or_else(truncated)?.try_into().expect("8 bytes"));
+    let crc = u32::from_le_bytes(take(4)?.ok_or_else(truncated)?.try_into().expect("4 bytes"));
+    let payload_at = (8 + 4 + 2 + len + 8 + 4) as u64;
+    let have = file_len - payload_at;
+    if have != payload_len {
+        return Err(corrupt(&format!("the payload has {have} bytes, the header says {payload_len}")));
+    }
+    let mut hasher = crc32fast::Hasher::new();
+    let mut piece = vec![0u8; 1 << 20];
+    loop {
+        let n = r.read(&mut piece).map_err(io)?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&piece[..n]);
+    }
+    if hasher.finalize() != crc {
+        return Err(corrupt("checksum mismatch"));
+    }
+    r.seek(SeekFrom::Start(payload_at)).map_err(io)?;
+    // Room for the payload's strings (the scene's TOML and the run's names), which postcard
+    // decodes through this buffer; the particle arrays go straight into the state.
+    let mut scratch = vec![0u8; (payload_len as usize).min(16 << 20)];
+    postcard::from_io((r.take(payload_len), scratch.as_mut_slice()))
+        .map(|(c, _)| c)
+        .map_err(|e| corrupt(&format!("cannot decode the payload: {e}")))
+}
+
+/// The checkpoint of a backend's current state.
+pub fn capture(backend: &mut dyn Backend, scene_toml: &str, run: RunRecord) -> anyhow::Result<Checkpoint> {
+    Ok(Checkpoint { scene_toml: scene_toml.to_string(), run, state: backend.save_state()? })
+}
+
+/// Writes the checkpoint of a backend's current state to `path`: the same bytes as [`write()`]
+/// of [`capture`], with the particle arrays taken from the backend in pieces of
+/// [`crate::solver::gpu::buffers::STREAM_CHUNK`] particles, so that no host copy of every array
+/// is made where the backend keeps them elsewhere (the GPU).
+pub fn save(backend: &mut dyn Backend, scene_toml: &str, run: &RunRecord, path: &Path) -> anyhow::Result<()> {
+    write_with_state(path, scene_toml, run, |w| write_state_in_pieces(backend, w, crate::solver::gpu::buffers::STREAM_CHUNK))
+}
+
+/// Writes the postcard encoding of the backend's [`BackendState`] to `w`, the particle arrays
+/// `chunk` particles at a time as the backend hands them over.
+pub fn write_state_in_pieces(backend: &mut dyn Backend, w: &mut dyn std::io::Write, chunk: u64) -> anyhow::Result<()> {
+    let header = backend.save_state_header()?;
+    let failure = RefCell::new(None);
+    let cell = RefCell::new(backend);
+    let (backend, fail) = (&cell, &failure);
+    let array = move |array| StateArrayInPieces { backend, array, chunk, failure: fail };
+    let state = StateInPieces {
+        kind: &header.kind,
+        step: header.step,
+        positions: array(StateArray::Positions),
+        velocities: array(StateArray::Velocities),
+        ids: array(StateArray::Ids),
+        non_finite: header.non_finite,
+        escaped: header.escaped,
+        first_bad_step: header.first_bad_step,
+        max_density: header.max_density,
+        time: header.time,
+        dt_min_max_last: header.dt_min_max_last,
+        gpu_status: &header.gpu_status,
+    };
+    let result = postcard::to_io(&state, w);
+    drop(state);
+    match (result, failure.into_inner()) {
+        (Ok(_), _) => Ok(()),
+        (Err(_), Some(e)) => Err(e),
+        (Err(e), None) => Err(anyhow::anyhow!("cannot serialise the state: {e}")),
+    }
+}
+
+/// Serialises exactly as [`BackendState`] does: postcard writes a struct as its fields in
+/// order, so these fields are BackendState's, in its order, with the arrays taken from the
+/// backend as they are serialised (the tests compare the bytes with the whole-state checkpoint).
+#[derive(Serialize)]
+struct StateInPieces<'a, 'b> {
+    kind: &'a str,
+    step: u64,
+    positions: StateArrayInPieces<'a, 'b>,
+    velocities: StateArrayInPieces<'a, 'b>,
+    ids: StateArrayInPieces<'a, 'b>,
+    non_finite: u64,
+    escaped: u64,
+    first_bad_step: Option<u64>,
+    max_density: f64,
+    time: f64,
+    dt_min_max_last: [f64; 3],
+    gpu_status: &'a [u32],
+}
+
+/// One particle array of the state, serialised as a sequence handed over piece by piece.
+struct StateArrayInPieces<'a, 'b> {
+    backend: &'a RefCell<&'b mut dyn Backend>,
+    array: StateArray,
+    chunk: u64,
+    /// Why the backend failed (postcard keeps only that a custom error happened).
+    failure: &'a RefCell<Option<anyhow::Error>>,
+}
+
+impl Serialize for StateArrayInPieces<'_, '_> {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut backend = self.backend.borrow_mut();
+        let n = backend.fluid_count();
+        let mut seq = Some(serializer.serialize_seq(Some(n))?);
+        let mut serialised: Result<(), S::Error> = Ok(());
+        let visited = backend.visit_state_array(self.array, self.chunk, &mut |piece| {
+            let seq = seq.as_mut().expect("open until the end");
+            let r = match piece {
+                StatePiece::Vectors(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
+                StatePiece::Ids(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
+            };
+            r.map_err(|e| {
+                let why = anyhow::anyhow!("cannot serialise the state: {e}");
+                serialised = Err(e);
+                why
+            })
+        });
+        serialised?;
+        if let Err(e) = visited {
+            *self.failure.borrow_mut() = Some(e);
+            return Err(S::Error::custom("the backend could not hand its state over"));
+        }
+        seq.take().expect("still open").end()
+    }
+}

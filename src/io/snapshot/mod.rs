@@ -1,0 +1,129 @@
+//! Snapshot files for other programs: the project's CSV, legacy VTK for ParaView (with a
+//! `.vtk.series` index so a run opens as an animation) and binary PLY for Blender and
+//! splashsurf. Every file is written atomically (see [`crate::io::atomic`]) and a snapshot
+//! holding NaN or infinity is refused.
+
+pub mod csv;
+pub mod format;
+pub mod ply;
+pub mod stream;
+pub mod vtk;
+
+use crate::model::state::Snapshot;
+use crate::solver::{Backend, SnapshotRow};
+use format::{snapshot_file, SnapshotFormat};
+use std::path::{Path, PathBuf};
+use stream::SnapshotStream;
+use vtk::{FileSeries, VTK_SERIES_NAME};
+
+/// Writes a snapshot in one format.
+pub fn write_snapshot(path: &Path, format: SnapshotFormat, s: &Snapshot) -> anyhow::Result<()> {
+    match format {
+        SnapshotFormat::Csv => csv::write_snapshot_csv(path, s),
+        SnapshotFormat::Vtk => vtk::write_vtk(path, s),
+        SnapshotFormat::Ply => ply::write_ply(path, s),
+    }
+}
+
+
+/// Writes every snapshot file a run asked for, and keeps the VTK series index up to date.
+pub struct SnapshotWriter {
+    out: PathBuf,
+    formats: Vec<SnapshotFormat>,
+    series: FileSeries,
+}
+
+impl SnapshotWriter {
+    /// Formats are de-duplicated, in the order given.
+    pub fn new(out: &Path, formats: &[SnapshotFormat]) -> Self {
+        let mut fs: Vec<SnapshotFormat> = Vec::new();
+        for &f in formats {
+            if !fs.contains(&f) {
+                fs.push(f);
+            }
+        }
+        SnapshotWriter { out: out.to_path_buf(), formats: fs, series: FileSeries::default() }
+    }
+
+    /// A writer continuing a run that stopped after `last_step`: the series index keeps the
+    /// snapshots written up to it.
+    pub fn resume(out: &Path, formats: &[SnapshotFormat], last_step: u64) -> anyhow::Result<Self> {
+        let mut w = SnapshotWriter::new(out, formats);
+        let index = w.series_path();
+        if w.formats.contains(&SnapshotFormat::Vtk) && index.exists() {
+            w.series = FileSeries::read_up_to(&index, last_step)?;
+        }
+        Ok(w)
+    }
+
+    pub fn series_path(&self) -> PathBuf {
+        self.out.join("snapshots").join(VTK_SERIES_NAME)
+    }
+
+    /// Writes the backend's current state in every format through its streamed path, without
+    /// one host copy of every array; returns the path of the first format's file and the
+    /// largest speed, or `None` where the backend has no streamed path.
+    pub fn write_streamed(&mut self, backend: &mut dyn Backend) -> Option<anyhow::Result<(PathBuf, f64)>> {
+        if !backend.streams_snapshots() {
+            return None;
+        }
+        let step = backend.steps_done();
+        let files: Vec<(SnapshotFormat, PathBuf)> = self.formats.iter().map(|&f| (f, snapshot_file(&self.out, step, f))).collect();
+        let written = write_streamed(backend, &files);
+        Some(written.and_then(|s| {
+            for (f, path) in &files {
+                if *f == SnapshotFormat::Vtk {
+                    self.add_to_series(path, s.time)?;
+                }
+                log::info!("wrote {}", path.display());
+            }
+            let (_, first) = files.into_iter().next().ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))?;
+            Ok((first, s.max_speed))
+        }))
+    }
+
+    fn add_to_series(&mut self, vtk_file: &Path, time: f64) -> anyhow::Result<()> {
+        let name = vtk_file.file_name().expect("a file name").to_string_lossy().into_owned();
+        let index = self.series_path();
+        self.series.add_and_write(&index, name, time)
+    }
+
+    /// Writes `s` in every format; returns the path of the first format's file.
+    pub fn write(&mut self, s: &Snapshot) -> anyhow::Result<PathBuf> {
+        let mut first = None;
+        for f in self.formats.clone() {
+            let path = snapshot_file(&self.out, s.step, f);
+            write_snapshot(&path, f, s)?;
+            if f == SnapshotFormat::Vtk {
+                self.add_to_series(&path, s.time)?;
+            }
+            log::info!("wrote {}", path.display());
+            first.get_or_insert(path);
+        }
+        first.ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))
+    }
+}
+
+
+/// Writes the backend's current state as a snapshot in every `(format, path)` given, from the
+/// rows it hands over in pieces (the same bytes as the whole-array writers of
+/// [`Backend::snapshot`]). The files are written atomically, so a refused or failed snapshot
+/// leaves none.
+pub fn write_streamed(backend: &mut dyn Backend, files: &[(SnapshotFormat, PathBuf)]) -> anyhow::Result<stream::StreamedSnapshot> {
+    let (particles, step, time) = (backend.fluid_count() as u64, backend.steps_done(), backend.time());
+    write_rows(files, particles, step, time, |visit| backend.visit_snapshot_rows(visit))
+}
+
+/// Writes a snapshot of `particles` particles at `step` and `time` in every `(format, path)`
+/// given, from the rows that `rows` hands to the visitor it gets, in original order.
+pub fn write_rows(
+    files: &[(SnapshotFormat, PathBuf)],
+    particles: u64,
+    step: u64,
+    time: f64,
+    rows: impl FnOnce(&mut dyn FnMut(u64, &[SnapshotRow]) -> anyhow::Result<()>) -> anyhow::Result<()>,
+) -> anyhow::Result<stream::StreamedSnapshot> {
+    let mut out = SnapshotStream::create(files, particles, step, time)?;
+    rows(&mut |first, r| out.write_rows(first, r))?;
+    out.finish()
+}

@@ -1,0 +1,218 @@
+//! Scene validation: every field checked against what is allowed before any work, with an
+//! error that names the file, the field, the value and the allowed range.
+
+use super::initial::lattice_counts;
+use super::params::MAX_PLANES;
+use super::scene::{err, Boundary, Scene, SceneError, SceneOrigin};
+
+/// Most particles a scene may hold: indices are u32 on the GPU and the CPU.
+pub const MAX_PARTICLES: u64 = 1 << 31;
+/// Most grid cells a scene may have.
+pub const MAX_CELLS: u64 = 1 << 30;
+/// Host bytes per particle the CPU path needs at most (f64 state, sort buffers, snapshot copy).
+pub const CPU_BYTES_PER_PARTICLE: u64 = 200;
+
+impl Scene {
+    /// Checks every field against what is allowed, before any work.
+    pub fn validate(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
+        let positive = |field: &str, v: f64| -> Result<(), SceneError> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(err(origin, field, format!("is {v}; must be a finite number > 0")))
+            }
+        };
+        let finite3 = |field: &str, v: [f64; 3]| -> Result<(), SceneError> {
+            if v.iter().all(|c| c.is_finite()) {
+                Ok(())
+            } else {
+                Err(err(origin, field, format!("is {v:?}; every component must be finite")))
+            }
+        };
+        let ordered = |field: &str, min: [f64; 3], max: [f64; 3]| -> Result<(), SceneError> {
+            finite3(&format!("{field}.min"), min)?;
+            finite3(&format!("{field}.max"), max)?;
+            if (0..3).all(|a| max[a] > min[a]) {
+                Ok(())
+            } else {
+                Err(err(origin, field, format!("min {min:?} must be below max {max:?} on every axis")))
+            }
+        };
+        let p = &self.physics;
+        positive("physics.smoothing_length", p.smoothing_length)?;
+        positive("physics.rest_density", p.rest_density)?;
+        positive("physics.particle_spacing", p.particle_spacing)?;
+        if let Some(m) = p.particle_mass {
+            positive("physics.particle_mass", m)?;
+        }
+        match (p.stiffness, p.speed_of_sound) {
+            (Some(k), None) => positive("physics.stiffness", k)?,
+            (None, Some(c)) => positive("physics.speed_of_sound", c)?,
+            _ => {
+                return Err(err(origin, "physics.stiffness", "give exactly one of stiffness and speed_of_sound"))
+            }
+        }
+        if !(p.viscosity.is_finite() && p.viscosity >= 0.0) {
+            return Err(err(origin, "physics.viscosity", format!("is {}; must be finite and >= 0", p.viscosity)));
+        }
+        let mut last = 0.0;
+        for (i, c) in p.viscosity_schedule.iter().enumerate() {
+            let f = format!("physics.viscosity_schedule[{i}]");
+            if !(c.time.is_finite() && c.time >= last) {
+                return Err(err(origin, format!("{f}.time"), format!("is {}; times must be finite, >= 0 and increasing", c.time)));
+            }
+            if !(c.viscosity.is_finite() && c.viscosity >= 0.0) {
+                return Err(err(origin, format!("{f}.viscosity"), format!("is {}; must be finite and >= 0", c.viscosity)));
+            }
+            last = c.time;
+        }
+        if !(p.boundary_friction.is_finite() && p.boundary_friction >= 0.0) {
+            return Err(err(origin, "physics.boundary_friction", format!("is {}; must be finite and >= 0", p.boundary_friction)));
+        }
+        finite3("physics.gravity", p.gravity)?;
+        if let Some(c) = &self.camera {
+            finite3("camera.eye", c.eye)?;
+            finite3("camera.target", c.target)?;
+            finite3("camera.up", c.up)?;
+            let d = [c.target[0] - c.eye[0], c.target[1] - c.eye[1], c.target[2] - c.eye[2]];
+            let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if dn == 0.0 {
+                return Err(err(origin, "camera.target", format!("is {:?}, the same point as camera.eye; they must differ", c.target)));
+            }
+            let un = (c.up[0] * c.up[0] + c.up[1] * c.up[1] + c.up[2] * c.up[2]).sqrt();
+            let cross = [d[1] * c.up[2] - d[2] * c.up[1], d[2] * c.up[0] - d[0] * c.up[2], d[0] * c.up[1] - d[1] * c.up[0]];
+            let cn = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
+            if !(un > 0.0 && cn > 1e-6 * dn * un) {
+                return Err(err(origin, "camera.up", format!("is {:?}; must be non-zero and not parallel to the viewing direction", c.up)));
+            }
+            if !(c.fov_degrees.is_finite() && c.fov_degrees > 1.0 && c.fov_degrees < 170.0) {
+                return Err(err(origin, "camera.fov_degrees", format!("is {}; must be between 1 and 170", c.fov_degrees)));
+            }
+        }
+        positive("time.dt", self.time.dt)?;
+        positive("time.end_time", self.time.end_time)?;
+        self.validate_time_options(origin)?;
+        ordered("domain", self.domain.min, self.domain.max)?;
+        let inside = |q: [f64; 3]| (0..3).all(|a| q[a] >= self.domain.min[a] && q[a] <= self.domain.max[a]);
+
+        if self.fluid.is_empty() {
+            return Err(err(origin, "fluid", "the scene has no fluid block; add at least one [[fluid]] with min and max"));
+        }
+        for (i, b) in self.fluid.iter().enumerate() {
+            let f = format!("fluid[{i}]");
+            ordered(&f, b.min, b.max)?;
+            if !inside(b.min) || !inside(b.max) {
+                return Err(err(origin, &f, format!(
+                    "block {:?}..{:?} is not inside the domain {:?}..{:?}", b.min, b.max, self.domain.min, self.domain.max)));
+            }
+            if !(b.jitter.is_finite() && (0.0..0.5).contains(&b.jitter)) {
+                return Err(err(origin, format!("{f}.jitter"), format!("is {}; must be in [0, 0.5)", b.jitter)));
+            }
+            finite3(&format!("{f}.velocity"), b.velocity)?;
+            if lattice_counts(b.min, b.max, p.particle_spacing).iter().any(|&n| n == 0) {
+                return Err(err(origin, &f, format!("is thinner than one particle spacing ({}) on some axis", p.particle_spacing)));
+            }
+        }
+        for (i, b) in self.boundary.iter().enumerate() {
+            let f = format!("boundary[{i}]");
+            match b {
+                Boundary::Container { min, max, walls, .. } | Boundary::Box { min, max, walls } => {
+                    ordered(&f, *min, *max)?;
+                    let s = walls.spacing.unwrap_or(p.particle_spacing);
+                    positive(&format!("{f}.spacing"), s)?;
+                    if let Some(rd) = walls.rest_density {
+                        positive(&format!("{f}.rest_density"), rd)?;
+                    }
+                    if walls.layers == Some(0) {
+                        return Err(err(origin, format!("{f}.layers"), "is 0; must be at least 1"));
+                    }
+                    let (lo, hi) = self.wall_span(b).expect("a container or a box");
+                    if !inside(lo) || !inside(hi) {
+                        return Err(err(origin, &f, format!(
+                            "its wall particles span {lo:?}..{hi:?}, outside the domain {:?}..{:?}; enlarge the domain",
+                            self.domain.min, self.domain.max)));
+                    }
+                }
+                Boundary::Plane { point, normal, restitution } => {
+                    finite3(&format!("{f}.point"), *point)?;
+                    finite3(&format!("{f}.normal"), *normal)?;
+                    if normal.iter().map(|c| c * c).sum::<f64>() < 1e-12 {
+                        return Err(err(origin, format!("{f}.normal"), "is zero; must be a non-zero vector"));
+                    }
+                    if !(restitution.is_finite() && (0.0..=1.0).contains(restitution)) {
+                        return Err(err(origin, format!("{f}.restitution"), format!("is {restitution}; must be in [0, 1]")));
+                    }
+                }
+            }
+        }
+        if self.boundary.iter().filter(|b| matches!(b, Boundary::Plane { .. })).count() > MAX_PLANES {
+            return Err(err(origin, "boundary", format!("has more than {MAX_PLANES} planes")));
+        }
+        let grid = self.grid();
+        let cells: u64 = grid.dims.iter().map(|&d| d as u64).product();
+        if cells > MAX_CELLS {
+            return Err(err(origin, "domain", format!(
+                "needs {cells} grid cells of size h = {}; at most {MAX_CELLS} are allowed (shrink the domain or grow h)",
+                p.smoothing_length)));
+        }
+        let count = self.estimated_particle_count();
+        if count > MAX_PARTICLES {
+            return Err(err(origin, "fluid", format!("would create {count} particles; at most {MAX_PARTICLES} are allowed")));
+        }
+        if let Some(avail) = available_memory_bytes() {
+            let need = count * CPU_BYTES_PER_PARTICLE + cells * 8;
+            if need > avail {
+                return Err(err(origin, "fluid", format!(
+                    "{count} particles (fluid and walls) and {cells} cells need about {} MiB of host memory; {} MiB are available",
+                    need >> 20, avail >> 20)));
+            }
+        }
+        Ok(())
+    }
+
+    /// Adaptive dt and the neighbour rebuild interval.
+    fn validate_time_options(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
+        let t = &self.time;
+        if !(1..=2).contains(&t.neighbour_rebuild_every) {
+            return Err(err(origin, "time.neighbour_rebuild_every", format!("is {}; must be 1 or 2", t.neighbour_rebuild_every)));
+        }
+        for (field, v) in [("time.cfl_number", t.cfl_number), ("time.force_number", t.force_number), ("time.viscous_number", t.viscous_number)] {
+            if !(v.is_finite() && v > 0.0 && v <= 1.0) {
+                return Err(err(origin, field, format!("is {v}; must be in (0, 1]")));
+            }
+        }
+        for (field, v) in [("time.dt_min", t.dt_min), ("time.dt_max", t.dt_max)] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(err(origin, field, format!("is {v}; must be a finite number > 0")));
+                }
+            }
+        }
+        if !t.adaptive && (t.dt_min.is_some() || t.dt_max.is_some()) {
+            return Err(err(origin, "time.dt_min", "dt_min and dt_max need adaptive = true"));
+        }
+        if t.adaptive {
+            let (lo, hi) = (t.dt_min.unwrap_or(t.dt * 1e-3), t.dt_max.unwrap_or(t.dt));
+            if lo > hi {
+                return Err(err(origin, "time.dt_min", format!("is {lo}, above dt_max {hi}; must be <= dt_max")));
+            }
+            if !self.physics.viscosity_schedule.is_empty() {
+                return Err(err(
+                    origin,
+                    "physics.viscosity_schedule",
+                    "cannot be combined with time.adaptive = true (the GPU picks its step itself, so the host cannot time a viscosity change); use one viscosity or a fixed dt",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+}
+
+/// Host memory available to this process, where the platform tells.
+pub fn available_memory_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}

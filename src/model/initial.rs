@@ -1,0 +1,135 @@
+//! The particles of a scene at t = 0: fluid blocks on jittered lattices, walls on regular
+//! lattices, and the solid regions fluid must never enter.
+
+use super::scene::{Boundary, Scene};
+use rand::{Rng, SeedableRng};
+
+/// A solid region (inside of an obstacle or of a tank's walls) that fluid must never enter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolidRegion {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+/// Particles of a scene at t = 0.
+#[derive(Clone, Debug, Default)]
+pub struct InitialState {
+    pub fluid_positions: Vec<[f64; 3]>,
+    pub fluid_velocities: Vec<[f64; 3]>,
+    pub wall_positions: Vec<[f64; 3]>,
+    pub wall_masses: Vec<f64>,
+}
+
+impl Scene {
+    /// Regions fluid must never enter: the wall shells of containers and the obstacle boxes.
+    pub fn solid_regions(&self) -> Vec<SolidRegion> {
+        let mut out = Vec::new();
+        for b in &self.boundary {
+            match b {
+                Boundary::Box { min, max, .. } => out.push(SolidRegion { min: *min, max: *max }),
+                Boundary::Container { min, max, open_top, walls } => {
+                    let s = walls.spacing.unwrap_or(self.physics.particle_spacing);
+                    let l = self.wall_layers(walls) as f64 * s;
+                    let top = if *open_top { max[1] } else { max[1] + l };
+                    let slab = |a: usize, lo: f64, hi: f64| {
+                        let mut r = SolidRegion { min: [min[0] - l, min[1] - l, min[2] - l], max: [max[0] + l, top, max[2] + l] };
+                        r.min[a] = lo;
+                        r.max[a] = hi;
+                        r
+                    };
+                    out.push(slab(0, min[0] - l, min[0]));
+                    out.push(slab(0, max[0], max[0] + l));
+                    out.push(slab(1, min[1] - l, min[1]));
+                    if !*open_top {
+                        out.push(slab(1, max[1], max[1] + l));
+                    }
+                    out.push(slab(2, min[2] - l, min[2]));
+                    out.push(slab(2, max[2], max[2] + l));
+                }
+                Boundary::Plane { .. } => {}
+            }
+        }
+        out
+    }
+
+    /// The particles at t = 0: fluid on jittered lattices, walls on regular lattices.
+    pub fn initial_state(&self) -> InitialState {
+        let s = self.physics.particle_spacing;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(self.seed);
+        let mut st = InitialState::default();
+        for b in &self.fluid {
+            let j = b.jitter * s;
+            for q in lattice(b.min, b.max, s) {
+                let mut q = q;
+                if j > 0.0 {
+                    for c in q.iter_mut() {
+                        *c += rng.random_range(-j..=j);
+                    }
+                }
+                st.fluid_positions.push(q);
+                st.fluid_velocities.push(b.velocity);
+            }
+        }
+        for b in &self.boundary {
+            let (min, max, walls, open_top, hollow_box) = match b {
+                Boundary::Container { min, max, walls, open_top } => (min, max, walls, *open_top, false),
+                Boundary::Box { min, max, walls } => (min, max, walls, false, true),
+                Boundary::Plane { .. } => continue,
+            };
+            let ws = walls.spacing.unwrap_or(s);
+            let l = self.wall_layers(walls) as f64 * ws;
+            let mass = walls.rest_density.unwrap_or(self.physics.rest_density) * ws.powi(3);
+            let inner = |q: &[f64; 3], lo: [f64; 3], hi: [f64; 3]| (0..3).all(|a| q[a] > lo[a] && q[a] < hi[a]);
+            if hollow_box {
+                // Obstacle: a shell of `layers` inside its faces; the core is never reached.
+                let lo = [min[0] + l, min[1] + l, min[2] + l];
+                let hi = [max[0] - l, max[1] - l, max[2] - l];
+                for q in lattice(*min, *max, ws) {
+                    if !inner(&q, lo, hi) {
+                        st.wall_positions.push(q);
+                        st.wall_masses.push(mass);
+                    }
+                }
+            } else {
+                let lo = [min[0] - l, min[1] - l, min[2] - l];
+                let top = if open_top { max[1] } else { max[1] + l };
+                let hi = [max[0] + l, top, max[2] + l];
+                // The walls' first layer sits half a spacing outside the container's faces.
+                let cavity_hi = [max[0], if open_top { f64::INFINITY } else { max[1] }, max[2]];
+                for q in lattice(lo, hi, ws) {
+                    if !inner(&q, *min, cavity_hi) {
+                        st.wall_positions.push(q);
+                        st.wall_masses.push(mass);
+                    }
+                }
+            }
+        }
+        st
+    }
+}
+
+pub(crate) fn lattice_counts(min: [f64; 3], max: [f64; 3], s: f64) -> [u64; 3] {
+    // A small tolerance so that a block an exact multiple of s wide gets that many layers.
+    let mut n = [0u64; 3];
+    for a in 0..3 {
+        n[a] = ((max[a] - min[a]) / s + 1e-6).floor().max(0.0) as u64;
+    }
+    n
+}
+
+/// Points at min + (i + 0.5) s, filling [min, max] on every axis; x runs fastest.
+fn lattice(min: [f64; 3], max: [f64; 3], s: f64) -> impl Iterator<Item = [f64; 3]> {
+    let n = lattice_counts(min, max, s);
+    (0..n[2]).flat_map(move |k| {
+        (0..n[1]).flat_map(move |j| {
+            (0..n[0]).map(move |i| {
+                [
+                    min[0] + (i as f64 + 0.5) * s,
+                    min[1] + (j as f64 + 0.5) * s,
+                    min[2] + (k as f64 + 0.5) * s,
+                ]
+            })
+        })
+    })
+}
+

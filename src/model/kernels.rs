@@ -1,0 +1,204 @@
+//! Kernels, equations of state, cell coordinates, stencil runs and the counting sort on the host:
+//! the formulas of wgsl/shared/common.wgsl, used by the CPU reference, by the GPU host (the
+//! f32 constants of its parameter block, the walls sorted once) and by the profile.
+//!
+//! h is the support radius: every kernel is zero for r >= h.
+
+use super::params::Grid;
+use super::real::{Real, V3};
+use super::scene::{EquationOfState, Kernel};
+use std::f64::consts::PI;
+use std::ops::Range;
+
+/// Kernel constants for one support radius, precomputed once per scene.
+#[derive(Clone, Copy, Debug)]
+pub struct KernelCoefficients<R> {
+    pub h: R,
+    pub h2: R,
+    pub kind: Kernel,
+    /// poly6: 315 / (64 pi h^9); cubic: 8 / (pi h^3).
+    pub w: R,
+    /// spiky: -45 / (pi h^6); cubic: 48 / (pi h^4), the derivative's factor.
+    pub grad: R,
+    /// viscosity Laplacian: 45 / (pi h^6).
+    pub lap: R,
+}
+
+impl<R: Real> KernelCoefficients<R> {
+    pub fn new(kind: Kernel, h: f64) -> Self {
+        let (w, grad, lap) = match kind {
+            Kernel::Mueller => (315.0 / (64.0 * PI * h.powi(9)), -45.0 / (PI * h.powi(6)), 45.0 / (PI * h.powi(6))),
+            Kernel::CubicSpline => (8.0 / (PI * h.powi(3)), 48.0 / (PI * h.powi(4)), 0.0),
+        };
+        KernelCoefficients { h: R::of(h), h2: R::of(h * h), kind, w: R::of(w), grad: R::of(grad), lap: R::of(lap) }
+    }
+
+    /// W(r) from r^2 (Mueller 2003 Eq. 20 poly6, or Monaghan 1992 cubic spline).
+    pub fn w(&self, r2: R) -> R {
+        if r2 >= self.h2 {
+            return R::zero();
+        }
+        match self.kind {
+            Kernel::Mueller => {
+                let d = self.h2 - r2;
+                self.w * d * d * d
+            }
+            Kernel::CubicSpline => {
+                let q = r2.sqrt() / self.h;
+                let one = R::one();
+                if q <= R::of(0.5) {
+                    self.w * (R::of(6.0) * (q * q * q - q * q) + one)
+                } else {
+                    let d = one - q;
+                    self.w * R::of(2.0) * d * d * d
+                }
+            }
+        }
+    }
+
+    /// grad W at r_ij = x_i - x_j (|r_ij| = r). Zero at r = 0, where the direction is undefined.
+    pub fn grad_w(&self, rij: V3<R>, r: R) -> V3<R> {
+        if r >= self.h || r <= R::of(1e-12) * self.h {
+            return V3::zero();
+        }
+        let dwdr = match self.kind {
+            // Spiky (Mueller 2003 Eq. 21): dW/dr = -45/(pi h^6) (h - r)^2.
+            Kernel::Mueller => {
+                let d = self.h - r;
+                self.grad * d * d
+            }
+            Kernel::CubicSpline => {
+                let q = r / self.h;
+                let one = R::one();
+                if q <= R::of(0.5) {
+                    self.grad * q * (R::of(3.0) * q - R::of(2.0))
+                } else {
+                    let d = one - q;
+                    -self.grad * d * d
+                }
+            }
+        };
+        rij * (dwdr / r)
+    }
+
+    /// Laplacian of the viscosity kernel (Mueller 2003 Eq. 22): 45/(pi h^6) (h - r).
+    pub fn lap_w(&self, r: R) -> R {
+        if r >= self.h {
+            R::zero()
+        } else {
+            self.lap * (self.h - r)
+        }
+    }
+}
+
+/// Pressure from density: report Eq. 8 (linear) or Eq. 9 (Tait, exponent 7).
+pub fn pressure<R: Real>(density: R, rest_density: R, stiffness: R, eos: EquationOfState, clamp: bool) -> R {
+    let ratio = density / rest_density;
+    let p = match eos {
+        EquationOfState::Linear => stiffness * (ratio - R::one()),
+        EquationOfState::Tait => {
+            let r2 = ratio * ratio;
+            let r4 = r2 * r2;
+            stiffness * (r4 * r2 * ratio - R::one())
+        }
+    };
+    if clamp && p < R::zero() {
+        R::zero()
+    } else {
+        p
+    }
+}
+
+impl<R: Real> Grid<R> {
+    /// Integer cell coordinates of a point, clamped into the grid so that a particle outside
+    /// the domain still has a valid cell (it is counted as escaped elsewhere); the same formula
+    /// as the GPU's `cell_coords`.
+    pub fn cell_coords(&self, p: V3<R>) -> [u32; 3] {
+        let mut c = [0u32; 3];
+        for a in 0..3 {
+            let f = ((p.0[a] - self.origin.0[a]) * self.inv_cell).floor();
+            let max = R::of((self.dims[a] - 1) as f64);
+            let f = if f.is_nan() { R::zero() } else { f.max(R::zero()).min(max) };
+            c[a] = f.to64() as u32;
+        }
+        c
+    }
+    /// The cell key of cell coordinates, x fastest.
+    pub fn key(&self, c: [u32; 3]) -> u32 {
+        c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
+    }
+    /// The cell key of a point.
+    pub fn key_of(&self, p: V3<R>) -> u32 {
+        self.key(self.cell_coords(p))
+    }
+    /// The 9 contiguous key ranges (x-runs of up to 3 cells) that cover the 27-cell stencil of
+    /// cell `c`: each run is one span of the cell-sorted arrays.
+    pub fn stencil_runs(&self, c: [u32; 3]) -> impl Iterator<Item = (u32, u32)> + '_ {
+        let x0 = c[0].saturating_sub(1);
+        let x1 = (c[0] + 1).min(self.dims[0] - 1);
+        let (y0, y1) = (c[1].saturating_sub(1), (c[1] + 1).min(self.dims[1] - 1));
+        let (z0, z1) = (c[2].saturating_sub(1), (c[2] + 1).min(self.dims[2] - 1));
+        (z0..=z1).flat_map(move |z| (y0..=y1).map(move |y| (self.key([x0, y, z]), self.key([x1, y, z]) + 1)))
+    }
+}
+
+/// The counting sort by cell, in three steps that the GPU stages mirror (wgsl/sim/bin_count,
+/// prefix_sum, bin_scatter): `keys[i]` = cell of point i with `counts[key]` incremented
+/// (`counts` must start at zero).
+pub fn count_cells<R: Real>(grid: &Grid<R>, positions: &[V3<R>], keys: &mut [u32], counts: &mut [u32]) {
+    for (i, p) in positions.iter().enumerate() {
+        let k = grid.key_of(*p);
+        keys[i] = k;
+        counts[k as usize] += 1;
+    }
+}
+
+/// `starts[c]` = sum of `counts[..c]`, and `starts[counts.len()]` = the total, so that cell c's
+/// points are `starts[c]..starts[c + 1]` and any run of cells is one contiguous span.
+pub fn exclusive_scan(counts: &[u32], starts: &mut [u32]) {
+    assert_eq!(starts.len(), counts.len() + 1);
+    let mut acc = 0u32;
+    for (s, &c) in starts.iter_mut().zip(counts) {
+        *s = acc;
+        acc += c;
+    }
+    starts[counts.len()] = acc;
+}
+
+/// `sorted[j]` = index of the point that goes to slot j of the cell-ordered arrays. Stable:
+/// inside a cell, points keep their current order.
+pub fn scatter_by_cell(keys: &[u32], starts: &[u32], sorted: &mut [u32]) {
+    let mut cursor: Vec<u32> = starts[..starts.len() - 1].to_vec();
+    for (i, &k) in keys.iter().enumerate() {
+        let slot = &mut cursor[k as usize];
+        sorted[*slot as usize] = i as u32;
+        *slot += 1;
+    }
+}
+
+/// Sorts points by cell (stable counting sort) and returns the permutation and the cell
+/// starts (the walls, sorted once on the host by both paths).
+pub fn sort_by_cell<R: Real>(grid: &Grid<R>, positions: &[V3<R>]) -> (Vec<u32>, Vec<u32>) {
+    let mut keys = vec![0u32; positions.len()];
+    let mut counts = vec![0u32; grid.cell_count()];
+    let mut starts = vec![0u32; grid.cell_count() + 1];
+    let mut sorted = vec![0u32; positions.len()];
+    count_cells(grid, positions, &mut keys, &mut counts);
+    exclusive_scan(&counts, &mut starts);
+    scatter_by_cell(&keys, &starts, &mut sorted);
+    (sorted, starts)
+}
+
+/// Particles sorted by cell with the start of every cell: `starts[c]..starts[c + 1]`.
+#[derive(Clone, Copy)]
+pub struct Neighbours<'a, R> {
+    pub positions: &'a [V3<R>],
+    pub starts: &'a [u32],
+}
+
+impl<R> Neighbours<'_, R> {
+    /// The particles of the cells with keys `k0..k1` (a contiguous run of cells).
+    pub fn span(&self, k0: u32, k1: u32) -> Range<usize> {
+        self.starts[k0 as usize] as usize..self.starts[k1 as usize] as usize
+    }
+}

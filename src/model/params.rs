@@ -1,0 +1,196 @@
+//! The resolved constants of a scene (defaults filled in, stiffness derived), the one
+//! neighbour grid, adaptive time stepping and the viscosity schedule.
+
+use super::real::{Real, V3};
+use super::scene::{Boundary, BoundaryPressure, EquationOfState, Kernel, Scene};
+
+/// Plane in the form normal . x = offset, with a unit normal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    pub normal: [f64; 3],
+    pub offset: f64,
+    pub restitution: f64,
+}
+
+/// The physical and numerical constants of a scene, resolved (defaults filled, k derived).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Params {
+    pub h: f64,
+    pub rest_density: f64,
+    pub fluid_mass: f64,
+    pub kernel: Kernel,
+    pub eos: EquationOfState,
+    pub stiffness: f64,
+    pub clamp_negative_pressure: bool,
+    /// (start time, nu) pairs in time order; the first starts at 0.
+    pub viscosity: Vec<(f64, f64)>,
+    pub boundary_friction: f64,
+    pub boundary_pressure: BoundaryPressure,
+    pub gravity: [f64; 3],
+    pub dt: f64,
+    pub end_time: f64,
+    /// Adaptive time stepping, when the scene asks for it (`dt` is then its largest step).
+    pub adaptive: Option<AdaptiveDt>,
+    /// Rebuild the neighbour grid every this many steps.
+    pub rebuild_every: u32,
+    pub domain_min: [f64; 3],
+    pub domain_max: [f64; 3],
+    pub planes: Vec<Plane>,
+    pub grid: Grid,
+}
+
+impl Params {
+    /// Kinematic viscosity in force during the step that starts at `step` (evaluated at the
+    /// step's midpoint so that a change time on a step boundary is never a float tie).
+    pub fn viscosity_at_step(&self, step: u64) -> f64 {
+        let t = (step as f64 + 0.5) * self.dt;
+        viscosity_at(&self.viscosity, t)
+    }
+    /// Whether any viscosity of the scene (its schedule included) is above zero.
+    pub fn uses_viscosity(&self) -> bool {
+        self.viscosity.iter().any(|&(_, nu)| nu > 0.0)
+    }
+    pub fn uses_gravity(&self) -> bool {
+        self.gravity.iter().any(|&g| g != 0.0)
+    }
+    /// The speed of sound implied by the equation of state: c0^2 = dp/drho at rho0.
+    pub fn speed_of_sound(&self) -> f64 {
+        match self.eos {
+            EquationOfState::Linear => (self.stiffness / self.rest_density).sqrt(),
+            EquationOfState::Tait => (7.0 * self.stiffness / self.rest_density).sqrt(),
+        }
+    }
+}
+
+/// nu at time t from a (start time, nu) schedule.
+pub fn viscosity_at(schedule: &[(f64, f64)], t: f64) -> f64 {
+    let mut nu = schedule.first().map(|s| s.1).unwrap_or(0.0);
+    for &(start, value) in schedule {
+        if t >= start {
+            nu = value;
+        }
+    }
+    nu
+}
+
+/// The uniform neighbour grid over the domain, cell size h (report Sec. V), in the float type
+/// `R` of whoever uses it: the scene's constants are `Grid<f64>`, the f32 paths use
+/// [`Grid::cast`] of it (the same conversion on the CPU and for the GPU's parameter block).
+/// Cell coordinates, keys and stencil runs are in [`super::kernels`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grid<R = f64> {
+    pub origin: V3<R>,
+    pub cell_size: R,
+    /// 1 / cell_size, computed in f64 and converted once.
+    pub inv_cell: R,
+    pub dims: [u32; 3],
+}
+
+impl<R: Real> Grid<R> {
+    pub fn cell_count(&self) -> usize {
+        self.dims.iter().map(|&d| d as usize).product()
+    }
+    /// The grid in another float type.
+    pub fn cast<S: Real>(&self) -> Grid<S> {
+        Grid { origin: V3::from64(self.origin.to64()), cell_size: S::of(self.cell_size.to64()), inv_cell: S::of(self.inv_cell.to64()), dims: self.dims }
+    }
+}
+
+/// Adaptive time stepping, resolved: dt = clamp(min(C_cfl h / (c0 + |v|max),
+/// C_f sqrt(h / |a|max), C_visc h^2 / nu), dt_min, dt_max) (Monaghan 1992; Morris et al. 1997
+/// for the viscous condition).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdaptiveDt {
+    pub cfl_number: f64,
+    pub force_number: f64,
+    pub viscous_number: f64,
+    pub dt_min: f64,
+    pub dt_max: f64,
+}
+
+impl AdaptiveDt {
+    /// The step for the largest speed and acceleration: the same formula on the CPU and in
+    /// wgsl/sim/integrate.wgsl `choose_dt`.
+    pub fn dt(&self, h: f64, c0: f64, max_speed: f64, max_accel: f64, nu: f64) -> f64 {
+        let mut dt = self.cfl_number * h / (c0 + max_speed);
+        if max_accel > 0.0 {
+            dt = dt.min(self.force_number * (h / max_accel).sqrt());
+        }
+        if nu > 0.0 {
+            dt = dt.min(self.viscous_number * h * h / nu);
+        }
+        // NaN (a blown-up state) falls to dt_min; the health check reports it.
+        if dt.is_nan() { self.dt_min } else { dt.clamp(self.dt_min, self.dt_max) }
+    }
+}
+
+impl Scene {
+    pub fn grid(&self) -> Grid {
+        let h = self.physics.smoothing_length;
+        let mut dims = [1u32; 3];
+        for a in 0..3 {
+            let n = ((self.domain.max[a] - self.domain.min[a]) / h).ceil().max(1.0);
+            dims[a] = n.min(u32::MAX as f64) as u32;
+        }
+        Grid { origin: V3(self.domain.min), cell_size: h, inv_cell: 1.0 / h, dims }
+    }
+
+    /// The resolved constants of the scene.
+    pub fn params(&self) -> Params {
+        let p = &self.physics;
+        let stiffness = match (p.stiffness, p.speed_of_sound) {
+            (Some(k), _) => k,
+            (None, Some(c)) => match p.equation_of_state {
+                EquationOfState::Linear => p.rest_density * c * c,
+                EquationOfState::Tait => p.rest_density * c * c / 7.0,
+            },
+            (None, None) => unreachable!("validated"),
+        };
+        let mut viscosity = vec![(0.0, p.viscosity)];
+        viscosity.extend(p.viscosity_schedule.iter().map(|c| (c.time, c.viscosity)));
+        let planes = self
+            .boundary
+            .iter()
+            .filter_map(|b| match b {
+                Boundary::Plane { point, normal, restitution } => {
+                    let len = normal.iter().map(|c| c * c).sum::<f64>().sqrt();
+                    let n = [normal[0] / len, normal[1] / len, normal[2] / len];
+                    let offset = n[0] * point[0] + n[1] * point[1] + n[2] * point[2];
+                    Some(Plane { normal: n, offset, restitution: *restitution })
+                }
+                _ => None,
+            })
+            .collect();
+        Params {
+            h: p.smoothing_length,
+            rest_density: p.rest_density,
+            fluid_mass: p.particle_mass.unwrap_or(p.rest_density * p.particle_spacing.powi(3)),
+            kernel: p.kernel,
+            eos: p.equation_of_state,
+            stiffness,
+            clamp_negative_pressure: p.clamp_negative_pressure,
+            viscosity,
+            boundary_friction: p.boundary_friction,
+            boundary_pressure: p.boundary_pressure,
+            gravity: p.gravity,
+            dt: self.time.dt,
+            end_time: self.time.end_time,
+            adaptive: self.time.adaptive.then(|| AdaptiveDt {
+                cfl_number: self.time.cfl_number,
+                force_number: self.time.force_number,
+                viscous_number: self.time.viscous_number,
+                dt_min: self.time.dt_min.unwrap_or(self.time.dt * 1e-3),
+                dt_max: self.time.dt_max.unwrap_or(self.time.dt),
+            }),
+            rebuild_every: self.time.neighbour_rebuild_every,
+            domain_min: self.domain.min,
+            domain_max: self.domain.max,
+            planes,
+            grid: self.grid(),
+        }
+    }
+}
+
+/// Most analytic planes a scene may have (they live in the GPU's parameter block).
+pub const MAX_PLANES: usize = 8;
+

@@ -1,0 +1,457 @@
+//! Scene files: the TOML schema of a scene and its loading and saving.
+//!
+//! Every length is in the scene's units (SI in the built-in SI scenes); `h` is the kernel's
+//! support radius, so a particle interacts with everything closer than `h`, as in the seed report.
+//! Validation is in [`super::check`], the resolved constants in [`super::params`], the particles
+//! at t = 0 in [`super::initial`].
+
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// Where a scene came from, for error messages.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum SceneOrigin {
+    BuiltIn(String),
+    File(PathBuf),
+    Text,
+}
+
+impl std::fmt::Display for SceneOrigin {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SceneOrigin::BuiltIn(n) => write!(f, "built-in scene '{n}'"),
+            SceneOrigin::File(p) => write!(f, "{}", p.display()),
+            SceneOrigin::Text => write!(f, "scene text"),
+        }
+    }
+}
+
+/// A scene that cannot be used: names the file, the field and what is allowed.
+#[derive(Debug, thiserror::Error)]
+#[error("{origin}: {field}: {message}")]
+pub struct SceneError {
+    pub origin: String,
+    pub field: String,
+    pub message: String,
+}
+
+pub(crate) fn err(origin: &SceneOrigin, field: impl Into<String>, message: impl Into<String>) -> SceneError {
+    SceneError { origin: origin.to_string(), field: field.into(), message: message.into() }
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Short name used in outputs.
+    #[serde(default = "default_name")]
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Seed of the random jitter of fluid particles.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    pub domain: Domain,
+    pub physics: Physics,
+    pub time: Time,
+    #[serde(default)]
+    pub fluid: Vec<FluidBlock>,
+    #[serde(default)]
+    pub boundary: Vec<Boundary>,
+    /// Camera of rendered frames; default: framed automatically around the tank and fluid.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraSpec>,
+}
+
+/// A perspective camera for rendered frames.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+    /// Vertical field of view in degrees.
+    #[serde(default = "default_fov")]
+    pub fov_degrees: f64,
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn default_fov() -> f64 {
+    40.0
+}
+
+fn default_name() -> String {
+    "scene".into()
+}
+fn default_seed() -> u64 {
+    1
+}
+
+/// The simulation domain: an axis-aligned box. A fluid particle that leaves it has escaped.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Domain {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+/// The pressure a wall particle pushes a fluid particle with.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BoundaryPressure {
+    /// The wall mirrors the fluid particle: 2 max(p_i, 0) / rho_i^2 (p_w = p_i, rho_w = rho_i).
+    #[default]
+    Mirror,
+    /// p_i / rho_i^2: the gradient of the elastic energy that the density summation over wall
+    /// particles defines, so that walls neither create nor destroy energy (Akinci et al. 2012).
+    Consistent,
+}
+
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Kernel {
+    /// Mueller et al. 2003: poly6 density, spiky gradient, viscosity Laplacian.
+    Mueller,
+    /// Monaghan's cubic spline (support h) with the Morris/Monaghan viscosity term.
+    CubicSpline,
+}
+
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum EquationOfState {
+    /// p = k (rho/rho0 - 1), report Eq. 8.
+    Linear,
+    /// p = k ((rho/rho0)^7 - 1), report Eq. 9 (Tait, Monaghan 1994).
+    Tait,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Physics {
+    /// Kernel support radius h.
+    pub smoothing_length: f64,
+    /// Rest density rho0 of the fluid.
+    #[serde(default = "default_rest_density")]
+    pub rest_density: f64,
+    /// Lattice spacing of the fluid particles.
+    pub particle_spacing: f64,
+    /// Mass of one fluid particle; default rest_density * particle_spacing^3.
+    #[serde(default)]
+    pub particle_mass: Option<f64>,
+    #[serde(default = "default_kernel")]
+    pub kernel: Kernel,
+    #[serde(default = "default_eos")]
+    pub equation_of_state: EquationOfState,
+    /// Stiffness k of the equation of state (Pa). Give this or speed_of_sound.
+    #[serde(default)]
+    pub stiffness: Option<f64>,
+    /// Speed of sound c0: sets k = rho0 c0^2 (linear) or rho0 c0^2 / 7 (Tait).
+    #[serde(default)]
+    pub speed_of_sound: Option<f64>,
+    /// Clamp negative pressures to zero (no tensile forces at a free surface).
+    #[serde(default)]
+    pub clamp_negative_pressure: bool,
+    /// Kinematic viscosity nu (m^2/s) at t = 0.
+    #[serde(default)]
+    pub viscosity: f64,
+    /// Changes of viscosity over time, applied from their time on.
+    #[serde(default)]
+    pub viscosity_schedule: Vec<ViscosityChange>,
+    /// Scales the viscosity term between fluid and wall particles: 1 = no-slip, 0 = free slip.
+    #[serde(default = "default_boundary_friction")]
+    pub boundary_friction: f64,
+    /// The wall particles' pressure term (see `BoundaryPressure`).
+    #[serde(default)]
+    pub boundary_pressure: BoundaryPressure,
+    #[serde(default = "default_gravity")]
+    pub gravity: [f64; 3],
+}
+
+fn default_rest_density() -> f64 {
+    1000.0
+}
+fn default_kernel() -> Kernel {
+    Kernel::Mueller
+}
+fn default_eos() -> EquationOfState {
+    EquationOfState::Linear
+}
+fn default_boundary_friction() -> f64 {
+    1.0
+}
+fn default_gravity() -> [f64; 3] {
+    [0.0, -9.81, 0.0]
+}
+
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ViscosityChange {
+    pub time: f64,
+    pub viscosity: f64,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Time {
+    /// Time step.
+    pub dt: f64,
+    /// Simulated time at which `wgsph run` stops by default.
+    pub end_time: f64,
+    /// Adaptive time stepping: dt from the CFL, force and viscous conditions every step.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub adaptive: bool,
+    /// C_cfl in dt <= C_cfl h / (c0 + |v|max) (adaptive only).
+    #[serde(default = "default_cfl_number")]
+    pub cfl_number: f64,
+    /// C_f in dt <= C_f sqrt(h / |a|max) (adaptive only).
+    #[serde(default = "default_force_number")]
+    pub force_number: f64,
+    /// C_visc in dt <= C_visc h^2 / nu (adaptive only).
+    #[serde(default = "default_viscous_number")]
+    pub viscous_number: f64,
+    /// Smallest adaptive dt; default dt / 1000.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dt_min: Option<f64>,
+    /// Largest adaptive dt; default dt.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dt_max: Option<f64>,
+    /// Rebuild the neighbour grid every this many steps (1 or 2; between rebuilds particles
+    /// keep the cells of the last rebuild).
+    #[serde(default = "default_rebuild_every")]
+    pub neighbour_rebuild_every: u32,
+}
+
+impl Time {
+    /// A fixed time step of `dt` up to `end_time`, every other setting at its default.
+    pub fn fixed(dt: f64, end_time: f64) -> Time {
+        Time {
+            dt,
+            end_time,
+            adaptive: false,
+            cfl_number: default_cfl_number(),
+            force_number: default_force_number(),
+            viscous_number: default_viscous_number(),
+            dt_min: None,
+            dt_max: None,
+            neighbour_rebuild_every: default_rebuild_every(),
+        }
+    }
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+fn default_cfl_number() -> f64 {
+    0.25
+}
+fn default_force_number() -> f64 {
+    0.25
+}
+fn default_viscous_number() -> f64 {
+    0.125
+}
+fn default_rebuild_every() -> u32 {
+    1
+}
+
+/// A box of fluid filled on a lattice of the physics spacing, with seeded random offsets.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FluidBlock {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+    /// Random offset of each particle, as a fraction of the spacing (uniform in +-jitter).
+    #[serde(default = "default_jitter")]
+    pub jitter: f64,
+    #[serde(default)]
+    pub velocity: [f64; 3],
+}
+
+fn default_jitter() -> f64 {
+    0.05
+}
+
+/// A solid boundary.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Boundary {
+    /// A tank of wall particles around the box [min, max]; the walls lie outside the box.
+    Container {
+        min: [f64; 3],
+        max: [f64; 3],
+        #[serde(default = "default_true")]
+        open_top: bool,
+        #[serde(flatten)]
+        walls: WallParticles,
+    },
+    /// A solid obstacle: wall particles filling a shell inside [min, max].
+    Box {
+        min: [f64; 3],
+        max: [f64; 3],
+        #[serde(flatten)]
+        walls: WallParticles,
+    },
+    /// An infinite analytic plane; fluid stays on the side the normal points to.
+    Plane {
+        point: [f64; 3],
+        normal: [f64; 3],
+        /// Fraction of the normal speed kept on impact (0 = inelastic).
+        #[serde(default)]
+        restitution: f64,
+    },
+}
+
+fn default_true() -> bool {
+    true
+}
+
+/// How a particle boundary is sampled.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct WallParticles {
+    /// Layers of particles; default ceil(h / spacing), enough that a fluid particle at the wall
+    /// sees a full kernel support of wall.
+    #[serde(default)]
+    pub layers: Option<u32>,
+    /// Lattice spacing of the wall particles; default the fluid spacing.
+    #[serde(default)]
+    pub spacing: Option<f64>,
+    /// Rest density of the wall particles (their mass is rest_density * spacing^3); default the
+    /// fluid's. The seed report uses 2500 so that walls push harder.
+    #[serde(default)]
+    pub rest_density: Option<f64>,
+}
+
+impl Scene {
+    /// Parses and validates a scene.
+    pub fn from_toml_str(text: &str, origin: &SceneOrigin) -> Result<Scene, SceneError> {
+        let scene: Scene = toml::from_str(text).map_err(|e| {
+            let field = e
+                .span()
+                .map(|s| {
+                    let line = text[..s.start.min(text.len())].lines().count().max(1);
+                    format!("line {line}")
+                })
+                .unwrap_or_else(|| "toml".into());
+            err(origin, field, e.message().to_string())
+        })?;
+        scene.validate(origin)?;
+        Ok(scene)
+    }
+
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).expect("a scene serialises")
+    }
+
+    pub(crate) fn wall_layers(&self, walls: &WallParticles) -> u32 {
+        let s = walls.spacing.unwrap_or(self.physics.particle_spacing);
+        walls.layers.unwrap_or(((self.physics.smoothing_length / s) - 1e-9).ceil().max(1.0) as u32)
+    }
+
+    /// The same scene at another resolution: particle and wall spacings, h and dt multiplied by
+    /// `factor` (dt with h keeps the CFL number), so the particle count changes by 1/factor^3.
+    pub fn with_resolution(&self, factor: f64) -> Scene {
+        let mut s = self.clone();
+        s.physics.particle_spacing *= factor;
+        s.physics.smoothing_length *= factor;
+        s.time.dt *= factor;
+        s.time.dt_min = s.time.dt_min.map(|d| d * factor);
+        s.time.dt_max = s.time.dt_max.map(|d| d * factor);
+        if let Some(m) = &mut s.physics.particle_mass {
+            *m *= factor.powi(3);
+        }
+        for b in &mut s.boundary {
+            if let Boundary::Container { walls, .. } | Boundary::Box { walls, .. } = b {
+                if let Some(sp) = &mut walls.spacing {
+                    *sp *= factor;
+                }
+            }
+        }
+        // Coarser wall layers are thicker: the domain grows where they would stick out of it.
+        for b in &s.boundary {
+            if let Some((lo, hi)) = s.wall_span(b) {
+                for a in 0..3 {
+                    s.domain.min[a] = s.domain.min[a].min(lo[a]);
+                    s.domain.max[a] = s.domain.max[a].max(hi[a]);
+                }
+            }
+        }
+        s
+    }
+
+    /// The region a container's or a box's wall particles occupy: a container's walls lie
+    /// outside its faces, `layers` spacings deep; a box's inside it.
+    pub fn wall_span(&self, b: &Boundary) -> Option<([f64; 3], [f64; 3])> {
+        match b {
+            Boundary::Container { min, max, walls, .. } => {
+                let d = self.wall_layers(walls) as f64 * walls.spacing.unwrap_or(self.physics.particle_spacing);
+                Some(([min[0] - d, min[1] - d, min[2] - d], [max[0] + d, max[1] + d, max[2] + d]))
+            }
+            Boundary::Box { min, max, .. } => Some((*min, *max)),
+            _ => None,
+        }
+    }
+
+    /// The scene refined or coarsened to about `fluid_particles` fluid particles.
+    pub fn with_fluid_particles(&self, fluid_particles: u64) -> Scene {
+        let now = self.fluid_particle_count().max(1) as f64;
+        self.with_resolution((now / fluid_particles.max(1) as f64).cbrt())
+    }
+
+    /// Fluid particles of the scene, counted from the lattice sizes without creating them.
+    pub fn fluid_particle_count(&self) -> u64 {
+        let s = self.physics.particle_spacing;
+        self.fluid.iter().map(|b| super::initial::lattice_counts(b.min, b.max, s).iter().product::<u64>()).sum()
+    }
+
+    /// Particle count (fluid and walls, walls over-estimated by the full shell of their box,
+    /// top included) computed from the lattice sizes, without creating the particles.
+    pub fn estimated_particle_count(&self) -> u64 {
+        let s = self.physics.particle_spacing;
+        let mut n = self.fluid_particle_count();
+        for b in &self.boundary {
+            if let Boundary::Container { min, max, walls, .. } | Boundary::Box { min, max, walls } = b {
+                let ws = walls.spacing.unwrap_or(s);
+                let l = self.wall_layers(walls) as f64 * ws;
+                let (lo, hi) = ([min[0] - l, min[1] - l, min[2] - l], [max[0] + l, max[1] + l, max[2] + l]);
+                let outer = super::initial::lattice_counts(lo, hi, ws).iter().product::<u64>();
+                let inner = super::initial::lattice_counts(*min, *max, ws).iter().map(|&c| c.saturating_sub(2)).product::<u64>();
+                n += outer.saturating_sub(inner);
+            }
+        }
+        n
+    }
+
+    /// The box worth looking at: the solids and the fluid blocks, within the domain (the
+    /// domain alone when the scene has neither).
+    pub fn view_bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut boxes: Vec<([f64; 3], [f64; 3])> = self.solid_regions().iter().map(|r| (r.min, r.max)).collect();
+        boxes.extend(self.fluid.iter().map(|f| (f.min, f.max)));
+        if boxes.is_empty() {
+            return (self.domain.min, self.domain.max);
+        }
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for (a, b) in boxes {
+            for k in 0..3 {
+                lo[k] = lo[k].min(a[k]).max(self.domain.min[k]);
+                hi[k] = hi[k].max(b[k]).min(self.domain.max[k]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Lattice spacing of the wall particles (the smallest over the particle boundaries).
+    pub fn wall_spacing(&self) -> f64 {
+        self.boundary
+            .iter()
+            .filter_map(|b| match b {
+                Boundary::Container { walls, .. } | Boundary::Box { walls, .. } => Some(walls.spacing.unwrap_or(self.physics.particle_spacing)),
+                Boundary::Plane { .. } => None,
+            })
+            .reduce(f64::min)
+            .unwrap_or(self.physics.particle_spacing)
+    }
+}

@@ -1,0 +1,145 @@
+//! The state of a run as the layers above the solvers see it: a snapshot of the particles,
+//! the fields of the last step, the health of the run, the time steps taken, and the complete
+//! state a checkpoint saves.
+
+/// Fluid particles in their original order, widened to f64.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Snapshot {
+    pub step: u64,
+    pub time: f64,
+    pub positions: Vec<[f64; 3]>,
+    pub velocities: Vec<[f64; 3]>,
+    pub densities: Vec<f64>,
+    pub pressures: Vec<f64>,
+}
+
+impl Snapshot {
+    pub fn with_len(n: usize, step: u64, time: f64) -> Self {
+        Snapshot {
+            step,
+            time,
+            positions: vec![[0.0; 3]; n],
+            velocities: vec![[0.0; 3]; n],
+            densities: vec![0.0; n],
+            pressures: vec![0.0; n],
+        }
+    }
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+    /// Number of particles with a non-finite value in any field.
+    pub fn non_finite_count(&self) -> usize {
+        (0..self.len())
+            .filter(|&i| {
+                !(self.positions[i].iter().chain(&self.velocities[i]).all(|v| v.is_finite())
+                    && self.densities[i].is_finite()
+                    && self.pressures[i].is_finite())
+            })
+            .count()
+    }
+    pub fn max_speed(&self) -> f64 {
+        self.velocities.iter().map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max)
+    }
+    pub fn kinetic_energy(&self, mass: f64) -> f64 {
+        self.velocities.iter().map(|v| 0.5 * mass * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])).sum()
+    }
+}
+
+/// The fields one step computed, in original particle order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepFields {
+    pub densities: Vec<f64>,
+    pub pressures: Vec<f64>,
+    pub accelerations: Vec<[f64; 3]>,
+}
+
+/// What a run found wrong, and the largest density seen.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Health {
+    /// Particles with a non-finite position or velocity after the last step.
+    pub non_finite: u64,
+    /// Particles outside the domain after the last step.
+    pub escaped: u64,
+    /// The first step after which a particle was non-finite or outside the domain.
+    pub first_bad_step: Option<u64>,
+    /// Largest density over all steps so far.
+    pub max_density: f64,
+}
+
+impl Health {
+    pub fn is_ok(&self) -> bool {
+        self.first_bad_step.is_none()
+    }
+    pub fn record(&mut self, step: u64, non_finite: u32, escaped: u32) {
+        self.non_finite = non_finite as u64;
+        self.escaped = escaped as u64;
+        if (non_finite > 0 || escaped > 0) && self.first_bad_step.is_none() {
+            self.first_bad_step = Some(step);
+        }
+    }
+}
+
+/// The time steps taken so far: smallest, largest, mean and the last one.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DtStats {
+    pub min: f64,
+    pub max: f64,
+    pub mean: f64,
+    pub last: f64,
+}
+
+impl DtStats {
+    pub fn fixed(dt: f64) -> Self {
+        DtStats { min: dt, max: dt, mean: dt, last: dt }
+    }
+}
+
+/// The complete dynamic state of a backend: particles in the internal order the next step's
+/// binning starts from (the order inside a cell depends on it), their original ids, the step
+/// count and the health counters. Values are widened to f64, which is exact for f32.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BackendState {
+    /// `gpu`, `cpu f32` or `cpu f64`: a state is restored only into the same kind.
+    pub kind: String,
+    pub step: u64,
+    pub positions: Vec<[f64; 3]>,
+    pub velocities: Vec<[f64; 3]>,
+    pub ids: Vec<u32>,
+    pub non_finite: u64,
+    pub escaped: u64,
+    pub first_bad_step: Option<u64>,
+    pub max_density: f64,
+    /// The CPU's simulated time and its smallest, largest and last dt (adaptive dt makes
+    /// time differ from step x dt).
+    pub time: f64,
+    pub dt_min_max_last: [f64; 3],
+    /// The GPU's whole status buffer (health counters, and the adaptive step's dt, time and
+    /// its compensation), restored word for word.
+    pub gpu_status: Vec<u32>,
+}
+
+impl BackendState {
+    /// Checks that the state fits a backend of `kind` with `fluid_count` particles.
+    pub fn check_fits(&self, kind: &str, fluid_count: usize) -> anyhow::Result<()> {
+        anyhow::ensure!(self.kind == kind, "the state was saved by the {} backend, not {kind}", self.kind);
+        let n = fluid_count;
+        anyhow::ensure!(
+            self.positions.len() == n && self.velocities.len() == n && self.ids.len() == n,
+            "the state holds {} particles; the scene has {n}",
+            self.positions.len()
+        );
+        let mut seen = vec![false; n];
+        for &id in &self.ids {
+            anyhow::ensure!((id as usize) < n && !seen[id as usize], "the state's particle ids are not a permutation");
+            seen[id as usize] = true;
+        }
+        Ok(())
+    }
+    pub fn health(&self) -> Health {
+        Health { non_finite: self.non_finite, escaped: self.escaped, first_bad_step: self.first_bad_step, max_density: self.max_density }
+    }
+}
+

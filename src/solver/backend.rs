@@ -1,0 +1,100 @@
+//! The [`Backend`] trait every layer above the solvers drives, and what it hands out.
+
+use super::gpu::buffers::ParticleBuffers;
+use crate::model::params::Params;
+use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
+
+/// One particle of a snapshot as a backend hands it over in pieces: x, y, z, vx, vy, vz,
+/// density, pressure, in f32 (what the GPU holds).
+pub type SnapshotRow = [f32; 8];
+
+/// One of the particle arrays of a saved state ([`BackendState`]), in the backend's internal
+/// order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StateArray {
+    Positions,
+    Velocities,
+    Ids,
+}
+
+/// A piece of a [`StateArray`]: vectors (positions, velocities) widened to f64, or ids.
+pub enum StatePiece<'a> {
+    Vectors(&'a [[f64; 3]]),
+    Ids(&'a [u32]),
+}
+
+/// A simulation the layers above can drive: the CPU reference or the GPU pipeline. It knows no
+/// file format and no picture: it hands out snapshots, rows and state, and the io and viz layers
+/// turn them into files and pictures.
+pub trait Backend {
+    /// "cpu" or "gpu".
+    fn kind(&self) -> &'static str;
+    /// The adapter name, or "cpu".
+    fn adapter(&self) -> String;
+    fn params(&self) -> &Params;
+    fn fluid_count(&self) -> usize;
+    fn wall_count(&self) -> usize;
+    /// Advances up to `n` steps (a backend may stop early after a step that went wrong).
+    fn step(&mut self, n: u64) -> anyhow::Result<()>;
+    fn steps_done(&self) -> u64;
+    /// Simulated time reached so far.
+    fn time(&self) -> f64 {
+        self.steps_done() as f64 * self.params().dt
+    }
+    /// The steps taken so far (with adaptive dt a few bytes read from the GPU).
+    fn dt_stats(&mut self) -> anyhow::Result<DtStats> {
+        Ok(DtStats::fixed(self.params().dt))
+    }
+    /// Bytes the backend allocated for the simulation, where it knows.
+    fn memory_bytes(&self) -> Option<u64> {
+        None
+    }
+    /// Reads the health counters (a few bytes on the GPU).
+    fn health(&mut self) -> anyhow::Result<Health>;
+    /// The particles in original order, with density and pressure evaluated for the current
+    /// positions. Taking a snapshot never changes the trajectory.
+    fn snapshot(&mut self) -> anyhow::Result<Snapshot>;
+    /// Whether [`Backend::visit_snapshot_rows`] hands the snapshot over in pieces (the GPU,
+    /// which then never needs one host copy of every array).
+    fn streams_snapshots(&self) -> bool {
+        false
+    }
+    /// The snapshot of [`Backend::snapshot`] in pieces: `visit(first, rows)` gets particles
+    /// `first..first + rows.len()` of the original order, in order. Only where
+    /// [`Backend::streams_snapshots`]; elsewhere an error.
+    fn visit_snapshot_rows(&mut self, _visit: &mut dyn FnMut(u64, &[SnapshotRow]) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        anyhow::bail!("the {} backend hands out whole snapshots only", self.kind())
+    }
+    /// Density, pressure and acceleration computed by the last step, in original particle
+    /// order (read before a snapshot, which re-evaluates density for the new positions).
+    fn step_fields(&mut self) -> anyhow::Result<StepFields>;
+    /// The device and the particle buffers of a backend that keeps its particles on a GPU, for
+    /// drawing them where they are (in the backend's current order, after the last step).
+    fn gpu_particles(&self) -> Option<ParticleBuffers> {
+        None
+    }
+    /// Everything the next step reads, in the backend's internal (cell) order, for checkpoints.
+    fn save_state(&mut self) -> anyhow::Result<BackendState>;
+    /// [`Backend::save_state`] without its particle arrays (left empty), which
+    /// [`Backend::visit_state_array`] hands over in pieces.
+    fn save_state_header(&mut self) -> anyhow::Result<BackendState> {
+        let mut state = self.save_state()?;
+        state.positions = Vec::new();
+        state.velocities = Vec::new();
+        state.ids = Vec::new();
+        Ok(state)
+    }
+    /// One particle array of the saved state, in pieces of at most `chunk` particles, in order.
+    fn visit_state_array(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        let state = self.save_state()?;
+        let chunk = chunk.max(1) as usize;
+        match array {
+            StateArray::Positions => state.positions.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
+            StateArray::Velocities => state.velocities.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
+            StateArray::Ids => state.ids.chunks(chunk).try_for_each(|c| visit(StatePiece::Ids(c))),
+        }
+    }
+    /// Continues from a saved state: the following steps are bitwise those the saving backend
+    /// would have computed (on the same adapter or float type).
+    fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()>;
+}

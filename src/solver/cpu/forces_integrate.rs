@@ -1,0 +1,32 @@
+//! The forces and the integration in one pass, for fixed dt: each particle's acceleration goes
+//! straight into its update instead of through an array. Twin of wgsl/sim/forces_integrate.wgsl
+//! (entry point `forces_and_integrate`); the same values as [`super::forces::forces`] followed
+//! by [`super::integrate::integrate`]. The new state goes to other arrays, as on the GPU, since
+//! other particles still read the old one.
+
+use super::forces::{particle_acceleration, ForcesInput};
+use super::integrate::{advance_particle, PlaneR, StepHealth};
+use crate::model::real::{Real, V3};
+use rayon::prelude::*;
+
+/// The next positions and velocities of every particle into `positions_out`, `velocities_out`.
+pub fn forces_and_integrate<R: Real>(
+    input: &ForcesInput<R>,
+    dt: R,
+    planes: &[PlaneR<R>],
+    domain: (V3<R>, V3<R>),
+    positions_out: &mut [V3<R>],
+    velocities_out: &mut [V3<R>],
+) -> StepHealth {
+    positions_out
+        .par_iter_mut()
+        .zip(velocities_out.par_iter_mut())
+        .enumerate()
+        .map(|(i, (x, v))| {
+            let a = particle_acceleration(input, i);
+            *x = input.fluid.positions[i];
+            *v = input.velocities[i];
+            advance_particle(x, v, a, dt, planes, domain)
+        })
+        .reduce(StepHealth::default, |a, b| StepHealth { non_finite: a.non_finite + b.non_finite, escaped: a.escaped + b.escaped })
+}

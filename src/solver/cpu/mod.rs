@@ -1,0 +1,375 @@
+//! The CPU reference path: the same stages as the GPU, one file per WGSL stage with the same
+//! name and the same entry points, generic over f32 and f64. `f64` is the judge of every GPU
+//! result.
+
+pub mod bin_count;
+pub mod bin_scatter;
+pub mod density;
+pub mod forces;
+pub mod forces_integrate;
+pub mod integrate;
+pub mod prefix_sum;
+pub mod reorder;
+
+use super::backend::Backend;
+use crate::model::initial::InitialState;
+use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
+use crate::model::params::{Grid, Params};
+use crate::model::real::{Real, V3};
+use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
+use integrate::PlaneR;
+
+/// The CPU solver. Particle arrays are kept in cell order (like the GPU's); `ids` maps each slot
+/// back to the particle's original index.
+pub struct CpuSolver<R: Real> {
+    params: Params,
+    kernel: KernelCoefficients<R>,
+    grid: Grid<R>,
+    planes: Vec<PlaneR<R>>,
+    positions: Vec<V3<R>>,
+    velocities: Vec<V3<R>>,
+    ids: Vec<u32>,
+    densities: Vec<R>,
+    pressures: Vec<R>,
+    accelerations: Vec<V3<R>>,
+    keys: Vec<u32>,
+    counts: Vec<u32>,
+    starts: Vec<u32>,
+    sorted: Vec<u32>,
+    scratch_v3: Vec<V3<R>>,
+    scratch_ids: Vec<u32>,
+    wall_positions: Vec<V3<R>>,
+    wall_masses: Vec<R>,
+    wall_starts: Vec<u32>,
+    step: u64,
+    health: Health,
+    /// Simulated time and the steps' dt (adaptive dt makes them differ from step x dt).
+    time: f64,
+    dt_stats: DtStats,
+}
+
+impl<R: Real> CpuSolver<R> {
+    pub fn new(params: &Params, initial: &InitialState) -> Self {
+        let grid = params.grid.cast::<R>();
+        let n = initial.fluid_positions.len();
+        // Walls never move: sort them by cell once.
+        let walls: Vec<V3<R>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
+        let (wall_order, wall_starts) = sort_by_cell(&grid, &walls);
+        // Without walls no stage visits them: no per-cell array.
+        let wall_starts = if walls.is_empty() { Vec::new() } else { wall_starts };
+        let planes = params
+            .planes
+            .iter()
+            .map(|p| PlaneR { normal: V3::from64(p.normal), offset: R::of(p.offset), restitution: R::of(p.restitution) })
+            .collect();
+        CpuSolver {
+            params: params.clone(),
+            kernel: KernelCoefficients::new(params.kernel, params.h),
+            grid,
+            planes,
+            positions: initial.fluid_positions.iter().map(|&p| V3::from64(p)).collect(),
+            velocities: initial.fluid_velocities.iter().map(|&p| V3::from64(p)).collect(),
+            ids: (0..n as u32).collect(),
+            densities: vec![R::zero(); n],
+            pressures: vec![R::zero(); n],
+            accelerations: vec![V3::zero(); n],
+            keys: vec![0; n],
+            counts: vec![0; grid.cell_count()],
+            starts: vec![0; grid.cell_count() + 1],
+            sorted: vec![0; n],
+            scratch_v3: Vec::with_capacity(n),
+            scratch_ids: Vec::with_capacity(n),
+            wall_positions: wall_order.iter().map(|&i| walls[i as usize]).collect(),
+            wall_masses: wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect(),
+            wall_starts,
+            step: 0,
+            health: Health::default(),
+            time: 0.0,
+            dt_stats: DtStats { min: f64::INFINITY, ..DtStats::default() },
+        }
+    }
+
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+    pub fn steps_done(&self) -> u64 {
+        self.step
+    }
+    pub fn health(&self) -> Health {
+        self.health
+    }
+    pub fn fluid_len(&self) -> usize {
+        self.positions.len()
+    }
+    pub fn time(&self) -> f64 {
+        if self.params.adaptive.is_some() {
+            self.time
+        } else {
+            self.step as f64 * self.params.dt
+        }
+    }
+    pub fn dt_stats(&self) -> DtStats {
+        if self.step == 0 {
+            DtStats::default()
+        } else {
+            DtStats { mean: self.time() / self.step as f64, ..self.dt_stats }
+        }
+    }
+    /// Bytes of the solver's arrays.
+    pub fn memory_bytes(&self) -> u64 {
+        let r = std::mem::size_of::<R>() as u64;
+        let v3 = 3 * r;
+        let n = self.positions.len() as u64;
+        n * (4 * v3 + 2 * r + 4 * 4) // positions, velocities, accelerations, scratch; densities, pressures; ids, keys, sorted, scratch ids
+            + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
+            + self.wall_positions.len() as u64 * (v3 + r)
+    }
+
+    /// Stage 1: counting-sort binning and reordering of the state into cell order.
+    pub fn bin(&mut self) {
+        self.counts.fill(0);
+        bin_count::bin_count(&self.grid, &self.positions, &mut self.keys, &mut self.counts);
+        prefix_sum::prefix_sum(&self.counts, &mut self.starts);
+        bin_scatter::bin_scatter(&self.keys, &self.starts, &mut self.sorted);
+        reorder::reorder(&self.sorted, &self.positions, &mut self.scratch_v3);
+        std::mem::swap(&mut self.positions, &mut self.scratch_v3);
+        reorder::reorder(&self.sorted, &self.velocities, &mut self.scratch_v3);
+        std::mem::swap(&mut self.velocities, &mut self.scratch_v3);
+        reorder::reorder(&self.sorted, &self.ids, &mut self.scratch_ids);
+        std::mem::swap(&mut self.ids, &mut self.scratch_ids);
+    }
+
+    /// Stage 2: density and pressure of every particle.
+    pub fn compute_density(&mut self) {
+        let p = &self.params;
+        let input = density::DensityInput {
+            kernel: &self.kernel,
+            grid: &self.grid,
+            fluid_mass: R::of(p.fluid_mass),
+            rest_density: R::of(p.rest_density),
+            stiffness: R::of(p.stiffness),
+            eos: p.eos,
+            clamp_negative_pressure: p.clamp_negative_pressure,
+            fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+            walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
+            wall_masses: &self.wall_masses,
+        };
+        density::density(&input, &mut self.densities, &mut self.pressures);
+    }
+
+    /// What the forces read: the current state and the fields of the last density stage.
+    fn forces_input(&self) -> forces::ForcesInput<'_, R> {
+        let p = &self.params;
+        forces::ForcesInput {
+            kernel: &self.kernel,
+            grid: &self.grid,
+            fluid_mass: R::of(p.fluid_mass),
+            viscosity: R::of(p.viscosity_at_step(self.step)),
+            rest_density: R::of(p.rest_density),
+            boundary_friction: R::of(p.boundary_friction),
+            boundary_pressure: p.boundary_pressure,
+            gravity: V3::from64(p.gravity),
+            fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+            velocities: &self.velocities,
+            densities: &self.densities,
+            pressures: &self.pressures,
+            walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
+            wall_masses: &self.wall_masses,
+        }
+    }
+
+    /// Stage 3: accelerations.
+    pub fn compute_forces(&mut self) {
+        let mut accelerations = std::mem::take(&mut self.accelerations);
+        forces::forces(&self.forces_input(), &mut accelerations);
+        self.accelerations = accelerations;
+    }
+
+    /// Stages 3 and 4 fused with fixed dt ([`forces_integrate::forces_and_integrate`]): the
+    /// next state, computed from the current one and the last density stage, without changing
+    /// the solver (for the parity tests of the fused stage).
+    pub fn forces_and_integrate(&self) -> (Vec<V3<R>>, Vec<V3<R>>, integrate::StepHealth) {
+        let n = self.positions.len();
+        let (mut x, mut v) = (vec![V3::zero(); n], vec![V3::zero(); n]);
+        let domain = (V3::from64(self.params.domain_min), V3::from64(self.params.domain_max));
+        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.planes, domain, &mut x, &mut v);
+        (x, v, found)
+    }
+
+    /// This step's dt: fixed, or with adaptive dt from the largest speed (at the start of the
+    /// step) and acceleration (of this step), as wgsl/sim/integrate.wgsl `reduce_maxima` and
+    /// `choose_dt`.
+    pub fn choose_dt(&self) -> f64 {
+        let Some(adaptive) = self.params.adaptive else {
+            return self.params.dt;
+        };
+        let p = &self.params;
+        let maxima = integrate::reduce_maxima(&self.velocities, &self.accelerations);
+        integrate::choose_dt(&adaptive, p.h, p.speed_of_sound(), maxima, p.viscosity_at_step(self.step))
+    }
+
+    /// Stage 4: integration and boundaries. Returns what went wrong in this step.
+    pub fn integrate(&mut self) -> integrate::StepHealth {
+        self.integrate_with(self.params.dt)
+    }
+
+    fn integrate_with(&mut self, dt: f64) -> integrate::StepHealth {
+        let input = integrate::IntegrateInput {
+            dt: R::of(dt),
+            planes: &self.planes,
+            domain_min: V3::from64(self.params.domain_min),
+            domain_max: V3::from64(self.params.domain_max),
+            accelerations: &self.accelerations,
+        };
+        integrate::integrate(&input, &mut self.positions, &mut self.velocities)
+    }
+
+    /// One full time step; records the first step that produced a non-finite or escaped particle.
+    /// The neighbour grid is rebuilt every `rebuild_every` steps, as on the GPU.
+    pub fn step_once(&mut self) {
+        if self.step % self.params.rebuild_every.max(1) as u64 == 0 {
+            self.bin();
+        }
+        self.compute_density();
+        self.compute_forces();
+        let max_density = self.densities.iter().fold(R::zero(), |a, &b| a.max(b)).to64();
+        self.health.max_density = self.health.max_density.max(max_density);
+        let dt = self.choose_dt();
+        let h = self.integrate_with(dt);
+        self.time += dt;
+        self.dt_stats.min = self.dt_stats.min.min(dt);
+        self.dt_stats.max = self.dt_stats.max.max(dt);
+        self.dt_stats.last = dt;
+        integrate::finish_step(&mut self.step, &mut self.health, h);
+    }
+
+    /// Runs up to `n` steps, stopping early after a step that went wrong.
+    pub fn step(&mut self, n: u64) {
+        for _ in 0..n {
+            self.step_once();
+            if !self.health.is_ok() {
+                break;
+            }
+        }
+    }
+
+    /// The state in the original particle order; density and pressure are evaluated for the
+    /// current positions.
+    pub fn snapshot(&mut self) -> Snapshot {
+        self.bin();
+        self.compute_density();
+        let n = self.positions.len();
+        let mut s = Snapshot::with_len(n, self.step, self.time());
+        for (slot, &id) in self.ids.iter().enumerate() {
+            let id = id as usize;
+            s.positions[id] = self.positions[slot].to64();
+            s.velocities[id] = self.velocities[slot].to64();
+            s.densities[id] = self.densities[slot].to64();
+            s.pressures[id] = self.pressures[slot].to64();
+        }
+        s
+    }
+
+    /// Density, pressure and acceleration of the last step, in original order.
+    pub fn step_fields(&self) -> StepFields {
+        let n = self.positions.len();
+        let mut out = StepFields { densities: vec![0.0; n], pressures: vec![0.0; n], accelerations: vec![[0.0; 3]; n] };
+        for (slot, &id) in self.ids.iter().enumerate() {
+            out.densities[id as usize] = self.densities[slot].to64();
+            out.pressures[id as usize] = self.pressures[slot].to64();
+            out.accelerations[id as usize] = self.accelerations[slot].to64();
+        }
+        out
+    }
+
+    /// The name of this backend in a saved state: `cpu f32` or `cpu f64`.
+    pub fn state_kind() -> String {
+        format!("cpu f{}", 8 * std::mem::size_of::<R>())
+    }
+
+    /// The particles in their current internal order, the step and the health: all the next
+    /// step reads (densities, pressures and accelerations are recomputed before use).
+    pub fn save_state(&self) -> BackendState {
+        BackendState {
+            kind: Self::state_kind(),
+            step: self.step,
+            positions: self.positions.iter().map(|p| p.to64()).collect(),
+            velocities: self.velocities.iter().map(|v| v.to64()).collect(),
+            ids: self.ids.clone(),
+            non_finite: self.health.non_finite,
+            escaped: self.health.escaped,
+            first_bad_step: self.health.first_bad_step,
+            max_density: self.health.max_density,
+            time: self.time,
+            dt_min_max_last: [self.dt_stats.min, self.dt_stats.max, self.dt_stats.last],
+            gpu_status: Vec::new(),
+        }
+    }
+
+    pub fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
+        state.check_fits(&Self::state_kind(), self.positions.len())?;
+        self.positions = state.positions.iter().map(|&p| V3::from64(p)).collect();
+        self.velocities = state.velocities.iter().map(|&v| V3::from64(v)).collect();
+        self.ids = state.ids.clone();
+        self.step = state.step;
+        self.health = state.health();
+        self.time = state.time;
+        let [min, max, last] = state.dt_min_max_last;
+        self.dt_stats = DtStats { min, max, last, ..DtStats::default() };
+        Ok(())
+    }
+
+    /// The sorted wall particles and their cell starts.
+    pub fn walls(&self) -> (&[V3<R>], &[R], &[u32]) {
+        (&self.wall_positions, &self.wall_masses, &self.wall_starts)
+    }
+}
+
+impl<R: Real> Backend for CpuSolver<R> {
+    fn kind(&self) -> &'static str {
+        "cpu"
+    }
+    fn adapter(&self) -> String {
+        format!("cpu ({}, {} threads)", std::any::type_name::<R>(), rayon::current_num_threads())
+    }
+    fn params(&self) -> &Params {
+        CpuSolver::params(self)
+    }
+    fn fluid_count(&self) -> usize {
+        self.fluid_len()
+    }
+    fn wall_count(&self) -> usize {
+        self.walls().0.len()
+    }
+    fn step(&mut self, n: u64) -> anyhow::Result<()> {
+        CpuSolver::step(self, n);
+        Ok(())
+    }
+    fn steps_done(&self) -> u64 {
+        CpuSolver::steps_done(self)
+    }
+    fn time(&self) -> f64 {
+        CpuSolver::time(self)
+    }
+    fn dt_stats(&mut self) -> anyhow::Result<DtStats> {
+        Ok(CpuSolver::dt_stats(self))
+    }
+    fn memory_bytes(&self) -> Option<u64> {
+        Some(CpuSolver::memory_bytes(self))
+    }
+    fn health(&mut self) -> anyhow::Result<Health> {
+        Ok(CpuSolver::health(self))
+    }
+    fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
+        Ok(CpuSolver::snapshot(self))
+    }
+    fn step_fields(&mut self) -> anyhow::Result<StepFields> {
+        Ok(CpuSolver::step_fields(self))
+    }
+    fn save_state(&mut self) -> anyhow::Result<BackendState> {
+        Ok(CpuSolver::save_state(self))
+    }
+    fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
+        CpuSolver::restore_state(self, state)
+    }
+}

@@ -1,0 +1,105 @@
+//! GPU buffers: allocation, the upload of a state, and the particle buffers handed to others
+//! (the renderer, a program that draws the particles itself).
+
+use super::device::GpuContext;
+use wgpu::util::DeviceExt;
+
+/// Particles per piece moved between the host and the GPU (uploads, streamed snapshots and
+/// checkpoints).
+pub const STREAM_CHUNK: u64 = 1 << 20;
+
+/// Usage of every storage buffer of the solver. VERTEX: the renderer draws particles straight
+/// from these buffers.
+fn storage_usage() -> wgpu::BufferUsages {
+    wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::VERTEX
+}
+
+/// A storage buffer of `bytes` bytes (at least 16: wgpu binds no empty buffer).
+pub fn storage(device: &wgpu::Device, label: &str, bytes: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: bytes.max(16), usage: storage_usage(), mapped_at_creation: false })
+}
+
+/// A storage buffer holding `contents` (padded to at least 16 bytes).
+pub fn storage_init(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Buffer {
+    let mut data = contents.to_vec();
+    data.resize(data.len().max(16), 0);
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &data, usage: storage_usage() })
+}
+
+/// Points as `vec4<f32>` with `w(i)` in the fourth component.
+pub fn vec4s(points: &[[f64; 3]], w: impl Fn(usize) -> f32) -> Vec<[f32; 4]> {
+    points.iter().enumerate().map(|(i, p)| [p[0] as f32, p[1] as f32, p[2] as f32, w(i)]).collect()
+}
+
+/// The particle state (one of a ping-pong pair): positions whose w holds each particle's
+/// original index as u32 bits, and velocities (w = 0).
+pub struct StateBuffers {
+    pub positions: wgpu::Buffer,
+    pub velocities: wgpu::Buffer,
+}
+
+impl StateBuffers {
+    pub fn new(device: &wgpu::Device, index: usize, fluid: u64) -> Self {
+        StateBuffers {
+            positions: storage(device, &format!("positions {index}"), fluid * 16),
+            velocities: storage(device, &format!("velocities {index}"), fluid * 16),
+        }
+    }
+
+    /// Writes positions (with the ids `id(i)` in their w) and velocities (w = 0, as the
+    /// integration writes them), `STREAM_CHUNK` particles at a time with a submission after
+    /// each piece, so the host converts and stages one piece instead of two whole `vec4` arrays
+    /// (32 bytes per particle).
+    pub fn upload(&self, ctx: &GpuContext, positions: &[[f64; 3]], velocities: &[[f64; 3]], id: impl Fn(usize) -> u32) {
+        let chunk = STREAM_CHUNK as usize;
+        for first in (0..positions.len()).step_by(chunk) {
+            let end = (first + chunk).min(positions.len());
+            let pos = vec4s(&positions[first..end], |i| f32::from_bits(id(first + i)));
+            let vel = vec4s(&velocities[first..end], |_| 0.0);
+            ctx.queue.write_buffer(&self.positions, first as u64 * 16, bytemuck::cast_slice(&pos));
+            ctx.queue.write_buffer(&self.velocities, first as u64 * 16, bytemuck::cast_slice(&vel));
+            ctx.queue.submit([]);
+            // Lets the device free the piece's staging memory before the next one.
+            let _ = ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None });
+        }
+    }
+}
+
+/// The ids carried in the w components of positions read back from the GPU.
+pub fn ids_of(positions: &[[f32; 4]]) -> Vec<u32> {
+    positions.iter().map(|p| p[3].to_bits()).collect()
+}
+
+/// Values in slot order put back into original order (`ids[slot]` is the original index).
+pub fn unpermute<T: Copy + Default>(ids: &[u32], values: impl Iterator<Item = T>) -> Vec<T> {
+    let mut out = vec![T::default(); ids.len()];
+    for (slot, v) in values.enumerate() {
+        out[ids[slot] as usize] = v;
+    }
+    out
+}
+
+/// The xyz of a `vec4<f32>`, widened to f64.
+pub fn widen(v: &[f32; 4]) -> [f64; 3] {
+    [v[0] as f64, v[1] as f64, v[2] as f64]
+}
+
+/// The buffers of the current particle state, for rendering or post-processing on the GPU, with
+/// the device they live on. They are the solver's own buffers (handles, not copies), in its
+/// cell order, all four in the same order; the solver alternates between two sets, so ask again
+/// after every step.
+#[derive(Clone, Debug)]
+pub struct ParticleBuffers {
+    pub context: GpuContext,
+    /// `array<vec4<f32>>`: x, y, z, and in w the original index of the particle in each slot
+    /// (u32 bits).
+    pub positions: wgpu::Buffer,
+    /// `array<vec4<f32>>`: vx, vy, vz, 0.
+    pub velocities: wgpu::Buffer,
+    /// `array<f32>`.
+    pub densities: wgpu::Buffer,
+    /// `array<f32>`.
+    pub pressures: wgpu::Buffer,
+    /// Number of fluid particles (elements of each array).
+    pub count: u32,
+}

@@ -1,0 +1,215 @@
+//! Adapter choice and device creation.
+//!
+//! `WGPU_BACKEND` (vulkan, metal, dx12, gl) and `WGPU_ADAPTER_NAME` (a case-insensitive part of
+//! the name) are honoured as in wgpu's own utilities; otherwise a discrete GPU is preferred.
+
+use anyhow::Context;
+
+/// An adapter, its device and queue (handles: clones share them).
+#[derive(Clone)]
+pub struct GpuContext {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    /// Bytes per storage binding of a split array (see [`GpuContext::storage_segment_bytes`]).
+    segment_bytes: u64,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "GpuContext({})", self.describe())
+    }
+}
+
+/// The smallest segment a storage array may be split into: the scan of the cell counts needs
+/// segments of whole 256-value blocks whose block totals start at 256-byte aligned offsets.
+pub const MIN_SEGMENT_BYTES: u64 = 1 << 16;
+
+/// Environment variable that lowers the segment size (to run split storage arrays on a small
+/// scene, or to emulate an adapter with smaller bindings).
+pub const SEGMENT_BYTES_VAR: &str = "WGSPH_STORAGE_SEGMENT_BYTES";
+
+/// No usable adapter, or one that cannot hold the scene.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter with compute shaders was found{0}")]
+    NoAdapter(String),
+    #[error("adapter '{adapter}' ({backend}): {what} needs {need} but the adapter's {limit} is {have}")]
+    Limit { adapter: String, backend: String, what: String, limit: &'static str, need: u64, have: u64 },
+}
+
+pub fn backends() -> wgpu::Backends {
+    wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all())
+}
+
+fn instance() -> wgpu::Instance {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    desc.backends = backends();
+    wgpu::Instance::new(desc)
+}
+
+fn type_rank(t: wgpu::DeviceType) -> u32 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+fn backend_rank(b: wgpu::Backend) -> u32 {
+    match b {
+        wgpu::Backend::Vulkan | wgpu::Backend::Metal | wgpu::Backend::Dx12 => 0,
+        wgpu::Backend::Gl => 1,
+        _ => 2,
+    }
+}
+
+fn supports_compute(a: &wgpu::Adapter) -> bool {
+    a.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+}
+
+/// Every adapter of the enabled backends, best first.
+pub fn adapters() -> Vec<wgpu::Adapter> {
+    best_first(pollster::block_on(instance().enumerate_adapters(backends())))
+}
+
+/// Sorts adapters: discrete before integrated before software; native APIs before OpenGL.
+pub fn best_first(mut list: Vec<wgpu::Adapter>) -> Vec<wgpu::Adapter> {
+    list.sort_by_key(|a| {
+        let i = a.get_info();
+        (type_rank(i.device_type), backend_rank(i.backend))
+    });
+    list
+}
+
+/// Every adapter with compute shaders, best first (what the tests run on).
+pub fn compute_adapters() -> Vec<wgpu::Adapter> {
+    adapters().into_iter().filter(supports_compute).collect()
+}
+
+/// The adapter a run uses: the best one with compute shaders, filtered by `WGPU_ADAPTER_NAME`.
+pub fn choose_adapter() -> Result<wgpu::Adapter, GpuError> {
+    choose_from(adapters())
+}
+
+/// The best of `all` (sorted best first) with compute shaders, filtered by `WGPU_ADAPTER_NAME`.
+pub fn choose_from(all: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter, GpuError> {
+    let wanted = std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase());
+    let names: Vec<String> = all.iter().map(|a| format!("{} ({:?})", a.get_info().name, a.get_info().backend)).collect();
+    all.into_iter()
+        .filter(supports_compute)
+        .find(|a| wanted.as_ref().is_none_or(|w| a.get_info().name.to_lowercase().contains(w)))
+        .ok_or_else(|| {
+            let mut why = String::new();
+            if let Some(w) = &wanted {
+                why += &format!(" matching WGPU_ADAPTER_NAME='{w}'");
+            }
+            if names.is_empty() {
+                why += " (no adapter at all: install a GPU driver, or Mesa's lavapipe/llvmpipe for a software adapter)";
+            } else {
+                why += &format!(" (adapters found: {})", names.join(", "));
+            }
+            GpuError::NoAdapter(why)
+        })
+}
+
+impl GpuContext {
+    /// Opens the chosen adapter with all of its limits, so big scenes can use big buffers.
+    pub fn new() -> anyhow::Result<Self> {
+        let adapter = choose_adapter()?;
+        Self::from_adapter(adapter)
+    }
+
+    pub fn from_adapter(adapter: wgpu::Adapter) -> anyhow::Result<Self> {
+        let info = adapter.get_info();
+        let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("wgsph"),
+            required_features: features,
+            required_limits: adapter.limits(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .with_context(|| format!("cannot open a device on adapter '{}' ({:?})", info.name, info.backend))?;
+        Self::from_device(adapter, device, queue)
+    }
+
+    /// A context of a device the caller opened itself on `adapter` (for example the one it
+    /// renders with). The device should have the adapter's storage-buffer limits for large
+    /// scenes. `WGSPH_STORAGE_SEGMENT_BYTES` is honoured as in [`GpuContext::new`].
+    pub fn from_device(adapter: wgpu::Adapter, device: wgpu::Device, queue: wgpu::Queue) -> anyhow::Result<Self> {
+        let info = adapter.get_info();
+        let natural = Self::natural_segment_bytes(&device.limits());
+        let ctx = GpuContext { adapter, device, queue, info, segment_bytes: natural };
+        match std::env::var(SEGMENT_BYTES_VAR) {
+            Ok(v) => {
+                let bytes = v.trim().parse::<u64>().map_err(|_| {
+                    anyhow::anyhow!("{SEGMENT_BYTES_VAR}='{v}' is not a number of bytes; allowed: a power of two from {MIN_SEGMENT_BYTES} to {natural}")
+                })?;
+                ctx.with_storage_segment_bytes(bytes).with_context(|| format!("{SEGMENT_BYTES_VAR}='{v}'"))
+            }
+            Err(_) => Ok(ctx),
+        }
+    }
+
+    /// The largest power of two that one storage binding and one buffer may hold.
+    fn natural_segment_bytes(l: &wgpu::Limits) -> u64 {
+        let most = (l.max_storage_buffer_binding_size as u64).min(l.max_buffer_size);
+        1u64 << (63 - most.max(1).leading_zeros())
+    }
+
+    /// Bytes of one storage binding of an array split into segments: the largest power of two
+    /// within the adapter's `max_storage_buffer_binding_size`, unless lowered. Arrays longer than
+    /// one segment are bound as several ranges of one buffer (src/solver/gpu/shaders.rs), so the
+    /// binding limit never bounds the particle count; `max_buffer_size` and memory still do.
+    pub fn storage_segment_bytes(&self) -> u64 {
+        self.segment_bytes
+    }
+
+    /// The same device with storage arrays split into segments of `bytes` (a power of two from
+    /// [`MIN_SEGMENT_BYTES`] up to the adapter's own segment size): a small scene then runs the
+    /// split-array path that only big scenes need otherwise.
+    pub fn with_storage_segment_bytes(mut self, bytes: u64) -> anyhow::Result<Self> {
+        let natural = Self::natural_segment_bytes(&self.device.limits());
+        let align = self.device.limits().min_storage_buffer_offset_alignment as u64;
+        anyhow::ensure!(
+            bytes.is_power_of_two() && (MIN_SEGMENT_BYTES..=natural).contains(&bytes) && bytes % align == 0,
+            "storage segment of {bytes} bytes: allowed is a power of two from {MIN_SEGMENT_BYTES} to {natural} (the adapter's largest) bytes"
+        );
+        self.segment_bytes = bytes;
+        Ok(self)
+    }
+
+    pub fn describe(&self) -> String {
+        format!("{} ({:?}, {:?})", self.info.name, self.info.backend, self.info.device_type)
+    }
+}
+
+/// One line per adapter with the limits that matter for big scenes (`wgsph adapters`).
+pub fn describe_adapters() -> Vec<String> {
+    adapters()
+        .iter()
+        .map(|a| {
+            let i = a.get_info();
+            let l = a.limits();
+            format!(
+                "{} | backend {:?} | type {:?} | driver {} {} | compute {} | max_storage_buffer_binding_size {} MiB | max_buffer_size {} MiB | storage buffers per stage {} | workgroups per dimension {} | timestamps {}",
+                i.name,
+                i.backend,
+                i.device_type,
+                i.driver,
+                i.driver_info,
+                if supports_compute(a) { "yes" } else { "no" },
+                l.max_storage_buffer_binding_size as u64 >> 20,
+                l.max_buffer_size >> 20,
+                l.max_storage_buffers_per_shader_stage,
+                l.max_compute_workgroups_per_dimension,
+                if a.features().contains(wgpu::Features::TIMESTAMP_QUERY) { "yes" } else { "no" },
+            )
+        })
+        .collect()
+}

@@ -1,0 +1,152 @@
+//! The GPU memory of the solver, planned before anything is allocated.
+//!
+//! [`MemoryPlan`] lists every buffer the GPU solver creates with its size in bytes. The
+//! solver checks the plan against the device's limits before it creates a buffer, and reports
+//! the plan's total as its memory (`Backend::memory_bytes`), so the check and the figure cannot
+//! disagree. wgpu reports no free-memory figure for an adapter, so only the per-buffer limits
+//! (`max_buffer_size`, `max_storage_buffer_binding_size`) are checked; an allocation beyond the
+//! device's memory still fails inside the driver.
+
+use super::device::GpuContext;
+use super::params::{status, GpuParams};
+use super::prefix_sum::Scan;
+use crate::model::scene::Scene;
+
+/// One buffer of the solver.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlannedBuffer {
+    pub label: &'static str,
+    pub bytes: u64,
+    /// Bytes per fluid particle (0 for buffers that do not grow with the fluid).
+    pub bytes_per_fluid_particle: u64,
+    /// Bound whole as one storage binding (the others are the uniform block and the arrays bound
+    /// in segments).
+    pub single_binding: bool,
+}
+
+/// Every buffer the solver allocates for a scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MemoryPlan {
+    pub fluid: u64,
+    /// `None` before the walls are generated (a check from the scene's sizes alone).
+    pub walls: Option<u64>,
+    pub cells: u64,
+    pub buffers: Vec<PlannedBuffer>,
+}
+
+/// The scene does not fit the adapter.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "adapter '{adapter}' ({backend}): {particles} fluid particles{walls} and {cells} grid cells need {at_least}{total} bytes ({total_mib} MiB) of GPU memory; \
+     the buffer '{buffer}' needs {need} bytes but the adapter's {limit} is {have} bytes{fit}"
+)]
+pub struct GpuMemoryError {
+    pub adapter: String,
+    pub backend: String,
+    pub particles: u64,
+    walls: String,
+    at_least: &'static str,
+    pub cells: u64,
+    pub total: u64,
+    total_mib: u64,
+    pub buffer: String,
+    pub need: u64,
+    pub limit: &'static str,
+    pub have: u64,
+    fit: String,
+}
+
+/// What `storage`/`storage_init` in the solver allocate: never less than 16 bytes.
+fn padded(bytes: u64) -> u64 {
+    bytes.max(16)
+}
+
+impl MemoryPlan {
+    /// The buffers of a solver with `fluid` particles, `walls` wall particles and `cells` grid
+    /// cells; `uniform_bytes` is the size of the parameter block. `accelerations`: whether the
+    /// step keeps an accelerations array (adaptive dt; with fixed dt the forces and the
+    /// integration are one pass).
+    pub fn new(fluid: u64, walls: Option<u64>, cells: u64, uniform_bytes: u64, accelerations: bool) -> MemoryPlan {
+        let w = walls.unwrap_or(0);
+        let per_fluid = |label, per: u64| PlannedBuffer { label, bytes: padded(fluid * per), bytes_per_fluid_particle: per, single_binding: false };
+        let fixed = |label, bytes| PlannedBuffer { label, bytes, bytes_per_fluid_particle: 0, single_binding: false };
+        let mut buffers = vec![
+            PlannedBuffer { label: "params", bytes: uniform_bytes, bytes_per_fluid_particle: 0, single_binding: false },
+            fixed("wall positions", padded(w * 16)),
+            // Without walls the shaders never read the per-cell wall array.
+            fixed("wall cell starts", padded(if w > 0 { (cells + 1) * 4 } else { 0 })),
+            // The particles' ids ride in the w of the positions.
+            per_fluid("positions 0", 16),
+            per_fluid("velocities 0", 16),
+            per_fluid("positions 1", 16),
+            per_fluid("velocities 1", 16),
+            fixed("cell starts", padded((cells + 1) * 4)),
+            // Also the binning's unordered slots and cell keys, dead by the time density is
+            // written; its ranks live in the velocities the reorder then writes.
+            per_fluid("densities", 4),
+            per_fluid("pressures", 4),
+            fixed("placeholder", 16),
+            PlannedBuffer { label: "status", bytes: padded(status::BYTES), bytes_per_fluid_particle: 0, single_binding: true },
+        ];
+        if accelerations {
+            buffers.push(per_fluid("accelerations", 16));
+        }
+        buffers.extend(Scan::sum_buffer_bytes(cells + 1).into_iter().map(|bytes| fixed("scan block sums", bytes)));
+        MemoryPlan { fluid, walls, cells, buffers }
+    }
+
+    /// The plan of a scene from its lattice sizes, before any particle is created on the host:
+    /// a lower bound (walls not counted, as they are known only once generated; the fused step's
+    /// arrays unless the scene has adaptive dt). The solver checks its exact plan again before
+    /// it allocates.
+    pub fn for_scene(scene: &Scene) -> MemoryPlan {
+        let uniform = GpuParams::default().bytes().len() as u64;
+        MemoryPlan::new(scene.fluid_particle_count(), None, scene.grid().cell_count() as u64, uniform, scene.time.adaptive)
+    }
+
+    /// Bytes of all buffers.
+    pub fn total(&self) -> u64 {
+        self.buffers.iter().map(|b| b.bytes).sum()
+    }
+
+    /// Fails, naming the adapter, the particle count, the total bytes and the limit, when a
+    /// buffer exceeds `max_buffer_size` or a buffer bound whole `max_storage_buffer_binding_size`.
+    pub fn check(&self, ctx: &GpuContext) -> Result<(), GpuMemoryError> {
+        let l = ctx.device.limits();
+        let binding = l.max_storage_buffer_binding_size as u64;
+        for b in &self.buffers {
+            let over = if b.bytes > l.max_buffer_size {
+                Some(("max_buffer_size", l.max_buffer_size))
+            } else if b.single_binding && b.bytes > binding {
+                Some(("max_storage_buffer_binding_size", binding))
+            } else {
+                None
+            };
+            let Some((limit, have)) = over else { continue };
+            let total = self.total();
+            return Err(GpuMemoryError {
+                adapter: ctx.info.name.clone(),
+                backend: format!("{:?}", ctx.info.backend),
+                particles: self.fluid,
+                walls: match self.walls {
+                    Some(w) => format!(", {w} wall particles"),
+                    None => " (walls not yet counted)".into(),
+                },
+                at_least: if self.walls.is_some() { "" } else { "at least " },
+                cells: self.cells,
+                total,
+                total_mib: total >> 20,
+                buffer: b.label.into(),
+                need: b.bytes,
+                limit,
+                have,
+                fit: if b.bytes_per_fluid_particle > 0 {
+                    format!(" (at most {} fluid particles fit; choose a smaller --particles)", have / b.bytes_per_fluid_particle)
+                } else {
+                    " (use a coarser grid: a larger smoothing length or a smaller domain)".into()
+                },
+            });
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,18 @@
+//! The GPU path: the device, the memory plan, the shaders and their pipelines, the buffers, the
+//! one step order (`schedule.rs`), the readback in pieces, and the solver that holds them.
+
+pub mod buffers;
+pub mod device;
+pub mod memory;
+pub mod params;
+pub mod prefix_sum;
+pub mod readback;
+pub mod schedule;
+pub mod shaders;
+pub mod solver;
+pub mod workgroups;
+
+pub use buffers::ParticleBuffers;
+pub use device::{GpuContext, GpuError};
+pub use solver::GpuSolver;
+pub use workgroups::{GpuOptions, WorkgroupSizes};

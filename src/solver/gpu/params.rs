@@ -1,0 +1,215 @@
+//! What the host and the shaders share: the uniform parameter block (`struct Params` in
+//! wgsl/shared/common.wgsl) and the status words (`STATUS_*` in the same file). Each is written
+//! once here with its WGSL spelling; a test reads common.wgsl and checks that both sides agree
+//! field by field and word by word.
+
+use crate::model::kernels::KernelCoefficients;
+use crate::model::params::{Params, MAX_PLANES};
+use encase::{ShaderType, UniformBuffer};
+
+/// A WGSL `vec4<T>` for encase (which has no glam support of its own).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Vec4<T>(pub [T; 4]);
+impl<T> AsRef<[T; 4]> for Vec4<T> {
+    fn as_ref(&self) -> &[T; 4] {
+        &self.0
+    }
+}
+impl<T> AsMut<[T; 4]> for Vec4<T> {
+    fn as_mut(&mut self) -> &mut [T; 4] {
+        &mut self.0
+    }
+}
+impl<T> From<[T; 4]> for Vec4<T> {
+    fn from(v: [T; 4]) -> Self {
+        Vec4(v)
+    }
+}
+encase::impl_vector!(4, Vec4<T>; (T); using AsRef AsMut From);
+pub type Vec4f = Vec4<f32>;
+pub type Vec4u = Vec4<u32>;
+
+/// Declares the uniform block once: the Rust struct (laid out by encase) and the WGSL type of
+/// every field, in order, for the mirror test.
+macro_rules! uniform_block {
+    ($(#[$meta:meta])* pub struct $name:ident { $($(#[doc = $doc:literal])* $field:ident: $ty:ty => $wgsl:literal,)* }) => {
+        $(#[$meta])*
+        pub struct $name {
+            $($(#[doc = $doc])* pub $field: $ty,)*
+        }
+        impl $name {
+            /// Every field's name and WGSL type, in order (`struct Params` of common.wgsl).
+            pub const WGSL_FIELDS: &'static [(&'static str, &'static str)] = &[$((stringify!($field), $wgsl)),*];
+        }
+    };
+}
+
+uniform_block! {
+    /// The uniform parameter block: `struct Params` in wgsl/shared/common.wgsl.
+    #[derive(ShaderType, Clone, Debug, Default)]
+    pub struct GpuParams {
+        domain_min: Vec4f => "vec4<f32>",
+        domain_max: Vec4f => "vec4<f32>",
+        gravity: Vec4f => "vec4<f32>",
+        grid_origin: Vec4f => "vec4<f32>",
+        /// xyz: cells per axis.
+        grid_dims: Vec4u => "vec4<u32>",
+        h: f32 => "f32",
+        h2: f32 => "f32",
+        inv_cell: f32 => "f32",
+        dt: f32 => "f32",
+        fluid_mass: f32 => "f32",
+        rest_density: f32 => "f32",
+        stiffness: f32 => "f32",
+        viscosity: f32 => "f32",
+        boundary_friction: f32 => "f32",
+        /// poly6 or cubic normalisation, gradient factor, Laplacian factor (model::kernels).
+        w_coef: f32 => "f32",
+        grad_coef: f32 => "f32",
+        lap_coef: f32 => "f32",
+        fluid_count: u32 => "u32",
+        wall_count: u32 => "u32",
+        plane_count: u32 => "u32",
+        pad0: u32 => "u32",
+        /// xyz: unit normal, w: offset (plane n.x = w).
+        planes: [Vec4f; MAX_PLANES] => "array<vec4<f32>, 8>",
+        /// x: restitution.
+        plane_restitution: [Vec4f; MAX_PLANES] => "array<vec4<f32>, 8>",
+        speed_of_sound: f32 => "f32",
+        cfl_number: f32 => "f32",
+        force_number: f32 => "f32",
+        viscous_number: f32 => "f32",
+        dt_min: f32 => "f32",
+        dt_max: f32 => "f32",
+        pad1: u32 => "u32",
+        pad2: u32 => "u32",
+    }
+}
+
+fn v4(v: [f64; 3]) -> Vec4f {
+    Vec4([v[0] as f32, v[1] as f32, v[2] as f32, 0.0])
+}
+
+impl GpuParams {
+    /// The f32 constants, converted exactly as the f32 CPU path converts them.
+    pub fn new(p: &Params, fluid_count: u32, wall_count: u32, viscosity: f64) -> Self {
+        let k = KernelCoefficients::<f32>::new(p.kernel, p.h);
+        let g = p.grid.cast::<f32>();
+        let mut planes = [Vec4f::default(); MAX_PLANES];
+        let mut restitution = [Vec4f::default(); MAX_PLANES];
+        for (i, pl) in p.planes.iter().enumerate() {
+            planes[i] = Vec4([pl.normal[0] as f32, pl.normal[1] as f32, pl.normal[2] as f32, pl.offset as f32]);
+            restitution[i] = Vec4([pl.restitution as f32, 0.0, 0.0, 0.0]);
+        }
+        GpuParams {
+            domain_min: v4(p.domain_min),
+            domain_max: v4(p.domain_max),
+            gravity: v4(p.gravity),
+            grid_origin: Vec4([g.origin.0[0], g.origin.0[1], g.origin.0[2], 0.0]),
+            grid_dims: Vec4([g.dims[0], g.dims[1], g.dims[2], 0]),
+            h: k.h,
+            h2: k.h2,
+            inv_cell: g.inv_cell,
+            dt: p.dt as f32,
+            fluid_mass: p.fluid_mass as f32,
+            rest_density: p.rest_density as f32,
+            stiffness: p.stiffness as f32,
+            viscosity: viscosity as f32,
+            boundary_friction: p.boundary_friction as f32,
+            w_coef: k.w,
+            grad_coef: k.grad,
+            lap_coef: k.lap,
+            fluid_count,
+            wall_count,
+            plane_count: p.planes.len() as u32,
+            pad0: 0,
+            planes,
+            plane_restitution: restitution,
+            speed_of_sound: p.speed_of_sound() as f32,
+            cfl_number: p.adaptive.map_or(0.0, |a| a.cfl_number as f32),
+            force_number: p.adaptive.map_or(0.0, |a| a.force_number as f32),
+            viscous_number: p.adaptive.map_or(0.0, |a| a.viscous_number as f32),
+            dt_min: p.adaptive.map_or(p.dt, |a| a.dt_min) as f32,
+            dt_max: p.adaptive.map_or(p.dt, |a| a.dt_max) as f32,
+            pad1: 0,
+            pad2: 0,
+        }
+    }
+
+    pub fn bytes(&self) -> Vec<u8> {
+        let mut buf = UniformBuffer::new(Vec::new());
+        buf.write(self).expect("the parameter block serialises");
+        buf.into_inner()
+    }
+}
+
+/// Declares the status words once: a Rust constant per word and its WGSL name, for the mirror
+/// test.
+macro_rules! status_words {
+    ($($(#[doc = $doc:literal])* $name:ident = $index:literal => $wgsl:literal,)*) => {
+        $($(#[doc = $doc])* pub const $name: usize = $index;)*
+        /// Every word's WGSL constant name and index.
+        pub const WGSL_NAMES: &[(&str, usize)] = &[$(($wgsl, $index)),*];
+    };
+}
+
+/// The status buffer: the health counters of a run, and the adaptive step's maxima, dt and
+/// time, read and written by the shaders (wgsl/sim/density.wgsl, integrate.wgsl) and read back
+/// by the host a few bytes at a time. Floats are stored as their bits.
+pub mod status {
+    status_words! {
+        /// Steps done.
+        STEPS = 0 => "STATUS_STEPS",
+        /// Particles that became non-finite this step.
+        NON_FINITE = 1 => "STATUS_NON_FINITE",
+        /// Particles outside the domain this step.
+        ESCAPED = 2 => "STATUS_ESCAPED",
+        /// The first step that went wrong ([`NO_BAD_STEP`]: none).
+        FIRST_BAD_STEP = 3 => "STATUS_FIRST_BAD_STEP",
+        /// The largest density so far (positive floats order like their bits).
+        MAX_DENSITY = 4 => "STATUS_MAX_DENSITY",
+        /// Adaptive dt: the largest |v| of this step.
+        MAX_SPEED = 5 => "STATUS_MAX_SPEED",
+        /// Adaptive dt: the largest |a| of this step.
+        MAX_ACCELERATION = 6 => "STATUS_MAX_ACCELERATION",
+        /// Adaptive dt: this step's dt.
+        DT = 7 => "STATUS_DT",
+        /// Adaptive dt: the simulated time, a Kahan sum (time = TIME - TIME_COMPENSATION).
+        TIME = 8 => "STATUS_TIME",
+        /// Adaptive dt: the compensation of that sum.
+        TIME_COMPENSATION = 9 => "STATUS_TIME_COMPENSATION",
+        /// Adaptive dt: the smallest dt so far.
+        DT_MIN = 10 => "STATUS_DT_MIN",
+        /// Adaptive dt: the largest dt so far.
+        DT_MAX = 11 => "STATUS_DT_MAX",
+    }
+    /// Words of the status buffer.
+    pub const WORDS: usize = 12;
+    /// Bytes of the status buffer.
+    pub const BYTES: u64 = WORDS as u64 * 4;
+    /// FIRST_BAD_STEP while no step went wrong (`STATUS_NO_BAD_STEP` in WGSL).
+    pub const NO_BAD_STEP: u32 = u32::MAX;
+
+    /// The status words of a new run.
+    pub fn initial() -> [u32; WORDS] {
+        let mut s = [0u32; WORDS];
+        s[FIRST_BAD_STEP] = NO_BAD_STEP;
+        s[DT_MIN] = f32::INFINITY.to_bits();
+        s
+    }
+
+    /// The health counters in the status words.
+    pub fn health(s: &[u32]) -> crate::model::state::Health {
+        crate::model::state::Health {
+            non_finite: s[NON_FINITE] as u64,
+            escaped: s[ESCAPED] as u64,
+            first_bad_step: (s[FIRST_BAD_STEP] != NO_BAD_STEP).then_some(s[FIRST_BAD_STEP] as u64),
+            max_density: f32::from_bits(s[MAX_DENSITY]) as f64,
+        }
+    }
+
+    /// A float word.
+    pub fn float(s: &[u32], word: usize) -> f64 {
+        f32::from_bits(s[word]) as f64
+    }
+}

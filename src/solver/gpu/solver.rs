@@ -1,0 +1,600 @@
+//! The GPU solver: structure-of-arrays storage buffers, the pipelines of every stage and their
+//! bind groups, built once per scene, and the [`Backend`] the layers above drive. The order in
+//! which a step dispatches the stages is recorded in one place, `schedule.rs`; nothing is read
+//! back, waited for or created while steps are recorded.
+
+use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, ParticleBuffers, StateBuffers, STREAM_CHUNK};
+use super::device::GpuContext;
+use super::memory::MemoryPlan;
+use super::params::{status, GpuParams};
+use super::prefix_sum::Scan;
+use super::readback::{read_buffers, visit_array, visit_rows, Element, RowArrays};
+use super::shaders::{constants, stage, storage_bindings, Stage};
+use super::workgroups::GpuOptions;
+use crate::model::initial::InitialState;
+use crate::model::kernels::sort_by_cell;
+use crate::model::params::Params;
+use crate::model::real::V3;
+use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
+use crate::solver::backend::{Backend, SnapshotRow, StateArray, StatePiece};
+use wgpu::util::DeviceExt;
+
+/// Steps per command buffer: enough to amortise submission, few enough to check health often.
+pub const STEPS_PER_SUBMIT: u64 = 32;
+
+/// Bind groups of one parity: reading state `c`, writing state `1 - c`.
+pub(super) struct ParityBindGroups {
+    pub bin_count: wgpu::BindGroup,
+    pub bin_scatter: wgpu::BindGroup,
+    pub reorder: wgpu::BindGroup,
+    pub density: wgpu::BindGroup,
+    /// The integration (after `forces`, adaptive dt) or the fused forces and integration.
+    pub advance: wgpu::BindGroup,
+}
+
+pub(super) struct Pipelines {
+    pub bin_count: Stage,
+    pub bin_scatter: Stage,
+    pub reorder: Stage,
+    pub density: Stage,
+    /// The forces alone: every step with adaptive dt; otherwise only when the accelerations are
+    /// asked for (`step_fields`).
+    pub forces: Stage,
+    /// `integrate` (two passes) or `forces_and_integrate` (fused, see `fused`).
+    pub advance: Stage,
+    pub finish_step: Stage,
+    /// Adaptive dt only: the reduction of |v|max and |a|max, and the choice of dt.
+    pub adaptive: Option<(Stage, Stage)>,
+    /// Forces and integration in one pass (fixed dt only; see `GpuOptions`): no accelerations
+    /// array.
+    pub fused: bool,
+}
+
+/// The accelerations array with the forces' bind groups of each parity.
+pub(super) struct Accelerations {
+    pub buffer: wgpu::Buffer,
+    pub groups: [wgpu::BindGroup; 2],
+}
+
+pub struct GpuSolver {
+    pub(super) ctx: GpuContext,
+    pub(super) params: Params,
+    pub(super) fluid_count: u32,
+    pub(super) wall_count: u32,
+    pub(super) uniform: wgpu::Buffer,
+    /// Viscosity currently in the uniform block.
+    pub(super) uniform_viscosity: f64,
+    pub(super) state: [StateBuffers; 2],
+    /// Which of `state` holds the current particles.
+    pub(super) current: usize,
+    /// Which of `state` the densities and pressures (and accelerations, when valid) belong to:
+    /// the state the last step or refresh evaluated them on.
+    pub(super) fields_state: usize,
+    /// Whether `accelerations` holds the accelerations of `fields_state`.
+    pub(super) accelerations_valid: bool,
+    /// Cell counts, scanned in place into cell starts (cells + 1 values).
+    pub(super) starts: wgpu::Buffer,
+    /// Also the binning's unordered cell slots (u32), which are dead once the state is reordered.
+    pub(super) densities: wgpu::Buffer,
+    /// Also the binning's cell keys (u32), which are dead once the state is reordered.
+    pub(super) pressures: wgpu::Buffer,
+    /// Every step with two passes; with the fused step created on the first `step_fields`.
+    pub(super) accelerations: Option<Accelerations>,
+    /// Bound where a fused stage declares the accelerations it does not use.
+    pub(super) placeholder: wgpu::Buffer,
+    pub(super) status: wgpu::Buffer,
+    pub(super) wall_positions: wgpu::Buffer,
+    pub(super) wall_starts: wgpu::Buffer,
+    pub(super) scan: Scan,
+    pub(super) pipelines: Pipelines,
+    pub(super) groups: [ParityBindGroups; 2],
+    pub(super) finish_group: wgpu::BindGroup,
+    pub(super) steps: u64,
+    /// The adapter's `max_compute_workgroups_per_dimension`.
+    pub(super) max_groups_per_dim: u32,
+    /// Steps per command buffer.
+    pub(super) steps_per_submit: u64,
+    /// Bytes of every buffer the solver allocated.
+    memory: u64,
+}
+
+/// The element count of each array the stages declare, by name: every particle array holds
+/// the fluid particles, the cell starts (and the counts scanned into them) one value per cell
+/// and one more, the walls theirs. `status` is bound whole.
+struct ArrayCounts {
+    fluid: u64,
+    cells_plus_one: u64,
+    walls: u64,
+    wall_cells_plus_one: u64,
+}
+
+impl ArrayCounts {
+    fn len(&self, name: &str) -> u64 {
+        match name {
+            "starts" | "counts" => self.cells_plus_one,
+            "wall_positions" => self.walls,
+            "wall_starts" => self.wall_cells_plus_one,
+            "status" => 0,
+            _ => self.fluid,
+        }
+    }
+}
+
+impl GpuSolver {
+    /// Uploads a scene's particles and builds every pipeline and bind group. Programs build a
+    /// solver through [`crate::solver::open`], which checks the memory plan first.
+    pub(crate) fn with_options(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions) -> anyhow::Result<Self> {
+        let n = initial.fluid_positions.len() as u64;
+        let cells = params.grid.cell_count() as u64;
+        let viscosity = params.viscosity_at_step(0);
+        let gpu_params = GpuParams::new(params, n as u32, initial.wall_positions.len() as u32, viscosity);
+        // Every buffer is checked against the device's limits before the first is created.
+        let w = initial.wall_positions.len() as u64;
+        // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
+        let has_walls = w > 0;
+        let counts = ArrayCounts { fluid: n, cells_plus_one: cells + 1, walls: w, wall_cells_plus_one: if has_walls { cells + 1 } else { 0 } };
+        // The fused stage binds a placeholder for the accelerations it declares but never uses,
+        // as does the one-thread finish_step.
+        let without_accelerations = |name: &str| if name == "accelerations" { 0 } else { counts.len(name) };
+        let len = |name: &str| counts.len(name);
+        // Forces and integration can be fused with fixed dt, unless the fused stage's bindings
+        // exceed the adapter's (arrays in many segments): then they run as two passes.
+        let can_fuse = params.adaptive.is_none()
+            && storage_bindings(&ctx, "forces_integrate", &without_accelerations) <= ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
+        let uniform_bytes = gpu_params.bytes().len() as u64;
+        let fused = can_fuse
+            && options.fuse_forces_and_integration.unwrap_or_else(|| {
+                ctx.info.device_type != wgpu::DeviceType::Cpu || MemoryPlan::new(n, Some(w), cells, uniform_bytes, true).check(&ctx).is_err()
+            });
+        let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, !fused);
+        plan.check(&ctx)?;
+
+        // The pipelines come first: they check that the stages' bindings (one per segment of
+        // each array) fit the adapter before any buffer exists.
+        let mut k = constants(params);
+        k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
+        k.push(("STENCIL_RUNS", if options.single_cells { 0.0 } else { 1.0 }));
+        let ws = options.workgroup_sizes;
+        ws.check(&ctx)?;
+        // The constants of a stage with `size` threads per workgroup.
+        let sized = |size: u32| {
+            let mut c = k.clone();
+            c.push(("WORKGROUP_SIZE", size as f64));
+            c
+        };
+        let pipelines = Pipelines {
+            bin_count: stage(&ctx, "bin_count", "bin_count", &len, &sized(ws.bin_count))?,
+            bin_scatter: stage(&ctx, "bin_scatter", "bin_scatter", &len, &sized(ws.bin_scatter))?,
+            reorder: stage(&ctx, "reorder", "reorder", &len, &sized(ws.reorder))?,
+            density: stage(&ctx, "density", "density", &len, &sized(ws.density))?,
+            forces: stage(&ctx, "forces", "forces", &len, &sized(ws.forces))?,
+            advance: if fused {
+                stage(&ctx, "forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
+            } else {
+                stage(&ctx, "integrate", "integrate", &len, &sized(ws.integrate))?
+            },
+            // One thread on the status words.
+            finish_step: stage(&ctx, "integrate", "finish_step", &without_accelerations, &k)?,
+            adaptive: match params.adaptive {
+                Some(_) => Some((
+                    stage(&ctx, "integrate", "reduce_maxima", &len, &sized(ws.integrate))?,
+                    stage(&ctx, "integrate", "choose_dt", &len, &k)?,
+                )),
+                None => None,
+            },
+            fused,
+        };
+
+        let device = &ctx.device;
+        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("params"),
+            contents: &gpu_params.bytes(),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        });
+
+        // Walls never move: sorted by cell once, on the host, with the same counting sort.
+        let grid = params.grid.cast::<f32>();
+        let wall_f32: Vec<V3<f32>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
+        let (wall_order, wall_starts) = sort_by_cell(&grid, &wall_f32);
+        let walls_sorted: Vec<[f64; 3]> = wall_order.iter().map(|&i| initial.wall_positions[i as usize]).collect();
+        let wall_masses: Vec<f32> = wall_order.iter().map(|&i| initial.wall_masses[i as usize] as f32).collect();
+        // The w of a wall position holds its mass.
+        let wall_positions = storage_init(device, "wall positions", bytemuck::cast_slice(&vec4s(&walls_sorted, |i| wall_masses[i])));
+        let wall_starts = if has_walls { wall_starts } else { Vec::new() };
+        let wall_starts = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
+
+        let state = [StateBuffers::new(device, 0, n), StateBuffers::new(device, 1, n)];
+        state[0].upload(&ctx, &initial.fluid_positions, &initial.fluid_velocities, |i| i as u32);
+        let starts = storage(device, "cell starts", (cells + 1) * 4);
+        let densities = storage(device, "densities", n * 4);
+        let pressures = storage(device, "pressures", n * 4);
+        let placeholder = storage(device, "placeholder", 16);
+        let accelerations = (!fused).then(|| storage(device, "accelerations", n * 16));
+        let status = storage_init(device, "status", bytemuck::cast_slice(&status::initial()));
+        let scan = Scan::new(&ctx, &uniform, &starts, cells + 1)?;
+
+        let u = &uniform;
+        let p = &pipelines;
+        // The buffer of every array name, reading state `c` and writing state `1 - c`. The
+        // binning's arrays live in arrays that are dead while it runs: the cell keys and the
+        // unordered slots in the pressures and densities (written again only after the reorder),
+        // the ranks in the velocities of the state being gathered into (written by the reorder,
+        // after the scatter has read the ranks).
+        let buffers = |c: usize| {
+            let (src, dst) = (&state[c], &state[1 - c]);
+            let acc = accelerations.as_ref().unwrap_or(&placeholder);
+            let (starts, densities, pressures, status, wall_positions, wall_starts) = (&starts, &densities, &pressures, &status, &wall_positions, &wall_starts);
+            move |name: &str| -> wgpu::Buffer {
+                match name {
+                    "positions" | "positions_in" => src.positions.clone(),
+                    "velocities" | "velocities_in" => src.velocities.clone(),
+                    "positions_out" => dst.positions.clone(),
+                    "velocities_out" | "ranks" => dst.velocities.clone(),
+                    "keys" | "pressures" => pressures.clone(),
+                    "unordered" | "densities" => densities.clone(),
+                    "starts" | "counts" => starts.clone(),
+                    "wall_positions" => wall_positions.clone(),
+                    "wall_starts" => wall_starts.clone(),
+                    "status" => status.clone(),
+                    "accelerations" => acc.clone(),
+                    other => panic!("no buffer holds the array '{other}'"),
+                }
+            }
+        };
+        // The fused stage and the one-thread finish_step declare accelerations they never use.
+        let without_accelerations = |c: usize| {
+            let b = buffers(c);
+            let placeholder = &placeholder;
+            move |name: &str| if name == "accelerations" { placeholder.clone() } else { b(name) }
+        };
+        let make_parity = |c: usize| {
+            let b = buffers(c);
+            ParityBindGroups {
+                bin_count: p.bin_count.bind_group(device, "bin_count", u, &b),
+                bin_scatter: p.bin_scatter.bind_group(device, "bin_scatter", u, &b),
+                reorder: p.reorder.bind_group(device, "reorder", u, &b),
+                density: p.density.bind_group(device, "density", u, &b),
+                advance: if fused {
+                    p.advance.bind_group(device, "forces_and_integrate", u, &without_accelerations(c))
+                } else {
+                    p.advance.bind_group(device, "integrate", u, &b)
+                },
+            }
+        };
+        let groups = [make_parity(0), make_parity(1)];
+        let finish_group = p.finish_step.bind_group(device, "finish_step", u, &without_accelerations(0));
+        let max_groups_per_dim = device.limits().max_compute_workgroups_per_dimension;
+        let memory = plan.total();
+        let mut solver = GpuSolver {
+            params: params.clone(),
+            fluid_count: n as u32,
+            wall_count: w as u32,
+            uniform,
+            uniform_viscosity: viscosity,
+            state,
+            current: 0,
+            fields_state: 0,
+            accelerations_valid: false,
+            starts,
+            densities,
+            pressures,
+            accelerations: None,
+            placeholder,
+            status,
+            wall_positions,
+            wall_starts,
+            scan,
+            groups,
+            pipelines,
+            finish_group,
+            steps: 0,
+            max_groups_per_dim,
+            steps_per_submit: if options.steps_per_submit == 0 { STEPS_PER_SUBMIT } else { options.steps_per_submit },
+            memory,
+            ctx,
+        };
+        if let Some(buffer) = accelerations {
+            solver.accelerations = Some(solver.forces_groups(buffer));
+        }
+        Ok(solver)
+    }
+
+    /// The forces' bind groups of both parities, writing into `buffer`.
+    fn forces_groups(&self, buffer: wgpu::Buffer) -> Accelerations {
+        let device = &self.ctx.device;
+        let group = |c: usize| {
+            let st = &self.state[c];
+            self.pipelines.forces.bind_group(device, "forces", &self.uniform, &|name: &str| {
+                match name {
+                    "positions" => &st.positions,
+                    "velocities" => &st.velocities,
+                    "densities" => &self.densities,
+                    "pressures" => &self.pressures,
+                    "starts" => &self.starts,
+                    "wall_positions" => &self.wall_positions,
+                    "wall_starts" => &self.wall_starts,
+                    "accelerations" => &buffer,
+                    other => panic!("no buffer holds the array '{other}'"),
+                }
+                .clone()
+            })
+        };
+        let groups = [group(0), group(1)];
+        Accelerations { buffer, groups }
+    }
+
+    /// Makes `accelerations` hold the accelerations of `fields_state`: the fused step keeps them
+    /// in registers, so they are evaluated again here (same inputs, same shader code: the same
+    /// values), into an array created on first use.
+    fn ensure_accelerations(&mut self) {
+        if self.accelerations_valid {
+            return;
+        }
+        if self.accelerations.is_none() {
+            let buffer = storage(&self.ctx.device, "accelerations", self.fluid_count as u64 * 16);
+            self.accelerations = Some(self.forces_groups(buffer));
+        }
+        self.record_accelerations();
+        self.accelerations_valid = true;
+    }
+
+    /// Whether forces and integration run as one pass.
+    pub fn fused(&self) -> bool {
+        self.pipelines.fused
+    }
+    /// Blocks until the GPU has finished everything submitted (for timing).
+    pub fn wait(&self) -> anyhow::Result<()> {
+        self.ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None })?;
+        Ok(())
+    }
+
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    pub(super) fn set_viscosity(&mut self, nu: f64) {
+        if nu != self.uniform_viscosity {
+            let p = GpuParams::new(&self.params, self.fluid_count, self.wall_count, nu);
+            self.ctx.queue.write_buffer(&self.uniform, 0, &p.bytes());
+            self.uniform_viscosity = nu;
+        }
+    }
+
+    /// The ids of the particles in cell order and the cell starts, after binning the current
+    /// state (for the binning tests).
+    pub fn binning(&mut self) -> anyhow::Result<(Vec<u32>, Vec<u32>)> {
+        self.refresh_fields();
+        let n = self.fluid_count as u64;
+        let cells = self.params.grid.cell_count() as u64;
+        let data = read_buffers(&self.ctx, &[(&self.state[self.current].positions, n * 16), (&self.starts, (cells + 1) * 4)])?;
+        Ok((ids_of(bytemuck::cast_slice(&data[0])), bytemuck::pod_collect_to_vec(&data[1])))
+    }
+
+    /// The buffers holding the current particle state (they alternate between two pairs as the
+    /// solver steps: ask again after stepping). Particles are in cell order; the w component of
+    /// each position holds the particle's original index as u32 bits. `densities` and
+    /// `pressures` are in the same order after a snapshot.
+    pub fn particle_buffers(&self) -> ParticleBuffers {
+        let st = &self.state[self.current];
+        ParticleBuffers {
+            context: self.ctx.clone(),
+            positions: st.positions.clone(),
+            velocities: st.velocities.clone(),
+            densities: self.densities.clone(),
+            pressures: self.pressures.clone(),
+            count: self.fluid_count,
+        }
+    }
+
+    /// The status words, checked to count as many steps as the host did (for saved states).
+    fn counted_status(&self) -> anyhow::Result<[u32; status::WORDS]> {
+        let words = self.read_status()?;
+        anyhow::ensure!(words[status::STEPS] as u64 == self.steps % (1 << 32), "the GPU counted {} steps, the host {}", words[status::STEPS], self.steps);
+        Ok(words)
+    }
+
+    fn read_status(&self) -> anyhow::Result<[u32; status::WORDS]> {
+        let data = read_buffers(&self.ctx, &[(&self.status, status::BYTES)])?;
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
+        Ok(words.try_into().expect("the status buffer has status::WORDS words"))
+    }
+
+    /// Bytes of every buffer the solver allocated on the device (its [`MemoryPlan`]'s total).
+    pub fn memory_bytes(&self) -> u64 {
+        self.memory
+    }
+
+    /// Bytes of the buffers as created, summed from the buffers themselves (to check the plan).
+    pub fn allocated_bytes(&self) -> u64 {
+        let s = self;
+        // With the fused step the accelerations exist only after `step_fields` asked for them.
+        let planned_accelerations = s.accelerations.as_ref().filter(|_| !s.pipelines.fused).map(|a| &a.buffer);
+        [&s.uniform, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
+            .into_iter()
+            .chain(planned_accelerations)
+            .map(|b| b.size())
+            .chain(s.state.iter().flat_map(|st| [st.positions.size(), st.velocities.size()]))
+            .sum::<u64>()
+            + s.scan.bytes()
+    }
+
+    /// The snapshot rows of the current state (after a refresh) in pieces of `chunk` slots: the
+    /// streamed snapshot with an explicit piece size (the tests use small ones).
+    pub fn visit_rows_in_pieces(&mut self, chunk: u64, visit: &mut dyn FnMut(u64, &[SnapshotRow]) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        self.refresh_fields();
+        let st = &self.state[self.current];
+        let arrays = RowArrays { positions: &st.positions, velocities: &st.velocities, densities: &self.densities, pressures: &self.pressures, count: self.fluid_count as u64 };
+        visit_rows(&self.ctx, &arrays, chunk, visit)
+    }
+
+    /// One array of the saved state in pieces of `chunk` particles (the tests use small ones).
+    pub fn visit_state_in_pieces(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        let st = &self.state[self.current];
+        let n = self.fluid_count as u64;
+        match array {
+            StateArray::Positions => visit_array(&self.ctx, &st.positions, n, Element::Vector, chunk, visit),
+            StateArray::Velocities => visit_array(&self.ctx, &st.velocities, n, Element::Vector, chunk, visit),
+            StateArray::Ids => visit_array(&self.ctx, &st.positions, n, Element::IdInW, chunk, visit),
+        }
+    }
+}
+
+impl Backend for GpuSolver {
+    fn kind(&self) -> &'static str {
+        "gpu"
+    }
+    fn adapter(&self) -> String {
+        self.ctx.describe()
+    }
+    fn params(&self) -> &Params {
+        &self.params
+    }
+    fn fluid_count(&self) -> usize {
+        self.fluid_count as usize
+    }
+    fn wall_count(&self) -> usize {
+        self.wall_count as usize
+    }
+    fn step(&mut self, n: u64) -> anyhow::Result<()> {
+        self.advance(n);
+        Ok(())
+    }
+    fn steps_done(&self) -> u64 {
+        self.steps
+    }
+    fn time(&self) -> f64 {
+        if self.params.adaptive.is_none() {
+            return self.steps as f64 * self.params.dt;
+        }
+        // A few bytes: the compensated sum of the steps' dt (wgsl/sim/integrate.wgsl choose_dt).
+        match self.read_status() {
+            Ok(w) => status::float(&w, status::TIME) - status::float(&w, status::TIME_COMPENSATION),
+            Err(e) => {
+                log::error!("reading the simulated time failed: {e:#}");
+                f64::NAN
+            }
+        }
+    }
+    fn dt_stats(&mut self) -> anyhow::Result<DtStats> {
+        let Some(_) = self.params.adaptive else {
+            return Ok(DtStats::fixed(self.params.dt));
+        };
+        let s = self.read_status()?;
+        let f = |i: usize| status::float(&s, i);
+        let time = f(status::TIME) - f(status::TIME_COMPENSATION);
+        Ok(if self.steps == 0 {
+            DtStats::default()
+        } else {
+            DtStats { min: f(status::DT_MIN), max: f(status::DT_MAX), mean: time / self.steps as f64, last: f(status::DT) }
+        })
+    }
+    fn memory_bytes(&self) -> Option<u64> {
+        Some(self.memory)
+    }
+    fn health(&mut self) -> anyhow::Result<Health> {
+        Ok(status::health(&self.read_status()?))
+    }
+    fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
+        self.refresh_fields();
+        let n = self.fluid_count as u64;
+        let st = &self.state[self.current];
+        let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16), (&self.densities, n * 4), (&self.pressures, n * 4)])?;
+        let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
+        let ids = ids_of(&pos);
+        let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
+        let rho: Vec<f32> = bytemuck::pod_collect_to_vec(&data[2]);
+        let p: Vec<f32> = bytemuck::pod_collect_to_vec(&data[3]);
+        Ok(Snapshot {
+            step: self.steps,
+            time: self.time(),
+            positions: unpermute(&ids, pos.iter().map(widen)),
+            velocities: unpermute(&ids, vel.iter().map(widen)),
+            densities: unpermute(&ids, rho.iter().map(|&v| v as f64)),
+            pressures: unpermute(&ids, p.iter().map(|&v| v as f64)),
+        })
+    }
+    fn streams_snapshots(&self) -> bool {
+        true
+    }
+    fn visit_snapshot_rows(&mut self, visit: &mut dyn FnMut(u64, &[SnapshotRow]) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        self.visit_rows_in_pieces(STREAM_CHUNK, visit)
+    }
+    fn gpu_particles(&self) -> Option<ParticleBuffers> {
+        Some(self.particle_buffers())
+    }
+    fn save_state(&mut self) -> anyhow::Result<BackendState> {
+        let mut state = self.save_state_header()?;
+        for (array, chunk) in [(StateArray::Positions, 0), (StateArray::Velocities, 0), (StateArray::Ids, 0)] {
+            self.visit_state_in_pieces(array, chunk, &mut |piece| {
+                match (array, piece) {
+                    (StateArray::Positions, StatePiece::Vectors(v)) => state.positions.extend_from_slice(v),
+                    (StateArray::Velocities, StatePiece::Vectors(v)) => state.velocities.extend_from_slice(v),
+                    (StateArray::Ids, StatePiece::Ids(v)) => state.ids.extend_from_slice(v),
+                    _ => unreachable!("each array hands out its own kind of piece"),
+                }
+                Ok(())
+            })?;
+        }
+        Ok(state)
+    }
+    fn save_state_header(&mut self) -> anyhow::Result<BackendState> {
+        let words = self.counted_status()?;
+        let h = status::health(&words);
+        Ok(BackendState {
+            kind: "gpu".into(),
+            step: self.steps,
+            positions: Vec::new(),
+            velocities: Vec::new(),
+            ids: Vec::new(),
+            non_finite: h.non_finite,
+            escaped: h.escaped,
+            first_bad_step: h.first_bad_step,
+            max_density: h.max_density,
+            // The GPU keeps its time and dt range in the status words, restored whole.
+            time: 0.0,
+            dt_min_max_last: [0.0; 3],
+            gpu_status: words.to_vec(),
+        })
+    }
+    fn visit_state_array(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        self.visit_state_in_pieces(array, chunk, visit)
+    }
+    fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
+        state.check_fits("gpu", self.fluid_count as usize)?;
+        anyhow::ensure!(
+            state.gpu_status.len() == status::WORDS,
+            "the state holds {} status words; this solver has {}",
+            state.gpu_status.len(),
+            status::WORDS
+        );
+        self.state[0].upload(&self.ctx, &state.positions, &state.velocities, |i| state.ids[i]);
+        let q = &self.ctx.queue;
+        q.write_buffer(&self.status, 0, bytemuck::cast_slice(&state.gpu_status));
+        q.submit([]);
+        self.current = 0;
+        self.fields_state = 0;
+        self.accelerations_valid = false;
+        self.steps = state.step;
+        Ok(())
+    }
+    fn step_fields(&mut self) -> anyhow::Result<StepFields> {
+        let n = self.fluid_count as u64;
+        self.ensure_accelerations();
+        let acc = &self.accelerations.as_ref().expect("ensured").buffer;
+        let data = read_buffers(&self.ctx, &[
+            (&self.densities, n * 4),
+            (&self.pressures, n * 4),
+            (acc, n * 16),
+            (&self.state[self.fields_state].positions, n * 16),
+        ])?;
+        let ids = ids_of(bytemuck::cast_slice(&data[3]));
+        let rho: Vec<f32> = bytemuck::pod_collect_to_vec(&data[0]);
+        let p: Vec<f32> = bytemuck::pod_collect_to_vec(&data[1]);
+        let acc: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[2]);
+        Ok(StepFields {
+            densities: unpermute(&ids, rho.iter().map(|&v| v as f64)),
+            pressures: unpermute(&ids, p.iter().map(|&v| v as f64)),
+            accelerations: unpermute(&ids, acc.iter().map(widen)),
+        })
+    }
+}

@@ -1,0 +1,151 @@
+//! Threads per workgroup of each particle stage: a pipeline-overridable constant
+//! (`WORKGROUP_SIZE` in wgsl/shared/common.wgsl), so that each stage can be tuned to an adapter
+//! without touching the shaders (`wgsph profile --workgroup-size`), and the other choices of the GPU step that change no value.
+
+use super::device::{GpuContext, GpuError};
+use std::fmt;
+use std::str::FromStr;
+
+/// The stages whose workgroup size can be chosen, as named on the command line.
+pub const TUNABLE_STAGES: [&str; 6] = ["bin_count", "bin_scatter", "reorder", "density", "forces", "integrate"];
+
+/// Threads per workgroup of each particle stage. `forces` also sizes the fused forces and
+/// integration, and `integrate` the adaptive dt's reduction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WorkgroupSizes {
+    pub bin_count: u32,
+    pub bin_scatter: u32,
+    pub reorder: u32,
+    pub density: u32,
+    pub forces: u32,
+    pub integrate: u32,
+}
+
+impl Default for WorkgroupSizes {
+    fn default() -> Self {
+        WorkgroupSizes::all(super::shaders::WORKGROUP_SIZE)
+    }
+}
+
+/// Smallest and largest workgroup size accepted before the adapter's own limits are checked.
+const SMALLEST: u32 = 1;
+const LARGEST: u32 = 1024;
+
+impl WorkgroupSizes {
+    /// The same size for every stage.
+    pub fn all(size: u32) -> Self {
+        WorkgroupSizes { bin_count: size, bin_scatter: size, reorder: size, density: size, forces: size, integrate: size }
+    }
+
+    fn slot(&mut self, stage: &str) -> Option<&mut u32> {
+        Some(match stage {
+            "bin_count" => &mut self.bin_count,
+            "bin_scatter" => &mut self.bin_scatter,
+            "reorder" => &mut self.reorder,
+            "density" => &mut self.density,
+            "forces" => &mut self.forces,
+            "integrate" => &mut self.integrate,
+            _ => return None,
+        })
+    }
+
+    fn values(&self) -> [(&'static str, u32); 6] {
+        [
+            ("bin_count", self.bin_count),
+            ("bin_scatter", self.bin_scatter),
+            ("reorder", self.reorder),
+            ("density", self.density),
+            ("forces", self.forces),
+            ("integrate", self.integrate),
+        ]
+    }
+
+    /// Fails, naming the adapter, the stage, its size and the limit, when a size exceeds what the
+    /// adapter allows (`max_compute_workgroup_size_x`, `max_compute_invocations_per_workgroup`).
+    pub fn check(&self, ctx: &GpuContext) -> Result<(), GpuError> {
+        let l = ctx.device.limits();
+        let (limit, have) = if l.max_compute_workgroup_size_x <= l.max_compute_invocations_per_workgroup {
+            ("max_compute_workgroup_size_x", l.max_compute_workgroup_size_x)
+        } else {
+            ("max_compute_invocations_per_workgroup", l.max_compute_invocations_per_workgroup)
+        };
+        match self.values().into_iter().find(|&(_, size)| size > have) {
+            Some((stage, size)) => Err(GpuError::Limit {
+                adapter: ctx.info.name.clone(),
+                backend: format!("{:?}", ctx.info.backend),
+                what: format!("the workgroup size of stage '{stage}'"),
+                limit,
+                need: size as u64,
+                have: have as u64,
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+impl fmt::Display for WorkgroupSizes {
+    fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        let parts: Vec<String> = self.values().iter().map(|(s, n)| format!("{s}={n}")).collect();
+        write!(f, "{}", parts.join(","))
+    }
+}
+
+/// A size for every stage (`64`), or sizes of some stages (`density=64,forces=256`; the others
+/// keep the default).
+impl FromStr for WorkgroupSizes {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        let size = |value: &str, what: &str| -> Result<u32, String> {
+            match value.trim().parse::<u32>() {
+                Ok(n) if (SMALLEST..=LARGEST).contains(&n) => Ok(n),
+                _ => Err(format!("{what} '{}' is not a workgroup size; allowed: a whole number of threads from {SMALLEST} to {LARGEST}", value.trim())),
+            }
+        };
+        if !text.contains('=') {
+            return Ok(WorkgroupSizes::all(size(text, "the size")?));
+        }
+        let mut out = WorkgroupSizes::default();
+        for part in text.split(',') {
+            let (stage, value) = part.split_once('=').ok_or_else(|| format!("'{part}' is not STAGE=SIZE"))?;
+            let stage = stage.trim();
+            let n = size(value, &format!("the size of stage '{stage}'"))?;
+            *out.slot(stage).ok_or_else(|| format!("'{stage}' is not a stage with a workgroup size; allowed: {}", TUNABLE_STAGES.join(", ")))? = n;
+        }
+        Ok(out)
+    }
+}
+
+/// Choices of the GPU step that do not change its results.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuOptions {
+    /// Fuse the forces and the integration into one pass when dt is fixed: the same values,
+    /// without the accelerations array (16 bytes per fluid particle) and a second pass over the
+    /// state. `None` (the default) fuses on every adapter but software ones (llvmpipe, lavapipe,
+    /// WARP), where the fused pass measured 3-20 % slower, unless only the fused step fits the
+    /// adapter's buffers.
+    pub fuse_forces_and_integration: Option<bool>,
+    /// Threads per workgroup of each particle stage.
+    pub workgroup_sizes: WorkgroupSizes,
+    /// Steps recorded into one command buffer (0: the default, 32).
+    pub steps_per_submit: u64,
+    /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 (to measure what
+    /// the runs gain; the same values).
+    pub single_cells: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse_for_all_stages_or_some() {
+        assert_eq!("64".parse::<WorkgroupSizes>().unwrap(), WorkgroupSizes::all(64));
+        let s: WorkgroupSizes = "density=32, forces=256".parse().unwrap();
+        assert_eq!((s.density, s.forces, s.reorder), (32, 256, super::super::shaders::WORKGROUP_SIZE));
+        assert_eq!(s.to_string().parse::<WorkgroupSizes>().unwrap(), s);
+        for (bad, names) in [("0", "'0'"), ("density=abc", "'density'"), ("pressure=64", "'pressure'"), ("forces", "'forces'"), ("2048", "1024")] {
+            let e = bad.parse::<WorkgroupSizes>().unwrap_err();
+            assert!(e.contains(names), "{bad}: {e}");
+        }
+    }
+}

@@ -1,0 +1,345 @@
+//! The library entry point for programs that embed the simulator.
+//!
+//! A [`Simulation`] is built from a [`Scene`] (a file, a TOML string, or built in code) on the
+//! GPU or the CPU, advanced with [`Simulation::step`] and read with
+//! [`Simulation::snapshot`]. On the GPU, [`Simulation::device`], [`Simulation::queue`] and
+//! [`Simulation::particle_buffers`] give access to the wgpu device and the particle buffers, so
+//! a program can render the particles without copying them back to the host.
+//!
+//! ```
+//! use wgsph::{Scene, Simulation};
+//!
+//! // A built-in scene at a low resolution, on the CPU (runs everywhere).
+//! let scene = Scene::builtin("hydrostatic").unwrap().with_fluid_particles(300);
+//! let mut sim = Simulation::cpu(scene)?;
+//! sim.step(5)?;
+//! let snapshot = sim.snapshot()?;
+//! assert_eq!(snapshot.step, 5);
+//! assert_eq!(snapshot.len(), sim.fluid_count());
+//! assert!(sim.health()?.is_ok());
+//! # Ok::<(), anyhow::Error>(())
+//! ```
+
+use super::cpu::CpuSolver;
+use super::gpu::{GpuContext, GpuOptions, GpuSolver, ParticleBuffers};
+use super::backend::Backend;
+use crate::model::check::{available_memory_bytes, CPU_BYTES_PER_PARTICLE};
+use crate::model::initial::InitialState;
+use crate::model::params::Params;
+use crate::model::real::Real;
+use crate::model::scene::{Scene, SceneError, SceneOrigin};
+use crate::model::state::{Health, Snapshot};
+
+/// Which device runs a scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Device {
+    /// The GPU when an adapter exists, else the CPU with a warning.
+    #[default]
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+/// Float type of the CPU path (the GPU always computes in f32).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Precision {
+    #[default]
+    F64,
+    F32,
+}
+
+/// How to run a scene: the device, the CPU's float type, the GPU step's tuning and, optionally,
+/// a GPU device the caller opened.
+#[derive(Clone, Debug, Default)]
+pub struct BackendChoice {
+    pub device: Device,
+    pub precision: Precision,
+    pub gpu_options: GpuOptions,
+    /// Run on this GPU device instead of choosing an adapter (`Device::Gpu` or `Auto`).
+    pub context: Option<GpuContext>,
+}
+
+impl BackendChoice {
+    /// The CPU reference path in `precision`.
+    pub fn cpu(precision: Precision) -> Self {
+        BackendChoice { device: Device::Cpu, precision, ..Default::default() }
+    }
+    /// The GPU, on the adapter `wgsph run` would choose.
+    pub fn gpu() -> Self {
+        BackendChoice { device: Device::Gpu, ..Default::default() }
+    }
+    /// The GPU, on a device the caller opened.
+    pub fn gpu_on(context: GpuContext) -> Self {
+        BackendChoice { device: Device::Gpu, context: Some(context), ..Default::default() }
+    }
+    /// The same choice with the GPU step's tuning options.
+    pub fn with_gpu_options(mut self, options: GpuOptions) -> Self {
+        self.gpu_options = options;
+        self
+    }
+}
+
+/// The solver behind a [`Simulation`].
+pub enum Solver {
+    Gpu(Box<GpuSolver>),
+    Cpu64(CpuSolver<f64>),
+    Cpu32(CpuSolver<f32>),
+}
+
+/// A running simulation of one scene.
+pub struct Simulation {
+    scene: Scene,
+    solver: Solver,
+}
+
+/// The one builder: the scene (validated again, as code may have changed it) on the backend
+/// `choice` names, from the scene's own initial particles. See [`open_with`].
+pub fn open(scene: &Scene, choice: &BackendChoice) -> anyhow::Result<Simulation> {
+    open_with(scene, None, choice)
+}
+
+/// The one builder, with the particles at t = 0 given (`None`: the scene's own). Every command,
+/// test, bench and example builds its backend here, so the fallback rule and the memory checks
+/// are the same everywhere: the GPU's [`super::gpu::memory::MemoryPlan`] is checked against the
+/// adapter before any particle is created on the host, and the CPU's host memory against what
+/// the machine has.
+pub fn open_with(scene: &Scene, initial: Option<InitialState>, choice: &BackendChoice) -> anyhow::Result<Simulation> {
+    scene.validate(&SceneOrigin::Text)?;
+    let params = scene.params();
+    let initial_of = |initial: Option<InitialState>| initial.unwrap_or_else(|| scene.initial_state());
+    let gpu = |ctx: GpuContext, initial: Option<InitialState>| -> anyhow::Result<Solver> {
+        super::gpu::memory::MemoryPlan::for_scene(scene).check(&ctx)?;
+        Ok(Solver::Gpu(Box::new(GpuSolver::with_options(ctx, &params, &initial_of(initial), choice.gpu_options)?)))
+    };
+    let cpu = |initial: Option<InitialState>| -> anyhow::Result<Solver> {
+        check_host_memory(scene)?;
+        let initial = initial_of(initial);
+        Ok(match choice.precision {
+            Precision::F64 => Solver::Cpu64(CpuSolver::new(&params, &initial)),
+            Precision::F32 => Solver::Cpu32(CpuSolver::new(&params, &initial)),
+        })
+    };
+    let context = || match &choice.context {
+        Some(c) => Ok(c.clone()),
+        None => GpuContext::new(),
+    };
+    let solver = match choice.device {
+        Device::Cpu => cpu(initial)?,
+        Device::Gpu => gpu(context()?, initial)?,
+        Device::Auto => match context() {
+            Ok(ctx) => gpu(ctx, initial)?,
+            Err(e) => {
+                eprintln!("warning: {e:#}; falling back to the cpu backend");
+                cpu(initial)?
+            }
+        },
+    };
+    Ok(Simulation { scene: scene.clone(), solver })
+}
+
+/// The CPU path's host memory against what the machine has (where the platform tells).
+fn check_host_memory(scene: &Scene) -> Result<(), SceneError> {
+    let count = scene.estimated_particle_count();
+    let cells = scene.grid().cell_count() as u64;
+    match available_memory_bytes() {
+        Some(available) if count * CPU_BYTES_PER_PARTICLE + cells * 8 > available => Err(SceneError {
+            origin: scene.name.clone(),
+            field: "fluid".into(),
+            message: format!(
+                "{count} particles (fluid and walls) and {cells} cells need about {} MiB of host memory on the cpu backend; {} MiB are available",
+                (count * CPU_BYTES_PER_PARTICLE + cells * 8) >> 20,
+                available >> 20
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
+impl Simulation {
+    /// Parses and validates a scene from TOML text (the format of docs/scenes.md).
+    ///
+    /// ```
+    /// let scene = wgsph::Simulation::scene_from_toml(r#"
+    ///     name = "drop"
+    ///     domain = { min = [0, 0, 0], max = [1, 1, 1] }
+    ///     physics = { smoothing_length = 0.1, particle_spacing = 0.05, speed_of_sound = 10 }
+    ///     time = { dt = 0.001, end_time = 0.1 }
+    ///     [[fluid]]
+    ///     min = [0.3, 0.3, 0.3]
+    ///     max = [0.6, 0.6, 0.6]
+    /// "#)?;
+    /// assert_eq!(scene.fluid_particle_count(), 6 * 6 * 6);
+    /// # Ok::<(), wgsph::SceneError>(())
+    /// ```
+    pub fn scene_from_toml(text: &str) -> Result<Scene, SceneError> {
+        Scene::from_toml_str(text, &SceneOrigin::Text)
+    }
+
+    /// Loads a scene: a built-in name (`seed`, `dam_break`, `hydrostatic`) or a file path.
+    pub fn scene_from_file(name_or_path: &str) -> Result<Scene, SceneError> {
+        Scene::load(name_or_path)
+    }
+
+    /// The scene on the GPU, on the adapter `wgsph run` would choose (`WGPU_BACKEND` and
+    /// `WGPU_ADAPTER_NAME` apply). Fails when there is no adapter with compute shaders or the
+    /// scene does not fit the adapter's limits.
+    pub fn gpu(scene: Scene) -> anyhow::Result<Self> {
+        open(&scene, &BackendChoice::gpu())
+    }
+
+    /// The scene on the GPU, on a device the caller opened (for example the one it renders
+    /// with: [`GpuContext::from_device`] of its adapter, device and queue). The device should
+    /// have the adapter's storage-buffer limits for large scenes.
+    pub fn gpu_on(scene: Scene, context: GpuContext) -> anyhow::Result<Self> {
+        open(&scene, &BackendChoice::gpu_on(context))
+    }
+
+    /// Like [`Simulation::gpu_on`], with the GPU step's tuning options (fusion, workgroup
+    /// sizes, steps per submission; none changes a value).
+    pub fn gpu_with(scene: Scene, context: GpuContext, options: GpuOptions) -> anyhow::Result<Self> {
+        open(&scene, &BackendChoice::gpu_on(context).with_gpu_options(options))
+    }
+
+    /// The scene on the CPU reference path in f64 (parallel over the available cores).
+    pub fn cpu(scene: Scene) -> anyhow::Result<Self> {
+        open(&scene, &BackendChoice::cpu(Precision::F64))
+    }
+
+    /// The scene on the CPU in f32: the same arithmetic as the GPU, to rounding.
+    pub fn cpu_f32(scene: Scene) -> anyhow::Result<Self> {
+        open(&scene, &BackendChoice::cpu(Precision::F32))
+    }
+
+    /// The backend as the layers above drive it (runs, checkpoints, step fields).
+    pub fn backend(&mut self) -> &mut dyn Backend {
+        match &mut self.solver {
+            Solver::Gpu(s) => s.as_mut(),
+            Solver::Cpu64(s) => s,
+            Solver::Cpu32(s) => s,
+        }
+    }
+
+    fn backend_ref(&self) -> &dyn Backend {
+        match &self.solver {
+            Solver::Gpu(s) => s.as_ref(),
+            Solver::Cpu64(s) => s,
+            Solver::Cpu32(s) => s,
+        }
+    }
+
+    /// The backend, owned (for code that keeps several of different kinds).
+    pub fn into_backend(self) -> Box<dyn Backend> {
+        match self.solver {
+            Solver::Gpu(s) => s,
+            Solver::Cpu64(s) => Box::new(s),
+            Solver::Cpu32(s) => Box::new(s),
+        }
+    }
+
+    /// The solver itself.
+    pub fn solver(&mut self) -> &mut Solver {
+        &mut self.solver
+    }
+
+    /// The GPU solver, when running on the GPU.
+    pub fn gpu_solver(&mut self) -> Option<&mut GpuSolver> {
+        match &mut self.solver {
+            Solver::Gpu(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// The GPU solver, owned, when running on the GPU.
+    pub fn into_gpu(self) -> Option<GpuSolver> {
+        match self.solver {
+            Solver::Gpu(s) => Some(*s),
+            _ => None,
+        }
+    }
+
+    /// The CPU solver in float type `R`, owned, when running on the CPU in that type.
+    pub fn into_cpu<R: Real>(self) -> Option<CpuSolver<R>> {
+        let any: Box<dyn std::any::Any> = match self.solver {
+            Solver::Gpu(_) => return None,
+            Solver::Cpu64(s) => Box::new(s),
+            Solver::Cpu32(s) => Box::new(s),
+        };
+        any.downcast::<CpuSolver<R>>().ok().map(|s| *s)
+    }
+
+    /// Advances `n` time steps. On the GPU this only records and submits work (nothing is
+    /// waited for or read back), so it is cheap to call every frame; call
+    /// [`Simulation::health`] now and then to learn whether the state went bad.
+    pub fn step(&mut self, n: u64) -> anyhow::Result<()> {
+        self.backend().step(n)
+    }
+
+    /// The fluid particles in their original order, with density and pressure evaluated for
+    /// the current positions (on the GPU: a readback that waits for the queued steps). Taking a
+    /// snapshot never changes the trajectory.
+    pub fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
+        self.backend().snapshot()
+    }
+
+    /// Particles that became non-finite or left the domain, and the largest density so far
+    /// (a few bytes read back on the GPU).
+    pub fn health(&mut self) -> anyhow::Result<Health> {
+        self.backend().health()
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+    /// The resolved constants (h, dt, stiffness, grid, ...).
+    pub fn params(&self) -> &Params {
+        self.backend_ref().params()
+    }
+    pub fn steps_done(&self) -> u64 {
+        self.backend_ref().steps_done()
+    }
+    /// Simulated time reached.
+    pub fn time(&self) -> f64 {
+        self.backend_ref().time()
+    }
+    pub fn fluid_count(&self) -> usize {
+        self.backend_ref().fluid_count()
+    }
+    /// `"gpu"` or `"cpu"`.
+    pub fn kind(&self) -> &'static str {
+        self.backend_ref().kind()
+    }
+    /// The adapter's name and backend, or the CPU float type.
+    pub fn adapter(&self) -> String {
+        self.backend_ref().adapter()
+    }
+
+    /// The GPU context (adapter, device, queue), when running on the GPU.
+    pub fn gpu_context(&self) -> Option<&GpuContext> {
+        match &self.solver {
+            Solver::Gpu(s) => Some(s.context()),
+            _ => None,
+        }
+    }
+    /// The wgpu device, when running on the GPU.
+    pub fn device(&self) -> Option<&wgpu::Device> {
+        self.gpu_context().map(|c| &c.device)
+    }
+    /// The wgpu queue the simulation submits to, when running on the GPU.
+    pub fn queue(&self) -> Option<&wgpu::Queue> {
+        self.gpu_context().map(|c| &c.queue)
+    }
+
+    /// The storage buffers of the current particle state, when running on the GPU: positions
+    /// and velocities as `array<vec4<f32>>` (w = 0), ids, densities and pressures, in the
+    /// solver's cell order (`ids[slot]` is the original index). The solver alternates between
+    /// two sets of buffers, so ask again after every [`Simulation::step`]; work submitted to
+    /// [`Simulation::queue`] afterwards sees the new state. Every buffer has `STORAGE`,
+    /// `COPY_SRC` and `COPY_DST` usage: bind it read-only in a vertex or compute shader, or copy
+    /// from it.
+    pub fn particle_buffers(&self) -> Option<ParticleBuffers> {
+        match &self.solver {
+            Solver::Gpu(s) => Some(s.particle_buffers()),
+            _ => None,
+        }
+    }
+}

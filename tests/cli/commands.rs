@@ -1,0 +1,193 @@
+//! The `wgsph` command end to end: outputs, backends, and a run that blows up.
+
+use crate::common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+use wgsph::io::snapshot::csv::read_snapshot_csv;
+use wgsph::io::summary::Summary;
+use wgsph::io::snapshot::csv::SNAPSHOT_HEADER;
+
+fn wgsph(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir).output().unwrap()
+}
+
+fn summary(dir: &Path) -> Summary {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+fn snapshot_names(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> =
+        std::fs::read_dir(dir.join("snapshots")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn run_writes_snapshots_and_a_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = wgsph(&["run", "hydrostatic", "--steps", "20", "--backend", "cpu", "--out", "o", "--snapshot-every", "10"], dir.path());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let o = dir.path().join("o");
+    assert_eq!(snapshot_names(&o), ["step_000000.csv", "step_000010.csv", "step_000020.csv"]);
+    let text = std::fs::read_to_string(o.join("snapshots/step_000020.csv")).unwrap();
+    assert_eq!(text.lines().next(), Some(SNAPSHOT_HEADER));
+    let s = summary(&o);
+    assert_eq!((s.scene.as_str(), s.backend.as_str(), s.steps), ("hydrostatic", "cpu", 20));
+    assert_eq!(s.fluid_particles, read_snapshot_csv(&o.join("snapshots/step_000020.csv")).unwrap().len());
+    assert!(s.wall_particles > 0 && s.particle_steps_per_second > 0.0 && s.max_density_ratio > 0.9);
+    assert_eq!((s.nan_count, s.escaped, s.failure), (0, 0, None));
+    assert!((s.sim_time - 20.0 * s.dt).abs() < 1e-12);
+    let line = String::from_utf8_lossy(&out.stdout);
+    assert!(line.contains("hydrostatic") && line.contains("20 steps"), "{line}");
+    // No temporary files are left beside the outputs.
+    assert!(std::fs::read_dir(&o).unwrap().all(|e| {
+        let n = e.unwrap().file_name();
+        n == "summary.json" || n == "snapshots" || n == "scene.toml"
+    }));
+}
+
+#[test]
+fn scenes_lists_the_built_in_scenes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = wgsph(&["scenes"], dir.path());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for name in ["seed", "dam_break", "hydrostatic"] {
+        assert!(text.contains(name), "{text}");
+    }
+}
+
+#[test]
+fn gpu_run_writes_the_same_outputs_as_cpu() {
+    if common::contexts().is_empty() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for backend in ["cpu", "gpu"] {
+        let out = wgsph(&["run", "dam_break", "--steps", "30", "--backend", backend, "--out", backend, "--snapshot-every", "15"], dir.path());
+        assert!(out.status.success(), "{backend}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    let (c, g) = (dir.path().join("cpu"), dir.path().join("gpu"));
+    assert_eq!(snapshot_names(&c), snapshot_names(&g));
+    let (sc, sg) = (summary(&c), summary(&g));
+    assert_eq!((sc.steps, sc.fluid_particles, sc.wall_particles), (sg.steps, sg.fluid_particles, sg.wall_particles));
+    assert_eq!(sg.backend, "gpu");
+    assert!((sc.max_density_ratio - sg.max_density_ratio).abs() < 1e-4);
+    let (a, b) = (read_snapshot_csv(&c.join("snapshots/step_000030.csv")).unwrap(), read_snapshot_csv(&g.join("snapshots/step_000030.csv")).unwrap());
+    assert_eq!(a.len(), b.len());
+    for i in 0..a.len() {
+        for k in 0..3 {
+            assert!((a.positions[i][k] - b.positions[i][k]).abs() < 1e-5, "particle {i}");
+        }
+        assert!((a.densities[i] - b.densities[i]).abs() < 1e-3 * a.densities[i], "particle {i}");
+    }
+}
+
+#[test]
+fn a_run_that_blows_up_stops_with_a_diagnosis_and_keeps_its_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    // The hydrostatic tank with a time step 30x over its CFL limit.
+    let text = wgsph::model::builtin::BUILTIN_SCENES.iter().find(|s| s.0 == "hydrostatic").unwrap().2.replace("dt = 0.0003", "dt = 0.01");
+    std::fs::write(dir.path().join("unstable.toml"), text).unwrap();
+    let mut backends = vec!["cpu"];
+    if !common::contexts().is_empty() {
+        backends.push("gpu");
+    }
+    for backend in backends {
+        let out = wgsph(&["run", "unstable.toml", "--time", "5", "--backend", backend, "--out", backend, "--snapshot-every", "5", "--check-every", "5"], dir.path());
+        assert_eq!(out.status.code(), Some(1), "{backend}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("step") && err.contains("CFL") && err.contains("last good snapshot"), "{backend}: {err}");
+        let o = dir.path().join(backend);
+        let s = summary(&o);
+        let failure = s.failure.expect("the summary records the failure");
+        assert!(failure.contains("CFL"));
+        assert!(s.steps < 500, "{backend}: detected after {} steps", s.steps);
+        // Every snapshot written is finite, the last good one included.
+        let last = s.last_snapshot.expect("a last good snapshot");
+        assert_eq!(read_snapshot_csv(Path::new(&dir.path().join(&last))).unwrap().non_finite_count(), 0);
+        for name in snapshot_names(&o) {
+            assert_eq!(read_snapshot_csv(&o.join("snapshots").join(&name)).unwrap().non_finite_count(), 0, "{name}");
+        }
+    }
+}
+
+#[test]
+fn particles_option_scales_the_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = wgsph(&["run", "hydrostatic", "--particles", "500", "--steps", "2", "--backend", "cpu", "--out", "o"], dir.path());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = summary(&dir.path().join("o"));
+    assert!((350..=650).contains(&s.fluid_particles), "{}", s.fluid_particles);
+    let out = wgsph(&["run", "hydrostatic", "--particles", "0"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn run_writes_frames_of_the_asked_size() {
+    let dir = tempfile::tempdir().unwrap();
+    if common::contexts().is_empty() {
+        return;
+    }
+    let out = wgsph(
+        &["run", "hydrostatic", "--steps", "20", "--out", "o", "--frames", "f", "--frame-every", "10", "--resolution", "160x90", "--style", "surface"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut names: Vec<String> =
+        std::fs::read_dir(dir.path().join("f")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    names.sort();
+    assert_eq!(names, ["frame_00000.png", "frame_00001.png", "frame_00002.png"]);
+    let img = image::open(dir.path().join("f/frame_00002.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (160, 90));
+    assert_eq!(summary(&dir.path().join("o")).frames, 3);
+}
+
+#[test]
+fn run_writes_frames_of_the_surface_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    if common::contexts().is_empty() {
+        return;
+    }
+    let out = wgsph(
+        &["run", "hydrostatic", "--steps", "10", "--out", "o", "--frames", "f", "--frame-every", "10", "--resolution", "160x90", "--style", "mesh"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut names: Vec<String> =
+        std::fs::read_dir(dir.path().join("f")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    names.sort();
+    assert_eq!(names, ["frame_00000.png", "frame_00001.png"]);
+    let img = image::open(dir.path().join("f/frame_00001.png")).unwrap().to_rgb8();
+    assert_eq!((img.width(), img.height()), (160, 90));
+    // The fluid is drawn: a good share of the pixels are bluer than the background.
+    let blue = img.pixels().filter(|p| p[2] as i32 > p[0] as i32 + 30).count();
+    assert!(blue > 160 * 90 / 50, "only {blue} blue pixels");
+}
+
+#[cfg(feature = "view")]
+#[test]
+fn the_viewer_refuses_the_mesh_style() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = wgsph(&["view", "hydrostatic", "--style", "mesh"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--style mesh") && err.contains("particles or surface"), "{err}");
+}
+
+#[test]
+fn bad_picture_options_are_refused_with_what_is_allowed() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flag, value, expect) in [
+        ("--resolution", "1280by720", "WIDTHxHEIGHT"),
+        ("--resolution", "4x4", "between 16 and 8192"),
+        ("--color-range", "3:1", "MIN < MAX"),
+        ("--style", "cartoon", "particles"),
+    ] {
+        let out = wgsph(&["run", "hydrostatic", "--steps", "1", "--frames", "f", flag, value], dir.path());
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(expect) && err.contains(flag), "{flag} {value}: {err}");
+    }
+    assert!(!dir.path().join("f").exists());
+}

@@ -1,0 +1,8 @@
+//! The command line: runs, exit codes, outputs, the profile and the speed-against-accuracy study.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod commands;
+mod profile;
+mod tradeoff;

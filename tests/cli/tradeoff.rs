@@ -1,0 +1,63 @@
+//! `wgsph tradeoff`: the Pareto front, the sample times, and a small study end to end.
+
+use std::process::Command;
+use wgsph::app::tradeoff::pareto_of;
+use wgsph::app::tradeoff::sample_times;
+
+#[test]
+fn the_pareto_front_holds_exactly_the_undominated_points() {
+    // (cost, error): (2, 5) is beaten by (1, 4); (3, 3) and (3, 4): the latter is beaten.
+    let marks = pareto_of(&[(1.0, 4.0), (2.0, 5.0), (3.0, 3.0), (3.0, 4.0), (10.0, 0.5), (0.5, 9.0)]);
+    assert_eq!(marks, vec![true, false, true, false, true, true]);
+    // Equal points do not dominate each other.
+    assert_eq!(pareto_of(&[(1.0, 1.0), (1.0, 1.0)]), vec![true, true]);
+}
+
+#[test]
+fn sample_times_fall_on_whole_even_numbers_of_base_steps_and_end_at_the_run_end() {
+    let dt = 2.5e-4;
+    let t = sample_times(dt, 0.4, 20);
+    assert_eq!(t.len(), 20);
+    assert!((t.last().unwrap() - 0.4).abs() < 1e-12);
+    for w in t.windows(2) {
+        let steps = (w[1] - w[0]) / dt;
+        assert!(w[1] > w[0]);
+        assert!((steps - steps.round()).abs() < 1e-6 && (steps.round() as u64) % 2 == 0 || w[1] == *t.last().unwrap(), "{w:?}");
+    }
+    // More samples than steps: one per pair of steps at most.
+    let t = sample_times(0.1, 0.3, 100);
+    assert_eq!(t.len(), 2);
+}
+
+#[test]
+fn a_small_study_writes_the_table_and_the_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .args(["tradeoff", "dam_break", "--particles", "300", "--time", "0.02", "--samples", "4", "--out", "study"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let md = std::fs::read_to_string(dir.path().join("study/tradeoff.md")).unwrap();
+    let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| configuration")).collect();
+    // The reference and one row per configuration, each with its knob.
+    assert_eq!(rows.len(), 18, "{md}");
+    for knob in ["reference", "baseline", "precision", "time step", "resolution", "kernel", "equation of state", "stiffness", "neighbour grid", "model term"] {
+        assert!(rows.iter().any(|r| r.split('|').nth(2).unwrap().trim() == knob), "no row for {knob}:\n{md}");
+    }
+    assert!(rows[0].contains("0 (reference)"));
+    // At least one configuration is on the Pareto front, and a finer time step is more exact
+    // than a coarser one.
+    assert!(rows.iter().any(|r| r.trim_end().ends_with("| yes |")), "{md}");
+    let front_error = |name: &str| -> f64 {
+        let r = rows.iter().find(|r| r.starts_with(&format!("| {name} |"))).unwrap();
+        r.split('|').nth(10).unwrap().trim().parse().unwrap()
+    };
+    assert!(front_error("dt x0.5") <= front_error("dt x2"), "{md}");
+    let png = image::open(dir.path().join("study/tradeoff.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (1200, 800));
+    // Bad input: exit 2 naming the flag.
+    let out = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["tradeoff", "--time=0"]).current_dir(dir.path()).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--time"));
+}

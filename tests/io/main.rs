@@ -1,0 +1,13 @@
+//! Files: scene errors, imports, snapshots in every format (whole and streamed), checkpoints and
+//! restart, run directories and surface meshes.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod scene_errors;
+mod splishsplash;
+mod export;
+mod stream;
+mod checkpoint;
+mod run_dir;
+mod surface;

@@ -1,0 +1,152 @@
+//! Bad scene files are refused before any work, naming the file, the field and what is allowed;
+//! the command line exits with code 2 for them.
+
+use std::process::Command;
+use wgsph::model::scene::Scene;
+use wgsph::model::scene::SceneOrigin;
+use wgsph::model::builtin::BUILTIN_SCENES;
+
+const GOOD: &str = r#"
+[domain]
+min = [0.0, 0.0, 0.0]
+max = [1.0, 1.0, 1.0]
+[physics]
+smoothing_length = 0.1
+particle_spacing = 0.05
+stiffness = 1000.0
+[time]
+dt = 0.001
+end_time = 0.1
+[[fluid]]
+min = [0.2, 0.2, 0.2]
+max = [0.4, 0.4, 0.4]
+"#;
+
+fn error_of(text: &str) -> String {
+    let origin = SceneOrigin::File("tank.toml".into());
+    Scene::from_toml_str(text, &origin).expect_err("must be refused").to_string()
+}
+
+#[test]
+fn the_good_scene_and_the_built_in_scenes_are_accepted() {
+    Scene::from_toml_str(GOOD, &SceneOrigin::Text).unwrap();
+    for (name, _, _) in BUILTIN_SCENES {
+        let s = Scene::builtin(name).unwrap();
+        assert!(!s.initial_state().fluid_positions.is_empty());
+    }
+}
+
+#[test]
+fn built_in_scenes_match_the_files_in_scenes_dir() {
+    for (name, _, text) in BUILTIN_SCENES {
+        let path = format!("{}/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+        assert_eq!(std::fs::read_to_string(path).unwrap(), *text);
+    }
+}
+
+#[test]
+fn a_missing_field_is_named() {
+    let e = error_of(&GOOD.replace("smoothing_length = 0.1\n", ""));
+    assert!(e.contains("tank.toml") && e.contains("smoothing_length"), "{e}");
+}
+
+#[test]
+fn a_wrong_type_or_unknown_field_is_named() {
+    let e = error_of(&GOOD.replace("smoothing_length = 0.1", "smoothing_length = \"big\""));
+    assert!(e.contains("tank.toml") && e.contains("line"), "{e}");
+    let e = error_of(&GOOD.replace("smoothing_length = 0.1", "smoothing_lenght = 0.1"));
+    assert!(e.contains("smoothing_lenght"), "{e}");
+    let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nequation_of_state = \"cubic\""));
+    assert!(e.contains("linear") && e.contains("tait"), "{e}");
+}
+
+#[test]
+fn non_positive_h_dt_and_spacing_are_refused() {
+    for (from, to, field) in [
+        ("smoothing_length = 0.1", "smoothing_length = -0.1", "physics.smoothing_length"),
+        ("smoothing_length = 0.1", "smoothing_length = 0.0", "physics.smoothing_length"),
+        ("dt = 0.001", "dt = 0.0", "time.dt"),
+        ("dt = 0.001", "dt = -1.0", "time.dt"),
+        ("particle_spacing = 0.05", "particle_spacing = -0.05", "physics.particle_spacing"),
+        ("particle_spacing = 0.05", "particle_spacing = 0.0", "physics.particle_spacing"),
+        ("stiffness = 1000.0", "stiffness = -3.0", "physics.stiffness"),
+    ] {
+        let e = error_of(&GOOD.replace(from, to));
+        assert!(e.contains("tank.toml") && e.contains(field) && e.contains("> 0"), "{to}: {e}");
+    }
+}
+
+#[test]
+fn a_fluid_block_outside_the_domain_is_refused() {
+    let e = error_of(&GOOD.replace("max = [0.4, 0.4, 0.4]", "max = [1.4, 0.4, 0.4]"));
+    assert!(e.contains("fluid[0]") && e.contains("domain"), "{e}");
+}
+
+#[test]
+fn an_empty_scene_is_refused() {
+    let text = GOOD.split("[[fluid]]").next().unwrap();
+    let e = error_of(text);
+    assert!(e.contains("fluid") && e.contains("at least one"), "{e}");
+    let e = error_of("");
+    assert!(e.contains("tank.toml"), "{e}");
+}
+
+#[test]
+fn a_particle_count_that_does_not_fit_is_refused() {
+    let e = error_of(
+        &GOOD
+            .replace("max = [1.0, 1.0, 1.0]", "max = [1000.0, 1000.0, 1000.0]")
+            .replace("max = [0.4, 0.4, 0.4]", "max = [900.0, 900.0, 900.0]")
+            .replace("smoothing_length = 0.1", "smoothing_length = 10.0"),
+    );
+    assert!(e.contains("particles") && (e.contains("at most") || e.contains("memory")), "{e}");
+}
+
+fn wgsph(args: &[&str], dir: &std::path::Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir).output().unwrap()
+}
+
+#[test]
+fn the_command_line_exits_with_2_on_bad_input_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, GOOD.replace("dt = 0.001", "dt = 0.0")).unwrap();
+    let out = wgsph(&["run", bad.to_str().unwrap(), "--backend", "cpu", "--out", "o"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.toml") && err.contains("time.dt"), "{err}");
+    assert!(!dir.path().join("o").exists(), "no output before the scene is valid");
+    let out = wgsph(&["run", "no_such_scene", "--backend", "cpu"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("built-in"));
+    let out = wgsph(&["run", "--steps", "-3"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let out = wgsph(&["run", "--backend", "tpu"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cpu"));
+}
+
+#[test]
+fn camera_fields_are_checked() {
+    let with = |camera: &str| format!("{GOOD}\n[camera]\n{camera}\n");
+    Scene::from_toml_str(&with("eye = [0.5, 0.5, 3.0]\ntarget = [0.5, 0.5, 0.5]"), &SceneOrigin::Text).unwrap();
+    for (camera, field, allowed) in [
+        ("eye = [0.5, 0.5, 0.5]\ntarget = [0.5, 0.5, 0.5]", "camera.target", "must differ"),
+        ("eye = [0.5, 3.0, 0.5]\ntarget = [0.5, 0.5, 0.5]", "camera.up", "not parallel"),
+        ("eye = [0.5, 0.5, 3.0]\ntarget = [0.5, 0.5, 0.5]\nfov_degrees = 180.0", "camera.fov_degrees", "between 1 and 170"),
+        ("eye = [0.5, 0.5, nan]\ntarget = [0.5, 0.5, 0.5]", "camera.eye", "finite"),
+    ] {
+        let e = error_of(&with(camera));
+        assert!(e.contains("tank.toml") && e.contains(field) && e.contains(allowed), "{camera}: {e}");
+    }
+}
+
+#[test]
+fn boundary_pressure_is_mirror_by_default_and_checked() {
+    use wgsph::model::scene::BoundaryPressure;
+    assert_eq!(Scene::from_toml_str(GOOD, &SceneOrigin::Text).unwrap().params().boundary_pressure, BoundaryPressure::Mirror);
+    let consistent = GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_pressure = \"consistent\"");
+    assert_eq!(Scene::from_toml_str(&consistent, &SceneOrigin::Text).unwrap().params().boundary_pressure, BoundaryPressure::Consistent);
+    let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_pressure = \"mirrored\""));
+    assert!(e.contains("tank.toml") && e.contains("mirrored") && e.contains("mirror") && e.contains("consistent"), "{e}");
+}

@@ -1,0 +1,127 @@
+//! SPlisHSPlasH scene import: what maps onto a wgsph scene, and clear refusals of the rest.
+
+use std::path::Path;
+use std::process::{Command, Output};
+use wgsph::model::scene::Boundary;
+use wgsph::model::scene::EquationOfState;
+use wgsph::model::scene::Kernel;
+use wgsph::model::scene::SceneOrigin;
+use wgsph::model::import::splishsplash::scene_from_json;
+use wgsph::model::scene::Scene;
+
+const DAM_BREAK: &str = include_str!("../data/splishsplash_dam_break.json");
+
+fn wgsph(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir).output().unwrap()
+}
+
+fn import(text: &str) -> Result<Scene, wgsph::SceneError> {
+    scene_from_json(text, "test", &SceneOrigin::Text)
+}
+
+#[test]
+fn a_wcsph_dam_break_maps_onto_a_scene() {
+    let s = import(DAM_BREAK).unwrap();
+    let p = &s.physics;
+    // Particle radius r = 0.01: spacing 2r, support radius 4r.
+    assert_eq!((p.particle_spacing, p.smoothing_length), (0.02, 0.04));
+    assert_eq!((p.rest_density, p.stiffness, p.speed_of_sound), (1000.0, Some(50000.0), None));
+    assert_eq!((p.equation_of_state, p.kernel), (EquationOfState::Tait, Kernel::CubicSpline));
+    assert_eq!((p.viscosity, p.boundary_friction, p.gravity), (0.01, 0.0, [0.0, -9.81, 0.0]));
+    assert_eq!((s.time.dt, s.time.end_time), (0.0002, 0.5));
+    // The block's corners scaled by 2; a regular lattice with the initial velocity.
+    assert_eq!(s.fluid.len(), 1);
+    assert_eq!((s.fluid[0].min, s.fluid[0].max, s.fluid[0].jitter, s.fluid[0].velocity), ([0.0; 3], [0.2, 0.4, 0.1], 0.0, [0.5, 0.0, 0.0]));
+    assert_eq!(s.fluid_particle_count(), 10 * 20 * 5);
+    // The unit box around the fluid is a closed tank backed by six planes; the small one is an obstacle.
+    let tank = s.boundary.iter().find_map(|b| match b {
+        Boundary::Container { min, max, open_top, .. } => Some((*min, *max, *open_top)),
+        _ => None,
+    });
+    assert_eq!(tank, Some(([0.0, 0.0, 0.0], [1.0, 0.6, 0.1], false)));
+    let obstacle = s.boundary.iter().find_map(|b| match b {
+        Boundary::Box { min, max, .. } => Some((*min, *max)),
+        _ => None,
+    });
+    let (min, max) = obstacle.unwrap();
+    for a in 0..3 {
+        assert!((min[a] - [0.65, 0.0, 0.0][a]).abs() < 1e-12 && (max[a] - [0.75, 0.1, 0.1][a]).abs() < 1e-12, "{min:?} {max:?}");
+    }
+    assert_eq!(s.boundary.iter().filter(|b| matches!(b, Boundary::Plane { .. })).count(), 6);
+    for a in 0..3 {
+        assert!(s.domain.min[a] < 0.0 && s.domain.max[a] > [1.0, 0.6, 0.1][a]);
+    }
+}
+
+#[test]
+fn a_json_scene_runs_from_the_command_line_and_is_recorded_as_toml() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("dam.json"), DAM_BREAK).unwrap();
+    let o = wgsph(&["run", "dam.json", "--steps", "10", "--backend", "cpu", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let recorded = Scene::load(dir.path().join("o/scene.toml").to_str().unwrap()).unwrap();
+    let mut imported = import(DAM_BREAK).unwrap();
+    imported.name = "dam".into();
+    imported.description = recorded.description.clone();
+    assert_eq!(recorded, imported);
+    let s: wgsph::io::summary::Summary = serde_json::from_str(&std::fs::read_to_string(dir.path().join("o/summary.json")).unwrap()).unwrap();
+    assert_eq!((s.scene.as_str(), s.fluid_particles, s.steps, s.failure), ("dam", 1000, 10, None));
+}
+
+#[test]
+fn everything_unsupported_is_named_in_one_clear_error() {
+    // A typical DFSPH scene: default solver, adaptive steps, volume maps, a mesh, an emitter.
+    let text = r#"{
+        "Configuration": { "particleRadius": 0.025, "stopAt": 2, "sim2D": true, "fancyOption": 3 },
+        "Fluid": { "viscosity": 0.01, "viscosityMethod": 6, "surfaceTensionMethod": 2 },
+        "RigidBodies": [ { "geometryFile": "../models/bunny.obj", "isDynamic": true, "rotationAngle": 1.5 } ],
+        "FluidBlocks": [ { "start": [0,0,0], "end": [1,1,1], "denseMode": 2 } ],
+        "Emitters": [ { "width": 5 } ],
+        "Simulation": {}
+    }"#;
+    let e = import(text).unwrap_err().to_string();
+    for field in [
+        "Configuration.simulationMethod: is 4 (DFSPH, the default)",
+        "Configuration.cflMethod: is 1 (adaptive, the default)",
+        "Configuration.boundaryHandlingMethod: is 2 (volume maps, the default)",
+        "Configuration.sim2D",
+        "Configuration.fancyOption",
+        "Fluid.viscosityMethod: is 6",
+        "Fluid.surfaceTensionMethod: is 2",
+        "RigidBodies[0].geometryFile: is '../models/bunny.obj'",
+        "RigidBodies[0].isDynamic",
+        "RigidBodies[0].rotationAngle",
+        "FluidBlocks[0].denseMode",
+        "Emitters",
+        "Simulation",
+    ] {
+        assert!(e.contains(field), "missing {field} in: {e}");
+    }
+    // Each supported value alone is accepted; each refused one alone is named.
+    let cases = [
+        (r#""exponent": 7"#, r#""exponent": 3"#, "Configuration.exponent"),
+        (r#""pause": true"#, r#""kernel": 1"#, "Configuration.kernel"),
+        (r#""stopAt": 0.5"#, r#""stopAt": -1"#, "Configuration.stopAt"),
+        (r#""isDynamic": false"#, r#""particleFile": "walls.bgeo""#, "RigidBodies[0].particleFile"),
+        (r#""translation": [0.7, 0.05, 0.05]"#, r#""translation": [0.15, 0.05, 0.05]"#, "RigidBodies[1]: the box neither contains"),
+    ];
+    for (from, to, field) in cases {
+        let text = DAM_BREAK.replacen(from, to, 1);
+        assert_ne!(text, DAM_BREAK);
+        let e = import(&text).unwrap_err();
+        assert!(e.to_string().contains(field), "{to}: {e}");
+    }
+    assert!(import(&DAM_BREAK.replacen(r#""exponent": 7"#, r#""exponent": 1"#, 1)).unwrap().physics.equation_of_state == EquationOfState::Linear);
+    let mueller = DAM_BREAK.replacen(r#""pause": true"#, r#""kernel": 2, "gradKernel": 3"#, 1);
+    assert_eq!(import(&mueller).unwrap().physics.kernel, Kernel::Mueller);
+    // From the command line: exit 2 before any work.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bad.json"), text).unwrap();
+    let o = wgsph(&["run", "bad.json", "--out", "o"], dir.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("bad.json") && !dir.path().join("o").exists());
+    std::fs::write(dir.path().join("broken.json"), "{ \"Configuration\": ").unwrap();
+    let o = wgsph(&["run", "broken.json"], dir.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not valid JSON"));
+}

@@ -1,0 +1,174 @@
+//! Snapshots and checkpoints written in pieces: the same bytes as the whole-array writers, in
+//! every format and on every adapter, with pieces small enough that every array is split
+//! unevenly and several passes are made; NaN is refused and leaves no file; a checkpoint
+//! written in pieces resumes bitwise exactly.
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+use wgsph::io::checkpoint::capture;
+use wgsph::io::checkpoint::read;
+use wgsph::io::checkpoint::write;
+use wgsph::io::checkpoint::{write_state_in_pieces, write_with_state};
+use wgsph::io::snapshot::write_rows;
+use wgsph::app::run::run_record;
+use wgsph::io::snapshot::stream::SnapshotStream;
+use wgsph::io::snapshot::write_snapshot;
+use wgsph::io::snapshot::format::SnapshotFormat;
+use wgsph::solver::gpu::buffers::STREAM_CHUNK;
+use wgsph::app::run::RunOptions;
+use wgsph::solver::Backend;
+use wgsph::model::scene::Scene;
+use wgsph::model::state::Snapshot;
+
+const FORMATS: [SnapshotFormat; 3] = [SnapshotFormat::Csv, SnapshotFormat::Vtk, SnapshotFormat::Ply];
+
+/// The files of one snapshot in every format, named `{stem}.{ext}` in `dir`.
+fn files(dir: &Path, stem: &str) -> Vec<(SnapshotFormat, PathBuf)> {
+    FORMATS.iter().map(|&f| (f, dir.join(format!("{stem}.{}", f.extension())))).collect()
+}
+
+/// The whole-array writers' bytes of `s` in every format.
+fn whole_bytes(dir: &Path, s: &Snapshot) -> Vec<Vec<u8>> {
+    files(dir, "whole")
+        .iter()
+        .map(|(f, path)| {
+            write_snapshot(path, *f, s).unwrap();
+            std::fs::read(path).unwrap()
+        })
+        .collect()
+}
+
+fn rows_of(s: &Snapshot) -> Vec<[f32; 8]> {
+    (0..s.len())
+        .map(|i| {
+            let (p, v) = (s.positions[i], s.velocities[i]);
+            [p[0], p[1], p[2], v[0], v[1], v[2], s.densities[i], s.pressures[i]].map(|x| x as f32)
+        })
+        .collect()
+}
+
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn snapshots_written_in_uneven_pieces_equal_the_whole_array_files() {
+    // f32 values (widened in the snapshot), as the GPU hands them over.
+    let scene = Scene::builtin("dam_break").unwrap().with_fluid_particles(300);
+    let mut cpu = common::cpu::<f32>(&scene);
+    cpu.step(3);
+    let s = Backend::snapshot(&mut cpu).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let expected = whole_bytes(dir.path(), &s);
+    let rows = rows_of(&s);
+    for piece in [1, 7, 64, rows.len()] {
+        let stem = format!("pieces_{piece}");
+        let mut out = SnapshotStream::create(&files(dir.path(), &stem), rows.len() as u64, s.step, s.time).unwrap();
+        for (k, part) in rows.chunks(piece).enumerate() {
+            out.write_rows((k * piece) as u64, part).unwrap();
+        }
+        let written = out.finish().unwrap();
+        assert_eq!((written.step, written.particles, written.max_speed), (s.step, s.len() as u64, s.max_speed()));
+        for ((_, path), want) in files(dir.path(), &stem).iter().zip(&expected) {
+            assert!(&std::fs::read(path).unwrap() == want, "{} differs from the whole-array file", path.display());
+        }
+    }
+}
+
+#[test]
+fn streamed_snapshots_with_nan_missing_or_misordered_rows_leave_no_file() {
+    let scene = Scene::builtin("hydrostatic").unwrap().with_fluid_particles(100);
+    let s = Backend::snapshot(&mut common::cpu::<f32>(&scene)).unwrap();
+    let rows = rows_of(&s);
+    let n = rows.len() as u64;
+    let dir = tempfile::tempdir().unwrap();
+    let fs = files(dir.path(), "step_000004");
+    let mut with_nan = rows.clone();
+    with_nan[17][6] = f32::NAN;
+    with_nan[40][1] = f32::INFINITY;
+    let mut out = SnapshotStream::create(&fs, n, 4, 0.1).unwrap();
+    out.write_rows(0, &with_nan).unwrap();
+    let e = out.finish().unwrap_err().to_string();
+    assert!(e.contains("refusing to write") && e.contains("step_000004.csv") && e.contains("2 particles hold NaN or infinity at step 4"), "{e}");
+    // Too few rows, and rows out of order.
+    let mut out = SnapshotStream::create(&fs, n, 4, 0.1).unwrap();
+    out.write_rows(0, &rows[..10]).unwrap();
+    assert!(out.write_rows(20, &rows[20..30]).unwrap_err().to_string().contains("out of order"));
+    let e = out.finish().unwrap_err().to_string();
+    assert!(e.contains(&format!("only 10 of {n} particles")), "{e}");
+    assert!(names_in(dir.path()).is_empty(), "no file and no temporary file is left: {:?}", names_in(dir.path()));
+}
+
+#[test]
+fn gpu_snapshots_streamed_in_pieces_and_passes_equal_the_whole_array_files_on_every_adapter() {
+    for ctx in common::contexts() {
+        let scene = Scene::builtin("dam_break").unwrap().with_fluid_particles(700);
+        let mut solver = common::gpu(ctx.clone(), &scene);
+        solver.step(5).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let snapshot = solver.snapshot().unwrap();
+        let expected = whole_bytes(dir.path(), &snapshot);
+        // 7: pieces that split every array unevenly and more than MAX_PASSES passes' worth of
+        // pieces (8 passes); 64: 11 pieces per pass; 1 << 20: one piece, one pass.
+        for chunk in [7, 64, STREAM_CHUNK] {
+            let stem = format!("streamed_{chunk}");
+            let n = solver.fluid_count() as u64;
+            let s = write_rows(&files(dir.path(), &stem), n, solver.steps_done(), solver.time(), |v| solver.visit_rows_in_pieces(chunk, v)).unwrap();
+            for ((f, path), want) in files(dir.path(), &stem).iter().zip(&expected) {
+                assert!(&std::fs::read(path).unwrap() == want, "{f:?}, chunk {chunk} on {}", ctx.describe());
+            }
+            assert_eq!((s.step, s.particles, s.time), (5, snapshot.len() as u64, snapshot.time));
+            assert_eq!(s.max_speed, snapshot.max_speed());
+        }
+        // A velocity that is not finite: refused in every format, and no file is written.
+        let mut state = solver.save_state().unwrap();
+        state.velocities[123][2] = f64::NAN;
+        solver.restore_state(&state).unwrap();
+        let bad = tempfile::tempdir().unwrap();
+        let n = solver.fluid_count() as u64;
+        let e = write_rows(&files(bad.path(), "nan"), n, solver.steps_done(), solver.time(), |v| solver.visit_rows_in_pieces(64, v)).unwrap_err().to_string();
+        assert!(e.contains("1 particles hold NaN or infinity at step 5"), "{e}");
+        assert!(names_in(bad.path()).is_empty(), "{}", ctx.describe());
+    }
+}
+
+#[test]
+fn gpu_checkpoints_streamed_in_pieces_equal_the_whole_state_ones_and_resume_bitwise_on_every_adapter() {
+    for (i, ctx) in common::contexts().into_iter().enumerate() {
+        // Adaptive dt: the status words (time, dt and its compensation) are in the state too.
+        let mut scene = Scene::builtin("dam_break").unwrap().with_fluid_particles(500);
+        scene.time.adaptive = true;
+        let mut solver = common::gpu(ctx.clone(), &scene);
+        solver.step(6).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let opts = RunOptions { steps: 10, out: dir.path().to_path_buf(), checkpoint_every: 6, ..Default::default() };
+        let record = run_record(&solver, &opts, 10, None, 0.5);
+        let whole = capture(&mut solver, &scene.to_toml(), record.clone()).unwrap();
+        let whole_path = dir.path().join("whole.wgsph");
+        write(&whole_path, &whole).unwrap();
+        let expected = std::fs::read(&whole_path).unwrap();
+        for chunk in [1, 7, 64, STREAM_CHUNK] {
+            let path = dir.path().join(format!("streamed_{chunk}.wgsph"));
+            write_with_state(&path, &whole.scene_toml, &whole.run, |w| write_state_in_pieces(&mut solver, w, chunk)).unwrap();
+            assert!(std::fs::read(&path).unwrap() == expected, "chunk {chunk} on {}", ctx.describe());
+        }
+        // What the run loop writes (the streamed path) is the same file too.
+        let saved = dir.path().join("saved.wgsph");
+        wgsph::io::checkpoint::save(&mut solver, &scene.to_toml(), &record, &saved).unwrap();
+        assert!(std::fs::read(&saved).unwrap() == expected, "{}", ctx.describe());
+        // Resumed from the checkpoint written in the smallest pieces, a fresh solver continues
+        // bitwise as the original does.
+        let c = read(&dir.path().join("streamed_7.wgsph")).unwrap();
+        assert!(c == whole);
+        let mut resumed = common::gpu(common::contexts().into_iter().nth(i).unwrap(), &scene);
+        resumed.restore_state(&c.state).unwrap();
+        solver.step(4).unwrap();
+        resumed.step(4).unwrap();
+        let (a, b) = (solver.snapshot().unwrap(), resumed.snapshot().unwrap());
+        assert!(a == b, "{}: the resumed run differs", ctx.describe());
+        assert_eq!(a.step, 10);
+    }
+}

@@ -1,0 +1,165 @@
+//! Adaptive time stepping and the neighbour-grid rebuild interval: the formula, the GPU against
+//! the f64 CPU path, the run loop and the scene checks.
+
+use crate::common;
+
+use wgsph::solver::compare::step_and_compare;
+use wgsph::solver::compare::MANY_STEPS;
+use wgsph::solver::compare::ONE_STEP;
+use wgsph::app::run::run;
+use wgsph::app::run::RunOptions;
+use wgsph::model::params::AdaptiveDt;
+use wgsph::model::scene::Scene;
+use wgsph::model::scene::SceneOrigin;
+use wgsph::solver::Backend;
+
+/// A jittered block moving in a tank of wall particles with a plane, gravity and viscosity.
+fn small_scene(time_options: &str) -> Scene {
+    common::scene_from(&small_text(time_options))
+}
+
+fn small_text(time_options: &str) -> String {
+    common::small_scene_text("mueller", "tait", true, "", time_options)
+}
+
+#[test]
+fn each_condition_of_the_adaptive_step_governs_in_its_regime_and_dt_is_clamped() {
+    let a = AdaptiveDt { cfl_number: 0.25, force_number: 0.25, viscous_number: 0.125, dt_min: 1e-6, dt_max: 1.0 };
+    let (h, c0) = (0.04, 20.0);
+    // At rest without forces or viscosity: the CFL condition on the speed of sound.
+    assert_eq!(a.dt(h, c0, 0.0, 0.0, 0.0), 0.25 * h / c0);
+    // A fast particle adds its speed.
+    assert_eq!(a.dt(h, c0, 20.0, 0.0, 0.0), 0.25 * h / 40.0);
+    // A large acceleration: the force condition.
+    assert_eq!(a.dt(h, c0, 0.0, 1e6, 0.0), 0.25 * (h / 1e6f64).sqrt());
+    // A large viscosity: the viscous condition.
+    assert_eq!(a.dt(h, c0, 0.0, 0.0, 10.0), 0.125 * h * h / 10.0);
+    // Clamped to [dt_min, dt_max], and a NaN maximum falls to dt_min.
+    let tight = AdaptiveDt { dt_min: 1e-4, dt_max: 2e-4, ..a };
+    assert_eq!(tight.dt(h, c0, 0.0, 0.0, 0.0), 2e-4);
+    assert_eq!(tight.dt(h, c0, 0.0, 0.0, 1e3), 1e-4);
+    assert_eq!(tight.dt(h, c0, f64::NAN, 0.0, 0.0), 1e-4);
+}
+
+#[test]
+fn the_cpu_step_follows_the_formula_and_accumulates_time() {
+    let s = small_scene("adaptive = true\ndt_max = 0.01");
+    let p = s.params();
+    let a = p.adaptive.unwrap();
+    let mut cpu = common::cpu::<f64>(&s);
+    let mut time = 0.0;
+    for _ in 0..20 {
+        let before = cpu.snapshot();
+        cpu.step(1);
+        let accel = cpu.step_fields().accelerations.iter().map(|a| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()).fold(0.0, f64::max);
+        let expected = a.dt(p.h, p.speed_of_sound(), before.max_speed(), accel, 0.005);
+        let stats = cpu.dt_stats();
+        assert!((stats.last - expected).abs() < 1e-15, "{} against {expected}", stats.last);
+        time += expected;
+    }
+    assert!((Backend::time(&cpu) - time).abs() < 1e-12);
+    let stats = cpu.dt_stats();
+    assert!(stats.min <= stats.mean && stats.mean <= stats.max && stats.max <= a.dt_max);
+}
+
+#[test]
+fn gpu_with_adaptive_dt_agrees_with_the_f64_cpu_path() {
+    for rebuild in [1, 2] {
+        let s = small_scene(&format!("adaptive = true\ndt_max = 0.002\nneighbour_rebuild_every = {rebuild}"));
+        for ctx in common::contexts() {
+            let who = format!("{} rebuild every {rebuild}", ctx.describe());
+            let mut gpu = common::gpu(ctx, &s);
+            let mut cpu = common::cpu::<f64>(&s);
+            let c = step_and_compare(&mut gpu, &mut cpu, 1, &ONE_STEP).unwrap();
+            assert!(c.passed(), "{who}\n{}", c.table());
+            let c = step_and_compare(&mut gpu, &mut cpu, 99, &MANY_STEPS).unwrap();
+            assert!(c.passed(), "{who}\n{}", c.table());
+            // The time and the steps taken, read back from the GPU in a few bytes.
+            let (tg, tc) = (gpu.time(), Backend::time(&cpu));
+            assert!((tg - tc).abs() < 1e-5 * tc, "{who}: time {tg} against {tc}");
+            let (sg, sc) = (gpu.dt_stats().unwrap(), cpu.dt_stats());
+            for (g, c) in [(sg.min, sc.min), (sg.max, sc.max), (sg.mean, sc.mean), (sg.last, sc.last)] {
+                assert!((g - c).abs() < 1e-3 * c, "{who}: {sg:?} against {sc:?}");
+            }
+            assert!(sc.min < sc.max, "{who}: the step never changed: {sc:?}");
+        }
+    }
+}
+
+#[test]
+fn rebuilding_the_grid_every_second_step_agrees_between_gpu_and_cpu_and_stays_close() {
+    let every2 = small_scene("neighbour_rebuild_every = 2");
+    let (p, init) = (every2.params(), every2.initial_state());
+    for ctx in common::contexts() {
+        let mut gpu = common::gpu(ctx, &every2);
+        let mut cpu = common::cpu::<f64>(&every2);
+        let c = step_and_compare(&mut gpu, &mut cpu, 100, &MANY_STEPS).unwrap();
+        assert!(c.passed(), "{}", c.table());
+    }
+    // Against rebuilding every step: the same flow to well within a particle spacing.
+    let every1 = small_scene("");
+    let mut a = common::cpu_from::<f64>(&every1, &init);
+    let mut b = common::cpu::<f64>(&every2);
+    a.step(100);
+    b.step(100);
+    let (sa, sb) = (a.snapshot(), b.snapshot());
+    let worst = (0..sa.len())
+        .map(|i| (0..3).map(|k| (sa.positions[i][k] - sb.positions[i][k]).powi(2)).sum::<f64>().sqrt())
+        .fold(0.0, f64::max);
+    assert!(worst > 0.0 && worst < 0.1 * p.h, "largest position difference {worst}");
+}
+
+#[test]
+fn adaptive_dt_handles_a_fixed_step_far_over_the_cfl_limit() {
+    // dt = 0.01 is 50x over the CFL limit as a fixed step (tests/physics/extremes.rs); as dt_max of an
+    // adaptive step the run is stable and its steps obey the CFL condition.
+    let s = small_scene("adaptive = true\ndt_max = 0.01");
+    let p = s.params();
+    let mut list: Vec<Box<dyn Backend>> = vec![Box::new(common::cpu::<f64>(&s))];
+    for ctx in common::contexts() {
+        list.push(Box::new(common::gpu(ctx, &s)));
+    }
+    for mut b in list {
+        b.step(300).unwrap();
+        assert!(b.health().unwrap().is_ok(), "{}", b.adapter());
+        assert_eq!(b.snapshot().unwrap().non_finite_count(), 0);
+        let stats = b.dt_stats().unwrap();
+        assert!(stats.max <= 0.25 * p.h / p.speed_of_sound() * (1.0 + 1e-6), "{}: {stats:?}", b.adapter());
+    }
+}
+
+#[test]
+fn a_run_to_a_time_with_adaptive_dt_ends_at_the_first_step_reaching_it() {
+    let s = small_scene("adaptive = true\ndt_max = 0.002");
+    let mut list: Vec<Box<dyn Backend>> = vec![Box::new(common::cpu::<f64>(&s))];
+    for ctx in common::contexts() {
+        list.push(Box::new(common::gpu(ctx, &s)));
+    }
+    for mut b in list {
+        let dir = tempfile::tempdir().unwrap();
+        let opts = RunOptions { steps: u64::MAX / 4, out: dir.path().into(), snapshot_every: 0, check_every: 50, progress: false, end_time: Some(0.05), ..Default::default() };
+        let summary = run(b.as_mut(), &s, &opts).unwrap();
+        assert!(summary.failure.is_none());
+        assert!(summary.sim_time >= 0.05 && summary.sim_time < 0.05 + summary.dt_max, "{}: {summary:?}", b.adapter());
+        assert!(summary.dt_min <= summary.dt_mean && summary.dt_mean <= summary.dt_max && summary.dt_min > 0.0);
+        assert!((summary.sim_time - summary.dt_mean * summary.steps as f64).abs() < 1e-4 * summary.sim_time);
+        let last = wgsph::io::snapshot::csv::read_snapshot_csv(std::path::Path::new(summary.last_snapshot.as_ref().unwrap())).unwrap();
+        assert_eq!(last.len(), b.fluid_count());
+    }
+}
+
+#[test]
+fn time_options_are_checked() {
+    let bad = |opts: &str, field: &str| {
+        let e = Scene::from_toml_str(&small_text(opts), &SceneOrigin::Text).unwrap_err().to_string();
+        assert!(e.contains(field), "{opts}: {e}");
+    };
+    bad("neighbour_rebuild_every = 3", "time.neighbour_rebuild_every");
+    bad("adaptive = true\ncfl_number = 0.0", "time.cfl_number");
+    bad("adaptive = true\nforce_number = 2.0", "time.force_number");
+    bad("adaptive = true\ndt_min = 0.01\ndt_max = 0.001", "time.dt_min");
+    bad("dt_min = 0.001", "time.dt_min");
+    let with_schedule = small_text("adaptive = true").replace("viscosity = 0.005", "viscosity = 0.005\nviscosity_schedule = [{ time = 0.5, viscosity = 0.001 }]");
+    let e = Scene::from_toml_str(&with_schedule, &SceneOrigin::Text).unwrap_err().to_string();
+    assert!(e.contains("physics.viscosity_schedule") && e.contains("adaptive"), "{e}");
+}

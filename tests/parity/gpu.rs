@@ -1,0 +1,163 @@
+//! The GPU pipeline against the CPU reference, on every adapter found (lavapipe and llvmpipe in
+//! CI).
+
+use crate::common;
+
+use wgsph::solver::compare::step_and_compare;
+use wgsph::solver::compare::MANY_STEPS;
+use wgsph::solver::compare::ONE_STEP;
+use wgsph::solver::cpu::prefix_sum::prefix_sum;
+use wgsph::model::kernels::sort_by_cell;
+use wgsph::solver::gpu::prefix_sum::exclusive_scan;
+use wgsph::solver::gpu::GpuContext;
+use wgsph::model::real::V3;
+use wgsph::model::scene::Scene;
+use wgsph::solver::Backend;
+
+/// A small scene for each model combination: a jittered block in a tank of wall particles with
+/// a plane, gravity, viscosity and a viscosity schedule.
+fn small_scene(kernel: &str, eos: &str, clamp: bool) -> Scene {
+    common::scene_from(&common::small_scene_text(kernel, eos, clamp, "viscosity_schedule = [{ time = 0.002, viscosity = 0.001 }]", ""))
+}
+
+/// Runs `steps` steps on the GPU and on the f64 CPU path from the scene's initial state and
+/// compares them.
+fn gpu_against_cpu(ctx: GpuContext, scene: &Scene, steps: u64, tol: &wgsph::solver::compare::Tolerances) -> wgsph::solver::compare::Comparison {
+    let mut gpu = common::gpu(ctx, &scene);
+    let mut cpu = common::cpu::<f64>(&scene);
+    step_and_compare(&mut gpu, &mut cpu, steps, tol).unwrap()
+}
+
+#[test]
+fn one_step_agrees_with_the_f64_cpu_path_to_f32_precision() {
+    for ctx in common::contexts() {
+        let name = ctx.describe();
+        for (kernel, eos, clamp) in [("mueller", "tait", true), ("mueller", "linear", false), ("cubic_spline", "tait", false)] {
+            let device = GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
+            let c = gpu_against_cpu(device, &small_scene(kernel, eos, clamp), 1, &ONE_STEP);
+            let what = format!("{name} {kernel}/{eos}:\n{}", c.table());
+            // Density to a relative 1e-5; acceleration to 1e-4 of its RMS magnitude.
+            assert!(c.field("density").max < 1e-5, "{what}");
+            assert!(c.field("acceleration").max < 1e-4, "{what}");
+            assert!(c.passed(), "{what}");
+        }
+    }
+}
+
+
+
+#[test]
+fn many_steps_stay_within_the_stated_tolerances_including_a_viscosity_change() {
+    for ctx in common::contexts() {
+        let c = gpu_against_cpu(ctx, &small_scene("mueller", "tait", true), 100, &MANY_STEPS);
+        assert!(c.passed(), "{}", c.table());
+    }
+}
+
+#[test]
+fn compare_dam_break_100_steps_passes() {
+    for ctx in common::contexts() {
+        let c = gpu_against_cpu(ctx, &Scene::builtin("dam_break").unwrap(), 100, &MANY_STEPS);
+        assert!(c.passed(), "{}", c.table());
+    }
+}
+
+#[test]
+fn binning_matches_a_cpu_counting_sort_exactly() {
+    for ctx in common::contexts() {
+        // The small scene, and one where every particle is in a single cell.
+        let mut crowded = small_scene("mueller", "linear", false);
+        crowded.physics.smoothing_length = 0.5;
+        // The walls' layers grow with h: the domain grows to hold them (still one cell of fluid).
+        crowded.domain.min = [-0.6; 3];
+        crowded.domain.max = [1.2, 1.1, 0.8];
+        for scene in [small_scene("mueller", "tait", true), crowded] {
+            let (p, init) = (scene.params(), scene.initial_state());
+            let mut gpu = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene);
+            let (ids, starts) = gpu.binning().unwrap();
+            let grid = p.grid.cast::<f32>();
+            let pos: Vec<V3<f32>> = init.fluid_positions.iter().map(|&x| V3::from64(x)).collect();
+            let (sorted, cpu_starts) = sort_by_cell(&grid, &pos);
+            assert_eq!(starts, cpu_starts);
+            assert_eq!(ids, sorted);
+        }
+    }
+}
+
+#[test]
+fn prefix_sum_is_exact_for_any_cell_count() {
+    for ctx in common::contexts() {
+        for n in [1usize, 255, 256, 257, 65_536, 1_000_003] {
+            let counts: Vec<u32> = (0..n).map(|i| ((i as u64 * 2654435761) % 7) as u32).collect();
+            let mut expected = vec![0u32; n + 1];
+            prefix_sum(&counts, &mut expected);
+            let got = exclusive_scan(&ctx, &counts).unwrap();
+            assert_eq!(got.len(), n + 1);
+            assert!(got == expected, "{}: scan of {n} values differs", ctx.describe());
+        }
+    }
+}
+
+#[test]
+fn runs_are_bitwise_reproducible_and_conserve_mass() {
+    for ctx in common::contexts() {
+        let scene = small_scene("mueller", "tait", true);
+        let init = scene.initial_state();
+        let run = || {
+            let mut gpu = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene);
+            gpu.step(60).unwrap();
+            // A snapshot in the middle must not change the trajectory.
+            let mid = gpu.snapshot().unwrap();
+            gpu.step(40).unwrap();
+            let (ids, _) = gpu.binning().unwrap();
+            (mid, gpu.snapshot().unwrap(), ids)
+        };
+        let (mid_a, a, ids) = run();
+        let (mid_b, b, _) = run();
+        let bits = |s: &wgsph::Snapshot| -> Vec<u64> {
+            s.positions.iter().chain(&s.velocities).flatten().chain(&s.densities).chain(&s.pressures).map(|v| v.to_bits()).collect()
+        };
+        assert!(bits(&mid_a) == bits(&mid_b), "{}: runs differ at step 60", ctx.describe());
+        assert!(bits(&a) == bits(&b), "{}: runs differ at step 100", ctx.describe());
+        // Mass: every particle is still there exactly once, each with its mass.
+        let mut sorted = ids.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..init.fluid_positions.len() as u32).collect::<Vec<_>>());
+        assert_eq!(a.len(), init.fluid_positions.len());
+        assert_eq!(a.non_finite_count(), 0);
+    }
+}
+
+#[test]
+fn a_snapshot_between_steps_does_not_change_the_trajectory() {
+    for ctx in common::contexts() {
+        let scene = small_scene("cubic_spline", "tait", true);
+        let mut with = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene);
+        let mut without = common::gpu(ctx, &scene);
+        for _ in 0..5 {
+            with.step(7).unwrap();
+            with.snapshot().unwrap();
+        }
+        without.step(35).unwrap();
+        assert_eq!(with.snapshot().unwrap(), without.snapshot().unwrap());
+    }
+}
+
+/// The consistent wall pressure (p_i / rho_i^2) agrees between the GPU and the CPU, and the
+/// GPU's specialisation constant takes effect: its step differs from the CPU's mirrored one.
+#[test]
+fn consistent_wall_pressure_agrees_with_the_cpu_path() {
+    for ctx in common::contexts() {
+        let name = ctx.describe();
+        let mut consistent = small_scene("cubic_spline", "tait", true);
+        consistent.physics.boundary_pressure = wgsph::model::scene::BoundaryPressure::Consistent;
+        let device = GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
+        let c = gpu_against_cpu(device, &consistent, 1, &ONE_STEP);
+        assert!(c.field("acceleration").max < 1e-4 && c.passed(), "{name}:\n{}", c.table());
+        let mut gpu = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &consistent);
+        let mirror = small_scene("cubic_spline", "tait", true);
+        let mut cpu_mirror = common::cpu::<f64>(&mirror);
+        let c = step_and_compare(&mut gpu, &mut cpu_mirror, 1, &ONE_STEP).unwrap();
+        assert!(!c.passed() && c.field("acceleration").max > 1e-3, "{name}: the wall pressure made no difference:\n{}", c.table());
+    }
+}

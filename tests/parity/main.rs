@@ -1,0 +1,12 @@
+//! GPU against the CPU reference: every stage alone, whole steps and runs, adaptive time steps,
+//! the specialised shaders, and arrays bound in segments. Every GPU test runs on every adapter
+//! found.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod stages;
+mod gpu;
+mod adaptive;
+mod specialise;
+mod scale;

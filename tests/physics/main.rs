@@ -1,0 +1,10 @@
+//! The physics: kernels and equations of state, the CPU reference on its own (conservation,
+//! stability, hydrostatics), the extremes, and the validation cases at coarse resolution.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod kernels;
+mod cpu_reference;
+mod extremes;
+mod validation;

@@ -1,0 +1,212 @@
+// Shared by every stage (each includes it): the parameter block, the status words, the kernels,
+// the equation of state and the grid. The formulas' twin is src/model/kernels.rs; the parameter
+// block and the status words are declared on the host in src/solver/gpu/params.rs, and a test
+// checks that the two agree.
+// h is the kernel's support radius: every kernel is zero for r >= h.
+
+// Specialisation constants, set per scene when the pipelines are built.
+override KERNEL: u32 = 0u;                      // 0: Mueller et al. 2003, 1: cubic spline
+override EOS: u32 = 0u;                         // 0: linear (report Eq. 8), 1: Tait (Eq. 9)
+override CLAMP_NEGATIVE_PRESSURE: bool = false;
+override CONSISTENT_WALL_PRESSURE: bool = false; // walls push with p_i/rho_i^2, not 2 max(p_i,0)/rho_i^2
+// The terms a scene uses: a term that is off is compiled out of every stage.
+override VISCOSITY: bool = true;                // some viscosity of the scene (or its schedule) > 0
+override WALLS: bool = true;                    // the scene has wall particles
+override PLANES: bool = true;                   // the scene has analytic planes
+override GRAVITY: bool = true;                  // gravity is not zero
+override ADAPTIVE_DT: bool = false;             // dt chosen on the GPU every step (integrate.wgsl)
+// The neighbour stencil as 9 runs of 3 cells (true) or as 27 single cells (false, kept to
+// measure what the runs gain; the same neighbours in the same order).
+override STENCIL_RUNS: bool = true;
+
+// Threads per workgroup of a particle stage, chosen per stage by the host (GpuOptions).
+override WORKGROUP_SIZE: u32 = 128u;
+const MAX_PLANES: u32 = 8u;
+
+struct Params {
+    domain_min: vec4<f32>,
+    domain_max: vec4<f32>,
+    gravity: vec4<f32>,
+    grid_origin: vec4<f32>,
+    // xyz: cells per axis.
+    grid_dims: vec4<u32>,
+    h: f32,
+    h2: f32,
+    inv_cell: f32,
+    dt: f32,
+    fluid_mass: f32,
+    rest_density: f32,
+    stiffness: f32,
+    viscosity: f32,
+    boundary_friction: f32,
+    // poly6 or cubic normalisation, gradient factor, Laplacian factor (see src/model/kernels.rs).
+    w_coef: f32,
+    grad_coef: f32,
+    lap_coef: f32,
+    fluid_count: u32,
+    wall_count: u32,
+    plane_count: u32,
+    pad0: u32,
+    // xyz: unit normal, w: offset (plane n.x = w).
+    planes: array<vec4<f32>, 8>,
+    // x: restitution.
+    plane_restitution: array<vec4<f32>, 8>,
+    // Adaptive dt: speed of sound, C_cfl, C_f, C_visc, dt_min, dt_max.
+    speed_of_sound: f32,
+    cfl_number: f32,
+    force_number: f32,
+    viscous_number: f32,
+    dt_min: f32,
+    dt_max: f32,
+    pad1: u32,
+    pad2: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+
+// The words of the status buffer (health counters; the adaptive step's maxima, dt and time).
+// Floats are stored as their bits.
+const STATUS_STEPS: u32 = 0u;
+const STATUS_NON_FINITE: u32 = 1u;
+const STATUS_ESCAPED: u32 = 2u;
+const STATUS_FIRST_BAD_STEP: u32 = 3u;        // STATUS_NO_BAD_STEP while none went wrong
+const STATUS_MAX_DENSITY: u32 = 4u;           // positive floats order like their bits
+const STATUS_MAX_SPEED: u32 = 5u;             // adaptive dt: this step's largest |v|
+const STATUS_MAX_ACCELERATION: u32 = 6u;      // adaptive dt: this step's largest |a|
+const STATUS_DT: u32 = 7u;                    // adaptive dt: this step's dt
+const STATUS_TIME: u32 = 8u;                  // adaptive dt: time = TIME - TIME_COMPENSATION
+const STATUS_TIME_COMPENSATION: u32 = 9u;     // (a Kahan sum)
+const STATUS_DT_MIN: u32 = 10u;
+const STATUS_DT_MAX: u32 = 11u;
+const STATUS_NO_BAD_STEP: u32 = 0xffffffffu;
+
+// Dispatches of more than 65535 workgroups wrap into rows along y.
+fn thread_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return gid.x + gid.y * groups.x * WORKGROUP_SIZE;
+}
+
+fn is_finite_f32(v: f32) -> bool {
+    // A bit test, since compilers may assume that NaN never occurs in float comparisons.
+    return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
+}
+
+fn is_finite_vec3(v: vec3<f32>) -> bool {
+    return is_finite_f32(v.x) && is_finite_f32(v.y) && is_finite_f32(v.z);
+}
+
+// Integer cell of a point, clamped into the grid (a particle outside the domain is counted as
+// escaped by the integration; here it only needs a valid cell).
+fn cell_coords(p: vec3<f32>) -> vec3<u32> {
+    let f = floor((p - params.grid_origin.xyz) * params.inv_cell);
+    var c: vec3<u32>;
+    for (var a = 0u; a < 3u; a++) {
+        let max_c = params.grid_dims[a] - 1u;
+        if (!is_finite_f32(f[a])) {
+            c[a] = 0u;
+        } else {
+            c[a] = u32(clamp(f[a], 0.0, f32(max_c)));
+        }
+    }
+    return c;
+}
+
+fn cell_key(c: vec3<u32>) -> u32 {
+    return c.x + params.grid_dims.x * (c.y + params.grid_dims.y * c.z);
+}
+
+// W(r) from r^2: poly6 (Mueller 2003 Eq. 20) or the cubic spline (Monaghan 1992).
+fn kernel_w(r2: f32) -> f32 {
+    if (r2 >= params.h2) {
+        return 0.0;
+    }
+    if (KERNEL == 0u) {
+        let d = params.h2 - r2;
+        return params.w_coef * d * d * d;
+    }
+    let q = sqrt(r2) / params.h;
+    if (q <= 0.5) {
+        return params.w_coef * (6.0 * (q * q * q - q * q) + 1.0);
+    }
+    let d = 1.0 - q;
+    return params.w_coef * 2.0 * d * d * d;
+}
+
+// grad W at r_ij = x_i - x_j with |r_ij| = r; zero at r = 0 where the direction is undefined.
+fn kernel_grad(rij: vec3<f32>, r: f32) -> vec3<f32> {
+    if (r >= params.h || r <= 1e-12 * params.h) {
+        return vec3<f32>(0.0);
+    }
+    var dwdr: f32;
+    if (KERNEL == 0u) {
+        // Spiky (Mueller 2003 Eq. 21).
+        let d = params.h - r;
+        dwdr = params.grad_coef * d * d;
+    } else {
+        let q = r / params.h;
+        if (q <= 0.5) {
+            dwdr = params.grad_coef * q * (3.0 * q - 2.0);
+        } else {
+            let d = 1.0 - q;
+            dwdr = -params.grad_coef * d * d;
+        }
+    }
+    return rij * (dwdr / r);
+}
+
+// Laplacian of the viscosity kernel (Mueller 2003 Eq. 22).
+fn kernel_laplacian(r: f32) -> f32 {
+    if (r >= params.h) {
+        return 0.0;
+    }
+    return params.lap_coef * (params.h - r);
+}
+
+// Report Eq. 8 (linear) or Eq. 9 (Tait, exponent 7).
+fn eos_pressure(density: f32) -> f32 {
+    let ratio = density / params.rest_density;
+    var p: f32;
+    if (EOS == 0u) {
+        p = params.stiffness * (ratio - 1.0);
+    } else {
+        let r2 = ratio * ratio;
+        let r4 = r2 * r2;
+        p = params.stiffness * (r4 * r2 * ratio - 1.0);
+    }
+    if (CLAMP_NEGATIVE_PRESSURE && p < 0.0) {
+        p = 0.0;
+    }
+    return p;
+}
+
+// Spans of the stencil a particle visits: 9 runs of up to 3 cells, or 27 single cells.
+fn stencil_span_count() -> u32 {
+    return select(27u, 9u, STENCIL_RUNS);
+}
+
+// The 27-cell stencil as 9 runs of up to 3 cells along x: each run is one contiguous span of
+// the cell-sorted arrays, from starts[run.x] to starts[run.y]. Without STENCIL_RUNS, span
+// `index` is the single cell dx = index % 3 - 1 of run index / 3 (empty outside the grid).
+fn stencil_run(c: vec3<u32>, index: u32) -> vec2<u32> {
+    var run = index;
+    if (!STENCIL_RUNS) {
+        run = index / 3u;
+    }
+    let dy = i32(run % 3u) - 1;
+    let dz = i32(run / 3u) - 1;
+    let y = i32(c.y) + dy;
+    let z = i32(c.z) + dz;
+    if (y < 0 || z < 0 || y >= i32(params.grid_dims.y) || z >= i32(params.grid_dims.z)) {
+        return vec2<u32>(0u, 0u);
+    }
+    let row = params.grid_dims.x * (u32(y) + params.grid_dims.y * u32(z));
+    if (!STENCIL_RUNS) {
+        let x = i32(c.x) + i32(index % 3u) - 1;
+        if (x < 0 || x >= i32(params.grid_dims.x)) {
+            return vec2<u32>(0u, 0u);
+        }
+        return vec2<u32>(row + u32(x), row + u32(x) + 1u);
+    }
+    let x0 = select(c.x - 1u, 0u, c.x == 0u);
+    let x1 = min(c.x + 1u, params.grid_dims.x - 1u);
+    return vec2<u32>(row + x0, row + x1 + 1u);
+}

@@ -1,0 +1,131 @@
+// Symplectic Euler (v += dt a, then x += dt v), the analytic planes, and the health counters;
+// with adaptive dt also the reduction of the largest speed and acceleration and the choice of dt.
+// Twin of src/solver/cpu/integrate.rs (a function for every entry point). The new state goes to the other buffer of the pair (the one
+// the binning read from), so that a stage fused with the forces (forces_integrate.wgsl) can
+// write it while other threads still read the neighbours' old state.
+
+//! include shared/common.wgsl
+//! include shared/reduce.wgsl
+//! array positions: vec4<f32>, read
+//! array velocities: vec4<f32>, read
+//! array accelerations: vec4<f32>, read
+//! array positions_out: vec4<f32>, read_write
+//! array velocities_out: vec4<f32>, read_write
+// The status words: STATUS_* in shared/common.wgsl.
+//! array status: u32, atomic, whole
+
+fn step_dt() -> f32 {
+    if (ADAPTIVE_DT) {
+        return bitcast<f32>(atomicLoad(&status[STATUS_DT]));
+    }
+    return params.dt;
+}
+
+// Advances fluid particle i with acceleration a over dt into the output arrays. The w component
+// of the position (the particle's original index, as bits) is carried over untouched.
+fn advance_particle(i: u32, a: vec3<f32>, dt: f32) {
+    let old = positions_at(i);
+    var v = velocities_at(i).xyz;
+    var x = old.xyz;
+    v += a * dt;
+    x += v * dt;
+    // A plane puts a particle behind it back on it and removes (or reflects, with restitution)
+    // the velocity into it, so that no particle is lost through it.
+    if (PLANES) {
+        for (var k = 0u; k < params.plane_count; k++) {
+            let plane = params.planes[k];
+            let d = dot(x, plane.xyz) - plane.w;
+            if (d < 0.0) {
+                x -= plane.xyz * d;
+                let vn = dot(v, plane.xyz);
+                if (vn < 0.0) {
+                    v -= plane.xyz * ((1.0 + params.plane_restitution[k].x) * vn);
+                }
+            }
+        }
+    }
+    positions_out_set(i, vec4<f32>(x, old.w));
+    velocities_out_set(i, vec4<f32>(v, 0.0));
+    let finite = is_finite_vec3(x) && is_finite_vec3(v);
+    if (!finite) {
+        atomicAdd(&status[STATUS_NON_FINITE], 1u);
+    } else if (any(x < params.domain_min.xyz) || any(x > params.domain_max.xyz)) {
+        atomicAdd(&status[STATUS_ESCAPED], 1u);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn integrate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        advance_particle(i, accelerations_at(i).xyz, step_dt());
+    }
+}
+
+// Adaptive dt, 1 of 2: the largest |v| (at the start of the step) and |a| (of this step),
+// reduced per workgroup, then once per workgroup into the status buffer. Non-negative floats
+// order like their bits; a non-finite value is left out (the health check reports it).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn reduce_maxima(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    reduce_begin(lid);
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let speed = length(velocities_at(i).xyz);
+        let accel = length(accelerations_at(i).xyz);
+        if (is_finite_f32(speed)) {
+            reduce_offer(0u, bitcast<u32>(speed));
+        }
+        if (is_finite_f32(accel)) {
+            reduce_offer(1u, bitcast<u32>(accel));
+        }
+    }
+    reduce_end();
+    if (lid == 0u) {
+        atomicMax(&status[STATUS_MAX_SPEED], reduce_result(0u));
+        atomicMax(&status[STATUS_MAX_ACCELERATION], reduce_result(1u));
+    }
+}
+
+// Adaptive dt, 2 of 2 (one thread): dt = clamp(min(C_cfl h / (c0 + |v|max), C_f sqrt(h / |a|max),
+// C_visc h^2 / nu), dt_min, dt_max) (Monaghan 1992; Morris et al. 1997), the simulated time
+// (Kahan-compensated sum, so that 10^5 steps of f32 lose no time) and the dt range.
+// Twin of AdaptiveDt::dt in src/model/params.rs.
+@compute @workgroup_size(1)
+fn choose_dt() {
+    let speed = bitcast<f32>(atomicLoad(&status[STATUS_MAX_SPEED]));
+    let accel = bitcast<f32>(atomicLoad(&status[STATUS_MAX_ACCELERATION]));
+    atomicStore(&status[STATUS_MAX_SPEED], 0u);
+    atomicStore(&status[STATUS_MAX_ACCELERATION], 0u);
+    var dt = params.cfl_number * params.h / (params.speed_of_sound + speed);
+    if (accel > 0.0) {
+        dt = min(dt, params.force_number * sqrt(params.h / accel));
+    }
+    if (VISCOSITY && params.viscosity > 0.0) {
+        dt = min(dt, params.viscous_number * params.h2 / params.viscosity);
+    }
+    dt = clamp(dt, params.dt_min, params.dt_max);
+    atomicStore(&status[STATUS_DT], bitcast<u32>(dt));
+    let sum = bitcast<f32>(atomicLoad(&status[STATUS_TIME]));
+    let compensation = bitcast<f32>(atomicLoad(&status[STATUS_TIME_COMPENSATION]));
+    let y = dt - compensation;
+    let t = sum + y;
+    atomicStore(&status[STATUS_TIME_COMPENSATION], bitcast<u32>((t - sum) - y));
+    atomicStore(&status[STATUS_TIME], bitcast<u32>(t));
+    atomicStore(&status[STATUS_DT_MIN], bitcast<u32>(min(bitcast<f32>(atomicLoad(&status[STATUS_DT_MIN])), dt)));
+    atomicStore(&status[STATUS_DT_MAX], bitcast<u32>(max(bitcast<f32>(atomicLoad(&status[STATUS_DT_MAX])), dt)));
+}
+
+// One thread after every step: counts the step and remembers the first one that went wrong.
+@compute @workgroup_size(1)
+fn finish_step() {
+    let step = atomicLoad(&status[STATUS_STEPS]) + 1u;
+    atomicStore(&status[STATUS_STEPS], step);
+    let bad = atomicLoad(&status[STATUS_NON_FINITE]) + atomicLoad(&status[STATUS_ESCAPED]);
+    if (bad > 0u && atomicLoad(&status[STATUS_FIRST_BAD_STEP]) == STATUS_NO_BAD_STEP) {
+        atomicStore(&status[STATUS_FIRST_BAD_STEP], step);
+    }
+}
