@@ -6,6 +6,7 @@ use crate::io::surface::MeshFormat;
 use crate::solver::gpu::{GpuOptions, WorkgroupSizes};
 use crate::solver::{BackendChoice, Device, Precision};
 use crate::viz::render;
+use super::validate::case::Resolution;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -29,11 +30,11 @@ pub enum Command {
     /// Open a window that runs a scene on the GPU and draws every frame (orbit camera, keys).
     View(ViewArgs),
     /// Measure speed against accuracy: one scene under many settings against a reference run.
-    Tradeoff(super::tradeoff::TradeoffArgs),
+    Tradeoff(TradeoffArgs),
     /// Run the validation cases against measurements and exact solutions; exit code 1 when one fails.
-    Validate(super::validate::ValidateArgs),
+    Validate(ValidateArgs),
     /// Time each compute stage of the GPU step; bandwidth, interactions/s and memory per particle.
-    Profile(super::profile::ProfileArgs),
+    Profile(ProfileArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -245,4 +246,64 @@ impl GpuTuning {
             single_cells: false,
         }
     }
+}
+
+/// `wgsph profile`.
+#[derive(Args, Debug, Clone)]
+pub struct ProfileArgs {
+    /// A built-in scene name or a path to a scene TOML file.
+    #[arg(default_value = "dam_break")]
+    pub scene: String,
+    /// Refine or coarsen the scene to about N fluid particles.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub particles: Option<u64>,
+    /// Steps to time (after 2 warm-up steps).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: u64,
+    #[command(flatten)]
+    pub tuning: GpuTuning,
+    /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 cells (to measure
+    /// what the runs gain).
+    #[arg(long)]
+    pub single_cells: bool,
+    /// Also write the numbers to this JSON file.
+    #[arg(long, value_name = "FILE.json")]
+    pub out: Option<PathBuf>,
+}
+
+/// `wgsph tradeoff`.
+#[derive(Args, Debug, Clone)]
+pub struct TradeoffArgs {
+    /// A built-in scene name or a path to a scene TOML file.
+    #[arg(default_value = "dam_break")]
+    pub scene: String,
+    /// Output directory for tradeoff.md and tradeoff.png.
+    #[arg(long, default_value = "tradeoff")]
+    pub out: PathBuf,
+    /// Fluid particles of the base resolution (the scene is refined or coarsened to it).
+    #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..))]
+    pub particles: u64,
+    /// Simulated time of every run (default 0.3 s: the dam-break surge before it reaches the
+    /// far wall, after which the splash makes single trajectories chaotic).
+    #[arg(long, default_value_t = 0.3)]
+    pub time: f64,
+    /// Times at which the runs are compared.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    pub samples: u64,
+}
+
+/// `wgsph validate`.
+#[derive(Args, Debug, Clone)]
+pub struct ValidateArgs {
+    /// A case (hydrostatic, dam_break_martin_moyce, dam_break_koshizuka_oka, conservation) or `all`.
+    #[arg(default_value = "all")]
+    pub case: String,
+    /// Output directory: CASE.png, CASE.csv per case and validation.md.
+    #[arg(long, default_value = "validation")]
+    pub out: PathBuf,
+    #[arg(long, value_enum, default_value_t = Resolution::Default)]
+    pub resolution: Resolution,
+    /// The GPU path by default (the CPU when no adapter exists, with a warning).
+    #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
+    pub backend: BackendArg,
 }

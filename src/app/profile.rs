@@ -4,7 +4,7 @@
 //! Stage times come from timestamp queries (one timed compute pass per stage) where the device
 //! has `TIMESTAMP_QUERY`; elsewhere only whole steps are timed on the host (submit and wait).
 
-use super::args::GpuTuning;
+use super::args::ProfileArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients};
@@ -15,33 +15,9 @@ use crate::solver::gpu::memory::MemoryPlan;
 use crate::solver::gpu::schedule::PROFILED_STAGES;
 use crate::solver::gpu::{GpuContext, GpuOptions};
 use crate::solver::{open_with, Backend, BackendChoice};
-use clap::Args;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::path::PathBuf;
 use std::time::Instant;
-
-#[derive(Args, Debug, Clone)]
-pub struct ProfileArgs {
-    /// A built-in scene name or a path to a scene TOML file.
-    #[arg(default_value = "dam_break")]
-    pub scene: String,
-    /// Refine or coarsen the scene to about N fluid particles.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
-    pub particles: Option<u64>,
-    /// Steps to time (after 2 warm-up steps).
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
-    pub steps: u64,
-    #[command(flatten)]
-    pub tuning: GpuTuning,
-    /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 cells (to measure
-    /// what the runs gain).
-    #[arg(long)]
-    pub single_cells: bool,
-    /// Also write the numbers to this JSON file.
-    #[arg(long, value_name = "FILE.json")]
-    pub out: Option<PathBuf>,
-}
 
 /// The rows of a profile whose forces and integration are one pass: the fused pass is timed as
 /// `forces_integrate`, and what remains of the integration pass (one thread updating the step's

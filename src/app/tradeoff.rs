@@ -17,6 +17,7 @@
 //! Cost: wall seconds of stepping (health checks included, snapshots for the errors left out)
 //! per simulated second and per particle-step, and the bytes the backend allocated.
 
+use super::args::TradeoffArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
 use crate::model::diagnosis::diagnose;
@@ -25,29 +26,7 @@ use crate::model::state::Snapshot;
 use crate::solver::compare::{diff as distance, rms};
 use crate::solver::{open, Backend, BackendChoice, Device, Precision};
 use crate::viz::plot::{Corner, Mark, Plot};
-use clap::Args;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
-
-#[derive(Args, Debug, Clone)]
-pub struct TradeoffArgs {
-    /// A built-in scene name or a path to a scene TOML file.
-    #[arg(default_value = "dam_break")]
-    pub scene: String,
-    /// Output directory for tradeoff.md and tradeoff.png.
-    #[arg(long, default_value = "tradeoff")]
-    pub out: PathBuf,
-    /// Fluid particles of the base resolution (the scene is refined or coarsened to it).
-    #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..))]
-    pub particles: u64,
-    /// Simulated time of every run (default 0.3 s: the dam-break surge before it reaches the
-    /// far wall, after which the splash makes single trajectories chaotic).
-    #[arg(long, default_value_t = 0.3)]
-    pub time: f64,
-    /// Times at which the runs are compared.
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..=1000))]
-    pub samples: u64,
-}
 
 /// Where a configuration runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

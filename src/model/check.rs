@@ -1,7 +1,7 @@
 //! Scene validation: every field checked against what is allowed before any work, with an
 //! error that names the file, the field, the value and the allowed range.
 
-use super::initial::lattice_counts;
+use super::lattice::lattice_counts;
 use super::params::MAX_PLANES;
 use super::scene::{err, Boundary, Scene, SceneError, SceneOrigin};
 

@@ -5,6 +5,7 @@
 //! Validation is in [`super::check`], the resolved constants in [`super::params`], the particles
 //! at t = 0 in [`super::initial`].
 
+use super::lattice::lattice_counts;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -403,7 +404,7 @@ impl Scene {
     /// Fluid particles of the scene, counted from the lattice sizes without creating them.
     pub fn fluid_particle_count(&self) -> u64 {
         let s = self.physics.particle_spacing;
-        self.fluid.iter().map(|b| super::initial::lattice_counts(b.min, b.max, s).iter().product::<u64>()).sum()
+        self.fluid.iter().map(|b| lattice_counts(b.min, b.max, s).iter().product::<u64>()).sum()
     }
 
     /// Particle count (fluid and walls, walls over-estimated by the full shell of their box,
@@ -416,8 +417,8 @@ impl Scene {
                 let ws = walls.spacing.unwrap_or(s);
                 let l = self.wall_layers(walls) as f64 * ws;
                 let (lo, hi) = ([min[0] - l, min[1] - l, min[2] - l], [max[0] + l, max[1] + l, max[2] + l]);
-                let outer = super::initial::lattice_counts(lo, hi, ws).iter().product::<u64>();
-                let inner = super::initial::lattice_counts(*min, *max, ws).iter().map(|&c| c.saturating_sub(2)).product::<u64>();
+                let outer = lattice_counts(lo, hi, ws).iter().product::<u64>();
+                let inner = lattice_counts(*min, *max, ws).iter().map(|&c| c.saturating_sub(2)).product::<u64>();
                 n += outer.saturating_sub(inner);
             }
         }

@@ -1,6 +1,7 @@
 //! The `wgsph` command end to end: outputs, backends, and a run that blows up.
 
 use crate::common;
+use crate::common::TestScene;
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -87,8 +88,8 @@ fn gpu_run_writes_the_same_outputs_as_cpu() {
 fn a_run_that_blows_up_stops_with_a_diagnosis_and_keeps_its_outputs() {
     let dir = tempfile::tempdir().unwrap();
     // The hydrostatic tank with a time step 30x over its CFL limit.
-    let text = wgsph::model::builtin::BUILTIN_SCENES.iter().find(|s| s.0 == "hydrostatic").unwrap().2.replace("dt = 0.0003", "dt = 0.01");
-    std::fs::write(dir.path().join("unstable.toml"), text).unwrap();
+    let unstable = TestScene::from(wgsph::Scene::builtin("hydrostatic").unwrap()).dt(0.01).build();
+    std::fs::write(dir.path().join("unstable.toml"), unstable.to_toml()).unwrap();
     let mut backends = vec!["cpu"];
     if !common::contexts().is_empty() {
         backends.push("gpu");

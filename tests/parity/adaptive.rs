@@ -2,6 +2,7 @@
 //! the f64 CPU path, the run loop and the scene checks.
 
 use crate::common;
+use crate::common::TestScene;
 
 use wgsph::solver::compare::step_and_compare;
 use wgsph::solver::compare::MANY_STEPS;
@@ -9,18 +10,7 @@ use wgsph::solver::compare::ONE_STEP;
 use wgsph::app::run::run;
 use wgsph::app::run::RunOptions;
 use wgsph::model::params::AdaptiveDt;
-use wgsph::model::scene::Scene;
-use wgsph::model::scene::SceneOrigin;
 use wgsph::solver::Backend;
-
-/// A jittered block moving in a tank of wall particles with a plane, gravity and viscosity.
-fn small_scene(time_options: &str) -> Scene {
-    common::scene_from(&small_text(time_options))
-}
-
-fn small_text(time_options: &str) -> String {
-    common::small_scene_text("mueller", "tait", true, "", time_options)
-}
 
 #[test]
 fn each_condition_of_the_adaptive_step_governs_in_its_regime_and_dt_is_clamped() {
@@ -43,7 +33,7 @@ fn each_condition_of_the_adaptive_step_governs_in_its_regime_and_dt_is_clamped()
 
 #[test]
 fn the_cpu_step_follows_the_formula_and_accumulates_time() {
-    let s = small_scene("adaptive = true\ndt_max = 0.01");
+    let s = TestScene::small_tank().adaptive().dt_max(0.01).build();
     let p = s.params();
     let a = p.adaptive.unwrap();
     let mut cpu = common::cpu::<f64>(&s);
@@ -65,7 +55,7 @@ fn the_cpu_step_follows_the_formula_and_accumulates_time() {
 #[test]
 fn gpu_with_adaptive_dt_agrees_with_the_f64_cpu_path() {
     for rebuild in [1, 2] {
-        let s = small_scene(&format!("adaptive = true\ndt_max = 0.002\nneighbour_rebuild_every = {rebuild}"));
+        let s = TestScene::small_tank().adaptive().dt_max(0.002).neighbour_rebuild_every(rebuild).build();
         for ctx in common::contexts() {
             let who = format!("{} rebuild every {rebuild}", ctx.describe());
             let mut gpu = common::gpu(ctx, &s);
@@ -88,7 +78,7 @@ fn gpu_with_adaptive_dt_agrees_with_the_f64_cpu_path() {
 
 #[test]
 fn rebuilding_the_grid_every_second_step_agrees_between_gpu_and_cpu_and_stays_close() {
-    let every2 = small_scene("neighbour_rebuild_every = 2");
+    let every2 = TestScene::small_tank().neighbour_rebuild_every(2).build();
     let (p, init) = (every2.params(), every2.initial_state());
     for ctx in common::contexts() {
         let mut gpu = common::gpu(ctx, &every2);
@@ -97,7 +87,7 @@ fn rebuilding_the_grid_every_second_step_agrees_between_gpu_and_cpu_and_stays_cl
         assert!(c.passed(), "{}", c.table());
     }
     // Against rebuilding every step: the same flow to well within a particle spacing.
-    let every1 = small_scene("");
+    let every1 = TestScene::small_tank().build();
     let mut a = common::cpu_from::<f64>(&every1, &init);
     let mut b = common::cpu::<f64>(&every2);
     a.step(100);
@@ -113,7 +103,7 @@ fn rebuilding_the_grid_every_second_step_agrees_between_gpu_and_cpu_and_stays_cl
 fn adaptive_dt_handles_a_fixed_step_far_over_the_cfl_limit() {
     // dt = 0.01 is 50x over the CFL limit as a fixed step (tests/physics/extremes.rs); as dt_max of an
     // adaptive step the run is stable and its steps obey the CFL condition.
-    let s = small_scene("adaptive = true\ndt_max = 0.01");
+    let s = TestScene::small_tank().adaptive().dt_max(0.01).build();
     let p = s.params();
     let mut list: Vec<Box<dyn Backend>> = vec![Box::new(common::cpu::<f64>(&s))];
     for ctx in common::contexts() {
@@ -130,7 +120,7 @@ fn adaptive_dt_handles_a_fixed_step_far_over_the_cfl_limit() {
 
 #[test]
 fn a_run_to_a_time_with_adaptive_dt_ends_at_the_first_step_reaching_it() {
-    let s = small_scene("adaptive = true\ndt_max = 0.002");
+    let s = TestScene::small_tank().adaptive().dt_max(0.002).build();
     let mut list: Vec<Box<dyn Backend>> = vec![Box::new(common::cpu::<f64>(&s))];
     for ctx in common::contexts() {
         list.push(Box::new(common::gpu(ctx, &s)));
@@ -150,16 +140,18 @@ fn a_run_to_a_time_with_adaptive_dt_ends_at_the_first_step_reaching_it() {
 
 #[test]
 fn time_options_are_checked() {
-    let bad = |opts: &str, field: &str| {
-        let e = Scene::from_toml_str(&small_text(opts), &SceneOrigin::Text).unwrap_err().to_string();
-        assert!(e.contains(field), "{opts}: {e}");
-    };
-    bad("neighbour_rebuild_every = 3", "time.neighbour_rebuild_every");
-    bad("adaptive = true\ncfl_number = 0.0", "time.cfl_number");
-    bad("adaptive = true\nforce_number = 2.0", "time.force_number");
-    bad("adaptive = true\ndt_min = 0.01\ndt_max = 0.001", "time.dt_min");
-    bad("dt_min = 0.001", "time.dt_min");
-    let with_schedule = small_text("adaptive = true").replace("viscosity = 0.005", "viscosity = 0.005\nviscosity_schedule = [{ time = 0.5, viscosity = 0.001 }]");
-    let e = Scene::from_toml_str(&with_schedule, &SceneOrigin::Text).unwrap_err().to_string();
+    let tank = TestScene::small_tank;
+    for (scene, field) in [
+        (tank().neighbour_rebuild_every(3), "time.neighbour_rebuild_every"),
+        (tank().adaptive().cfl_number(0.0), "time.cfl_number"),
+        (tank().adaptive().force_number(2.0), "time.force_number"),
+        (tank().adaptive().dt_min(0.01).dt_max(0.001), "time.dt_min"),
+        // dt_min and dt_max bound adaptive steps only.
+        (tank().dt_min(0.001), "time.dt_min"),
+    ] {
+        let e = scene.validation_error();
+        assert!(e.contains(field), "{field}: {e}");
+    }
+    let e = tank().adaptive().viscosity_change(0.5, 0.001).validation_error();
     assert!(e.contains("physics.viscosity_schedule") && e.contains("adaptive"), "{e}");
 }

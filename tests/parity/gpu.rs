@@ -2,6 +2,7 @@
 //! CI).
 
 use crate::common;
+use crate::common::TestScene;
 
 use wgsph::solver::compare::step_and_compare;
 use wgsph::solver::compare::MANY_STEPS;
@@ -11,13 +12,12 @@ use wgsph::model::kernels::sort_by_cell;
 use wgsph::solver::gpu::prefix_sum::exclusive_scan;
 use wgsph::solver::gpu::GpuContext;
 use wgsph::model::real::V3;
-use wgsph::model::scene::Scene;
+use wgsph::model::scene::{BoundaryPressure, EquationOfState, Kernel, Scene};
 use wgsph::solver::Backend;
 
-/// A small scene for each model combination: a jittered block in a tank of wall particles with
-/// a plane, gravity, viscosity and a viscosity schedule.
-fn small_scene(kernel: &str, eos: &str, clamp: bool) -> Scene {
-    common::scene_from(&common::small_scene_text(kernel, eos, clamp, "viscosity_schedule = [{ time = 0.002, viscosity = 0.001 }]", ""))
+/// The small tank for each model combination, with a viscosity schedule.
+fn small_scene(kernel: Kernel, eos: EquationOfState, clamp: bool) -> TestScene {
+    TestScene::small_tank().kernel(kernel).equation_of_state(eos).clamp_negative_pressure(clamp).viscosity_change(0.002, 0.001)
 }
 
 /// Runs `steps` steps on the GPU and on the f64 CPU path from the scene's initial state and
@@ -32,10 +32,14 @@ fn gpu_against_cpu(ctx: GpuContext, scene: &Scene, steps: u64, tol: &wgsph::solv
 fn one_step_agrees_with_the_f64_cpu_path_to_f32_precision() {
     for ctx in common::contexts() {
         let name = ctx.describe();
-        for (kernel, eos, clamp) in [("mueller", "tait", true), ("mueller", "linear", false), ("cubic_spline", "tait", false)] {
+        for (kernel, eos, clamp) in [
+            (Kernel::Mueller, EquationOfState::Tait, true),
+            (Kernel::Mueller, EquationOfState::Linear, false),
+            (Kernel::CubicSpline, EquationOfState::Tait, false),
+        ] {
             let device = GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
-            let c = gpu_against_cpu(device, &small_scene(kernel, eos, clamp), 1, &ONE_STEP);
-            let what = format!("{name} {kernel}/{eos}:\n{}", c.table());
+            let c = gpu_against_cpu(device, &small_scene(kernel, eos, clamp).build(), 1, &ONE_STEP);
+            let what = format!("{name} {kernel:?}/{eos:?}:\n{}", c.table());
             // Density to a relative 1e-5; acceleration to 1e-4 of its RMS magnitude.
             assert!(c.field("density").max < 1e-5, "{what}");
             assert!(c.field("acceleration").max < 1e-4, "{what}");
@@ -49,7 +53,7 @@ fn one_step_agrees_with_the_f64_cpu_path_to_f32_precision() {
 #[test]
 fn many_steps_stay_within_the_stated_tolerances_including_a_viscosity_change() {
     for ctx in common::contexts() {
-        let c = gpu_against_cpu(ctx, &small_scene("mueller", "tait", true), 100, &MANY_STEPS);
+        let c = gpu_against_cpu(ctx, &small_scene(Kernel::Mueller, EquationOfState::Tait, true).build(), 100, &MANY_STEPS);
         assert!(c.passed(), "{}", c.table());
     }
 }
@@ -65,13 +69,10 @@ fn compare_dam_break_100_steps_passes() {
 #[test]
 fn binning_matches_a_cpu_counting_sort_exactly() {
     for ctx in common::contexts() {
-        // The small scene, and one where every particle is in a single cell.
-        let mut crowded = small_scene("mueller", "linear", false);
-        crowded.physics.smoothing_length = 0.5;
-        // The walls' layers grow with h: the domain grows to hold them (still one cell of fluid).
-        crowded.domain.min = [-0.6; 3];
-        crowded.domain.max = [1.2, 1.1, 0.8];
-        for scene in [small_scene("mueller", "tait", true), crowded] {
+        // The small scene, and one where every particle is in a single cell: h = 0.5, in a
+        // domain grown to hold the walls, whose layers grow with h (still one cell of fluid).
+        let crowded = small_scene(Kernel::Mueller, EquationOfState::Linear, false).smoothing_length(0.5).domain([-0.6; 3], [1.2, 1.1, 0.8]).build();
+        for scene in [small_scene(Kernel::Mueller, EquationOfState::Tait, true).build(), crowded] {
             let (p, init) = (scene.params(), scene.initial_state());
             let mut gpu = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene);
             let (ids, starts) = gpu.binning().unwrap();
@@ -101,7 +102,7 @@ fn prefix_sum_is_exact_for_any_cell_count() {
 #[test]
 fn runs_are_bitwise_reproducible_and_conserve_mass() {
     for ctx in common::contexts() {
-        let scene = small_scene("mueller", "tait", true);
+        let scene = small_scene(Kernel::Mueller, EquationOfState::Tait, true).build();
         let init = scene.initial_state();
         let run = || {
             let mut gpu = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene);
@@ -131,7 +132,7 @@ fn runs_are_bitwise_reproducible_and_conserve_mass() {
 #[test]
 fn a_snapshot_between_steps_does_not_change_the_trajectory() {
     for ctx in common::contexts() {
-        let scene = small_scene("cubic_spline", "tait", true);
+        let scene = small_scene(Kernel::CubicSpline, EquationOfState::Tait, true).build();
         let mut with = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene);
         let mut without = common::gpu(ctx, &scene);
         for _ in 0..5 {
@@ -149,13 +150,12 @@ fn a_snapshot_between_steps_does_not_change_the_trajectory() {
 fn consistent_wall_pressure_agrees_with_the_cpu_path() {
     for ctx in common::contexts() {
         let name = ctx.describe();
-        let mut consistent = small_scene("cubic_spline", "tait", true);
-        consistent.physics.boundary_pressure = wgsph::model::scene::BoundaryPressure::Consistent;
+        let consistent = small_scene(Kernel::CubicSpline, EquationOfState::Tait, true).boundary_pressure(BoundaryPressure::Consistent).build();
         let device = GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
         let c = gpu_against_cpu(device, &consistent, 1, &ONE_STEP);
         assert!(c.field("acceleration").max < 1e-4 && c.passed(), "{name}:\n{}", c.table());
         let mut gpu = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &consistent);
-        let mirror = small_scene("cubic_spline", "tait", true);
+        let mirror = small_scene(Kernel::CubicSpline, EquationOfState::Tait, true).build();
         let mut cpu_mirror = common::cpu::<f64>(&mirror);
         let c = step_and_compare(&mut gpu, &mut cpu_mirror, 1, &ONE_STEP).unwrap();
         assert!(!c.passed() && c.field("acceleration").max > 1e-3, "{name}: the wall pressure made no difference:\n{}", c.table());

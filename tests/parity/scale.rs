@@ -2,10 +2,11 @@
 //! on at small sizes), and snapshots streamed in pieces.
 
 use crate::common;
+use crate::common::TestScene;
 
 use std::process::Command;
 use wgsph::solver::gpu::memory::MemoryPlan;
-use wgsph::model::scene::Scene;
+use wgsph::model::scene::{EquationOfState, Kernel, Scene};
 
 #[test]
 fn the_memory_figure_is_the_plan_and_matches_the_buffers_created() {
@@ -54,12 +55,15 @@ fn arrays_bound_in_segments_step_bit_for_bit_like_whole_arrays() {
     use wgsph::solver::Backend;
     for ctx in common::contexts() {
         let split_ctx = ctx.clone().with_storage_segment_bytes(SMALL_SEGMENT).unwrap();
-        // The shared small scene in a longer domain: its fluid vec4 arrays, the cell arrays and
-        // the walls in 2 segments or more, within OpenGL's 16 storage buffers per stage.
-        let text = common::small_scene_text("mueller", "tait", true, "", "")
-            .replace("max = [0.7, 0.9, 0.3]", "max = [1.5, 0.9, 0.7]")
-            .replace("max = [0.2, 0.3, 0.2]", "max = [0.44, 0.4, 0.2]");
-        let scene = common::scene_from(&text);
+        // The small tank in a longer domain with a larger block: its fluid vec4 arrays, the cell
+        // arrays and the walls in 2 segments or more, within OpenGL's 16 storage buffers per stage.
+        let scene = TestScene::small_tank()
+            .domain([-0.1; 3], [1.5, 0.9, 0.7])
+            .without_fluid()
+            .fluid([0.0; 3], [0.44, 0.4, 0.2])
+            .jitter(0.1)
+            .moving_at([0.3, 0.0, 0.0])
+            .build();
         let (params, initial) = (scene.params(), scene.initial_state());
         let n = initial.fluid_positions.len() as u64;
         let cells = params.grid.cell_count() as u64 + 1;
@@ -184,7 +188,7 @@ fn fused_forces_and_integration_step_bit_for_bit_like_two_passes_with_less_memor
     use wgsph::solver::gpu::GpuOptions;
     use wgsph::solver::Backend;
     for ctx in common::contexts() {
-        let scene = common::scene_from(&common::small_scene_text("cubic_spline", "tait", false, "", ""));
+        let scene = TestScene::small_tank().kernel(Kernel::CubicSpline).clamp_negative_pressure(false).build();
         let initial = scene.initial_state();
         let option = |fuse| GpuOptions { fuse_forces_and_integration: Some(fuse), ..Default::default() };
         let mut fused = common::gpu_with(ctx.clone(), &scene, None, option(true)).unwrap();
@@ -229,8 +233,7 @@ fn workgroup_sizes_per_stage_change_no_value_and_oversized_ones_are_refused() {
     use wgsph::solver::Backend;
     for ctx in common::contexts() {
         // Adaptive dt too: its reduction of the largest speed and acceleration runs per workgroup.
-        for time_extra in ["", "adaptive = true"] {
-            let scene = common::scene_from(&common::small_scene_text("mueller", "tait", true, "", time_extra));
+        for scene in [TestScene::small_tank().build(), TestScene::small_tank().adaptive().build()] {
             let run = |sizes: WorkgroupSizes| {
                 let options = GpuOptions { workgroup_sizes: sizes, ..Default::default() };
                 let mut solver = common::gpu_with(ctx.clone(), &scene, None, options).unwrap();
@@ -240,7 +243,7 @@ fn workgroup_sizes_per_stage_change_no_value_and_oversized_ones_are_refused() {
             let reference = run(WorkgroupSizes::default());
             for sizes in ["32", "density=64,forces=256,integrate=32,reorder=256"] {
                 let got = run(sizes.parse().unwrap());
-                assert!(got == reference, "{} with {sizes} ({time_extra}): another result", ctx.describe());
+                assert!(got == reference, "{} with {sizes} (adaptive dt: {}): another result", ctx.describe(), scene.time.adaptive);
             }
         }
         let l = ctx.device.limits();
@@ -258,7 +261,7 @@ fn single_cell_stencils_and_steps_per_submission_change_no_value() {
     use wgsph::solver::gpu::GpuOptions;
     use wgsph::solver::Backend;
     for ctx in common::contexts() {
-        let scene = common::scene_from(&common::small_scene_text("cubic_spline", "linear", false, "", ""));
+        let scene = TestScene::small_tank().kernel(Kernel::CubicSpline).equation_of_state(EquationOfState::Linear).clamp_negative_pressure(false).build();
         let initial = scene.initial_state();
         let run = |options: GpuOptions| {
             let mut solver = common::gpu_with(ctx.clone(), &scene, None, options).unwrap();

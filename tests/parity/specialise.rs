@@ -3,27 +3,29 @@
 //! arrays.
 
 use crate::common;
+use crate::common::TestScene;
 
 use wgsph::solver::compare::step_and_compare;
 use wgsph::solver::compare::MANY_STEPS;
 use wgsph::solver::compare::ONE_STEP;
-use wgsph::model::scene::Boundary;
 use wgsph::model::scene::Scene;
 
 /// dam_break at about 1000 particles with the chosen terms switched off.
 fn variant(viscosity: bool, walls: bool, planes: bool, gravity: bool) -> Scene {
-    let mut s = Scene::builtin("dam_break").unwrap().with_fluid_particles(1000);
+    let mut s = TestScene::from(Scene::builtin("dam_break").unwrap().with_fluid_particles(1000));
     if !viscosity {
-        s.physics.viscosity = 0.0;
+        s = s.viscosity(0.0);
     }
     if !gravity {
-        s.physics.gravity = [0.0; 3];
+        s = s.gravity([0.0; 3]);
     }
-    s.boundary.retain(|b| match b {
-        Boundary::Plane { .. } => planes,
-        _ => walls,
-    });
-    s
+    if !walls {
+        s = s.without_walls();
+    }
+    if !planes {
+        s = s.without_planes();
+    }
+    s.build()
 }
 
 #[test]

@@ -1,49 +1,36 @@
 //! The CPU reference's physics: conservation, the seed scene's stability, hydrostatics.
 
 use crate::common;
+use crate::common::TestScene;
+use wgsph::model::scene::EquationOfState;
+use wgsph::model::scene::Kernel;
 use wgsph::model::scene::Scene;
-use wgsph::model::scene::SceneOrigin;
-
-fn scene(text: &str) -> Scene {
-    Scene::from_toml_str(text, &SceneOrigin::Text).expect("valid test scene")
-}
 
 /// Two jittered blocks of fluid moving against each other, no gravity, no walls or planes.
-fn colliding_blocks(kernel: &str, eos: &str) -> Scene {
-    scene(&format!(
-        r#"
-        [domain]
-        min = [-1.0, -1.0, -1.0]
-        max = [2.0, 2.0, 2.0]
-        [physics]
-        smoothing_length = 0.1
-        particle_spacing = 0.05
-        kernel = "{kernel}"
-        equation_of_state = "{eos}"
-        speed_of_sound = 20.0
-        viscosity = 0.01
-        gravity = [0.0, 0.0, 0.0]
-        [time]
-        dt = 0.0005
-        end_time = 1.0
-        [[fluid]]
-        min = [0.0, 0.0, 0.0]
-        max = [0.4, 0.4, 0.4]
-        jitter = 0.2
-        velocity = [1.0, 0.5, 0.0]
-        [[fluid]]
-        min = [0.4, 0.0, 0.0]
-        max = [0.8, 0.3, 0.4]
-        jitter = 0.2
-        velocity = [-1.0, 0.0, 0.25]
-        "#
-    ))
+fn colliding_blocks(kernel: Kernel, eos: EquationOfState) -> Scene {
+    TestScene::new()
+        .domain([-1.0; 3], [2.0; 3])
+        .smoothing_length(0.1)
+        .particle_spacing(0.05)
+        .kernel(kernel)
+        .equation_of_state(eos)
+        .speed_of_sound(20.0)
+        .viscosity(0.01)
+        .gravity([0.0; 3])
+        .dt(0.0005)
+        .fluid([0.0; 3], [0.4; 3])
+        .jitter(0.2)
+        .moving_at([1.0, 0.5, 0.0])
+        .fluid([0.4, 0.0, 0.0], [0.8, 0.3, 0.4])
+        .jitter(0.2)
+        .moving_at([-1.0, 0.0, 0.25])
+        .build()
 }
 
 #[test]
 fn pressure_and_viscosity_conserve_momentum_in_a_closed_box_without_gravity() {
-    for kernel in ["mueller", "cubic_spline"] {
-        for eos in ["linear", "tait"] {
+    for kernel in [Kernel::Mueller, Kernel::CubicSpline] {
+        for eos in [EquationOfState::Linear, EquationOfState::Tait] {
             let s = colliding_blocks(kernel, eos);
             let p = s.params();
             let mut cpu = common::cpu::<f64>(&s);
@@ -59,13 +46,13 @@ fn pressure_and_viscosity_conserve_momentum_in_a_closed_box_without_gravity() {
             }
             assert!(magnitude > 0.0);
             let net = (total[0] * total[0] + total[1] * total[1] + total[2] * total[2]).sqrt();
-            assert!(net < 1e-12 * magnitude, "{kernel}/{eos}: net force {net:e} against {magnitude:e}");
+            assert!(net < 1e-12 * magnitude, "{kernel:?}/{eos:?}: net force {net:e} against {magnitude:e}");
             // Momentum after many steps is unchanged to rounding.
             let before = momentum(&cpu.snapshot(), p.fluid_mass);
             cpu.step(50);
             let after = momentum(&cpu.snapshot(), p.fluid_mass);
             for k in 0..3 {
-                assert!((after[k] - before[k]).abs() < 1e-10 * magnitude.max(1.0), "{kernel}/{eos}: {before:?} -> {after:?}");
+                assert!((after[k] - before[k]).abs() < 1e-10 * magnitude.max(1.0), "{kernel:?}/{eos:?}: {before:?} -> {after:?}");
             }
         }
     }

@@ -2,74 +2,43 @@
 //! every GPU adapter found.
 
 use crate::common;
+use crate::common::TestScene;
 
 use wgsph::app::run::run;
 use wgsph::app::run::RunOptions;
 use wgsph::model::initial::InitialState;
+use wgsph::model::scene::EquationOfState;
 use wgsph::model::scene::Scene;
-use wgsph::model::scene::SceneOrigin;
 use wgsph::solver::Backend;
 use wgsph::model::state::StepFields;
-
-use crate::common::scene_from as scene;
 
 /// A block of 6 x 8 x 4 fluid particles in a closed tank of wall particles, backed by planes on
 /// the tank's inner faces. h = 0.04, c0 = 20 m/s: the CFL number dt (c0 + |v|) / h is 0.1 at
 /// dt = 2e-4.
-const TANK: &str = r#"
-name = "tank"
-[domain]
-min = [-0.06, -0.06, -0.06]
-max = [0.30, 0.30, 0.18]
-[physics]
-smoothing_length = 0.04
-particle_spacing = 0.02
-equation_of_state = "tait"
-speed_of_sound = 20.0
-clamp_negative_pressure = true
-viscosity = 0.001
-boundary_friction = 0.0
-[time]
-dt = 0.0002
-end_time = 1.0
-[[fluid]]
-min = [0.0, 0.0, 0.0]
-max = [0.12, 0.16, 0.08]
-velocity = [0.0, 0.0, 0.0]
-[[boundary]]
-type = "container"
-min = [0.0, 0.0, 0.0]
-max = [0.24, 0.24, 0.12]
-open_top = false
-[[boundary]]
-type = "plane"
-point = [0.0, 0.0, 0.0]
-normal = [1.0, 0.0, 0.0]
-[[boundary]]
-type = "plane"
-point = [0.24, 0.0, 0.0]
-normal = [-1.0, 0.0, 0.0]
-[[boundary]]
-type = "plane"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 1.0, 0.0]
-[[boundary]]
-type = "plane"
-point = [0.0, 0.24, 0.0]
-normal = [0.0, -1.0, 0.0]
-[[boundary]]
-type = "plane"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 0.0, 1.0]
-[[boundary]]
-type = "plane"
-point = [0.0, 0.0, 0.12]
-normal = [0.0, 0.0, -1.0]
-"#;
-
-/// The tank without its planes (walls of particles only).
-fn without_planes(text: &str) -> String {
-    text.split("[[boundary]]\ntype = \"plane\"").next().unwrap().to_string()
+fn tank() -> TestScene {
+    let inside = [0.24, 0.24, 0.12];
+    let mut tank = TestScene::new()
+        .named("tank")
+        .domain([-0.06; 3], [0.30, 0.30, 0.18])
+        .smoothing_length(0.04)
+        .particle_spacing(0.02)
+        .equation_of_state(EquationOfState::Tait)
+        .speed_of_sound(20.0)
+        .clamp_negative_pressure(true)
+        .viscosity(0.001)
+        .boundary_friction(0.0)
+        .dt(0.0002)
+        .fluid([0.0; 3], [0.12, 0.16, 0.08])
+        .closed_container([0.0; 3], inside);
+    // Per axis, the face through the origin, then the far face.
+    for axis in 0..3 {
+        let (mut far, mut normal, mut inward) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+        far[axis] = inside[axis];
+        normal[axis] = 1.0;
+        inward[axis] = -1.0;
+        tank = tank.plane([0.0; 3], normal, 0.0).plane(far, inward, 0.0);
+    }
+    tank
 }
 
 /// The f64 CPU reference and one GPU solver per adapter, all from the same state.
@@ -105,7 +74,7 @@ fn run_to_dir(backend: &mut dyn Backend, scene: &Scene, steps: u64, every: u64) 
 #[test]
 fn a_time_step_far_over_the_cfl_limit_stops_within_bounded_steps_naming_the_step_and_the_cfl_number() {
     // dt 50x the stable step (CFL number 5), walls of particles only: the state blows up.
-    let s = scene(&without_planes(TANK).replace("dt = 0.0002", "dt = 0.01"));
+    let s = tank().without_planes().dt(0.01).build();
     for mut b in backends(&s, &s.initial_state()) {
         let who = b.adapter();
         let (summary, snaps) = run_to_dir(b.as_mut(), &s, 1000, 5);
@@ -127,7 +96,7 @@ fn very_low_and_very_high_stiffness_stay_finite_and_inside_the_tank() {
     // hold it. c0 = 2000 m/s with dt at CFL number 0.2: nearly incompressible, the largest
     // density stays within 1 % of the largest at t = 0 (jitter and walls make that above rho0).
     for (c0, dt, steps, max_growth) in [(0.01, 2e-4, 600, 100.0), (2000.0, 4e-6, 300, 1.01)] {
-        let s = scene(&TANK.replace("speed_of_sound = 20.0", &format!("speed_of_sound = {c0}")).replace("dt = 0.0002", &format!("dt = {dt}")));
+        let s = tank().speed_of_sound(c0).dt(dt).build();
         for mut b in backends(&s, &s.initial_state()) {
             let who = format!("{} c0 = {c0}", b.adapter());
             let initial_max = b.snapshot().unwrap().densities.iter().cloned().fold(0.0, f64::max);
@@ -146,7 +115,7 @@ fn very_low_and_very_high_stiffness_stay_finite_and_inside_the_tank() {
 #[test]
 fn zero_viscosity_is_stable_and_very_high_viscosity_damps_or_is_detected() {
     // nu = 0: inviscid, stable at the CFL number 0.1.
-    let s = scene(&TANK.replace("viscosity = 0.001", "viscosity = 0.0"));
+    let s = tank().viscosity(0.0).build();
     for mut b in backends(&s, &s.initial_state()) {
         b.step(400).unwrap();
         assert!(b.health().unwrap().is_ok(), "{}", b.adapter());
@@ -154,12 +123,8 @@ fn zero_viscosity_is_stable_and_very_high_viscosity_damps_or_is_detected() {
     }
     // nu = 10 m^2/s with dt under the viscous limit 0.125 h^2 / nu = 2e-5: a block moving at
     // 1 m/s against still fluid is damped to a common velocity.
-    let viscous = |dt: &str| {
-        TANK.replace("viscosity = 0.001", "viscosity = 10.0")
-            .replace("dt = 0.0002", &format!("dt = {dt}"))
-            .replace("velocity = [0.0, 0.0, 0.0]", "velocity = [0.0, 0.0, 0.0]\n[[fluid]]\nmin = [0.12, 0.0, 0.0]\nmax = [0.2, 0.16, 0.08]\nvelocity = [1.0, 0.0, 0.0]")
-    };
-    let s = scene(&viscous("0.00001"));
+    let viscous = |dt: f64| tank().viscosity(10.0).dt(dt).fluid([0.12, 0.0, 0.0], [0.2, 0.16, 0.08]).moving_at([1.0, 0.0, 0.0]);
+    let s = viscous(0.00001).build();
     for mut b in backends(&s, &s.initial_state()) {
         let spread = |snap: &wgsph::Snapshot| {
             let n = snap.len() as f64;
@@ -175,7 +140,7 @@ fn zero_viscosity_is_stable_and_very_high_viscosity_damps_or_is_detected() {
     }
     // The same at dt = 2e-4, 10x over the viscous limit: explicit viscosity diverges, and the
     // run stops with a diagnosis.
-    let s = scene(&without_planes(&viscous("0.0002")));
+    let s = viscous(0.0002).without_planes().build();
     for mut b in backends(&s, &s.initial_state()) {
         let (summary, snaps) = run_to_dir(b.as_mut(), &s, 2000, 10);
         assert!(summary.failure.is_some(), "{}: not detected", b.adapter());
@@ -185,7 +150,7 @@ fn zero_viscosity_is_stable_and_very_high_viscosity_damps_or_is_detected() {
 
 #[test]
 fn particles_at_the_same_position_give_no_division_by_zero() {
-    let s = scene(TANK);
+    let s = tank().build();
     let mut init = s.initial_state();
     // Three particles stacked exactly on a fourth, and two more pairs elsewhere.
     for (dst, src) in [(1, 0), (2, 0), (3, 0), (40, 41), (100, 101)] {
@@ -221,11 +186,7 @@ fn agrees_with_reference(reference: &mut Option<StepFields>, f: StepFields, adap
 #[test]
 fn all_particles_in_one_grid_cell() {
     // h larger than the domain: one cell holds every particle (and every wall particle).
-    let text = TANK
-        .replace("smoothing_length = 0.04", "smoothing_length = 0.5")
-        .replace("open_top = false", "open_top = false\nlayers = 2")
-        .replace("dt = 0.0002", "dt = 0.002");
-    let s = scene(&text);
+    let s = tank().smoothing_length(0.5).wall_layers(2).dt(0.002).build();
     assert_eq!(s.params().grid.cell_count(), 1);
     let mut reference = None;
     for mut b in backends(&s, &s.initial_state()) {
@@ -240,24 +201,16 @@ fn all_particles_in_one_grid_cell() {
 
 #[test]
 fn a_single_particle_falls_freely_then_rests_on_a_floor_plane() {
-    let text = r#"
-        [domain]
-        min = [0.0, -1.0, 0.0]
-        max = [1.0, 1.0, 1.0]
-        [physics]
-        smoothing_length = 0.1
-        particle_spacing = 0.05
-        speed_of_sound = 10.0
-        viscosity = 0.01
-        [time]
-        dt = 0.001
-        end_time = 1.0
-        [[fluid]]
-        min = [0.5, 0.5, 0.5]
-        max = [0.55, 0.55, 0.55]
-        jitter = 0.0
-    "#;
-    let s = scene(text);
+    let particle = TestScene::new()
+        .domain([0.0, -1.0, 0.0], [1.0; 3])
+        .smoothing_length(0.1)
+        .particle_spacing(0.05)
+        .speed_of_sound(10.0)
+        .viscosity(0.01)
+        .dt(0.001)
+        .fluid([0.5; 3], [0.55; 3])
+        .jitter(0.0);
+    let s = particle.clone().build();
     let p = s.params();
     assert_eq!(s.initial_state().fluid_positions.len(), 1);
     let n = 200u64;
@@ -277,7 +230,7 @@ fn a_single_particle_falls_freely_then_rests_on_a_floor_plane() {
         assert!((snap.densities[0] - p.fluid_mass * w0).abs() < 1e-5 * snap.densities[0], "{who}");
     }
     // With a floor plane at y = 0 it lands and stays on it.
-    let s = scene(&format!("{text}\n[[boundary]]\ntype = \"plane\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 1.0, 0.0]\n"));
+    let s = particle.plane([0.0; 3], [0.0, 1.0, 0.0], 0.0).build();
     for mut b in backends(&s, &s.initial_state()) {
         b.step(1000).unwrap();
         assert!(b.health().unwrap().is_ok());
@@ -289,11 +242,11 @@ fn a_single_particle_falls_freely_then_rests_on_a_floor_plane() {
 
 #[test]
 fn a_scene_without_fluid_is_refused_and_the_solvers_step_zero_particles() {
-    // The scene file: a clear error naming the field.
-    let e = Scene::from_toml_str(TANK.split("[[fluid]]").next().unwrap(), &SceneOrigin::Text).unwrap_err().to_string();
+    // The tank emptied of fluid (and boundaries) is refused, with an error naming the field.
+    let e = tank().without_fluid().without_boundaries().validation_error();
     assert!(e.contains("fluid") && e.contains("at least one"), "{e}");
     // The solvers given no fluid particles (only walls) step, report health and write outputs.
-    let s = scene(TANK);
+    let s = tank().build();
     let mut init = s.initial_state();
     init.fluid_positions.clear();
     init.fluid_velocities.clear();
@@ -311,7 +264,7 @@ fn a_scene_without_fluid_is_refused_and_the_solvers_step_zero_particles() {
 fn high_speed_impacts_lose_no_particle_through_a_wall() {
     // The block hits the tank's far wall at 50 m/s, faster than sound (c0 = 20); dt keeps the
     // CFL number dt (c0 + |v|) / h at 0.18.
-    let s = scene(&TANK.replace("velocity = [0.0, 0.0, 0.0]", "velocity = [50.0, 0.0, 0.0]").replace("dt = 0.0002", "dt = 0.0001"));
+    let s = tank().moving_at([50.0, 0.0, 0.0]).dt(0.0001).build();
     for mut b in backends(&s, &s.initial_state()) {
         let who = b.adapter();
         for _ in 0..10 {
@@ -328,7 +281,7 @@ fn high_speed_impacts_lose_no_particle_through_a_wall() {
 #[test]
 fn particles_leaving_the_domain_are_counted_and_never_binned_out_of_bounds() {
     // No walls, no planes: a block flies out of the domain at 50 m/s.
-    let s = scene(&TANK.split("[[boundary]]").next().unwrap().replace("velocity = [0.0, 0.0, 0.0]", "velocity = [50.0, 0.0, 0.0]").replace("dt = 0.0002", "dt = 0.0001"));
+    let s = tank().without_boundaries().moving_at([50.0, 0.0, 0.0]).dt(0.0001).build();
     let n = s.initial_state().fluid_positions.len();
     let (dmin, dmax) = (s.domain.min, s.domain.max);
     for mut b in backends(&s, &s.initial_state()) {
@@ -379,8 +332,7 @@ fn a_large_scene_steps_and_one_too_large_for_memory_is_refused() {
         }
     }
     // 10^9 particles: refused before any allocation, naming the count and the memory.
-    let text = TANK.replace("max = [0.30, 0.30, 0.18]", "max = [20.0, 20.0, 20.0]").replace("max = [0.12, 0.16, 0.08]", "max = [19.0, 19.0, 19.0]");
-    let e = Scene::from_toml_str(&text, &SceneOrigin::Text).unwrap_err().to_string();
+    let e = tank().domain([-0.06; 3], [20.0; 3]).without_fluid().fluid([0.0; 3], [19.0; 3]).validation_error();
     assert!(e.contains("fluid") && e.contains("particles") && e.contains("MiB"), "{e}");
 }
 
@@ -389,30 +341,30 @@ fn a_long_run_of_100_000_steps_keeps_every_particle_and_bounded_energy() {
     // 8 particles in a box of planes with gravity and viscosity. 100 000 steps on the f64 and
     // f32 CPU paths (f32 is the GPU's arithmetic); 10 000 on each GPU adapter, where a software
     // adapter spends about 1 ms per step on dispatch overhead whatever the particle count.
-    let text = r#"
-        [domain]
-        min = [-0.01, -0.01, -0.01]
-        max = [0.09, 0.09, 0.09]
-        [physics]
-        smoothing_length = 0.04
-        particle_spacing = 0.02
-        speed_of_sound = 5.0
-        viscosity = 0.001
-        clamp_negative_pressure = true
-        [time]
-        dt = 0.0005
-        end_time = 100.0
-        [[fluid]]
-        min = [0.02, 0.04, 0.02]
-        max = [0.06, 0.08, 0.06]
-        jitter = 0.1
-        velocity = [0.5, 0.0, -0.3]
-    "#;
-    let planes: String = [([0.0, 0.0, 0.0], [1, 0, 0]), ([0.0; 3], [0, 1, 0]), ([0.0; 3], [0, 0, 1]), ([0.08; 3], [-1, 0, 0]), ([0.08; 3], [0, -1, 0]), ([0.08; 3], [0, 0, -1])]
-        .iter()
-        .map(|(p, n)| format!("[[boundary]]\ntype = \"plane\"\npoint = {p:?}\nnormal = [{}.0, {}.0, {}.0]\n", n[0], n[1], n[2]))
-        .collect();
-    let s = scene(&format!("{text}\n{planes}"));
+    let mut box_of_planes = TestScene::new()
+        .domain([-0.01; 3], [0.09; 3])
+        .smoothing_length(0.04)
+        .particle_spacing(0.02)
+        .speed_of_sound(5.0)
+        .viscosity(0.001)
+        .clamp_negative_pressure(true)
+        .dt(0.0005)
+        .end_time(100.0)
+        .fluid([0.02, 0.04, 0.02], [0.06, 0.08, 0.06])
+        .jitter(0.1)
+        .moving_at([0.5, 0.0, -0.3]);
+    // The three faces through the origin, then the three through the far corner.
+    for (point, normal) in [
+        ([0.0; 3], [1.0, 0.0, 0.0]),
+        ([0.0; 3], [0.0, 1.0, 0.0]),
+        ([0.0; 3], [0.0, 0.0, 1.0]),
+        ([0.08; 3], [-1.0, 0.0, 0.0]),
+        ([0.08; 3], [0.0, -1.0, 0.0]),
+        ([0.08; 3], [0.0, 0.0, -1.0]),
+    ] {
+        box_of_planes = box_of_planes.plane(point, normal, 0.0);
+    }
+    let s = box_of_planes.build();
     let (p, init) = (s.params(), s.initial_state());
     let m = p.fluid_mass;
     let energy = |snap: &wgsph::Snapshot| snap.kinetic_energy(m) + snap.positions.iter().map(|x| m * 9.81 * x[1]).sum::<f64>();

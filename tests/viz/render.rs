@@ -3,6 +3,7 @@
 //! CPU backend.
 
 use crate::common;
+use crate::common::TestScene;
 
 use glam::{Vec3, Vec4Swizzles};
 use wgsph::solver::gpu::GpuContext;
@@ -16,40 +17,28 @@ use wgsph::viz::render::RenderOptions;
 use wgsph::viz::render::Style;
 use wgsph::viz::render::Walls;
 use wgsph::model::scene::Scene;
-use wgsph::model::scene::SceneOrigin;
 use wgsph::solver::Backend;
 
-/// A block of fluid alone in space (no walls, no gravity unless asked).
+/// A block of n x n x n particles alone in space (no walls, no gravity unless asked), on a
+/// floor plane if asked.
 fn block(n: usize, jitter: f64, gravity: f64, planes: bool) -> Scene {
-    let s = 0.1;
-    let side = n as f64 * s;
-    let floor = if planes {
-        "[[boundary]]\ntype = \"plane\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 1.0, 0.0]\n"
+    let spacing = 0.1;
+    let side = n as f64 * spacing;
+    let block = TestScene::new()
+        .named("block")
+        .domain([-2.0, -0.5, -2.0], [3.0; 3])
+        .smoothing_length(0.2)
+        .particle_spacing(spacing)
+        .stiffness(1000.0)
+        .gravity([0.0, gravity, 0.0])
+        .dt(0.002)
+        .fluid([0.0; 3], [side; 3])
+        .jitter(jitter);
+    if planes {
+        block.plane([0.0; 3], [0.0, 1.0, 0.0], 0.0).build()
     } else {
-        ""
-    };
-    let text = format!(
-        r#"
-        name = "block"
-        [domain]
-        min = [-2.0, -0.5, -2.0]
-        max = [3.0, 3.0, 3.0]
-        [physics]
-        smoothing_length = 0.2
-        particle_spacing = {s}
-        stiffness = 1000.0
-        gravity = [0.0, {gravity}, 0.0]
-        [time]
-        dt = 0.002
-        end_time = 1.0
-        [[fluid]]
-        min = [0.0, 0.0, 0.0]
-        max = [{side}, {side}, {side}]
-        jitter = {jitter}
-        {floor}
-        "#
-    );
-    Scene::from_toml_str(&text, &SceneOrigin::Text).unwrap()
+        block.build()
+    }
 }
 
 fn options(style: Style) -> RenderOptions {

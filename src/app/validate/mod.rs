@@ -16,15 +16,14 @@ pub mod sloshing;
 
 pub use case::{Case, CaseReport, Figure, MakeBackend, Resolution};
 
-use super::args::BackendArg;
+use super::args::ValidateArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
 use crate::model::initial::InitialState;
 use crate::model::scene::Scene;
 use crate::solver::{open_with, BackendChoice, Device, Precision};
 use case::fmt_num;
-use clap::Args;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Runs one case, writing `out/CASE.png` and `out/CASE.csv`.
 pub fn run_case(case: Case, resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow::Result<CaseReport> {
@@ -56,21 +55,6 @@ pub fn write_markdown(out: &Path, reports: &[CaseReport]) -> anyhow::Result<()> 
         }
         Ok(())
     })
-}
-
-#[derive(Args, Debug, Clone)]
-pub struct ValidateArgs {
-    /// A case (hydrostatic, dam_break_martin_moyce, dam_break_koshizuka_oka, conservation) or `all`.
-    #[arg(default_value = "all")]
-    pub case: String,
-    /// Output directory: CASE.png, CASE.csv per case and validation.md.
-    #[arg(long, default_value = "validation")]
-    pub out: PathBuf,
-    #[arg(long, value_enum, default_value_t = Resolution::Default)]
-    pub resolution: Resolution,
-    /// The GPU path by default (the CPU when no adapter exists, with a warning).
-    #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
-    pub backend: BackendArg,
 }
 
 /// `wgsph validate`: exit code 0 when every case passed, 1 when one failed, 2 for bad input.

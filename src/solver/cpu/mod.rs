@@ -19,8 +19,10 @@ use crate::model::real::{Real, V3};
 use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
 use integrate::PlaneR;
 
-/// The CPU solver. Particle arrays are kept in cell order (like the GPU's); `ids` maps each slot
+/// The CPU solver (cloned, it continues independently from the same state). Particle arrays
+/// are kept in cell order (like the GPU's); `ids` maps each slot
 /// back to the particle's original index.
+#[derive(Clone)]
 pub struct CpuSolver<R: Real> {
     params: Params,
     kernel: KernelCoefficients<R>,
@@ -317,6 +319,12 @@ impl<R: Real> CpuSolver<R> {
         let [min, max, last] = state.dt_min_max_last;
         self.dt_stats = DtStats { min, max, last, ..DtStats::default() };
         Ok(())
+    }
+
+    /// The particles in the solver's current (cell) order: positions, velocities and their
+    /// original ids.
+    pub fn particles(&self) -> (&[V3<R>], &[V3<R>], &[u32]) {
+        (&self.positions, &self.velocities, &self.ids)
     }
 
     /// The sorted wall particles and their cell starts.

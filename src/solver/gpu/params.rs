@@ -213,3 +213,60 @@ pub mod status {
         f32::from_bits(s[word]) as f64
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{status, GpuParams};
+
+    /// wgsl/shared/common.wgsl, where the shaders declare the block and the words.
+    fn common_wgsl() -> &'static str {
+        super::super::shaders::source("shared/common.wgsl").expect("the shared shader file")
+    }
+
+    /// The fields of `struct Params` in common.wgsl: (name, type) in order.
+    fn wgsl_fields() -> Vec<(String, String)> {
+        let text = common_wgsl();
+        let body = &text[text.find("struct Params {").expect("struct Params") + "struct Params {".len()..];
+        let body = &body[..body.find("\n}").expect("the end of struct Params")];
+        body.lines()
+            .map(|l| l.split("//").next().unwrap().trim())
+            .filter(|l| !l.is_empty())
+            .map(|l| {
+                let (name, ty) = l.trim_end_matches(',').split_once(':').expect("name: type");
+                (name.trim().to_string(), ty.trim().to_string())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_uniform_block_is_the_same_on_both_sides() {
+        let wgsl = wgsl_fields();
+        let rust: Vec<(String, String)> = GpuParams::WGSL_FIELDS.iter().map(|(n, t)| (n.to_string(), t.to_string())).collect();
+        assert_eq!(wgsl, rust, "struct Params in wgsl/shared/common.wgsl and GpuParams differ");
+        // encase lays the Rust struct out as WGSL's uniform rules do; 16-byte multiples.
+        assert_eq!(GpuParams::default().bytes().len() % 16, 0);
+    }
+
+    #[test]
+    fn the_status_words_are_the_same_on_both_sides() {
+        let text = common_wgsl();
+        let mut seen = 0;
+        for line in text.lines().filter(|l| l.trim_start().starts_with("const STATUS_")) {
+            let (name, value) = line.trim_start().trim_start_matches("const ").split_once(':').expect("const NAME: u32 = V");
+            let value = value.split('=').nth(1).expect("a value").split(';').next().unwrap().trim();
+            if name == "STATUS_NO_BAD_STEP" {
+                assert_eq!(value, format!("{:#x}u", status::NO_BAD_STEP));
+                continue;
+            }
+            let index: usize = value.trim_end_matches('u').parse().expect("an index");
+            let rust = status::WGSL_NAMES.iter().find(|(n, _)| *n == name).unwrap_or_else(|| panic!("{name} has no Rust constant"));
+            assert_eq!(rust.1, index, "{name}");
+            seen += 1;
+        }
+        assert_eq!(seen, status::WGSL_NAMES.len(), "every Rust status word is declared in WGSL");
+        assert_eq!(status::WGSL_NAMES.len(), status::WORDS);
+        let mut indices: Vec<usize> = status::WGSL_NAMES.iter().map(|w| w.1).collect();
+        indices.sort();
+        assert_eq!(indices, (0..status::WORDS).collect::<Vec<_>>(), "the words are 0..WORDS, each once");
+    }
+}
