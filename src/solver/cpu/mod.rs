@@ -51,7 +51,8 @@ pub struct CpuSolver<R: Real> {
 }
 
 impl<R: Real> CpuSolver<R> {
-    pub fn new(params: &Params, initial: &InitialState) -> Self {
+    /// The CPU solver of a scene. Programs build one through [`crate::solver::open`].
+    pub(crate) fn new(params: &Params, initial: &InitialState) -> Self {
         let grid = params.grid.cast::<R>();
         let n = initial.fluid_positions.len();
         // Walls never move: sort them by cell once.
