@@ -35,6 +35,8 @@ pub enum Command {
     Validate(ValidateArgs),
     /// Time each compute stage of the GPU step; bandwidth, interactions/s and memory per particle.
     Profile(ProfileArgs),
+    /// Time the peers' block workload on every path, against the recorded SPlisHSPlasH figure.
+    Bench(BenchArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -306,4 +308,35 @@ pub struct ValidateArgs {
     /// The GPU path by default (the CPU when no adapter exists, with a warning).
     #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
     pub backend: BackendArg,
+}
+
+/// A path `wgsph bench` times.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BenchPath {
+    CpuF32,
+    CpuF64,
+    Gpu,
+}
+
+/// `wgsph bench`.
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    /// n^3 fluid particles (the peers were measured at 20, 30 and 40).
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u32).range(2..=400))]
+    pub n: u32,
+    /// Steps to time (after one warm-up step).
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: u64,
+    /// The paths to time, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::Gpu])]
+    pub paths: Vec<BenchPath>,
+    /// Threads of the CPU paths (default: every core).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    pub threads: Option<u16>,
+    /// The GPU path on every adapter with compute shaders, not only the one a run would choose.
+    #[arg(long)]
+    pub every_adapter: bool,
+    /// Also write the figures to this JSON file.
+    #[arg(long, value_name = "FILE.json")]
+    pub out: Option<PathBuf>,
 }

@@ -2,6 +2,7 @@
 //! floor; it imports every other.
 
 pub mod args;
+pub mod bench;
 pub mod compare;
 pub mod errors;
 pub mod profile;
@@ -32,6 +33,7 @@ pub fn main() -> i32 {
         Command::Tradeoff(args) => tradeoff::cmd_tradeoff(&args),
         Command::Validate(args) => validate::cmd_validate(&args),
         Command::Profile(args) => profile::cmd_profile(&args),
+        Command::Bench(args) => bench::cmd_bench(&args),
         Command::Adapters => {
             let lines = crate::solver::gpu::device::describe_adapters();
             if lines.is_empty() {

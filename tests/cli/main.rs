@@ -7,3 +7,4 @@ mod commands;
 mod profile;
 mod tradeoff;
 mod architecture;
+mod bench;
