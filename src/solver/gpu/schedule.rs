@@ -1,4 +1,4 @@
-//! THE order of the GPU's work: one function, [`GpuSolver::schedule`], records a step (or the
+//! THE order of the GPU's work: one function, `GpuSolver::schedule`, records a step (or the
 //! fields of the current state) against a [`Recorder`]. The normal path records into as few
 //! compute passes as possible ([`PlainRecorder`]); the profile records the very same order with
 //! every stage in its own timed pass ([`TimedRecorder`]), so what is timed is what runs.
@@ -234,7 +234,7 @@ impl GpuSolver {
         self.ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY)
     }
 
-    /// Runs `steps` steps in the order of [`GpuSolver::schedule`], each stage in its own timed
+    /// Runs `steps` steps in the order of `GpuSolver::schedule`, each stage in its own timed
     /// pass, and returns the total GPU time of each stage of [`PROFILED_STAGES`] in nanoseconds
     /// (a stage that did not run, like the binning between neighbour rebuilds, adds 0). `None`
     /// when the device has no timestamp queries. Each step is submitted and read back on its
