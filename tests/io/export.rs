@@ -130,7 +130,7 @@ fn only_the_chosen_formats_are_written_and_bad_ones_are_refused() {
     let mut names: Vec<String> =
         std::fs::read_dir(dir.path().join("v/snapshots")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     names.sort();
-    assert_eq!(names, ["particles.vtk.series", "step_000000.vtk", "step_000002.vtk"]);
+    assert_eq!(names, ["index.csv", "particles.vtk.series", "step_000000.vtk", "step_000002.vtk"]);
     let out = wgsph(&["run", "hydrostatic", "--steps", "2", "--out", "x", "--format", "obj"], dir.path());
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
