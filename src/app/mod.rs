@@ -5,25 +5,42 @@ pub mod args;
 pub mod bench;
 pub mod compare;
 pub mod errors;
+pub mod first_run;
 pub mod profile;
 pub mod resume;
 pub mod run;
+pub mod signals;
 pub mod tradeoff;
 pub mod validate;
 
 use crate::model::builtin::BUILTIN_SCENES;
 use crate::model::scene::{Scene, SceneOrigin};
-use args::{Cli, Command, RunArgs, ViewArgs};
+use args::{Cli, Command, ViewArgs};
 use clap::Parser;
 use errors::InputError;
 
 /// Parses the command line, runs it and returns the process exit code:
-/// 0 success, 1 a run that went bad or a failed check, 2 bad input.
+/// 0 success, 1 a run that went bad or a failed check, 2 bad input, 130 / 143 a run stopped
+/// by SIGINT / SIGTERM.
 pub fn main() -> i32 {
     let cli = Cli::parse();
     let quiet = matches!(&cli.command, Some(Command::Run(a)) if a.quiet);
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(if quiet { "error" } else { "warn" })).init();
-    let result = match cli.command.unwrap_or(Command::Run(RunArgs::default())) {
+    let result = match cli.command {
+        None => first_run::cmd_first_run(),
+        Some(command) => run_command(command),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            errors::exit_code(&e)
+        }
+    }
+}
+
+fn run_command(command: Command) -> anyhow::Result<i32> {
+    match command {
         Command::Run(args) => match &args.resume {
             Some(dir) => resume::resume_run(dir, &args),
             None => run::cmd_run(&args),
@@ -49,13 +66,6 @@ pub fn main() -> i32 {
                 println!("{name:<12} {description}");
             }
             Ok(0)
-        }
-    };
-    match result {
-        Ok(code) => code,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            errors::exit_code(&e)
         }
     }
 }

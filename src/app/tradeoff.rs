@@ -306,8 +306,10 @@ fn engine_backend(config: &Config) -> anyhow::Result<Box<dyn Backend>> {
     let choice = match config.engine {
         Engine::CpuF64 => BackendChoice::cpu(Precision::F64),
         Engine::CpuF32 => BackendChoice::cpu(Precision::F32),
-        // Without an adapter the GPU's configurations run on the CPU in f32, its arithmetic.
-        Engine::Gpu => BackendChoice { device: Device::Auto, precision: Precision::F32, ..Default::default() },
+        // The GPU's configurations run on any adapter, a software one too; without one, on
+        // the CPU in f32, its arithmetic.
+        Engine::Gpu if crate::solver::gpu::device::compute_adapters().is_empty() => BackendChoice::cpu(Precision::F32),
+        Engine::Gpu => BackendChoice { device: Device::Gpu, precision: Precision::F32, ..Default::default() },
     };
     Ok(open(&config.scene, &choice)?.into_backend())
 }

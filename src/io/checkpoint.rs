@@ -27,7 +27,7 @@ use std::path::Path;
 pub const CHECKPOINT_FILE: &str = "checkpoint.wgsph";
 const MAGIC: &[u8; 8] = b"WGSPHCKP";
 /// Bumped whenever the payload's layout or meaning changes.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// The wgsph version written into (and required of) checkpoints.
 pub const WGSPH_VERSION: &str = env!("CARGO_PKG_VERSION");
 
@@ -46,6 +46,9 @@ pub struct RunRecord {
     /// The step the run was heading to.
     pub end_step: u64,
     pub snapshot_every: u64,
+    /// A snapshot at the first step reaching each multiple of this simulated time (instead of
+    /// every `snapshot_every` steps).
+    pub snapshot_interval: Option<f64>,
     pub check_every: u64,
     pub checkpoint_every: u64,
     pub formats: Vec<SnapshotFormat>,

@@ -4,6 +4,7 @@
 mod common;
 
 mod commands;
+mod runs;
 mod profile;
 mod tradeoff;
 mod architecture;
