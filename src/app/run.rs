@@ -8,7 +8,7 @@ use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
 use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, StartGuard};
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::snapshot::SnapshotWriter;
-use crate::io::summary::{write_summary, RunStatus, Summary, SUMMARY_FILE};
+use crate::io::summary::{write_summary, DfsphSummary, RunStatus, Summary, SUMMARY_FILE};
 use crate::io::surface::{write_snapshot_surface, MeshFormat, SurfaceParameters};
 use crate::model::diagnosis::{diagnose, diagnose_at};
 use crate::model::params::Params;
@@ -176,6 +176,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut next_snapshot_time = opts.snapshot_interval.map(|i| next_multiple(i, backend.time()));
     let mut step = start;
     let mut end = end;
+    let mut warned_unconverged = false;
     let mut started = false;
     let mut stopped_by: Option<StopSignal> = None;
     let outcome = (|| -> anyhow::Result<()> {
@@ -232,6 +233,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             end = step;
         }
         let health = backend.health()?;
+        warn_unconverged(&health, &params, &mut warned_unconverged);
         if let Some(b) = &bar {
             match opts.end_time {
                 Some(t_end) => b.set_position((1000.0 * time / t_end).min(1000.0) as u64),
@@ -329,6 +331,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         status,
         last_checkpoint: last_checkpoint.as_ref().map(|p| p.display().to_string()),
         snapshots: snapshots_written,
+        // Over the whole run (a resumed run's counts continue from its checkpoint).
+        dfsph: health.iterations.map(|it| DfsphSummary::of(&it, backend.steps_done())),
     };
     let summary_path = opts.out.join(SUMMARY_FILE);
     write_summary(&summary_path, &summary).with_context(|| match &failure {
@@ -348,10 +352,39 @@ fn write_checkpoint(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions,
     Ok(())
 }
 
+/// Warns once when a DFSPH solve stopped at its iteration limit above its tolerance: the run
+/// goes on, but that step's density (or divergence) error is larger than the scene asks.
+fn warn_unconverged(health: &crate::model::state::Health, params: &Params, warned: &mut bool) {
+    let (Some(it), Some(d)) = (health.iterations, &params.dfsph) else { return };
+    if *warned || it.pressure.unconverged + it.divergence.unconverged == 0 {
+        return;
+    }
+    *warned = true;
+    eprintln!(
+        "warning: {} step(s) ended their DFSPH solve at the iteration limit above the tolerance (constant density: {} at max_iterations = {}, divergence: {} at max_divergence_iterations = {}); raise the limits or lower dt",
+        it.pressure.unconverged + it.divergence.unconverged,
+        it.pressure.unconverged,
+        d.max_iterations,
+        it.divergence.unconverged,
+        d.max_divergence_iterations
+    );
+}
+
 /// The one-line summary printed at the end of a run.
 pub fn summary_line(s: &Summary, out: &Path) -> String {
+    let dfsph = match &s.dfsph {
+        Some(d) => format!(
+            ", DFSPH iterations per step {:.2} (max {}) + divergence {:.2} (max {}), unconverged steps {}",
+            d.pressure_iterations_mean,
+            d.pressure_iterations_max,
+            d.divergence_iterations_mean,
+            d.divergence_iterations_max,
+            d.unconverged_pressure_steps + d.unconverged_divergence_steps
+        ),
+        None => String::new(),
+    };
     format!(
-        "{}: {} fluid + {} wall particles, {} steps to t = {:.4} (dt min/max/mean {:.3e}/{:.3e}/{:.3e}) on {} in {:.2} s ({:.3e} particle-steps/s), max rho/rho0 = {:.4}, nan = {}, escaped = {} -> {}",
+        "{}: {} fluid + {} wall particles, {} steps to t = {:.4} (dt min/max/mean {:.3e}/{:.3e}/{:.3e}) on {} in {:.2} s ({:.3e} particle-steps/s), max rho/rho0 = {:.4}{dfsph}, nan = {}, escaped = {} -> {}",
         s.scene, s.fluid_particles, s.wall_particles, s.steps, s.sim_time, s.dt_min, s.dt_max, s.dt_mean, s.adapter, s.wall_seconds,
         s.particle_steps_per_second, s.max_density_ratio, s.nan_count, s.escaped, out.display()
     )

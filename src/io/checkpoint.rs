@@ -240,6 +240,8 @@ pub fn write_state_in_pieces(backend: &mut dyn Backend, w: &mut dyn std::io::Wri
         time: header.time,
         dt_min_max_last: header.dt_min_max_last,
         gpu_status: &header.gpu_status,
+        warm_start: array(StateArray::WarmStart),
+        iterations: header.iterations,
     };
     let result = postcard::to_io(&state, w);
     drop(state);
@@ -267,6 +269,8 @@ struct StateInPieces<'a, 'b> {
     time: f64,
     dt_min_max_last: [f64; 3],
     gpu_status: &'a [u32],
+    warm_start: StateArrayInPieces<'a, 'b>,
+    iterations: crate::model::state::IterationStats,
 }
 
 /// One particle array of the state, serialised as a sequence handed over piece by piece.
@@ -281,7 +285,7 @@ struct StateArrayInPieces<'a, 'b> {
 impl Serialize for StateArrayInPieces<'_, '_> {
     fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         let mut backend = self.backend.borrow_mut();
-        let n = backend.fluid_count();
+        let n = backend.state_array_len(self.array);
         let mut seq = Some(serializer.serialize_seq(Some(n))?);
         let mut serialised: Result<(), S::Error> = Ok(());
         let visited = backend.visit_state_array(self.array, self.chunk, &mut |piece| {
@@ -289,6 +293,7 @@ impl Serialize for StateArrayInPieces<'_, '_> {
             let r = match piece {
                 StatePiece::Vectors(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
                 StatePiece::Ids(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
+                StatePiece::Pairs(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
             };
             r.map_err(|e| {
                 let why = anyhow::anyhow!("cannot serialise the state: {e}");

@@ -60,6 +60,43 @@ pub struct Summary {
     /// Snapshots written by this run (each in every format).
     #[serde(default)]
     pub snapshots: u64,
+    /// DFSPH's iterations per step (absent for WCSPH).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dfsph: Option<DfsphSummary>,
+}
+
+/// DFSPH's solves over a run: iterations per step and how the last step ended.
+#[derive(Clone, Debug, Serialize, serde::Deserialize, PartialEq)]
+pub struct DfsphSummary {
+    /// Mean and largest iterations per step of the constant-density (pressure) solve.
+    pub pressure_iterations_mean: f64,
+    pub pressure_iterations_max: u32,
+    /// The same for the divergence solve (0 when it is switched off).
+    pub divergence_iterations_mean: f64,
+    pub divergence_iterations_max: u32,
+    /// Average density error (a fraction of rho0) and divergence error at the end of the last
+    /// step's solves.
+    pub last_density_error: f64,
+    pub last_divergence_error: f64,
+    /// Steps whose solve stopped at its iteration limit with the error above the tolerance.
+    pub unconverged_pressure_steps: u64,
+    pub unconverged_divergence_steps: u64,
+}
+
+impl DfsphSummary {
+    /// The summary of `stats` over `steps` steps.
+    pub fn of(stats: &crate::model::state::IterationStats, steps: u64) -> Self {
+        DfsphSummary {
+            pressure_iterations_mean: stats.pressure.mean(steps),
+            pressure_iterations_max: stats.pressure.max,
+            divergence_iterations_mean: stats.divergence.mean(steps),
+            divergence_iterations_max: stats.divergence.max,
+            last_density_error: stats.pressure.last_error,
+            last_divergence_error: stats.divergence.last_error,
+            unconverged_pressure_steps: stats.pressure.unconverged,
+            unconverged_divergence_steps: stats.divergence.unconverged,
+        }
+    }
 }
 
 pub fn write_summary(path: &Path, s: &Summary) -> anyhow::Result<()> {

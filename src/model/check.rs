@@ -3,12 +3,14 @@
 
 use super::lattice::lattice_counts;
 use super::params::MAX_PLANES;
-use super::scene::{err, Boundary, Scene, SceneError, SceneOrigin};
+use super::scene::{err, Boundary, BoundaryVolume, PressureSolver, Scene, SceneError, SceneOrigin};
 
 /// Most particles a scene may hold: indices are u32 on the GPU and the CPU.
 pub const MAX_PARTICLES: u64 = 1 << 31;
 /// Most grid cells a scene may have.
 pub const MAX_CELLS: u64 = 1 << 30;
+/// Most iterations a DFSPH solve may take per step (the GPU records that many per step).
+pub const MAX_SOLVER_ITERATIONS: u32 = 1000;
 /// Host bytes per particle the CPU path needs at most (f64 state, sort buffers, snapshot copy).
 pub const CPU_BYTES_PER_PARTICLE: u64 = 200;
 
@@ -45,13 +47,19 @@ impl Scene {
         if let Some(m) = p.particle_mass {
             positive("physics.particle_mass", m)?;
         }
-        match (p.stiffness, p.speed_of_sound) {
-            (Some(k), None) => positive("physics.stiffness", k)?,
-            (None, Some(c)) => positive("physics.speed_of_sound", c)?,
-            _ => {
+        match (p.solver, p.stiffness, p.speed_of_sound) {
+            (PressureSolver::Wcsph, Some(k), None) => positive("physics.stiffness", k)?,
+            (PressureSolver::Wcsph, None, Some(c)) => positive("physics.speed_of_sound", c)?,
+            (PressureSolver::Wcsph, ..) => {
                 return Err(err(origin, "physics.stiffness", "give exactly one of stiffness and speed_of_sound"))
             }
+            (PressureSolver::Dfsph, None, None) => {}
+            (PressureSolver::Dfsph, k, _) => {
+                let field = if k.is_some() { "physics.stiffness" } else { "physics.speed_of_sound" };
+                return Err(err(origin, field, "is not used with solver = \"dfsph\", whose pressure comes from its incompressibility solve; remove it"));
+            }
         }
+        self.validate_dfsph(origin)?;
         if !(p.viscosity.is_finite() && p.viscosity >= 0.0) {
             return Err(err(origin, "physics.viscosity", format!("is {}; must be finite and >= 0", p.viscosity)));
         }
@@ -122,6 +130,10 @@ impl Scene {
                     positive(&format!("{f}.spacing"), s)?;
                     if let Some(rd) = walls.rest_density {
                         positive(&format!("{f}.rest_density"), rd)?;
+                        if p.boundary_volume == BoundaryVolume::Akinci {
+                            return Err(err(origin, format!("{f}.rest_density"), format!(
+                                "is {rd}; with physics.boundary_volume = \"akinci\" a wall particle's mass is rho0 / sum W over its wall neighbours, so a wall rest density is not used: remove it")));
+                        }
                     }
                     if walls.layers == Some(0) {
                         return Err(err(origin, format!("{f}.layers"), "is 0; must be at least 1"));
@@ -165,6 +177,31 @@ impl Scene {
                 return Err(err(origin, "fluid", format!(
                     "{count} particles (fluid and walls) and {cells} cells need about {} MiB of host memory; {} MiB are available",
                     need >> 20, avail >> 20)));
+            }
+        }
+        Ok(())
+    }
+
+    /// The DFSPH settings: in range, and given only with `solver = "dfsph"`.
+    fn validate_dfsph(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
+        let d = &self.physics.dfsph;
+        if self.physics.solver == PressureSolver::Wcsph {
+            if !d.is_default() {
+                return Err(err(origin, "physics.dfsph", "applies only to physics.solver = \"dfsph\"; remove it or set the solver"));
+            }
+            return Ok(());
+        }
+        for (field, v) in [("physics.dfsph.density_error", d.density_error), ("physics.dfsph.divergence_error", d.divergence_error)] {
+            if !(v.is_finite() && v > 0.0 && v < 1.0) {
+                return Err(err(origin, field, format!("is {v}; must be in (0, 1) (a fraction: 0.0001 is 0.01 %)")));
+            }
+        }
+        for (what, min, max) in [("", d.min_iterations, d.max_iterations), ("divergence_", d.min_divergence_iterations, d.max_divergence_iterations)] {
+            if !(1..=MAX_SOLVER_ITERATIONS).contains(&max) {
+                return Err(err(origin, format!("physics.dfsph.max_{what}iterations"), format!("is {max}; must be from 1 to {MAX_SOLVER_ITERATIONS}")));
+            }
+            if min > max {
+                return Err(err(origin, format!("physics.dfsph.min_{what}iterations"), format!("is {min}, above max_{what}iterations {max}; must be <= it")));
             }
         }
         Ok(())

@@ -22,6 +22,13 @@ pub fn diagnose_at(params: &Params, health: &Health, max_speed: f64, time: f64) 
         what.push(format!("{} particles left the domain", health.escaped));
     }
     let mut msg = format!("step {step} (t = {time:.6}): {}.", what.join(" and "));
+    if params.dfsph.is_some() {
+        msg += &format!(
+            " Likely cause: the time step is too large for the flow: the CFL number dt |v|max / h = {:.3} (dt = {}, |v|max = {:.4}, h = {}) should stay below about 0.25 with DFSPH, or a solve stopped at its iteration limit (see the summary's dfsph section): lower dt, use time.adaptive = true, or raise physics.dfsph.max_iterations.",
+            cfl, params.dt, max_speed, params.h
+        );
+        return msg;
+    }
     msg += &format!(
         " Likely cause: the time step is too large for the stiffness: the CFL number dt (c0 + |v|max) / h = {:.3} \
          (dt = {}, c0 = {:.4}, |v|max = {:.4}, h = {}); explicit WCSPH is stable below about 0.4",

@@ -1,9 +1,13 @@
 //! The particles of a scene at t = 0: fluid blocks on jittered lattices, walls on regular
 //! lattices, and the solid regions fluid must never enter.
 
+use super::kernels::{sort_by_cell, KernelCoefficients};
 use super::lattice::lattice;
-use super::scene::{Boundary, Scene};
+use super::params::Grid;
+use super::real::V3;
+use super::scene::{Boundary, BoundaryVolume, Kernel, Scene};
 use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
 
 /// A solid region (inside of an obstacle or of a tank's walls) that fluid must never enter.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -105,6 +109,35 @@ impl Scene {
                 }
             }
         }
+        if self.physics.boundary_volume == BoundaryVolume::Akinci {
+            st.wall_masses = akinci_volumes(&st.wall_positions, self.physics.kernel, self.physics.smoothing_length, &self.grid(), self.physics.rest_density);
+        }
         st
     }
+}
+
+/// The mass each wall particle stands for in Akinci et al. 2012 (Eq. 4 and 5): its volume
+/// V_b = 1 / sum_k W(|x_b - x_k|, h), summed over the wall particles k within h (b itself
+/// included), times the fluid's rest density: psi_b = rho0 V_b. A wall particle with few wall
+/// neighbours (a single layer, a sparse sampling) stands for more volume, so that a fluid
+/// particle next to any wall sees about the density of a full kernel support. Walls never move:
+/// computed once, in f64, and used by both backends.
+pub fn akinci_volumes(walls: &[[f64; 3]], kernel: Kernel, h: f64, grid: &Grid, rest_density: f64) -> Vec<f64> {
+    let k = KernelCoefficients::<f64>::new(kernel, h);
+    let points: Vec<V3<f64>> = walls.iter().map(|&p| V3(p)).collect();
+    let (order, starts) = sort_by_cell(grid, &points);
+    let sorted: Vec<V3<f64>> = order.iter().map(|&i| points[i as usize]).collect();
+    points
+        .par_iter()
+        .map(|&xb| {
+            let mut sum = 0.0;
+            for (k0, k1) in grid.stencil_runs(grid.cell_coords(xb)) {
+                for xk in &sorted[starts[k0 as usize] as usize..starts[k1 as usize] as usize] {
+                    sum += k.w((xb - *xk).length_squared());
+                }
+            }
+            // b itself is always within h, so the sum is at least W(0) > 0.
+            rest_density / sum
+        })
+        .collect()
 }

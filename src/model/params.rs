@@ -2,7 +2,7 @@
 //! neighbour grid, adaptive time stepping and the viscosity schedule.
 
 use super::real::{Real, V3};
-use super::scene::{Boundary, BoundaryPressure, EquationOfState, Kernel, Scene};
+use super::scene::{Boundary, BoundaryPressure, BoundaryVolume, DfsphSettings, EquationOfState, Kernel, PressureSolver, Scene};
 
 /// Plane in the form normal . x = offset, with a unit normal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -37,6 +37,10 @@ pub struct Params {
     pub domain_max: [f64; 3],
     pub planes: Vec<Plane>,
     pub grid: Grid,
+    /// DFSPH's settings when the scene uses it (`None`: weakly compressible, pressure from
+    /// the equation of state).
+    pub dfsph: Option<DfsphSettings>,
+    pub boundary_volume: BoundaryVolume,
 }
 
 impl Params {
@@ -53,8 +57,12 @@ impl Params {
     pub fn uses_gravity(&self) -> bool {
         self.gravity.iter().any(|&g| g != 0.0)
     }
-    /// The speed of sound implied by the equation of state: c0^2 = dp/drho at rho0.
+    /// The speed of sound implied by the equation of state: c0^2 = dp/drho at rho0; 0 for
+    /// DFSPH, which has no equation of state (its CFL condition is on the flow speed alone).
     pub fn speed_of_sound(&self) -> f64 {
+        if self.dfsph.is_some() {
+            return 0.0;
+        }
         match self.eos {
             EquationOfState::Linear => (self.stiffness / self.rest_density).sqrt(),
             EquationOfState::Tait => (7.0 * self.stiffness / self.rest_density).sqrt(),
@@ -144,7 +152,8 @@ impl Scene {
                 EquationOfState::Linear => p.rest_density * c * c,
                 EquationOfState::Tait => p.rest_density * c * c / 7.0,
             },
-            (None, None) => unreachable!("validated"),
+            // DFSPH: no equation of state.
+            (None, None) => 0.0,
         };
         let mut viscosity = vec![(0.0, p.viscosity)];
         viscosity.extend(p.viscosity_schedule.iter().map(|c| (c.time, c.viscosity)));
@@ -187,6 +196,8 @@ impl Scene {
             domain_max: self.domain.max,
             planes,
             grid: self.grid(),
+            dfsph: (p.solver == PressureSolver::Dfsph).then(|| p.dfsph.clone()),
+            boundary_volume: p.boundary_volume,
         }
     }
 }

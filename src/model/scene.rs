@@ -168,6 +168,116 @@ pub struct Physics {
     pub boundary_pressure: BoundaryPressure,
     #[serde(default = "default_gravity")]
     pub gravity: [f64; 3],
+    /// The pressure solver: weakly compressible (an equation of state) or DFSPH.
+    #[serde(default, skip_serializing_if = "PressureSolver::is_default")]
+    pub solver: PressureSolver,
+    /// How a wall particle's mass is found: its lattice cell, or Akinci et al.'s volume.
+    #[serde(default, skip_serializing_if = "BoundaryVolume::is_default")]
+    pub boundary_volume: BoundaryVolume,
+    /// Tolerances and iteration limits of DFSPH (`solver = "dfsph"` only).
+    #[serde(default, skip_serializing_if = "DfsphSettings::is_default")]
+    pub dfsph: DfsphSettings,
+}
+
+/// How pressure is found.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PressureSolver {
+    /// Weakly compressible SPH: pressure from the equation of state.
+    #[default]
+    Wcsph,
+    /// Divergence-free SPH (Bender & Koschier 2015, 2017): pressure from two implicit solves
+    /// per step, one keeping the density at rest density, one the velocity divergence-free.
+    Dfsph,
+}
+
+impl PressureSolver {
+    fn is_default(&self) -> bool {
+        *self == PressureSolver::default()
+    }
+}
+
+/// The mass a wall particle stands for.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BoundaryVolume {
+    /// rest_density x spacing^3: right for walls as thick as the kernel support.
+    #[default]
+    Lattice,
+    /// Akinci et al. 2012, Eq. 5: psi_b = rho0 / sum_k W_bk over the wall particles k near b,
+    /// so that thin walls (one layer) and irregular samplings give the right density.
+    Akinci,
+}
+
+impl BoundaryVolume {
+    fn is_default(&self) -> bool {
+        *self == BoundaryVolume::default()
+    }
+}
+
+/// The tolerances and iteration limits of the DFSPH solves (`[physics.dfsph]`).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DfsphSettings {
+    /// The constant-density solve stops once the average predicted density error
+    /// (rho* / rho0 - 1 where compressed) is at most this (0.0001 = 0.01 %, SPlisHSPlasH's default).
+    #[serde(default = "default_density_error")]
+    pub density_error: f64,
+    /// The divergence solve stops once the average density change over one step
+    /// (dt Drho/Dt / rho0 where compressing) is at most this (0.001 = 0.1 %).
+    #[serde(default = "default_divergence_error")]
+    pub divergence_error: f64,
+    #[serde(default = "default_min_iterations")]
+    pub min_iterations: u32,
+    #[serde(default = "default_max_iterations")]
+    pub max_iterations: u32,
+    #[serde(default = "default_min_divergence_iterations")]
+    pub min_divergence_iterations: u32,
+    #[serde(default = "default_max_iterations")]
+    pub max_divergence_iterations: u32,
+    /// Run the divergence solve at all (SPlisHSPlasH's `enableDivergenceSolver`).
+    #[serde(default = "default_true")]
+    pub divergence_solve: bool,
+    /// Start each solve from the stiffness of the previous step's.
+    #[serde(default = "default_true")]
+    pub warm_start: bool,
+}
+
+impl Default for DfsphSettings {
+    fn default() -> Self {
+        DfsphSettings {
+            density_error: default_density_error(),
+            divergence_error: default_divergence_error(),
+            min_iterations: default_min_iterations(),
+            max_iterations: default_max_iterations(),
+            min_divergence_iterations: default_min_divergence_iterations(),
+            max_divergence_iterations: default_max_iterations(),
+            divergence_solve: true,
+            warm_start: true,
+        }
+    }
+}
+
+impl DfsphSettings {
+    pub(crate) fn is_default(&self) -> bool {
+        *self == DfsphSettings::default()
+    }
+}
+
+fn default_density_error() -> f64 {
+    1e-4
+}
+fn default_divergence_error() -> f64 {
+    1e-3
+}
+fn default_min_iterations() -> u32 {
+    2
+}
+fn default_min_divergence_iterations() -> u32 {
+    1
+}
+fn default_max_iterations() -> u32 {
+    100
 }
 
 fn default_rest_density() -> f64 {

@@ -56,6 +56,35 @@ pub struct StepFields {
     pub accelerations: Vec<[f64; 3]>,
 }
 
+/// The iterations of one of DFSPH's two solves over a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SolveStats {
+    /// Iterations over all steps.
+    pub total: u64,
+    /// The most iterations one step took.
+    pub max: u32,
+    /// The last step's iterations.
+    pub last: u32,
+    /// The average error the last step's solve ended with (a fraction of rho0).
+    pub last_error: f64,
+    /// Steps whose solve stopped at its iteration limit with the error above the tolerance.
+    pub unconverged: u64,
+}
+
+impl SolveStats {
+    /// Iterations per step, on average over `steps` steps.
+    pub fn mean(&self, steps: u64) -> f64 {
+        if steps == 0 { 0.0 } else { self.total as f64 / steps as f64 }
+    }
+}
+
+/// DFSPH's iterations: the constant-density (pressure) solve and the divergence solve.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct IterationStats {
+    pub pressure: SolveStats,
+    pub divergence: SolveStats,
+}
+
 /// What a run found wrong, and the largest density seen.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Health {
@@ -67,6 +96,8 @@ pub struct Health {
     pub first_bad_step: Option<u64>,
     /// Largest density over all steps so far.
     pub max_density: f64,
+    /// DFSPH's iterations so far (`None` for weakly compressible SPH).
+    pub iterations: Option<IterationStats>,
 }
 
 impl Health {
@@ -119,6 +150,11 @@ pub struct BackendState {
     /// The GPU's whole status buffer (health counters, and the adaptive step's dt, time and
     /// its compensation), restored word for word.
     pub gpu_status: Vec<u32>,
+    /// DFSPH: each particle's stiffness sums of the last step (constant-density solve,
+    /// divergence solve), by original id, where the next step's solves start; empty for WCSPH.
+    pub warm_start: Vec<[f64; 2]>,
+    /// DFSPH on the CPU: the iterations so far (the GPU keeps them in its status words).
+    pub iterations: IterationStats,
 }
 
 impl BackendState {
@@ -139,7 +175,7 @@ impl BackendState {
         Ok(())
     }
     pub fn health(&self) -> Health {
-        Health { non_finite: self.non_finite, escaped: self.escaped, first_bad_step: self.first_bad_step, max_density: self.max_density }
+        Health { non_finite: self.non_finite, escaped: self.escaped, first_bad_step: self.first_bad_step, max_density: self.max_density, iterations: None }
     }
 }
 

@@ -15,12 +15,37 @@ pub enum StateArray {
     Positions,
     Velocities,
     Ids,
+    /// DFSPH's warm-start stiffnesses by particle id (empty for WCSPH).
+    WarmStart,
+}
+
+/// A stage of a DFSPH step, run alone by the stage tests (`CpuSolver::dfsph_stage`,
+/// `GpuSolver::dfsph_stage`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DfsphStage {
+    /// Density, output pressure, factors, wall gradients.
+    Factors,
+    /// The divergence solve's starting stiffness.
+    DivergenceWarmStart,
+    /// The divergence solve's stiffness and error from the current velocities.
+    DivergenceRate,
+    /// One Jacobi step of the divergence solve with the current stiffness.
+    DivergenceApply,
+    /// Viscosity, gravity, dt and the predicted velocities.
+    Predict,
+    /// The constant-density solve's starting stiffness.
+    PressureWarmStart,
+    /// The constant-density solve's stiffness and error from the predicted velocities.
+    PredictDensity,
+    /// One Jacobi step of the constant-density solve with the current stiffness.
+    PressureApply,
 }
 
 /// A piece of a [`StateArray`]: vectors (positions, velocities) widened to f64, or ids.
 pub enum StatePiece<'a> {
     Vectors(&'a [[f64; 3]]),
     Ids(&'a [u32]),
+    Pairs(&'a [[f64; 2]]),
 }
 
 /// A simulation the layers above can drive: the CPU reference or the GPU pipeline. It knows no
@@ -82,7 +107,16 @@ pub trait Backend {
         state.positions = Vec::new();
         state.velocities = Vec::new();
         state.ids = Vec::new();
+        state.warm_start = Vec::new();
         Ok(state)
+    }
+    /// Elements of one particle array of the saved state: every fluid particle's, but DFSPH's
+    /// warm start, which only DFSPH has.
+    fn state_array_len(&self, array: StateArray) -> usize {
+        match array {
+            StateArray::WarmStart if self.params().dfsph.is_none() => 0,
+            _ => self.fluid_count(),
+        }
     }
     /// One particle array of the saved state, in pieces of at most `chunk` particles, in order.
     fn visit_state_array(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
@@ -92,6 +126,7 @@ pub trait Backend {
             StateArray::Positions => state.positions.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
             StateArray::Velocities => state.velocities.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
             StateArray::Ids => state.ids.chunks(chunk).try_for_each(|c| visit(StatePiece::Ids(c))),
+            StateArray::WarmStart => state.warm_start.chunks(chunk).try_for_each(|c| visit(StatePiece::Pairs(c))),
         }
     }
     /// Continues from a saved state: the following steps are bitwise those the saving backend

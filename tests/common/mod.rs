@@ -7,7 +7,8 @@
 use wgsph::model::initial::InitialState;
 use wgsph::model::real::Real;
 use wgsph::model::scene::{
-    Boundary, BoundaryPressure, Domain, EquationOfState, FluidBlock, Kernel, Physics, Scene, SceneOrigin, Time, ViscosityChange, WallParticles,
+    Boundary, BoundaryPressure, BoundaryVolume, DfsphSettings, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, SceneOrigin, Time,
+    ViscosityChange, WallParticles,
 };
 use wgsph::solver::cpu::CpuSolver;
 use wgsph::solver::gpu::device::compute_adapters;
@@ -72,6 +73,9 @@ impl TestScene {
                     boundary_friction: 1.0,
                     boundary_pressure: BoundaryPressure::Mirror,
                     gravity: [0.0, -9.81, 0.0],
+                    solver: Default::default(),
+                    boundary_volume: Default::default(),
+                    dfsph: Default::default(),
                 },
                 time: Time::fixed(0.0004, 1.0),
                 fluid: Vec::new(),
@@ -313,6 +317,39 @@ impl TestScene {
 
     pub fn without_boundaries(mut self) -> TestScene {
         self.scene.boundary.clear();
+        self
+    }
+
+    /// The lattice spacing of the wall particles of every container and box.
+    pub fn wall_spacing(mut self, spacing: f64) -> TestScene {
+        for b in &mut self.scene.boundary {
+            if let Boundary::Container { walls, .. } | Boundary::Box { walls, .. } = b {
+                walls.spacing = Some(spacing);
+            }
+        }
+        self
+    }
+
+    // DFSPH and Akinci walls.
+
+    /// DFSPH instead of an equation of state (no stiffness or speed of sound), with the default
+    /// tolerances.
+    pub fn dfsph(mut self) -> TestScene {
+        self.scene.physics.solver = PressureSolver::Dfsph;
+        self.scene.physics.stiffness = None;
+        self.scene.physics.speed_of_sound = None;
+        self
+    }
+
+    /// Changes DFSPH's settings.
+    pub fn dfsph_settings(mut self, change: impl FnOnce(&mut DfsphSettings)) -> TestScene {
+        change(&mut self.scene.physics.dfsph);
+        self
+    }
+
+    /// How a wall particle's mass is found.
+    pub fn boundary_volume(mut self, volume: BoundaryVolume) -> TestScene {
+        self.scene.physics.boundary_volume = volume;
         self
     }
 }

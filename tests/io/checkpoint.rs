@@ -157,9 +157,18 @@ fn scenes() -> Vec<(Scene, &'static str)> {
     vec![(fixed, "fixed dt"), (adaptive, "adaptive dt")]
 }
 
+/// The dam break with DFSPH (whose warm start and iteration counts live in the state too), with
+/// a fixed step and with adaptive dt.
+fn dfsph_scenes() -> Vec<(Scene, &'static str)> {
+    let fixed = common::TestScene::from(Scene::builtin("dam_break").unwrap()).dfsph().dt(0.001).build();
+    let mut adaptive = fixed.clone();
+    adaptive.time.adaptive = true;
+    vec![(fixed, "DFSPH, fixed dt"), (adaptive, "DFSPH, adaptive dt")]
+}
+
 #[test]
 fn cpu_restart_is_bitwise_exact() {
-    for (scene, how) in scenes() {
+    for (scene, how) in scenes().into_iter().chain(dfsph_scenes()) {
         resumed_run_is_bitwise_the_uninterrupted_one(&mut || Box::new(common::cpu::<f64>(&scene)), &scene, &format!("cpu f64, {how}"));
         resumed_run_is_bitwise_the_uninterrupted_one(&mut || Box::new(common::cpu::<f32>(&scene)), &scene, &format!("cpu f32, {how}"));
     }

@@ -199,3 +199,53 @@ fn set_changes_a_scene_field_checked_like_the_file_and_recorded() {
     }
     assert!(!dir.path().join("out").exists(), "a refused run wrote nothing");
 }
+
+/// GOOD with DFSPH: no stiffness, and `extra` added to [physics] (`[physics.dfsph]` goes last).
+fn dfsph_scene(extra: &str, dfsph: &str) -> String {
+    let text = GOOD.replace("stiffness = 1000.0", &format!("solver = \"dfsph\"\n{extra}"));
+    text.replace("[time]", &format!("{dfsph}\n[time]"))
+}
+
+#[test]
+fn dfsph_scenes_are_read_and_checked() {
+    let s = Scene::from_toml_str(&dfsph_scene("", ""), &SceneOrigin::Text).unwrap();
+    let d = s.params().dfsph.expect("DFSPH");
+    assert_eq!((d.density_error, d.divergence_error, d.min_iterations, d.max_iterations), (1e-4, 1e-3, 2, 100));
+    assert!(d.warm_start && d.divergence_solve);
+    let s = Scene::from_toml_str(&dfsph_scene("", "[physics.dfsph]\ndensity_error = 0.001\nmax_iterations = 20\nwarm_start = false"), &SceneOrigin::Text).unwrap();
+    let d = s.params().dfsph.unwrap();
+    assert_eq!((d.density_error, d.max_iterations, d.warm_start), (1e-3, 20, false));
+    // A DFSPH scene's copy (the run directory's scene.toml) reads back the same.
+    assert_eq!(Scene::from_toml_str(&s.to_toml(), &SceneOrigin::Text).unwrap(), s);
+    // A WCSPH scene's copy is unchanged by the new options.
+    assert!(!Scene::from_toml_str(GOOD, &SceneOrigin::Text).unwrap().to_toml().contains("solver"));
+    for (text, field, allowed) in [
+        (dfsph_scene("stiffness = 1000.0", ""), "physics.stiffness", "not used"),
+        (dfsph_scene("speed_of_sound = 20.0", ""), "physics.speed_of_sound", "not used"),
+        (dfsph_scene("", "[physics.dfsph]\ndensity_error = 0.0"), "physics.dfsph.density_error", "(0, 1)"),
+        (dfsph_scene("", "[physics.dfsph]\ndivergence_error = 1.5"), "physics.dfsph.divergence_error", "(0, 1)"),
+        (dfsph_scene("", "[physics.dfsph]\nmax_iterations = 0"), "physics.dfsph.max_iterations", "from 1 to"),
+        (dfsph_scene("", "[physics.dfsph]\nmin_iterations = 5\nmax_iterations = 4"), "physics.dfsph.min_iterations", "<="),
+        (dfsph_scene("", "[physics.dfsph]\nmax_divergence_iterations = 100000"), "physics.dfsph.max_divergence_iterations", "from 1 to"),
+        (dfsph_scene("", "[physics.dfsph]\ntolerance = 0.1"), "line", "tolerance"),
+        (GOOD.replace("[time]", "[physics.dfsph]\ndensity_error = 0.001\n[time]"), "physics.dfsph", "solver = \"dfsph\""),
+        (GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nsolver = \"iisph\""), "line", "dfsph"),
+    ] {
+        let e = error_of(&text);
+        assert!(e.contains("tank.toml") && e.contains(field) && e.contains(allowed), "{field}: {e}");
+    }
+}
+
+#[test]
+fn akinci_walls_are_read_and_checked() {
+    let walls = "[[boundary]]\ntype = \"container\"\nmin = [0.1, 0.1, 0.1]\nmax = [0.9, 0.8, 0.9]\nlayers = 1\n";
+    let akinci = format!("{}\n{walls}", GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_volume = \"akinci\""));
+    let s = Scene::from_toml_str(&akinci, &SceneOrigin::Text).unwrap();
+    let masses = s.initial_state().wall_masses;
+    // A single layer stands for more than its lattice cells.
+    assert!(masses.iter().all(|&m| m > 1000.0 * 0.05f64.powi(3)), "{:?}", &masses[..4]);
+    let e = error_of(&akinci.replace("layers = 1", "layers = 1\nrest_density = 2500.0"));
+    assert!(e.contains("tank.toml") && e.contains("boundary[0].rest_density") && e.contains("akinci"), "{e}");
+    let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_volume = \"psi\""));
+    assert!(e.contains("lattice") && e.contains("akinci"), "{e}");
+}

@@ -8,3 +8,4 @@ mod kernels;
 mod cpu_reference;
 mod extremes;
 mod validation;
+mod dfsph;

@@ -106,6 +106,9 @@ impl Tank {
                 boundary_friction: 0.0,
                 boundary_pressure: self.boundary_pressure,
                 gravity: self.gravity,
+                solver: Default::default(),
+                boundary_volume: Default::default(),
+                dfsph: Default::default(),
             },
             time: Time::fixed(self.dt(), self.end_time),
             fluid: self

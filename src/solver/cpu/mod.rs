@@ -5,6 +5,14 @@
 pub mod bin_count;
 pub mod bin_scatter;
 pub mod density;
+pub mod dfsph;
+pub mod dfsph_convergence;
+pub mod dfsph_divergence;
+pub mod dfsph_factors;
+pub mod dfsph_integrate;
+pub mod dfsph_predict;
+pub mod dfsph_pressure;
+pub mod dfsph_shared;
 pub mod forces;
 pub mod forces_integrate;
 pub mod integrate;
@@ -17,6 +25,7 @@ use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
 use crate::model::real::{Real, V3};
 use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
+use dfsph::{DfsphCpu, StepParts};
 use integrate::PlaneR;
 
 /// The CPU solver (cloned, it continues independently from the same state). Particle arrays
@@ -48,6 +57,8 @@ pub struct CpuSolver<R: Real> {
     /// Simulated time and the steps' dt (adaptive dt makes them differ from step x dt).
     time: f64,
     dt_stats: DtStats,
+    /// DFSPH's arrays, when the scene uses it.
+    dfsph: Option<DfsphCpu<R>>,
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -89,6 +100,7 @@ impl<R: Real> CpuSolver<R> {
             health: Health::default(),
             time: 0.0,
             dt_stats: DtStats { min: f64::INFINITY, ..DtStats::default() },
+            dfsph: params.dfsph.as_ref().map(|settings| DfsphCpu::new(settings, n)),
         }
     }
 
@@ -99,7 +111,7 @@ impl<R: Real> CpuSolver<R> {
         self.step
     }
     pub fn health(&self) -> Health {
-        self.health
+        Health { iterations: self.dfsph.as_ref().map(|d| d.stats), ..self.health }
     }
     pub fn fluid_len(&self) -> usize {
         self.positions.len()
@@ -126,6 +138,7 @@ impl<R: Real> CpuSolver<R> {
         n * (4 * v3 + 2 * r + 4 * 4) // positions, velocities, accelerations, scratch; densities, pressures; ids, keys, sorted, scratch ids
             + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
             + self.wall_positions.len() as u64 * (v3 + r)
+            + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
     }
 
     /// Stage 1: counting-sort binning and reordering of the state into cell order.
@@ -227,11 +240,91 @@ impl<R: Real> CpuSolver<R> {
         integrate::integrate(&input, &mut self.positions, &mut self.velocities)
     }
 
+    /// The parts of the solver a DFSPH stage reads and writes, and DFSPH's own arrays.
+    fn dfsph_parts(&mut self) -> Option<(&mut DfsphCpu<R>, StepParts<'_, R>)> {
+        let dfsph = self.dfsph.as_mut()?;
+        let parts = StepParts {
+            params: &self.params,
+            kernel: &self.kernel,
+            grid: &self.grid,
+            planes: &self.planes,
+            positions: &mut self.positions,
+            velocities: &mut self.velocities,
+            starts: &self.starts,
+            scratch: &mut self.scratch_v3,
+            ids: &self.ids,
+            densities: &mut self.densities,
+            pressures: &mut self.pressures,
+            accelerations: &mut self.accelerations,
+            wall_positions: &self.wall_positions,
+            wall_starts: &self.wall_starts,
+            wall_masses: &self.wall_masses,
+            step: self.step,
+        };
+        Some((dfsph, parts))
+    }
+
+    /// DFSPH's arrays (for the stage tests).
+    pub fn dfsph(&self) -> Option<&DfsphCpu<R>> {
+        self.dfsph.as_ref()
+    }
+
+    /// Runs one DFSPH stage on the current state (for the stage tests; [`CpuSolver::step_once`]
+    /// runs them all in order). Returns the error sum of a stage that reduces one, and the
+    /// step's dt after the prediction.
+    pub fn dfsph_stage(&mut self, stage: crate::solver::backend::DfsphStage) -> Option<f64> {
+        use crate::solver::backend::DfsphStage;
+        let (d, mut s) = self.dfsph_parts()?;
+        let volume = R::of(s.params.fluid_mass / s.params.rest_density);
+        let input = dfsph_shared::SolveInput { pairs: &d.pairs, volume, factors: &d.factors, wall_gradients: &d.wall_gradients };
+        let dt = s.params.dt;
+        let share = R::of(dfsph_shared::WARM_START_SHARE);
+        Some(match stage {
+            DfsphStage::Factors => {
+                d.factors_stage(&mut s);
+                0.0
+            }
+            DfsphStage::DivergenceWarmStart => {
+                let warm = dfsph_shared::WarmStart { ids: s.ids, last: &d.warm_divergence, share };
+                dfsph_divergence::divergence_warm_start(&input, s.velocities, &warm, &mut d.stiffness);
+                0.0
+            }
+            DfsphStage::PressureWarmStart => {
+                let warm = dfsph_shared::WarmStart { ids: s.ids, last: &d.warm_pressure, share };
+                dfsph_pressure::pressure_warm_start(&input, s.velocities, s.densities, R::of(s.params.rest_density), R::of(dt), &warm, &mut d.stiffness);
+                0.0
+            }
+            DfsphStage::DivergenceRate => {
+                let dt = R::of(d.divergence_dt(s.params));
+                dfsph_divergence::divergence_rate(&input, s.velocities, dt, &mut d.stiffness) as f64
+            }
+            DfsphStage::DivergenceApply => {
+                dfsph_divergence::divergence_apply(&input, &d.stiffness, s.velocities, &mut d.divergence_sum);
+                0.0
+            }
+            DfsphStage::Predict => d.predict(&mut s),
+            DfsphStage::PredictDensity => {
+                dfsph_pressure::predict_density(&input, s.velocities, s.densities, R::of(s.params.rest_density), R::of(dt), &mut d.stiffness) as f64
+            }
+            DfsphStage::PressureApply => {
+                dfsph_pressure::pressure_apply(&input, &d.stiffness, R::one() / R::of(dt), s.velocities, &mut d.pressure_sum);
+                0.0
+            }
+        })
+    }
+
     /// One full time step; records the first step that produced a non-finite or escaped particle.
     /// The neighbour grid is rebuilt every `rebuild_every` steps, as on the GPU.
     pub fn step_once(&mut self) {
         if self.step % self.params.rebuild_every.max(1) as u64 == 0 {
             self.bin();
+        }
+        if let Some((dfsph, mut parts)) = self.dfsph_parts() {
+            let (found, dt) = dfsph.step(&mut parts);
+            let max_density = self.densities.iter().fold(R::zero(), |a, &b| a.max(b)).to64();
+            self.health.max_density = self.health.max_density.max(max_density);
+            self.record_step(dt, found);
+            return;
         }
         self.compute_density();
         self.compute_forces();
@@ -239,11 +332,16 @@ impl<R: Real> CpuSolver<R> {
         self.health.max_density = self.health.max_density.max(max_density);
         let dt = self.choose_dt();
         let h = self.integrate_with(dt);
+        self.record_step(dt, h);
+    }
+
+    /// The bookkeeping after a step of `dt`.
+    fn record_step(&mut self, dt: f64, found: integrate::StepHealth) {
         self.time += dt;
         self.dt_stats.min = self.dt_stats.min.min(dt);
         self.dt_stats.max = self.dt_stats.max.max(dt);
         self.dt_stats.last = dt;
-        integrate::finish_step(&mut self.step, &mut self.health, h);
+        integrate::finish_step(&mut self.step, &mut self.health, found);
     }
 
     /// Runs up to `n` steps, stopping early after a step that went wrong.
@@ -260,7 +358,11 @@ impl<R: Real> CpuSolver<R> {
     /// current positions.
     pub fn snapshot(&mut self) -> Snapshot {
         self.bin();
-        self.compute_density();
+        match self.dfsph_parts() {
+            // Density, and the pressure of the last constant-density solve.
+            Some((dfsph, mut parts)) => dfsph.factors_stage(&mut parts),
+            None => self.compute_density(),
+        }
         let n = self.positions.len();
         let mut s = Snapshot::with_len(n, self.step, self.time());
         for (slot, &id) in self.ids.iter().enumerate() {
@@ -306,6 +408,11 @@ impl<R: Real> CpuSolver<R> {
             time: self.time,
             dt_min_max_last: [self.dt_stats.min, self.dt_stats.max, self.dt_stats.last],
             gpu_status: Vec::new(),
+            warm_start: match &self.dfsph {
+                Some(d) => d.warm_pressure.iter().zip(&d.warm_divergence).map(|(p, v)| [p.to64(), v.to64()]).collect(),
+                None => Vec::new(),
+            },
+            iterations: self.dfsph.as_ref().map(|d| d.stats).unwrap_or_default(),
         }
     }
 
@@ -319,6 +426,14 @@ impl<R: Real> CpuSolver<R> {
         self.time = state.time;
         let [min, max, last] = state.dt_min_max_last;
         self.dt_stats = DtStats { min, max, last, ..DtStats::default() };
+        if let Some(d) = &mut self.dfsph {
+            let n = self.positions.len();
+            anyhow::ensure!(state.warm_start.len() == n, "the state holds {} warm-start stiffnesses for DFSPH; the scene has {n} particles", state.warm_start.len());
+            d.warm_pressure = state.warm_start.iter().map(|w| R::of(w[0])).collect();
+            d.warm_divergence = state.warm_start.iter().map(|w| R::of(w[1])).collect();
+            d.stats = state.iterations;
+            d.last_dt = if state.step > 0 { last } else { 0.0 };
+        }
         Ok(())
     }
 

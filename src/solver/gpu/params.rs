@@ -205,6 +205,7 @@ pub mod status {
             escaped: s[ESCAPED] as u64,
             first_bad_step: (s[FIRST_BAD_STEP] != NO_BAD_STEP).then_some(s[FIRST_BAD_STEP] as u64),
             max_density: f32::from_bits(s[MAX_DENSITY]) as f64,
+            iterations: None,
         }
     }
 

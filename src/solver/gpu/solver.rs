@@ -124,6 +124,7 @@ impl GpuSolver {
     /// Uploads a scene's particles and builds every pipeline and bind group. Programs build a
     /// solver through [`crate::solver::open`], which checks the memory plan first.
     pub(crate) fn with_options(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions) -> anyhow::Result<Self> {
+        anyhow::ensure!(params.dfsph.is_none(), "physics.solver = \"dfsph\" runs on the cpu backend only so far (--backend cpu)");
         let n = initial.fluid_positions.len() as u64;
         let cells = params.grid.cell_count() as u64;
         let viscosity = params.viscosity_at_step(0);
@@ -435,6 +436,7 @@ impl GpuSolver {
             StateArray::Positions => visit_array(&self.ctx, &st.positions, n, Element::Vector, chunk, visit),
             StateArray::Velocities => visit_array(&self.ctx, &st.velocities, n, Element::Vector, chunk, visit),
             StateArray::Ids => visit_array(&self.ctx, &st.positions, n, Element::IdInW, chunk, visit),
+            StateArray::WarmStart => Ok(()),
         }
     }
 }
@@ -554,6 +556,8 @@ impl Backend for GpuSolver {
             time: 0.0,
             dt_min_max_last: [0.0; 3],
             gpu_status: words.to_vec(),
+            warm_start: Vec::new(),
+            iterations: Default::default(),
         })
     }
     fn visit_state_array(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {

@@ -1,0 +1,270 @@
+//! DFSPH on the CPU (Bender & Koschier 2015, 2017): the order of a step. Each stage is the twin
+//! of the WGSL file of the same name (`dfsph_factors`, `dfsph_divergence`, `dfsph_predict`,
+//! `dfsph_pressure`, `dfsph_convergence`, `dfsph_integrate`); what they share is in
+//! `dfsph_shared` (the twin of wgsl/shared/dfsph.wgsl).
+
+use super::dfsph_convergence::{begin_solve, check_convergence, SolveLimits};
+use super::dfsph_divergence::{divergence_apply, divergence_rate, divergence_warm_start};
+use super::dfsph_factors::{density_and_factor, FactorsInput, FactorsOutput};
+use super::dfsph_integrate::{integrate, keep_warm_start, step_accelerations};
+use super::dfsph_predict::{choose_dt, non_pressure_accelerations, predict_from_accelerations, predict_velocities, PredictInput};
+use super::dfsph_pressure::{predict_density, pressure_apply, pressure_warm_start};
+use super::dfsph_shared::{error_threshold, Pairs, SolveInput, WarmStart, WARM_START_SHARE};
+use super::integrate::{PlaneR, StepHealth};
+use crate::model::kernels::{KernelCoefficients, Neighbours};
+use crate::model::params::{Grid, Params};
+use crate::model::real::{Real, V3};
+use crate::model::scene::DfsphSettings;
+use crate::model::state::IterationStats;
+
+/// Below this, the denominator of alpha (in 1/m^2) counts as zero: a particle with so few
+/// neighbours is not pushed.
+pub fn factor_epsilon(h: f64) -> f64 {
+    1e-6 / (h * h)
+}
+
+/// DFSPH's arrays on the CPU, in the solver's cell order except the warm-start stiffnesses,
+/// which are kept by particle id (the binning reorders the particles every step).
+#[derive(Clone)]
+pub struct DfsphCpu<R: Real> {
+    pub settings: DfsphSettings,
+    pub factors: Vec<R>,
+    pub wall_gradients: Vec<V3<R>>,
+    /// K of the current solve's last Jacobi step.
+    pub stiffness: Vec<R>,
+    /// The sums of K over this step's constant-density and divergence solves.
+    pub pressure_sum: Vec<R>,
+    pub divergence_sum: Vec<R>,
+    /// Last step's sums, by particle id: where the next step's solves start.
+    pub warm_pressure: Vec<R>,
+    pub warm_divergence: Vec<R>,
+    pub pairs: Pairs<R>,
+    pub stats: IterationStats,
+    /// The last step's dt (0 before the first).
+    pub last_dt: f64,
+}
+
+/// The parts of the CPU solver a DFSPH step reads and writes.
+pub struct StepParts<'a, R: Real> {
+    pub params: &'a Params,
+    pub kernel: &'a KernelCoefficients<R>,
+    pub grid: &'a Grid<R>,
+    pub planes: &'a [PlaneR<R>],
+    pub positions: &'a mut [V3<R>],
+    pub velocities: &'a mut Vec<V3<R>>,
+    pub starts: &'a [u32],
+    /// Receives the predicted velocities; afterwards it holds the velocities after the
+    /// divergence solve.
+    pub scratch: &'a mut Vec<V3<R>>,
+    pub ids: &'a [u32],
+    pub densities: &'a mut [R],
+    pub pressures: &'a mut [R],
+    /// The non-pressure accelerations (adaptive dt), then the step's accelerations
+    /// ([`step_accelerations`]).
+    pub accelerations: &'a mut [V3<R>],
+    pub wall_positions: &'a [V3<R>],
+    pub wall_starts: &'a [u32],
+    pub wall_masses: &'a [R],
+    /// The step about to run (for the viscosity schedule).
+    pub step: u64,
+}
+
+impl<R: Real> DfsphCpu<R> {
+    pub fn new(settings: &DfsphSettings, n: usize) -> Self {
+        DfsphCpu {
+            settings: settings.clone(),
+            factors: vec![R::zero(); n],
+            wall_gradients: vec![V3::zero(); n],
+            stiffness: vec![R::zero(); n],
+            pressure_sum: vec![R::zero(); n],
+            divergence_sum: vec![R::zero(); n],
+            warm_pressure: vec![R::zero(); n],
+            warm_divergence: vec![R::zero(); n],
+            pairs: Pairs::default(),
+            stats: IterationStats::default(),
+            last_dt: 0.0,
+        }
+    }
+
+    /// Bytes of the arrays (the neighbour lists at their current capacity).
+    pub fn memory_bytes(&self) -> u64 {
+        let r = std::mem::size_of::<R>() as u64;
+        self.factors.len() as u64 * (9 * r) + self.pairs.bytes()
+    }
+
+    /// The dt the divergence solve judges its error with: the step's own with a fixed dt; with
+    /// adaptive dt the last step's (the new one is chosen after the solve), dt_max before any.
+    pub fn divergence_dt(&self, params: &Params) -> f64 {
+        match params.adaptive {
+            Some(_) if self.last_dt > 0.0 => self.last_dt,
+            Some(a) => a.dt_max,
+            None => params.dt,
+        }
+    }
+
+    /// 1 / (rho0 dt^2) of the last step, which scales the output pressure (0 before any step
+    /// with adaptive dt).
+    fn pressure_scale(&self, params: &Params) -> R {
+        let dt = if params.adaptive.is_some() { self.last_dt } else { params.dt };
+        if dt > 0.0 {
+            let dt = R::of(dt);
+            R::one() / (R::of(params.rest_density) * dt * dt)
+        } else {
+            R::zero()
+        }
+    }
+
+    fn solve_input(&self, volume: R) -> SolveInput<'_, R> {
+        SolveInput { pairs: &self.pairs, volume, factors: &self.factors, wall_gradients: &self.wall_gradients }
+    }
+
+    /// The factors stage on the current state: density, output pressure, alpha, wall gradients,
+    /// the neighbour lists and the divergence warm start.
+    pub fn factors_stage(&mut self, s: &mut StepParts<'_, R>) {
+        let p = s.params;
+        let input = FactorsInput {
+            kernel: s.kernel,
+            grid: s.grid,
+            fluid_mass: R::of(p.fluid_mass),
+            rest_density: R::of(p.rest_density),
+            fluid: Neighbours { positions: s.positions, starts: s.starts },
+            walls: Neighbours { positions: s.wall_positions, starts: s.wall_starts },
+            wall_masses: s.wall_masses,
+            ids: s.ids,
+            warm_pressure: &self.warm_pressure,
+            pressure_scale: self.pressure_scale(p),
+            factor_epsilon: R::of(factor_epsilon(p.h)),
+        };
+        let out = FactorsOutput {
+            densities: s.densities,
+            pressures: s.pressures,
+            factors: &mut self.factors,
+            wall_gradients: &mut self.wall_gradients,
+            divergence_sum: &mut self.divergence_sum,
+        };
+        density_and_factor(&input, out, &mut self.pairs);
+    }
+
+    /// The divergence solve on the current velocities.
+    pub fn divergence_solve(&mut self, s: &mut StepParts<'_, R>) {
+        let p = s.params;
+        let volume = R::of(p.fluid_mass / p.rest_density);
+        let dt = R::of(self.divergence_dt(p));
+        let n = s.velocities.len();
+        let limits = SolveLimits {
+            min_iterations: self.settings.min_divergence_iterations,
+            max_iterations: self.settings.max_divergence_iterations,
+            threshold: error_threshold(self.settings.divergence_error, n),
+            particles: n,
+        };
+        let mut stats = self.stats.divergence;
+        let mut stiffness = std::mem::take(&mut self.stiffness);
+        let mut sums = std::mem::take(&mut self.divergence_sum);
+        let warm = self.settings.warm_start;
+        if warm {
+            let last = WarmStart { ids: s.ids, last: &self.warm_divergence, share: R::of(WARM_START_SHARE) };
+            divergence_warm_start(&self.solve_input(volume), s.velocities, &last, &mut stiffness);
+            divergence_apply(&self.solve_input(volume), &stiffness, s.velocities, &mut sums);
+        }
+        let mut solve = begin_solve(warm);
+        let mut error = divergence_rate(&self.solve_input(volume), s.velocities, dt, &mut stiffness);
+        check_convergence(&limits, &mut solve, error, &mut stats);
+        while solve.solving {
+            divergence_apply(&self.solve_input(volume), &stiffness, s.velocities, &mut sums);
+            error = divergence_rate(&self.solve_input(volume), s.velocities, dt, &mut stiffness);
+            check_convergence(&limits, &mut solve, error, &mut stats);
+        }
+        self.stiffness = stiffness;
+        self.divergence_sum = sums;
+        self.stats.divergence = stats;
+    }
+
+    /// Viscosity and gravity, the step's dt, the predicted velocities (into `scratch`, then
+    /// swapped with the velocities) and the constant-density warm start. Returns dt.
+    pub fn predict(&mut self, s: &mut StepParts<'_, R>) -> f64 {
+        let p = s.params;
+        let n = s.velocities.len();
+        s.scratch.resize(n, V3::zero());
+        let input = PredictInput {
+            kernel: s.kernel,
+            grid: s.grid,
+            fluid_mass: R::of(p.fluid_mass),
+            rest_density: R::of(p.rest_density),
+            viscosity: R::of(p.viscosity_at_step(s.step)),
+            boundary_friction: R::of(p.boundary_friction),
+            gravity: V3::from64(p.gravity),
+            fluid: Neighbours { positions: s.positions, starts: s.starts },
+            velocities: s.velocities,
+            densities: s.densities,
+            walls: Neighbours { positions: s.wall_positions, starts: s.wall_starts },
+            wall_masses: s.wall_masses,
+        };
+        let dt = match p.adaptive {
+            None => {
+                predict_velocities(&input, R::of(p.dt), s.scratch, &mut self.pressure_sum);
+                p.dt
+            }
+            Some(adaptive) => {
+                let maxima = non_pressure_accelerations(&input, s.accelerations);
+                let dt = choose_dt(&adaptive, p.h, maxima, p.viscosity_at_step(s.step));
+                predict_from_accelerations(s.velocities, s.accelerations, R::of(dt), s.scratch, &mut self.pressure_sum);
+                dt
+            }
+        };
+        std::mem::swap(s.velocities, s.scratch);
+        dt
+    }
+
+    /// The constant-density solve on the predicted velocities.
+    pub fn pressure_solve(&mut self, s: &mut StepParts<'_, R>, dt: f64) {
+        let p = s.params;
+        let volume = R::of(p.fluid_mass / p.rest_density);
+        let (dt, inv_dt) = (R::of(dt), R::one() / R::of(dt));
+        let rest_density = R::of(p.rest_density);
+        let n = s.velocities.len();
+        let limits = SolveLimits {
+            min_iterations: self.settings.min_iterations,
+            max_iterations: self.settings.max_iterations,
+            threshold: error_threshold(self.settings.density_error, n),
+            particles: n,
+        };
+        let mut stats = self.stats.pressure;
+        let mut stiffness = std::mem::take(&mut self.stiffness);
+        let mut sums = std::mem::take(&mut self.pressure_sum);
+        let warm = self.settings.warm_start;
+        if warm {
+            let last = WarmStart { ids: s.ids, last: &self.warm_pressure, share: R::of(WARM_START_SHARE) };
+            pressure_warm_start(&self.solve_input(volume), s.velocities, s.densities, rest_density, dt, &last, &mut stiffness);
+            pressure_apply(&self.solve_input(volume), &stiffness, inv_dt, s.velocities, &mut sums);
+        }
+        let mut solve = begin_solve(warm);
+        let mut error = predict_density(&self.solve_input(volume), s.velocities, s.densities, rest_density, dt, &mut stiffness);
+        check_convergence(&limits, &mut solve, error, &mut stats);
+        while solve.solving {
+            pressure_apply(&self.solve_input(volume), &stiffness, inv_dt, s.velocities, &mut sums);
+            error = predict_density(&self.solve_input(volume), s.velocities, s.densities, rest_density, dt, &mut stiffness);
+            check_convergence(&limits, &mut solve, error, &mut stats);
+        }
+        self.stiffness = stiffness;
+        self.pressure_sum = sums;
+        self.stats.pressure = stats;
+    }
+
+    /// One DFSPH step on a binned state (the caller bins first when due). Returns what went
+    /// wrong and the step's dt.
+    pub fn step(&mut self, s: &mut StepParts<'_, R>) -> (StepHealth, f64) {
+        self.factors_stage(s);
+        if self.settings.divergence_solve {
+            self.divergence_solve(s);
+        }
+        let dt = self.predict(s);
+        self.pressure_solve(s, dt);
+        let p = s.params;
+        let domain = (V3::from64(p.domain_min), V3::from64(p.domain_max));
+        let found = integrate(s.positions, s.velocities, R::of(dt), s.planes, domain);
+        keep_warm_start(s.ids, &self.pressure_sum, &self.divergence_sum, &mut self.warm_pressure, &mut self.warm_divergence);
+        step_accelerations(s.scratch, s.velocities, R::of(dt), s.accelerations);
+        self.last_dt = dt;
+        (found, dt)
+    }
+}

@@ -1,0 +1,34 @@
+//! DFSPH, the end of a step: positions advanced with the final velocities (x += dt v), the
+//! analytic planes, the health counters, and the stiffness sums kept by particle id for the
+//! next step's warm start. Twin of wgsl/sim/dfsph_integrate.wgsl (`integrate`,
+//! `step_accelerations`; the step's bookkeeping is wgsl/sim/integrate.wgsl `finish_step`).
+
+use super::integrate::{advance_particle, PlaneR, StepHealth};
+use crate::model::real::{Real, V3};
+use rayon::prelude::*;
+
+/// Every particle advanced in place with its velocity (planes may change both); returns what
+/// went wrong.
+pub fn integrate<R: Real>(positions: &mut [V3<R>], velocities: &mut [V3<R>], dt: R, planes: &[PlaneR<R>], domain: (V3<R>, V3<R>)) -> StepHealth {
+    positions
+        .par_iter_mut()
+        .zip(velocities.par_iter_mut())
+        .map(|(x, v)| advance_particle(x, v, V3::zero(), dt, planes, domain))
+        .reduce(StepHealth::default, |a, b| StepHealth { non_finite: a.non_finite + b.non_finite, escaped: a.escaped + b.escaped })
+}
+
+/// The stiffness sums of the step into the warm-start arrays, by particle id.
+pub fn keep_warm_start<R: Real>(ids: &[u32], pressure_sum: &[R], divergence_sum: &[R], warm_pressure: &mut [R], warm_divergence: &mut [R]) {
+    for (slot, &id) in ids.iter().enumerate() {
+        warm_pressure[id as usize] = pressure_sum[slot];
+        warm_divergence[id as usize] = divergence_sum[slot];
+    }
+}
+
+/// The acceleration the step applied after its divergence solve: (v_end - v_start) / dt (the
+/// pressure and every other force, the planes included), for `Backend::step_fields`.
+pub fn step_accelerations<R: Real>(start: &[V3<R>], end: &[V3<R>], dt: R, accelerations: &mut [V3<R>]) {
+    for ((a, &v0), &v1) in accelerations.iter_mut().zip(start).zip(end) {
+        *a = (v1 - v0) / dt;
+    }
+}
