@@ -66,7 +66,11 @@ fn run_to_dir(backend: &mut dyn Backend, scene: &Scene, steps: u64, every: u64) 
     let summary = run(backend, scene, &opts).unwrap();
     let mut snaps = Vec::new();
     for e in std::fs::read_dir(dir.path().join("snapshots")).unwrap() {
-        snaps.push(wgsph::io::snapshot::csv::read_snapshot_csv(&e.unwrap().path()).unwrap());
+        let path = e.unwrap().path();
+        // Beside the snapshots: their index.
+        if path.file_name().unwrap().to_string_lossy().starts_with("step_") {
+            snaps.push(wgsph::io::snapshot::csv::read_snapshot_csv(&path).unwrap());
+        }
     }
     (summary, snaps)
 }
