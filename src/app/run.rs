@@ -499,7 +499,7 @@ pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[
             Ok(inside) => format!("{}/", inside.display()),
             Err(_) => dir.display().to_string(),
         };
-        println!("  {dir:<13}  {} pictures{shown}", s.frames);
+        println!("  {dir:<13}  {} picture{}{shown}", s.frames, if s.frames == 1 { "" } else { "s" });
     }
     if s.last_checkpoint.is_some() {
         println!("  checkpoint.wgsph  the state to continue from with `wgsph run --resume {}`", out.display());

@@ -66,9 +66,9 @@ fn run_to_dir(backend: &mut dyn Backend, scene: &Scene, steps: u64, every: u64) 
     let summary = run(backend, scene, &opts).unwrap();
     let mut snaps = Vec::new();
     for e in std::fs::read_dir(dir.path().join("snapshots")).unwrap() {
-        // The snapshots, not their index (snapshots/index.csv).
         let path = e.unwrap().path();
-        if path.file_name().is_some_and(|n| n.to_string_lossy().starts_with("step_")) {
+        // Beside the snapshots: their index.
+        if path.file_name().unwrap().to_string_lossy().starts_with("step_") {
             snaps.push(wgsph::io::snapshot::csv::read_snapshot_csv(&path).unwrap());
         }
     }
