@@ -1,7 +1,9 @@
 //! The command line's arguments (clap): the commands, their flags, and how flags map to the
 //! library's choices.
 
+use super::errors::InputError;
 use crate::io::snapshot::format::SnapshotFormat;
+use crate::model::scene::Scene;
 use crate::io::surface::MeshFormat;
 use crate::model::overrides::Override;
 use crate::solver::gpu::{GpuOptions, WorkgroupSizes};
@@ -378,4 +380,34 @@ pub struct BenchArgs {
     /// Also write the figures to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,
+}
+
+/// The scene a command runs: `SCENE` loaded, at `--particles N` where given, with a warning
+/// line on stderr for each fluid block that its particle lattice does not fill exactly (unless
+/// `quiet`).
+pub fn load_scene(name: &str, particles: Option<u64>, quiet: bool) -> anyhow::Result<Scene> {
+    let mut scene = Scene::load(name)?;
+    if let Some(n) = particles {
+        scene = at_particles(&scene, n)?;
+    }
+    warn_lattice(&scene, quiet);
+    Ok(scene)
+}
+
+/// `scene` at about `n` fluid particles (`--particles N`): refused, naming the fewest the scene
+/// allows, where that is too coarse.
+pub fn at_particles(scene: &Scene, n: u64) -> anyhow::Result<Scene> {
+    let scene = scene.at_fluid_particles(n).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    scene.validate(&crate::model::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    Ok(scene)
+}
+
+/// One warning line on stderr for each fluid block of `scene` that its particle lattice does
+/// not fill exactly (none when `quiet`).
+pub fn warn_lattice(scene: &Scene, quiet: bool) {
+    if !quiet {
+        for line in scene.lattice_changes() {
+            eprintln!("warning: {line}");
+        }
+    }
 }

@@ -14,7 +14,6 @@ pub mod tradeoff;
 pub mod validate;
 
 use crate::model::builtin::BUILTIN_SCENES;
-use crate::model::scene::{Scene, SceneOrigin};
 use args::{Cli, Command, ViewArgs};
 use clap::Parser;
 use errors::InputError;
@@ -75,11 +74,7 @@ fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
     if args.picture.style == crate::viz::render::Style::Mesh {
         return Err(InputError("--style mesh is for `wgsph run --frames` (the surface is reconstructed on the host, too slowly for a window); `wgsph view` takes --style particles or surface".into()).into());
     }
-    let mut scene = Scene::load(&args.scene)?;
-    if let Some(n) = args.particles {
-        scene = scene.with_fluid_particles(n);
-        scene.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
-    }
+    let scene = args::load_scene(&args.scene, args.particles, false)?;
     let dt = scene.time.dt;
     let steps_per_frame = args.steps_per_frame.unwrap_or_else(|| ((1.0 / 60.0 / dt).ceil() as u64).clamp(1, 64));
     crate::viz::view::view(

@@ -10,10 +10,11 @@ use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::snapshot::SnapshotWriter;
 use crate::io::summary::{write_summary, DfsphSummary, RunStatus, Summary, SUMMARY_FILE};
 use crate::io::surface::{write_snapshot_surface, MeshFormat, SurfaceParameters};
-use crate::model::diagnosis::{diagnose, diagnose_at};
 use crate::model::params::Params;
-use crate::model::scene::{Scene, SceneOrigin};
+use crate::model::scene::Scene;
 use crate::model::state::Snapshot;
+use crate::model::diagnosis::regime_warnings;
+use crate::solver::backend::diagnose_failure;
 use crate::solver::{open, Backend};
 use crate::viz::render::frames::FrameRecorder;
 use crate::viz::render::RenderOptions;
@@ -242,12 +243,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             b.set_message(format!("t = {time:.3}"));
         }
         if !health.is_ok() {
-            failure = Some(if params.adaptive.is_some() {
-                let last = Params { dt: backend.dt_stats()?.last, ..params.clone() };
-                diagnose_at(&last, &health, max_speed, time)
-            } else {
-                diagnose(&params, &health, max_speed)
-            });
+            failure = Some(diagnose_failure(backend, scene)?);
             break;
         }
         let time_due = match (next_snapshot_time, opts.snapshot_interval) {
@@ -323,8 +319,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         wall_seconds,
         particle_steps_per_second: if wall_seconds > 0.0 { (steps as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
         max_density_ratio: health.max_density / params.rest_density,
-        nan_count: health.non_finite,
-        escaped: health.escaped,
+        nan_count: health.bad_counts().0,
+        escaped: health.bad_counts().1,
         failure: failure.clone(),
         last_snapshot: last_snapshot.as_ref().map(|p| p.display().to_string()),
         frames: frames_written,
@@ -333,6 +329,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         snapshots: snapshots_written,
         // Over the whole run (a resumed run's counts continue from its checkpoint).
         dfsph: health.iterations.map(|it| DfsphSummary::of(&it, backend.steps_done())),
+        max_mach: (params.speed_of_sound() > 0.0).then(|| health.max_speed / params.speed_of_sound()),
+        warnings: regime_warnings(&params, &health),
     };
     let summary_path = opts.out.join(SUMMARY_FILE);
     write_summary(&summary_path, &summary).with_context(|| match &failure {
@@ -399,8 +397,7 @@ pub fn run_scene(args: &RunArgs) -> anyhow::Result<Scene> {
     };
     scene = scene.with_overrides(&args.sets, &origin)?;
     if let Some(n) = args.particles {
-        scene = scene.with_fluid_particles(n);
-        scene.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+        scene = super::args::at_particles(&scene, n)?;
     }
     Ok(scene)
 }
@@ -420,6 +417,7 @@ pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
         }
     }
     let scene = run_scene(args)?;
+    super::args::warn_lattice(&scene, args.quiet);
     let params = scene.params();
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
     if args.checkpoint_every > 0 && params.rebuild_every > 1 {
@@ -514,6 +512,9 @@ pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[
 pub fn report_run(summary: &Summary, out: &std::path::Path, quiet: bool) -> anyhow::Result<i32> {
     if !quiet {
         println!("{}", summary_line(summary, out));
+        for w in &summary.warnings {
+            eprintln!("warning: {w}");
+        }
     }
     let summary_path = out.join(SUMMARY_FILE);
     match summary.status {

@@ -63,6 +63,13 @@ pub struct Summary {
     /// DFSPH's iterations per step (absent for WCSPH).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dfsph: Option<DfsphSummary>,
+    /// The largest speed of any step over the speed of sound (absent without a speed of
+    /// sound: DFSPH).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_mach: Option<f64>,
+    /// Where the run left the weakly compressible regime without stopping (`limits.warn_*`).
+    #[serde(default)]
+    pub warnings: Vec<String>,
 }
 
 /// DFSPH's solves over a run: iterations per step and how the last step ended.

@@ -224,6 +224,7 @@ fn report(case: Case, resolution: Resolution, run: Collapse, figures: Vec<Figure
         figures,
         wall_leaks: run.sampler.wall_leaks,
         deepest_spacings: run.sampler.deepest / run.spacing,
+        regime: run.sampler.regime,
         checked_steps: run.sampler.checked_steps,
         plot,
         csv,

@@ -81,8 +81,9 @@ uniform_block! {
         viscous_number: f32 => "f32",
         dt_min: f32 => "f32",
         dt_max: f32 => "f32",
-        pad1: u32 => "u32",
-        pad2: u32 => "u32",
+        /// The run stops at a step whose largest density or speed passes these (infinite: off).
+        stop_density: f32 => "f32",
+        stop_speed: f32 => "f32",
     }
 }
 
@@ -131,8 +132,8 @@ impl GpuParams {
             viscous_number: p.adaptive.map_or(0.0, |a| a.viscous_number as f32),
             dt_min: p.adaptive.map_or(p.dt, |a| a.dt_min) as f32,
             dt_max: p.adaptive.map_or(p.dt, |a| a.dt_max) as f32,
-            pad1: 0,
-            pad2: 0,
+            stop_density: p.stop_levels().density as f32,
+            stop_speed: p.stop_levels().speed as f32,
         }
     }
 
@@ -160,9 +161,9 @@ pub mod status {
     status_words! {
         /// Steps done.
         STEPS = 0 => "STATUS_STEPS",
-        /// Particles that became non-finite this step.
+        /// Particles that became non-finite this step (cleared before each step).
         NON_FINITE = 1 => "STATUS_NON_FINITE",
-        /// Particles outside the domain this step.
+        /// Particles outside the domain this step (cleared before each step).
         ESCAPED = 2 => "STATUS_ESCAPED",
         /// The first step that went wrong ([`NO_BAD_STEP`]: none).
         FIRST_BAD_STEP = 3 => "STATUS_FIRST_BAD_STEP",
@@ -182,13 +183,39 @@ pub mod status {
         DT_MIN = 10 => "STATUS_DT_MIN",
         /// Adaptive dt: the largest dt so far.
         DT_MAX = 11 => "STATUS_DT_MAX",
+        /// The largest density of this step (reset by `finish_step`).
+        STEP_MAX_DENSITY = 12 => "STATUS_STEP_MAX_DENSITY",
+        /// The largest speed after this step's integration (reset by `finish_step`).
+        STEP_MAX_SPEED = 13 => "STATUS_STEP_MAX_SPEED",
+        /// The largest speed so far.
+        TOP_SPEED = 14 => "STATUS_TOP_SPEED",
+        /// The first bad step's measures, written by `finish_step` with the marker
+        /// FIRST_BAD_STEP: which checks it failed (`CAUSE_*` bits) ...
+        BAD_CAUSES = 15 => "STATUS_BAD_CAUSES",
+        /// ... its counts of non-finite and escaped particles ...
+        BAD_NON_FINITE = 16 => "STATUS_BAD_NON_FINITE",
+        BAD_ESCAPED = 17 => "STATUS_BAD_ESCAPED",
+        /// ... its largest density and speed ...
+        BAD_MAX_DENSITY = 18 => "STATUS_BAD_MAX_DENSITY",
+        BAD_MAX_SPEED = 19 => "STATUS_BAD_MAX_SPEED",
+        /// ... its dt, and with adaptive dt the time at its end.
+        BAD_DT = 20 => "STATUS_BAD_DT",
+        BAD_TIME = 21 => "STATUS_BAD_TIME",
     }
     /// Words of the status buffer.
-    pub const WORDS: usize = 12;
+    pub const WORDS: usize = 22;
     /// Bytes of the status buffer.
     pub const BYTES: u64 = WORDS as u64 * 4;
     /// FIRST_BAD_STEP while no step went wrong (`STATUS_NO_BAD_STEP` in WGSL).
     pub const NO_BAD_STEP: u32 = u32::MAX;
+    /// The bits of BAD_CAUSES (`CAUSE_*` in WGSL).
+    pub const CAUSE_NON_FINITE: u32 = 1;
+    pub const CAUSE_ESCAPED: u32 = 2;
+    pub const CAUSE_TOO_DENSE: u32 = 4;
+    pub const CAUSE_TOO_FAST: u32 = 8;
+    /// Every cause bit's WGSL name and value.
+    pub const WGSL_CAUSES: &[(&str, u32)] =
+        &[("CAUSE_NON_FINITE", CAUSE_NON_FINITE), ("CAUSE_ESCAPED", CAUSE_ESCAPED), ("CAUSE_TOO_DENSE", CAUSE_TOO_DENSE), ("CAUSE_TOO_FAST", CAUSE_TOO_FAST)];
 
     /// The status words of a new run.
     pub fn initial() -> [u32; WORDS] {
@@ -198,13 +225,34 @@ pub mod status {
         s
     }
 
-    /// The health counters in the status words.
-    pub fn health(s: &[u32]) -> crate::model::state::Health {
+    /// The health of the run in the status words. `fixed_dt`: the step of a run without
+    /// adaptive dt, whose time the host knows (with adaptive dt the GPU sums it).
+    pub fn health(s: &[u32], fixed_dt: Option<f64>) -> crate::model::state::Health {
+        use crate::model::state::{BadStep, StepMeasures};
+        let bad_step = (s[FIRST_BAD_STEP] != NO_BAD_STEP).then(|| {
+            let step = s[FIRST_BAD_STEP] as u64;
+            let causes = s[BAD_CAUSES];
+            BadStep {
+                step,
+                measured: StepMeasures {
+                    non_finite: s[BAD_NON_FINITE] as u64,
+                    escaped: s[BAD_ESCAPED] as u64,
+                    max_density: float(s, BAD_MAX_DENSITY),
+                    max_speed: float(s, BAD_MAX_SPEED),
+                    dt: float(s, BAD_DT),
+                    time: fixed_dt.map_or_else(|| float(s, BAD_TIME), |dt| step as f64 * dt),
+                },
+                too_dense: causes & CAUSE_TOO_DENSE != 0,
+                too_fast: causes & CAUSE_TOO_FAST != 0,
+            }
+        });
         crate::model::state::Health {
             non_finite: s[NON_FINITE] as u64,
             escaped: s[ESCAPED] as u64,
-            first_bad_step: (s[FIRST_BAD_STEP] != NO_BAD_STEP).then_some(s[FIRST_BAD_STEP] as u64),
-            max_density: f32::from_bits(s[MAX_DENSITY]) as f64,
+            first_bad_step: bad_step.map(|b| b.step),
+            max_density: float(s, MAX_DENSITY),
+            max_speed: float(s, TOP_SPEED),
+            bad_step,
             iterations: None,
         }
     }
@@ -266,6 +314,10 @@ mod tests {
         }
         assert_eq!(seen, status::WGSL_NAMES.len(), "every Rust status word is declared in WGSL");
         assert_eq!(status::WGSL_NAMES.len(), status::WORDS);
+        for (name, bit) in status::WGSL_CAUSES {
+            let line = text.lines().find(|l| l.trim_start().starts_with(&format!("const {name}:"))).unwrap_or_else(|| panic!("{name} is not declared in WGSL"));
+            assert!(line.contains(&format!("= {bit}u;")), "{name}: {line}");
+        }
         let mut indices: Vec<usize> = status::WGSL_NAMES.iter().map(|w| w.1).collect();
         indices.sort();
         assert_eq!(indices, (0..status::WORDS).collect::<Vec<_>>(), "the words are 0..WORDS, each once");
