@@ -95,12 +95,12 @@ pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusi
     let mut causes = Vec::new();
     if acoustic_cfl > CFL_LIMIT {
         causes.push(format!(
-            "the CFL condition: dt c0 / h = {} is over {CFL_LIMIT} before the flow adds its speed (dt = {} is too large for the speed of sound c0 = {}; h = {}): lower time.dt below {}{}",
+            "the CFL condition: dt c0 / h = {} is over {CFL_LIMIT} before the flow adds its speed (dt = {} is too large for the speed of sound c0 = {}; h = {}): lower time.dt to 0.25 h / c0 = {} or less{}",
             short(acoustic_cfl),
             short(dt),
             short(c0),
             short(h),
-            short(CFL_LIMIT * h / (c0 + m.max_speed)),
+            short(0.25 * h / c0),
             if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
         ));
     }
