@@ -62,6 +62,7 @@ pub fn block_scene(n: u32) -> Scene {
             walls: WallParticles::default(),
         }],
         camera: None,
+        limits: Default::default(),
     }
 }
 

@@ -11,7 +11,7 @@ use crate::io::snapshot::SnapshotWriter;
 use crate::io::summary::{write_summary, DfsphSummary, RunStatus, Summary, SUMMARY_FILE};
 use crate::io::surface::{write_snapshot_surface, MeshFormat, SurfaceParameters};
 use crate::model::params::Params;
-use crate::model::scene::Scene;
+use crate::model::scene::{Scene, SceneOrigin};
 use crate::model::state::Snapshot;
 use crate::model::diagnosis::regime_warnings;
 use crate::solver::backend::diagnose_failure;

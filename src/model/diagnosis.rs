@@ -14,6 +14,9 @@ use super::state::{BadStep, Health};
 /// unstable (h the support radius; Monaghan 1992 gives 0.25 on h/2 ... h, the built-in scenes
 /// run at 0.225-0.25 on the support radius).
 pub const CFL_LIMIT: f64 = 0.4;
+/// The CFL number dt |v|max / h (h the support radius) DFSPH should stay below: with no sound
+/// to outrun, its condition is on the flow speed alone.
+pub const DFSPH_CFL_LIMIT: f64 = 0.25;
 /// The viscous condition dt <= 0.125 h^2 / nu (Morris et al. 1997, Eq. 27).
 pub const VISCOUS_NUMBER: f64 = 0.125;
 /// The force condition dt <= 0.25 sqrt(h / |a|) (Monaghan 1992).
@@ -93,6 +96,7 @@ pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusi
     // the viscosity, gravity): where one is broken, the fast, dense or misplaced fluid found at
     // the failure is what it led to, not a cause of its own.
     let mut causes = Vec::new();
+    let dfsph = params.dfsph.is_some();
     if acoustic_cfl > CFL_LIMIT {
         causes.push(format!(
             "the CFL condition: dt c0 / h = {} is over {CFL_LIMIT} before the flow adds its speed (dt = {} is too large for the speed of sound c0 = {}; h = {}): lower time.dt to 0.25 h / c0 = {} or less{}",
@@ -123,7 +127,25 @@ pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusi
     }
     // Then what the failing step measured.
     if causes.is_empty() {
-        if cfl > CFL_LIMIT {
+        if dfsph && cfl > DFSPH_CFL_LIMIT {
+            causes.push(format!(
+                "the CFL condition: the flow's speed |v|max = {} made dt |v|max / h = {} go over {DFSPH_CFL_LIMIT}, which DFSPH needs (dt = {}, h = {}): lower time.dt below {}{}",
+                short(m.max_speed),
+                short(cfl),
+                short(dt),
+                short(h),
+                short(DFSPH_CFL_LIMIT * h / m.max_speed),
+                if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
+            ));
+        }
+        if let Some(it) = health.iterations.filter(|it| it.pressure.unconverged + it.divergence.unconverged > 0) {
+            causes.push(format!(
+                "DFSPH's solves stopped at their iteration limit with the error above its tolerance ({} pressure and {} divergence solves; the summary's dfsph section): \
+                 raise physics.dfsph.max_iterations or lower time.dt",
+                it.pressure.unconverged, it.divergence.unconverged
+            ));
+        }
+        if !dfsph && cfl > CFL_LIMIT {
             causes.push(format!(
                 "the CFL condition: the flow's speed |v|max = {} made dt (c0 + |v|max) / h = {} go over {CFL_LIMIT} (dt = {}, c0 = {}, h = {}): lower time.dt below {}{}",
                 short(m.max_speed),
@@ -135,7 +157,12 @@ pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusi
                 if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
             ));
         }
-        if too_dense {
+        if too_dense && dfsph {
+            causes.push(format!(
+                "the fluid was compressed to {} rho0, which DFSPH's constant-density solve should have prevented: lower time.dt, or check what presses the fluid",
+                short(ratio)
+            ));
+        } else if too_dense {
             causes.push(format!(
                 "the fluid was compressed to {} rho0: weakly compressible SPH holds while density varies by a few per cent, which needs a speed of sound \
                  about 10 times the largest flow speed (rho/rho0 - 1 is about the square of the Mach number); raise physics.speed_of_sound (c0 = {}), or check what presses the fluid",
@@ -157,21 +184,23 @@ pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusi
         }
     }
     let figures = format!(
-        "measured at step {step}: |v|max = {}, max rho/rho0 = {}, dt = {}, CFL number dt (c0 + |v|max) / h = {}",
+        "measured at step {step}: |v|max = {}, max rho/rho0 = {}, dt = {}, CFL number dt ({}|v|max) / h = {}",
         short(m.max_speed),
         short(ratio),
         short(dt),
+        if dfsph { "" } else { "c0 + " },
         short(cfl)
     );
     if causes.is_empty() {
         msg += &format!(
-            " Cause unknown: the CFL number {} is below {CFL_LIMIT}, the viscous condition (dt <= {}) and the force condition (dt sqrt(|g| / h) = {} <= {FORCE_NUMBER}) hold, \
-             the density ({} rho0) and the speed (Mach {}) stayed within the limits, and {}; {figures}. Check the scene's boundaries and the domain.",
+            " Cause unknown: the CFL number {} is below {}, the viscous condition (dt <= {}) and the force condition (dt sqrt(|g| / h) = {} <= {FORCE_NUMBER}) hold, \
+             the density ({} rho0){} stayed within the limits, and {}; {figures}. Check the scene's boundaries and the domain.",
             short(cfl),
+            if dfsph { DFSPH_CFL_LIMIT } else { CFL_LIMIT },
             short(viscous_limit),
             short(force),
             short(ratio),
-            short(mach),
+            if dfsph { String::new() } else { format!(" and the speed (Mach {})", short(mach)) },
             if intrusions.is_some() { "no fluid particle is inside a solid" } else { "the particles were not checked against the solids" }
         );
     } else {
@@ -197,7 +226,8 @@ pub fn regime_warnings(params: &Params, health: &Health) -> Vec<String> {
             short(c0)
         ));
     }
-    if mach > limits.warn_mach {
+    // Without a speed of sound (DFSPH) there is no Mach number.
+    if c0 > 0.0 && mach > limits.warn_mach {
         out.push(format!(
             "the speed reached {} (Mach {} against c0 = {}), over limits.warn_mach = {}: beyond about 0.3 the fluid is no longer nearly incompressible \
              (rho/rho0 - 1 is about Mach^2); raise physics.speed_of_sound to about 10 times the largest speed",
