@@ -332,6 +332,12 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         max_mach: (params.speed_of_sound() > 0.0).then(|| health.max_speed / params.speed_of_sound()),
         warnings: regime_warnings(&params, &health),
     };
+    // The run stands (a run of no steps too): its start is no longer undone.
+    if let Some(guard) = &opts.start {
+        if let Err(e) = guard.commit() {
+            eprintln!("warning: {e:#}");
+        }
+    }
     let summary_path = opts.out.join(SUMMARY_FILE);
     write_summary(&summary_path, &summary).with_context(|| match &failure {
         Some(f) => format!("the run stopped ({f}), and its summary could not be written either"),

@@ -262,6 +262,10 @@ fn runs_without_out_get_numbered_directories() {
         assert!(o.status.success(), "{}", text(&o.stderr));
         assert!(dir.path().join(format!("out/hydrostatic-{n:03}/summary.json")).exists());
     }
+    // A run of no steps stands too.
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "0", "--backend", "cpu", "-q"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(summary(&dir.path().join("out/hydrostatic-003")).status, RunStatus::Completed);
     let o = wgsph(&["run", "hydrostatic", "--steps", "1", "--overwrite"], dir.path());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--out"), "{}", text(&o.stderr));
