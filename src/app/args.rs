@@ -3,7 +3,7 @@
 
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::surface::MeshFormat;
-use crate::solver::gpu::{GpuOptions, WorkgroupSizes};
+use crate::solver::gpu::{GpuOptions, SolverLoop, WorkgroupSizes};
 use crate::solver::{BackendChoice, Device, Precision};
 use crate::viz::render;
 use super::validate::case::Resolution;
@@ -234,6 +234,11 @@ pub struct GpuTuning {
     /// Steps recorded into one command buffer (default 32).
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
     pub steps_per_submit: Option<u64>,
+    /// How a DFSPH solve's loop ends on the GPU: `indirect` (default: every iteration up to the
+    /// limit recorded, the GPU making those after convergence empty; no host round trip) or
+    /// `readback:K` (the host reads the solve's state back every K iterations).
+    #[arg(long, value_name = "LOOP")]
+    pub solver_loop: Option<SolverLoop>,
 }
 
 impl GpuTuning {
@@ -244,6 +249,7 @@ impl GpuTuning {
             workgroup_sizes: self.workgroup_size.unwrap_or_default(),
             steps_per_submit: self.steps_per_submit.unwrap_or(0),
             single_cells: false,
+            solver_loop: self.solver_loop.unwrap_or_default(),
         }
     }
 }

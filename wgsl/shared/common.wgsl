@@ -60,6 +60,19 @@ struct Params {
     dt_max: f32,
     pad1: u32,
     pad2: u32,
+    // DFSPH: m / rho0, the smallest denominator of alpha, the warm start's share, the solves'
+    // iteration limits, and the error sums (fixed-point, low and high word) that meet the
+    // tolerances (src/solver/cpu/dfsph_shared.rs).
+    fluid_volume: f32,
+    factor_epsilon: f32,
+    warm_start_share: f32,
+    min_iterations: u32,
+    max_iterations: u32,
+    min_divergence_iterations: u32,
+    max_divergence_iterations: u32,
+    density_threshold: vec2<u32>,
+    divergence_threshold: vec2<u32>,
+    pad3: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -78,6 +91,20 @@ const STATUS_TIME: u32 = 8u;                  // adaptive dt: time = TIME - TIME
 const STATUS_TIME_COMPENSATION: u32 = 9u;     // (a Kahan sum)
 const STATUS_DT_MIN: u32 = 10u;
 const STATUS_DT_MAX: u32 = 11u;
+const STATUS_DFSPH_ERROR_LO: u32 = 12u;       // DFSPH: the error sum of the solve under way
+const STATUS_DFSPH_ERROR_HI: u32 = 13u;
+const STATUS_DFSPH_ITERATION: u32 = 14u;      // its iterations so far
+const STATUS_DFSPH_SOLVING: u32 = 15u;        // 1 while it goes on
+const STATUS_PRESSURE_ITERATIONS: u32 = 16u;  // the constant-density solve over the run
+const STATUS_PRESSURE_ITERATIONS_MAX: u32 = 17u;
+const STATUS_PRESSURE_ITERATIONS_LAST: u32 = 18u;
+const STATUS_PRESSURE_ERROR: u32 = 19u;
+const STATUS_PRESSURE_UNCONVERGED: u32 = 20u;
+const STATUS_DIVERGENCE_ITERATIONS: u32 = 21u; // the divergence solve over the run
+const STATUS_DIVERGENCE_ITERATIONS_MAX: u32 = 22u;
+const STATUS_DIVERGENCE_ITERATIONS_LAST: u32 = 23u;
+const STATUS_DIVERGENCE_ERROR: u32 = 24u;
+const STATUS_DIVERGENCE_UNCONVERGED: u32 = 25u;
 const STATUS_NO_BAD_STEP: u32 = 0xffffffffu;
 
 // Dispatches of more than 65535 workgroups wrap into rows along y.
