@@ -7,7 +7,7 @@ use crate::common;
 use crate::common::TestScene;
 use wgsph::model::scene::{BoundaryVolume, EquationOfState, Kernel, Scene};
 use wgsph::model::state::{BackendState, DfsphFields};
-use wgsph::solver::compare::{step_and_compare, MANY_STEPS, ONE_STEP};
+use wgsph::solver::compare::{step_and_compare, DFSPH_MANY_STEPS, ONE_STEP};
 use wgsph::solver::cpu::CpuSolver;
 use wgsph::solver::gpu::{GpuContext, GpuOptions, GpuSolver, SolverLoop};
 use wgsph::solver::{Backend, DfsphStage};
@@ -74,8 +74,9 @@ fn vector_error(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
     a.iter().zip(b).map(|(x, y)| norm([x[0] - y[0], x[1] - y[1], x[2] - y[2]])).fold(0.0, f64::max) / rms
 }
 
-/// Every field of `gpu` against `cpu`, each within `tol` of its RMS.
-fn check(gpu: &DfsphFields, cpu: &DfsphFields, tol: f64, what: &str) {
+/// Every field of `gpu` against `cpu`, each within `tol` of its RMS, the stiffness and its sum
+/// within `stiffness_tol`.
+fn check(gpu: &DfsphFields, cpu: &DfsphFields, tol: f64, stiffness_tol: f64, what: &str) {
     for (name, e) in [
         ("density", scalar_error(&gpu.densities, &cpu.densities)),
         ("pressure", scalar_error(&gpu.pressures, &cpu.pressures)),
@@ -86,6 +87,7 @@ fn check(gpu: &DfsphFields, cpu: &DfsphFields, tol: f64, what: &str) {
         ("divergence stiffness sum", scalar_error(&gpu.divergence_sum, &cpu.divergence_sum)),
         ("velocity", vector_error(&gpu.velocities, &cpu.velocities)),
     ] {
+        let tol = if name.contains("stiffness") { stiffness_tol } else { tol };
         assert!(e <= tol, "{what}: {name} differs by {e:.2e} of its RMS (tolerance {tol:.0e})");
     }
 }
@@ -115,17 +117,26 @@ fn every_dfsph_stage_agrees_with_its_cpu_twin() {
                 S::PressureApply,
                 S::PredictDensity,
             ];
-            let mut predicted = false;
+            let (mut predicted, mut residual) = (false, false);
             for (k, stage) in stages.into_iter().enumerate() {
                 let g = gpu.dfsph_stage(stage).unwrap();
                 let (c32, c64) = (f32s.dfsph_stage(stage).unwrap(), f64s.dfsph_stage(stage).unwrap());
                 predicted |= stage == S::Predict;
+                residual |= matches!(stage, S::DivergenceRate | S::PredictDensity);
                 let what = format!("{name} on {}, stage {k} ({stage:?})", ctx.describe());
                 let gf = gpu.dfsph_fields(predicted).unwrap();
                 // Sums of some 30 to 60 terms in f32 whose inputs already differ in their last
                 // bits; a wrong stage is off by its whole size.
-                check(&gf, &f32s.dfsph_fields().unwrap(), 1e-4, &format!("{what}, against cpu f32"));
-                check(&gf, &f64s.dfsph_fields().unwrap(), 1e-4, &format!("{what}, against cpu f64"));
+                // A solve's residual is a difference of large terms: the predicted density's
+                // rho* - 1 of numbers near 1 (f32 keeps it to about 1e-7, against errors of 1e-4
+                // and below), the divergence of velocities ten thousand times larger. So where a
+                // particle's residual is near zero the stiffness it sets depends on the last bits
+                // of the sums (their order, fused multiply-adds): measured up to 1.4e-2 of the RMS
+                // stiffness from f64's and 1e-3 from f32's on another backend. The velocities the
+                // stiffness moves agree to 1e-4.
+                let stiffness_tol = if residual { 5e-2 } else { 1e-4 };
+                check(&gf, &f32s.dfsph_fields().unwrap(), 1e-4, stiffness_tol, &format!("{what}, against cpu f32"));
+                check(&gf, &f64s.dfsph_fields().unwrap(), 1e-4, stiffness_tol, &format!("{what}, against cpu f64"));
                 if matches!(stage, S::DivergenceRate | S::PredictDensity) {
                     // The error sums: each particle's error truncated to 2^-30, the same or one
                     // unit apart.
@@ -148,7 +159,7 @@ fn whole_dfsph_steps_agree_with_the_f64_cpu_path() {
             let c = step_and_compare(&mut gpu, &mut cpu, 1, &ONE_STEP).unwrap();
             assert!(c.passed(), "{what}:\n{}", c.table());
             // 25 steps of 1 ms: the simulated time of the weakly compressible checks' 100.
-            let c = step_and_compare(&mut gpu, &mut cpu, 24, &MANY_STEPS).unwrap();
+            let c = step_and_compare(&mut gpu, &mut cpu, 24, &DFSPH_MANY_STEPS).unwrap();
             assert!(c.passed(), "{what}:\n{}", c.table());
             let (g, h) = (gpu.health().unwrap().iterations.unwrap(), cpu.health().iterations.unwrap());
             // A solve may stop one iteration apart on the two paths, now and then.

@@ -6,6 +6,8 @@
 use super::shaders::{dispatch_size, Stage};
 use super::solver::GpuSolver;
 use super::readback::{read_buffers, read_ranges};
+use super::buffers::storage;
+use super::dfsph::SharedBuffers;
 use super::workgroups::SolverLoop;
 use super::params::status;
 
@@ -382,6 +384,65 @@ impl GpuSolver {
         let acc = self.accelerations.as_ref().expect("made by the caller");
         self.dispatch_particles(&mut rec, &self.wcsph_stages().forces, &acc.groups[self.fields_state]);
         self.ctx.queue.submit([rec.finish()]);
+    }
+
+    /// DFSPH: the accelerations of the last step, (v_end - v_start) / dt, into the accelerations
+    /// array (made on first use with a fixed dt).
+    pub(super) fn record_step_accelerations(&mut self) {
+        let n = self.fluid_count as u64;
+        let d = self.dfsph.as_mut().expect("DFSPH");
+        let buffer = d.accelerations.get_or_insert_with(|| storage(&self.ctx.device, "accelerations", n * 16)).clone();
+        if self.step_accelerations_groups.is_none() {
+            let d = self.dfsph.as_ref().expect("DFSPH");
+            let shared = SharedBuffers {
+                state: &self.state,
+                starts: &self.starts,
+                densities: &self.densities,
+                pressures: &self.pressures,
+                status: &self.status,
+                wall_positions: &self.wall_positions,
+                wall_starts: &self.wall_starts,
+                accelerations: &buffer,
+            };
+            self.step_accelerations_groups = Some([0, 1].map(|c| d.step_accelerations_group(&self.ctx, &shared, &self.uniform, c)));
+        }
+        let d = self.dfsph.as_ref().expect("DFSPH");
+        let group = &self.step_accelerations_groups.as_ref().expect("made above")[self.fields_state];
+        let mut rec = PlainRecorder::new(&self.ctx.device, "step accelerations");
+        self.dispatch_particles(&mut rec, &d.stages.step_accelerations, group);
+        self.ctx.queue.submit([rec.finish()]);
+    }
+
+    /// Runs one DFSPH stage on the current state (for the stage tests, after a snapshot has
+    /// binned it and run the factors). Returns the error sum a stage that reduces one adds.
+    pub fn dfsph_stage(&mut self, stage: crate::solver::backend::DfsphStage) -> anyhow::Result<u64> {
+        use crate::solver::backend::DfsphStage as S;
+        let c = self.current;
+        let d = self.dfsph.as_ref().ok_or_else(|| anyhow::anyhow!("not a DFSPH scene"))?;
+        let (g, st) = (&d.groups[c], &d.stages);
+        let lo = status::DFSPH_ERROR_LO as u64 * 4;
+        let mut rec = PlainRecorder::new(&self.ctx.device, "dfsph stage");
+        rec.clear_range(&self.status, lo, 8);
+        match stage {
+            S::Factors => self.dispatch_particles(&mut rec, &st.factors, &g.factors),
+            S::DivergenceWarmStart => self.dispatch_particles(&mut rec, &st.divergence_warm_start, &g.divergence_warm_start),
+            S::DivergenceRate => self.dispatch_particles(&mut rec, &st.divergence_rate, &g.divergence_rate),
+            S::DivergenceApply => self.dispatch_particles(&mut rec, &st.divergence_apply, &g.divergence_apply),
+            S::Predict => match (&st.adaptive, &g.adaptive) {
+                (Some([a, choose, p]), Some([ga, gc, gp])) => {
+                    self.dispatch_particles(&mut rec, a, ga);
+                    self.dispatch_one(&mut rec, choose, gc);
+                    self.dispatch_particles(&mut rec, p, gp);
+                }
+                _ => self.dispatch_particles(&mut rec, &st.predict, &g.predict),
+            },
+            S::PressureWarmStart => self.dispatch_particles(&mut rec, &st.pressure_warm_start, &g.pressure_warm_start),
+            S::PredictDensity => self.dispatch_particles(&mut rec, &st.predict_density, &g.predict_density),
+            S::PressureApply => self.dispatch_particles(&mut rec, &st.pressure_apply, &g.pressure_apply),
+        }
+        self.ctx.queue.submit([rec.finish()]);
+        let words = self.read_status()?;
+        Ok(words[status::DFSPH_ERROR_LO] as u64 | (words[status::DFSPH_ERROR_HI] as u64) << 32)
     }
 
     /// Whether the device can time stages (wgpu `TIMESTAMP_QUERY`).

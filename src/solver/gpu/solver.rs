@@ -400,71 +400,12 @@ impl GpuSolver {
         self.accelerations_valid = true;
     }
 
-    /// DFSPH: the accelerations of the last step, (v_end - v_start) / dt, into the accelerations
-    /// array (made on first use with a fixed dt).
-    fn record_step_accelerations(&mut self) {
-        let n = self.fluid_count as u64;
-        let d = self.dfsph.as_mut().expect("DFSPH");
-        let buffer = d.accelerations.get_or_insert_with(|| storage(&self.ctx.device, "accelerations", n * 16)).clone();
-        if self.step_accelerations_groups.is_none() {
-            let d = self.dfsph.as_ref().expect("DFSPH");
-            let shared = SharedBuffers {
-                state: &self.state,
-                starts: &self.starts,
-                densities: &self.densities,
-                pressures: &self.pressures,
-                status: &self.status,
-                wall_positions: &self.wall_positions,
-                wall_starts: &self.wall_starts,
-                accelerations: &buffer,
-            };
-            self.step_accelerations_groups = Some([0, 1].map(|c| d.step_accelerations_group(&self.ctx, &shared, &self.uniform, c)));
-        }
-        let d = self.dfsph.as_ref().expect("DFSPH");
-        let group = &self.step_accelerations_groups.as_ref().expect("made above")[self.fields_state];
-        let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "step accelerations");
-        self.dispatch_particles(&mut rec, &d.stages.step_accelerations, group);
-        self.ctx.queue.submit([rec.finish()]);
-    }
-
     /// The accelerations array `step_fields` reads.
     fn accelerations_buffer(&self) -> &wgpu::Buffer {
         match &self.dfsph {
             Some(d) => d.accelerations.as_ref().expect("made by ensure_accelerations"),
             None => &self.accelerations.as_ref().expect("made by ensure_accelerations").buffer,
         }
-    }
-
-    /// Runs one DFSPH stage on the current state (for the stage tests, after a snapshot has
-    /// binned it and run the factors). Returns the error sum a stage that reduces one adds.
-    pub fn dfsph_stage(&mut self, stage: crate::solver::backend::DfsphStage) -> anyhow::Result<u64> {
-        use crate::solver::backend::DfsphStage as S;
-        let c = self.current;
-        let d = self.dfsph.as_ref().ok_or_else(|| anyhow::anyhow!("not a DFSPH scene"))?;
-        let (g, st) = (&d.groups[c], &d.stages);
-        let lo = status::DFSPH_ERROR_LO as u64 * 4;
-        let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "dfsph stage");
-        rec.clear_range(&self.status, lo, 8);
-        match stage {
-            S::Factors => self.dispatch_particles(&mut rec, &st.factors, &g.factors),
-            S::DivergenceWarmStart => self.dispatch_particles(&mut rec, &st.divergence_warm_start, &g.divergence_warm_start),
-            S::DivergenceRate => self.dispatch_particles(&mut rec, &st.divergence_rate, &g.divergence_rate),
-            S::DivergenceApply => self.dispatch_particles(&mut rec, &st.divergence_apply, &g.divergence_apply),
-            S::Predict => match (&st.adaptive, &g.adaptive) {
-                (Some([a, choose, p]), Some([ga, gc, gp])) => {
-                    self.dispatch_particles(&mut rec, a, ga);
-                    self.dispatch_one(&mut rec, choose, gc);
-                    self.dispatch_particles(&mut rec, p, gp);
-                }
-                _ => self.dispatch_particles(&mut rec, &st.predict, &g.predict),
-            },
-            S::PressureWarmStart => self.dispatch_particles(&mut rec, &st.pressure_warm_start, &g.pressure_warm_start),
-            S::PredictDensity => self.dispatch_particles(&mut rec, &st.predict_density, &g.predict_density),
-            S::PressureApply => self.dispatch_particles(&mut rec, &st.pressure_apply, &g.pressure_apply),
-        }
-        self.ctx.queue.submit([rec.finish()]);
-        let words = self.read_status()?;
-        Ok(words[status::DFSPH_ERROR_LO] as u64 | (words[status::DFSPH_ERROR_HI] as u64) << 32)
     }
 
     /// DFSPH's arrays in original particle order (for the stage tests): `velocities` are the
@@ -566,7 +507,7 @@ impl GpuSolver {
         Ok(words)
     }
 
-    fn read_status(&self) -> anyhow::Result<[u32; status::WORDS]> {
+    pub(super) fn read_status(&self) -> anyhow::Result<[u32; status::WORDS]> {
         let data = read_buffers(&self.ctx, &[(&self.status, status::BYTES)])?;
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
         Ok(words.try_into().expect("the status buffer has status::WORDS words"))
