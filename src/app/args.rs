@@ -1,8 +1,11 @@
 //! The command line's arguments (clap): the commands, their flags, and how flags map to the
 //! library's choices.
 
+use super::errors::InputError;
 use crate::io::snapshot::format::SnapshotFormat;
+use crate::model::scene::Scene;
 use crate::io::surface::MeshFormat;
+use crate::model::overrides::Override;
 use crate::solver::gpu::{GpuOptions, SolverLoop, WorkgroupSizes};
 use crate::solver::{BackendChoice, Device, Precision};
 use crate::viz::render;
@@ -19,7 +22,8 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Run a scene and write snapshots and a summary (the default command).
+    /// Run a scene and write snapshots and a summary. Without a command, wgsph runs its first
+    /// run: the dam break at a small size, with pictures.
     Run(RunArgs),
     /// List the built-in scenes.
     Scenes,
@@ -35,6 +39,8 @@ pub enum Command {
     Validate(ValidateArgs),
     /// Time each compute stage of the GPU step; bandwidth, interactions/s and memory per particle.
     Profile(ProfileArgs),
+    /// Time the peers' block workload on every path, against the recorded SPlisHSPlasH figure.
+    Bench(BenchArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -61,7 +67,8 @@ pub struct ViewArgs {
 /// `--backend`: which device runs the scene.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
 pub enum BackendArg {
-    /// The GPU when an adapter exists, else the CPU with a warning.
+    /// A hardware GPU when there is one, else the CPU path (a software GPU adapter runs
+    /// slower than the CPU path); says which and why.
     Auto,
     Cpu,
     Gpu,
@@ -93,11 +100,38 @@ impl PrecisionArg {
     }
 }
 
+/// `--snapshot-every`: a number of steps, or a simulated time (`0.02s`).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum SnapshotInterval {
+    Steps(u64),
+    Seconds(f64),
+}
+
+impl std::str::FromStr for SnapshotInterval {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        let t = text.trim();
+        let allowed = "allowed: a number of steps (e.g. 100; 0 for only the first and the last) or a simulated time in seconds (e.g. 0.02s)";
+        if let Some(seconds) = t.strip_suffix('s') {
+            return match seconds.trim().parse::<f64>() {
+                Ok(v) if v.is_finite() && v > 0.0 => Ok(SnapshotInterval::Seconds(v)),
+                _ => Err(format!("'{text}' is not a time > 0; {allowed}")),
+            };
+        }
+        t.parse::<u64>().map(SnapshotInterval::Steps).map_err(|_| format!("'{text}' is not a whole number of steps; {allowed}"))
+    }
+}
+
 #[derive(Args, Debug, Clone)]
 pub struct RunArgs {
     /// A built-in scene name (see `wgsph scenes`) or a path to a scene TOML file.
-    #[arg(default_value = "seed")]
+    #[arg(default_value = "dam_break")]
     pub scene: String,
+    /// Change a field of the scene: its dotted path in the scene file and a value written as
+    /// in TOML (`--set time.dt=1e-4 --set physics.viscosity=0`); repeated; checked like the file.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<Override>,
     /// Number of steps to run (default: up to the scene's end time).
     #[arg(long, conflicts_with = "time")]
     pub steps: Option<u64>,
@@ -111,12 +145,13 @@ pub struct RunArgs {
     pub precision: PrecisionArg,
     #[command(flatten)]
     pub gpu: GpuTuning,
-    /// Output directory.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Write a snapshot every K steps (default: about 50 per run; 0: only the first and last).
+    /// Output directory (default: a new one per run, out/SCENE-001, out/SCENE-002, ...).
     #[arg(long)]
-    pub snapshot_every: Option<u64>,
+    pub out: Option<PathBuf>,
+    /// Write a snapshot every K steps, or at the first step reaching each multiple of a
+    /// simulated time (`0.02s`) (default: about 50 per run; 0: only the first and last).
+    #[arg(long, value_name = "K|Ts")]
+    pub snapshot_every: Option<SnapshotInterval>,
     /// Refine or coarsen the scene to about N fluid particles (spacings, h and dt scale together).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub particles: Option<u64>,
@@ -130,15 +165,16 @@ pub struct RunArgs {
     /// No progress bar and no summary line (warnings and errors are still printed).
     #[arg(long, short)]
     pub quiet: bool,
-    /// Replace the output directory if it exists and is not empty (otherwise that is refused).
-    #[arg(long)]
+    /// Replace the earlier wgsph run in --out (and --frames): only the files a run writes are
+    /// replaced, and only in a directory a wgsph run wrote.
+    #[arg(long, requires = "out")]
     pub overwrite: bool,
     /// Write the full state to DIR/checkpoint.wgsph every K steps (0: never).
     #[arg(long, default_value_t = 0, value_name = "K")]
     pub checkpoint_every: u64,
     /// Continue the run in DIR from its checkpoint, to the end it was heading to (or for
     /// --steps N / --time T more); scene and settings come from the checkpoint.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format", "frames"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "sets", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format", "frames"])]
     pub resume: Option<PathBuf>,
     /// Reconstruct the fluid surface (marching cubes over an SPH density field, splashsurf)
     /// every K steps into DIR/surface/step_NNNNNN.obj (0: never).
@@ -188,12 +224,19 @@ impl PictureArgs {
     }
 }
 
-impl Default for RunArgs {
-    fn default() -> Self {
-        match Cli::parse_from(["wgsph", "run"]).command {
+impl RunArgs {
+    /// The arguments of `wgsph run ARGS...`.
+    pub fn parse_from<'a>(args: impl IntoIterator<Item = &'a str>) -> Self {
+        match Cli::parse_from(["wgsph", "run"].into_iter().chain(args)).command {
             Some(Command::Run(args)) => args,
             _ => unreachable!("`wgsph run` parses to the run command"),
         }
+    }
+}
+
+impl Default for RunArgs {
+    fn default() -> Self {
+        RunArgs::parse_from([])
     }
 }
 
@@ -309,7 +352,68 @@ pub struct ValidateArgs {
     pub out: PathBuf,
     #[arg(long, value_enum, default_value_t = Resolution::Default)]
     pub resolution: Resolution,
-    /// The GPU path by default (the CPU when no adapter exists, with a warning).
+    /// A hardware GPU when there is one, else the CPU path (see `wgsph run --help`).
     #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
     pub backend: BackendArg,
+}
+
+/// A path `wgsph bench` times.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BenchPath {
+    CpuF32,
+    CpuF64,
+    Gpu,
+}
+
+/// `wgsph bench`.
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    /// n^3 fluid particles (the peers were measured at 20, 30 and 40).
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u32).range(2..=400))]
+    pub n: u32,
+    /// Steps to time (after one warm-up step).
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: u64,
+    /// The paths to time, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::Gpu])]
+    pub paths: Vec<BenchPath>,
+    /// Threads of the CPU paths (default: every core).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    pub threads: Option<u16>,
+    /// The GPU path on every adapter with compute shaders, not only the one a run would choose.
+    #[arg(long)]
+    pub every_adapter: bool,
+    /// Also write the figures to this JSON file.
+    #[arg(long, value_name = "FILE.json")]
+    pub out: Option<PathBuf>,
+}
+
+/// The scene a command runs: `SCENE` loaded, at `--particles N` where given, with a warning
+/// line on stderr for each fluid block that its particle lattice does not fill exactly (unless
+/// `quiet`).
+pub fn load_scene(name: &str, particles: Option<u64>, quiet: bool) -> anyhow::Result<Scene> {
+    let mut scene = Scene::load(name)?;
+    if let Some(n) = particles {
+        scene = at_particles(&scene, n)?;
+    }
+    warn_lattice(&scene, quiet);
+    Ok(scene)
+}
+
+/// `scene` at about `n` fluid particles (`--particles N`): refused, naming the fewest the scene
+/// allows, where that is too coarse.
+pub fn at_particles(scene: &Scene, n: u64) -> anyhow::Result<Scene> {
+    let scene = scene.at_fluid_particles(n).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    scene.validate(&crate::model::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    Ok(scene)
+}
+
+/// One warning line on stderr for each fluid block of `scene` that its particle lattice does
+/// not fill exactly (none when `quiet`).
+pub fn warn_lattice(scene: &Scene, quiet: bool) {
+    if !quiet {
+        for line in scene.lattice_changes() {
+            eprintln!("warning: {line}");
+        }
+    }
 }

@@ -1,12 +1,11 @@
 //! `wgsph compare`: the GPU against the f64 CPU reference from the same state, every field.
 
 use super::args::CompareArgs;
-use crate::model::scene::Scene;
 use crate::solver::compare::{many_steps, step_and_compare, ONE_STEP};
 use crate::solver::{open, BackendChoice, Precision};
 
 pub fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
-    let scene = Scene::load(&args.scene)?;
+    let scene = super::args::load_scene(&args.scene, None, false)?;
     let mut gpu = open(&scene, &BackendChoice::gpu())?.into_backend();
     let mut cpu = open(&scene, &BackendChoice::cpu(Precision::F64))?.into_backend();
     println!("{}: {} fluid + {} wall particles; gpu {} against cpu f64", scene.name, gpu.fluid_count(), gpu.wall_count(), gpu.adapter());

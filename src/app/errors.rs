@@ -1,6 +1,7 @@
 //! Errors in what the user gave, and the process exit codes: 0 success, 1 a run that went bad
-//! or a failed check, 2 bad input (a scene, a flag, an unusable path, a scene beyond the
-//! adapter's limits).
+//! or a failed check, 2 bad input (a scene, a flag, an unusable path, a GPU asked for where
+//! there is none, a scene beyond the adapter's limits), 130 / 143 a run stopped by SIGINT /
+//! SIGTERM (see `run::report_run`).
 
 use crate::io::rundir::RunDirError;
 use crate::model::scene::SceneError;
@@ -14,8 +15,9 @@ pub struct InputError(pub String);
 
 /// The exit code of a command that failed with `e`.
 pub fn exit_code(e: &anyhow::Error) -> i32 {
-    // A scene or a setting beyond what the adapter allows is bad input too.
-    let too_big = e.downcast_ref::<GpuMemoryError>().is_some() || matches!(e.downcast_ref::<GpuError>(), Some(GpuError::Limit { .. }));
+    // A scene or a setting beyond what the adapter allows, or no adapter for --backend gpu, is
+    // bad input too.
+    let too_big = e.downcast_ref::<GpuMemoryError>().is_some() || e.downcast_ref::<GpuError>().is_some();
     let bad_input = e.downcast_ref::<SceneError>().is_some() || e.downcast_ref::<InputError>().is_some() || e.downcast_ref::<RunDirError>().is_some();
     if too_big || bad_input {
         2

@@ -2,27 +2,44 @@
 //! floor; it imports every other.
 
 pub mod args;
+pub mod bench;
 pub mod compare;
 pub mod errors;
+pub mod first_run;
 pub mod profile;
 pub mod resume;
 pub mod run;
+pub mod signals;
 pub mod tradeoff;
 pub mod validate;
 
 use crate::model::builtin::BUILTIN_SCENES;
-use crate::model::scene::{Scene, SceneOrigin};
-use args::{Cli, Command, RunArgs, ViewArgs};
+use args::{Cli, Command, ViewArgs};
 use clap::Parser;
 use errors::InputError;
 
 /// Parses the command line, runs it and returns the process exit code:
-/// 0 success, 1 a run that went bad or a failed check, 2 bad input.
+/// 0 success, 1 a run that went bad or a failed check, 2 bad input, 130 / 143 a run stopped
+/// by SIGINT / SIGTERM.
 pub fn main() -> i32 {
     let cli = Cli::parse();
     let quiet = matches!(&cli.command, Some(Command::Run(a)) if a.quiet);
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(if quiet { "error" } else { "warn" })).init();
-    let result = match cli.command.unwrap_or(Command::Run(RunArgs::default())) {
+    let result = match cli.command {
+        None => first_run::cmd_first_run(),
+        Some(command) => run_command(command),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            errors::exit_code(&e)
+        }
+    }
+}
+
+fn run_command(command: Command) -> anyhow::Result<i32> {
+    match command {
         Command::Run(args) => match &args.resume {
             Some(dir) => resume::resume_run(dir, &args),
             None => run::cmd_run(&args),
@@ -32,6 +49,7 @@ pub fn main() -> i32 {
         Command::Tradeoff(args) => tradeoff::cmd_tradeoff(&args),
         Command::Validate(args) => validate::cmd_validate(&args),
         Command::Profile(args) => profile::cmd_profile(&args),
+        Command::Bench(args) => bench::cmd_bench(&args),
         Command::Adapters => {
             let lines = crate::solver::gpu::device::describe_adapters();
             if lines.is_empty() {
@@ -48,13 +66,6 @@ pub fn main() -> i32 {
             }
             Ok(0)
         }
-    };
-    match result {
-        Ok(code) => code,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            errors::exit_code(&e)
-        }
     }
 }
 
@@ -63,11 +74,7 @@ fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
     if args.picture.style == crate::viz::render::Style::Mesh {
         return Err(InputError("--style mesh is for `wgsph run --frames` (the surface is reconstructed on the host, too slowly for a window); `wgsph view` takes --style particles or surface".into()).into());
     }
-    let mut scene = Scene::load(&args.scene)?;
-    if let Some(n) = args.particles {
-        scene = scene.with_fluid_particles(n);
-        scene.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
-    }
+    let scene = args::load_scene(&args.scene, args.particles, false)?;
     let dt = scene.time.dt;
     let steps_per_frame = args.steps_per_frame.unwrap_or_else(|| ((1.0 / 60.0 / dt).ceil() as u64).clamp(1, 64));
     crate::viz::view::view(

@@ -5,12 +5,11 @@
 //! has `TIMESTAMP_QUERY`; elsewhere only whole steps are timed on the host (submit and wait).
 
 use super::args::ProfileArgs;
-use super::errors::InputError;
 use crate::io::atomic::write_atomic;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients};
 use crate::model::params::Params;
 use crate::model::real::V3;
-use crate::model::scene::{Scene, SceneOrigin};
+use crate::model::scene::Scene;
 use crate::solver::gpu::memory::MemoryPlan;
 use crate::solver::gpu::schedule::{DFSPH_PROFILED_STAGES, PROFILED_STAGES};
 use crate::solver::gpu::{GpuContext, GpuOptions};
@@ -310,11 +309,7 @@ impl Profile {
 }
 
 pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
-    let mut scene = Scene::load(&args.scene)?;
-    if let Some(n) = args.particles {
-        scene = scene.with_fluid_particles(n);
-        scene.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
-    }
+    let scene = super::args::load_scene(&args.scene, args.particles, false)?;
     let options = GpuOptions { single_cells: args.single_cells, ..args.tuning.options() };
     let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
     print!("{}", profile.table());

@@ -3,7 +3,9 @@
 use super::args::RunArgs;
 use super::errors::InputError;
 use super::run::{report_run, run, steps_for_time, ResumedRun, RunOptions};
+use super::signals;
 use crate::io::checkpoint::{read, Checkpoint, CHECKPOINT_FILE};
+use crate::io::rundir::remove_partial_files;
 use crate::io::summary::Summary;
 use crate::model::scene::{Scene, SceneOrigin};
 use crate::solver::{open, Backend, BackendChoice, Precision};
@@ -38,6 +40,13 @@ pub fn resume_run(dir: &Path, args: &RunArgs) -> anyhow::Result<i32> {
         ))
         .into());
     }
+    // A run killed while writing left partial files of the atomic writer: they go first.
+    let removed = remove_partial_files(dir)?;
+    if !removed.is_empty() && !args.quiet {
+        let names: Vec<String> = removed.iter().map(|p| p.display().to_string()).collect();
+        println!("removed {} partial file(s) the interrupted run left: {}", removed.len(), names.join(", "));
+    }
+    signals::install();
     let mut sim = open(&scene, &choice_of_kind(&c.state.kind)?)?;
     let backend = sim.backend();
     // The CPU path gives the same bits with any number of threads; a GPU may not on another adapter.
@@ -62,6 +71,7 @@ pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u
         steps: end.saturating_sub(step),
         out: dir.to_path_buf(),
         snapshot_every: c.run.snapshot_every,
+        snapshot_interval: c.run.snapshot_interval,
         check_every: c.run.check_every,
         progress,
         formats: c.run.formats.clone(),
@@ -71,6 +81,7 @@ pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u
         end_time: c.run.end_time,
         surface_mesh_every: c.run.surface_mesh_every,
         surface_mesh_format: c.run.surface_mesh_format,
+        start: None,
     };
     let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::Text)?;
     run(backend, &scene, &opts)

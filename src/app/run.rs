@@ -1,21 +1,24 @@
 //! `wgsph run`: the run loop steps a backend, writes snapshots, checkpoints, frames and the
 //! summary, and stops with a diagnosis when the state goes bad.
 
-use super::args::RunArgs;
+use super::args::{RunArgs, SnapshotInterval};
 use super::errors::InputError;
+use super::signals::{self, StopSignal};
 use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
-use crate::io::rundir::{prepare_out_dir, write_scene_copy};
+use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, StartGuard};
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::snapshot::SnapshotWriter;
-use crate::io::summary::{write_summary, DfsphSummary, Summary};
+use crate::io::summary::{write_summary, DfsphSummary, RunStatus, Summary, SUMMARY_FILE};
 use crate::io::surface::{write_snapshot_surface, MeshFormat, SurfaceParameters};
-use crate::model::diagnosis::{diagnose, diagnose_at};
 use crate::model::params::Params;
 use crate::model::scene::{Scene, SceneOrigin};
 use crate::model::state::Snapshot;
+use crate::model::diagnosis::regime_warnings;
+use crate::solver::backend::diagnose_failure;
 use crate::solver::{open, Backend};
 use crate::viz::render::frames::FrameRecorder;
 use crate::viz::render::RenderOptions;
+use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -33,6 +36,9 @@ pub struct RunOptions {
     pub out: PathBuf,
     /// Write a snapshot every this many steps (0: only the first and the last).
     pub snapshot_every: u64,
+    /// Write a snapshot at the first step reaching each multiple of this simulated time (with
+    /// `snapshot_every` 0).
+    pub snapshot_interval: Option<f64>,
     /// Read the health counters every this many steps.
     pub check_every: u64,
     pub progress: bool,
@@ -50,6 +56,9 @@ pub struct RunOptions {
     /// Reconstruct the fluid surface every this many steps (0: never), into `DIR/surface/`.
     pub surface_mesh_every: u64,
     pub surface_mesh_format: MeshFormat,
+    /// The start of a new run, committed once the run took its first step; an error before
+    /// then returns with the start still uncommitted (dropping it undoes the start).
+    pub start: Option<StartGuard>,
 }
 
 /// What a resumed run takes over from the run that wrote its checkpoint.
@@ -65,6 +74,7 @@ impl Default for RunOptions {
             steps: 0,
             out: PathBuf::from("out"),
             snapshot_every: 0,
+            snapshot_interval: None,
             check_every: 50,
             progress: false,
             formats: vec![SnapshotFormat::Csv],
@@ -74,6 +84,7 @@ impl Default for RunOptions {
             end_time: None,
             surface_mesh_every: 0,
             surface_mesh_format: MeshFormat::Obj,
+            start: None,
         }
     }
 }
@@ -89,11 +100,15 @@ pub fn default_snapshot_every(steps: u64) -> u64 {
     (steps / 50).max(1)
 }
 
-/// Runs `opts.steps` steps, writing `out/snapshots/step_*.{csv,vtk,ply}`, `out/summary.json` and
-/// checkpoints.
-/// Returns the summary; `summary.failure` is set when the state went bad.
+/// Runs `opts.steps` steps, writing `out/snapshots/step_*.{csv,vtk,ply}`, their index,
+/// `out/summary.json` and checkpoints. Returns the summary, whose `status` and `failure` say
+/// how the run ended: the state went bad, an output could not be written (the summary names
+/// the step and the file), or SIGINT/SIGTERM stopped it (after the batch of steps under way,
+/// with a checkpoint when checkpoints are on). An error before the first step is returned as
+/// an error, without a summary (the caller undoes the start).
 pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summary> {
-    std::fs::create_dir_all(opts.out.join("snapshots"))?;
+    let snapshots_dir = opts.out.join("snapshots");
+    std::fs::create_dir_all(&snapshots_dir).with_context(|| format!("cannot create {}", snapshots_dir.display()))?;
     let params = backend.params().clone();
     let start = backend.steps_done();
     let end = start + opts.steps;
@@ -113,25 +128,35 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut last_snapshot: Option<PathBuf> = resumed.last_snapshot;
     let mut max_speed = resumed.max_speed;
     let mut failure = None;
+    let mut snapshots_written = 0u64;
+    let checkpoint_path = opts.out.join(CHECKPOINT_FILE);
+    let mut last_checkpoint = (opts.resumed.is_some() && checkpoint_path.exists()).then(|| checkpoint_path.clone());
     let mut writer = snapshot_writer(opts, start)?;
     let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
-        // Streamed where the backend can (the GPU): no host copy of every array.
-        if let Some(written) = writer.write_streamed(backend) {
-            (*last, *max_speed) = written.map(|(path, speed)| (Some(path), speed))?;
-            return Ok(None);
-        }
-        let s = backend.snapshot()?;
-        *max_speed = s.max_speed();
-        *last = Some(writer.write(&s)?);
-        Ok(Some(s))
+        let step = backend.steps_done();
+        let s = (|| -> anyhow::Result<Option<Snapshot>> {
+            // Streamed where the backend can (the GPU): no host copy of every array.
+            if let Some(written) = writer.write_streamed(backend) {
+                (*last, *max_speed) = written.map(|(path, speed)| (Some(path), speed))?;
+                return Ok(None);
+            }
+            let s = backend.snapshot()?;
+            *max_speed = s.max_speed();
+            *last = Some(writer.write(&s)?);
+            Ok(Some(s))
+        })()
+        .with_context(|| format!("step {step}: writing the snapshot"))?;
+        snapshots_written += 1;
+        Ok(s)
     };
     let surface = SurfaceParameters::for_scene(&params, scene.physics.particle_spacing);
     let write_surface = |backend: &mut dyn Backend, snapshot: Option<Snapshot>| -> anyhow::Result<()> {
+        let step = backend.steps_done();
         let s = match snapshot {
             Some(s) => s,
             None => backend.snapshot()?,
         };
-        write_snapshot_surface(&opts.out, &s, &surface, opts.surface_mesh_format)?;
+        write_snapshot_surface(&opts.out, &s, &surface, opts.surface_mesh_format).with_context(|| format!("step {step}: writing the surface mesh"))?;
         Ok(())
     };
     if opts.resumed.is_none() {
@@ -145,29 +170,64 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         None => None,
     };
     if let Some(f) = &mut frames {
-        f.capture(backend)?;
+        f.capture(backend).with_context(|| format!("step {start}: drawing the first picture"))?;
     }
+    // With a snapshot interval in simulated time: the next time a snapshot is due.
+    let next_multiple = |interval: f64, time: f64| ((time / interval + 1e-9).floor() + 1.0) * interval;
+    let mut next_snapshot_time = opts.snapshot_interval.map(|i| next_multiple(i, backend.time()));
     let mut step = start;
     let mut end = end;
     let mut warned_unconverged = false;
+    let mut started = false;
+    let mut stopped_by: Option<StopSignal> = None;
+    let outcome = (|| -> anyhow::Result<()> {
     while step < end {
+        if started {
+            if let Some(signal) = signals::requested() {
+                stopped_by = Some(signal);
+                break;
+            }
+        }
         // The next step at which anything is due (an interval of 0 is never due).
         let next = |every: u64| if every > 0 { (step / every + 1) * every } else { end };
         let mut target = [opts.snapshot_every, opts.check_every.max(1), opts.checkpoint_every, opts.surface_mesh_every, frames.as_ref().map_or(0, |f| f.every)]
             .into_iter()
             .map(next)
             .fold(end, u64::min);
+        // With adaptive dt, or a snapshot due at a simulated time: the step at which a time is
+        // reached is known only as the run gets there.
+        let dt = match (opts.end_time.is_some() || next_snapshot_time.is_some(), params.adaptive.is_some()) {
+            (false, _) => 0.0,
+            (true, true) => backend.dt_stats()?.last,
+            (true, false) => params.dt,
+        };
+        let steps_to = |t: f64, halve: bool| -> u64 {
+            let left = t - backend.time();
+            match (dt > 0.0, halve) {
+                // Before the first adaptive step there is no dt yet: take one.
+                (false, _) => 1,
+                // Adaptive dt: about half the time left at the current dt, so that the run
+                // ends at the first step reaching the time.
+                (true, true) => ((0.5 * left / dt).floor() as u64).max(1),
+                (true, false) => ((left / dt - 1e-6).ceil() as u64).max(1),
+            }
+        };
         if let Some(t_end) = opts.end_time {
-            // Adaptive dt: steps of about half the time left, at the current dt, so that the
-            // run ends at the first step reaching t_end.
-            let dt = backend.dt_stats()?.last;
-            let left = t_end - backend.time();
-            // Before the first step there is no dt yet: take one.
-            let chunk = if dt > 0.0 { ((0.5 * left / dt).floor() as u64).max(1) } else { 1 };
-            target = target.min(step + chunk);
+            target = target.min(step + steps_to(t_end, true));
+        }
+        if let Some(t) = next_snapshot_time {
+            target = target.min(step + steps_to(t, params.adaptive.is_some()));
         }
         backend.step(target - step)?;
         step = backend.steps_done();
+        if !started {
+            started = true;
+            if let Some(guard) = &opts.start {
+                if let Err(e) = guard.commit() {
+                    eprintln!("warning: {e:#}");
+                }
+            }
+        }
         // With adaptive dt the time is read from the GPU: once per batch.
         let time = backend.time();
         if opts.end_time.is_some_and(|t_end| time >= t_end) {
@@ -183,44 +243,67 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             b.set_message(format!("t = {time:.3}"));
         }
         if !health.is_ok() {
-            failure = Some(if params.adaptive.is_some() {
-                let last = Params { dt: backend.dt_stats()?.last, ..params.clone() };
-                diagnose_at(&last, &health, max_speed, time)
-            } else {
-                diagnose(&params, &health, max_speed)
-            });
+            failure = Some(diagnose_failure(backend, scene)?);
             break;
         }
+        let time_due = match (next_snapshot_time, opts.snapshot_interval) {
+            (Some(t), Some(interval)) => time >= t - 1e-9 * interval,
+            _ => false,
+        };
         let mut snapshot = None;
-        if step == end || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
+        if step == end || time_due || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
             snapshot = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+            if let Some(interval) = opts.snapshot_interval {
+                next_snapshot_time = Some(next_multiple(interval, time));
+            }
         }
         if opts.surface_mesh_every > 0 && step % opts.surface_mesh_every == 0 {
             write_surface(backend, snapshot)?;
         }
         if let Some(f) = &mut frames {
             if step == end || step % f.every == 0 {
-                f.capture(backend)?;
+                f.capture(backend).with_context(|| format!("step {step}: drawing a picture"))?;
             }
         }
         if opts.checkpoint_every > 0 && step % opts.checkpoint_every == 0 {
-            let path = opts.out.join(CHECKPOINT_FILE);
-            let record = run_record(backend, opts, end, last_snapshot.as_deref(), max_speed);
-            checkpoint::save(backend, &scene.to_toml(), &record, &path)?;
-            log::info!("wrote {} at step {step}", path.display());
+            write_checkpoint(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
+            last_checkpoint = Some(checkpoint_path.clone());
         }
     }
+    if stopped_by.is_some() && opts.checkpoint_every > 0 && step % opts.checkpoint_every != 0 {
+        // Stopped between checkpoints: one more, so that nothing computed is lost.
+        write_checkpoint(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
+        last_checkpoint = Some(checkpoint_path.clone());
+    }
+    Ok(())
+    })();
     let frames_written = match frames {
-        Some(f) => f.finish()?,
-        None => 0,
+        // The pictures under way are finished either way.
+        Some(f) => f.finish(),
+        None => Ok(0),
     };
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+    let error = match (outcome, frames_written.as_ref()) {
+        (Err(e), _) if !started => return Err(e),
+        (Err(e), _) => Some(e),
+        (Ok(()), Err(e)) => Some(anyhow::anyhow!("writing the pictures: {e:#}")),
+        (Ok(()), Ok(_)) => None,
+    };
+    let frames_written = frames_written.unwrap_or(0);
     let wall_seconds = t0.elapsed().as_secs_f64();
     let health = backend.health()?;
     let steps = backend.steps_done() - start;
     let dt_stats = backend.dt_stats()?;
+    let (status, failure) = match (stopped_by, &error, failure) {
+        (_, Some(e), _) => (RunStatus::Error, Some(format!("{e:#}"))),
+        (_, None, Some(f)) => (RunStatus::Failed, Some(f)),
+        (Some(signal), None, None) => {
+            (RunStatus::Interrupted, Some(format!("interrupted by {} at step {} (t = {:.6})", signal.name(), backend.steps_done(), backend.time())))
+        }
+        (None, None, None) => (RunStatus::Completed, None),
+    };
     let summary = Summary {
         scene: scene.name.clone(),
         backend: backend.kind().into(),
@@ -236,16 +319,41 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         wall_seconds,
         particle_steps_per_second: if wall_seconds > 0.0 { (steps as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
         max_density_ratio: health.max_density / params.rest_density,
-        nan_count: health.non_finite,
-        escaped: health.escaped,
+        nan_count: health.bad_counts().0,
+        escaped: health.bad_counts().1,
         failure: failure.clone(),
         last_snapshot: last_snapshot.as_ref().map(|p| p.display().to_string()),
         frames: frames_written,
+        status,
+        last_checkpoint: last_checkpoint.as_ref().map(|p| p.display().to_string()),
+        snapshots: snapshots_written,
         // Over the whole run (a resumed run's counts continue from its checkpoint).
         dfsph: health.iterations.map(|it| DfsphSummary::of(&it, backend.steps_done())),
+        max_mach: (params.speed_of_sound() > 0.0).then(|| health.max_speed / params.speed_of_sound()),
+        warnings: regime_warnings(&params, &health),
     };
-    write_summary(&opts.out.join("summary.json"), &summary)?;
+    // The run stands (a run of no steps too): its start is no longer undone.
+    if let Some(guard) = &opts.start {
+        if let Err(e) = guard.commit() {
+            eprintln!("warning: {e:#}");
+        }
+    }
+    let summary_path = opts.out.join(SUMMARY_FILE);
+    write_summary(&summary_path, &summary).with_context(|| match &failure {
+        Some(f) => format!("the run stopped ({f}), and its summary could not be written either"),
+        None => "writing the summary".to_string(),
+    })?;
     Ok(summary)
+}
+
+/// Writes the run's checkpoint (`DIR/checkpoint.wgsph`) at the backend's step.
+fn write_checkpoint(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions, end: u64, last_snapshot: Option<&Path>, max_speed: f64) -> anyhow::Result<()> {
+    let path = opts.out.join(CHECKPOINT_FILE);
+    let step = backend.steps_done();
+    let record = run_record(backend, opts, end, last_snapshot, max_speed);
+    checkpoint::save(backend, &scene.to_toml(), &record, &path).with_context(|| format!("step {step}: writing the checkpoint"))?;
+    log::info!("wrote {} at step {step}", path.display());
+    Ok(())
 }
 
 /// Warns once when a DFSPH solve stopped at its iteration limit above its tolerance: the run
@@ -286,6 +394,27 @@ pub fn summary_line(s: &Summary, out: &Path) -> String {
     )
 }
 
+/// The scene of `wgsph run`: the file or built-in scene, with `--set` and `--particles`.
+pub fn run_scene(args: &RunArgs) -> anyhow::Result<Scene> {
+    let mut scene = Scene::load(&args.scene)?;
+    let origin = match Scene::builtin(&args.scene) {
+        Some(_) => SceneOrigin::BuiltIn(args.scene.clone()),
+        None => SceneOrigin::File(PathBuf::from(&args.scene)),
+    };
+    scene = scene.with_overrides(&args.sets, &origin)?;
+    if let Some(n) = args.particles {
+        scene = super::args::at_particles(&scene, n)?;
+    }
+    Ok(scene)
+}
+
+/// What is odd about a built-in scene, said in one line when it runs.
+fn scene_note(name: &str) -> Option<&'static str> {
+    (name == "seed").then_some(
+        "note: `seed` is the seed report's scene as published: its fluid is so soft (k = 2 Pa, sound at 4.5 cm/s) that it collapses into dense strands on the floor (max rho/rho0 near 30); `wgsph run dam_break` shows water",
+    )
+}
+
 /// `wgsph run` (without `--resume`): a new run.
 pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
     if let Some(t) = args.time {
@@ -293,11 +422,8 @@ pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
             return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
         }
     }
-    let mut scene = Scene::load(&args.scene)?;
-    if let Some(n) = args.particles {
-        scene = scene.with_fluid_particles(n);
-        scene.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
-    }
+    let scene = run_scene(args)?;
+    super::args::warn_lattice(&scene, args.quiet);
     let params = scene.params();
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
     if args.checkpoint_every > 0 && params.rebuild_every > 1 {
@@ -307,15 +433,37 @@ pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
         ))
         .into());
     }
-    prepare_out_dir(&args.out, args.overwrite)?;
-    write_scene_copy(&args.out, &scene)?;
+    // Every output location is checked before anything is written or removed.
+    let out = args.out.clone().unwrap_or_else(|| numbered_run_dir(Path::new("out"), &scene.name));
+    let scene_file = Scene::builtin(&args.scene).is_none().then(|| PathBuf::from(&args.scene));
+    let inputs: Vec<&Path> = scene_file.iter().map(PathBuf::as_path).collect();
+    let outputs = RunOutputs::check(&out, args.frames.as_deref(), args.overwrite, args.out.is_none(), &inputs)?;
+    for (dir, names) in outputs.kept() {
+        eprintln!("note: --overwrite keeps {} in {}: no wgsph run wrote it", names.join(", "), dir.display());
+    }
+    if let (Some(note), false) = (scene_note(&args.scene), args.quiet) {
+        println!("{note}");
+    }
+    signals::install();
+    let mut sim = open(&scene, &args.backend_choice())?;
+    if !args.quiet {
+        println!("backend: {}", sim.backend_reason());
+    }
+    // From here on the directories are changed; a failure before the first step undoes it.
+    let start = outputs.prepare()?;
+    write_scene_copy(&out, &scene)?;
     // With adaptive dt a run to a time has no step count known in advance.
     let end_time = (params.adaptive.is_some() && args.steps.is_none()).then(|| args.time.unwrap_or(params.end_time));
-    let mut sim = open(&scene, &args.backend_choice())?;
+    let (snapshot_every, snapshot_interval) = match args.snapshot_every {
+        None => (default_snapshot_every(steps), None),
+        Some(SnapshotInterval::Steps(k)) => (k, None),
+        Some(SnapshotInterval::Seconds(t)) => (0, Some(t)),
+    };
     let opts = RunOptions {
         steps: if end_time.is_some() { u64::MAX / 4 } else { steps },
-        out: args.out.clone(),
-        snapshot_every: args.snapshot_every.unwrap_or_else(|| default_snapshot_every(steps)),
+        out: out.clone(),
+        snapshot_every,
+        snapshot_interval,
         check_every: args.check_every,
         progress: !args.quiet,
         formats: args.formats.clone(),
@@ -329,28 +477,75 @@ pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
         end_time,
         surface_mesh_every: args.surface_mesh_every,
         surface_mesh_format: args.surface_mesh_format,
+        start: Some(start),
     };
     let summary = run(sim.backend(), &scene, &opts)?;
-    if let (Some(dir), false) = (&args.frames, args.quiet) {
-        println!("{} pictures in {}", summary.frames, dir.display());
+    let code = report_run(&summary, &out, args.quiet)?;
+    if !args.quiet {
+        print_outputs(&summary, &out, args.frames.as_deref(), &args.formats);
     }
-    report_run(&summary, &args.out, args.quiet)
+    Ok(code)
 }
 
-/// Prints the end of a run (the summary line unless quiet; the failure, if any) and returns
-/// its exit code.
+/// A short account of what a run wrote where.
+pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[SnapshotFormat]) {
+    let names: Vec<&str> = formats.iter().map(|f| f.extension()).collect();
+    println!("wrote {}:", out.display());
+    let plural = if s.snapshots == 1 { "" } else { "s" };
+    println!("  snapshots/     {} snapshot{plural} ({}); the step and time of each in snapshots/index.csv", s.snapshots, names.join(", "));
+    if let Some(dir) = frames {
+        let shown = match s.frames {
+            0 => String::new(),
+            1 => format!(": {}", crate::io::rundir::frame_file_name(0)),
+            n => format!(": {} to {}", crate::io::rundir::frame_file_name(0), crate::io::rundir::frame_file_name(n - 1)),
+        };
+        let dir = match dir.strip_prefix(out) {
+            Ok(inside) => format!("{}/", inside.display()),
+            Err(_) => dir.display().to_string(),
+        };
+        println!("  {dir:<13}  {} picture{}{shown}", s.frames, if s.frames == 1 { "" } else { "s" });
+    }
+    if s.last_checkpoint.is_some() {
+        println!("  checkpoint.wgsph  the state to continue from with `wgsph run --resume {}`", out.display());
+    }
+    println!("  summary.json   what the run did and how it ended");
+    println!("  scene.toml     the scene as run (`wgsph run {}` runs it again)", out.join("scene.toml").display());
+}
+
+/// Prints the end of a run (the summary line unless quiet; how it stopped, if it did) and
+/// returns its exit code: 0 completed, 1 the state went bad or an output could not be written,
+/// 130 / 143 interrupted by SIGINT / SIGTERM.
 pub fn report_run(summary: &Summary, out: &std::path::Path, quiet: bool) -> anyhow::Result<i32> {
     if !quiet {
         println!("{}", summary_line(summary, out));
-    }
-    if let Some(f) = &summary.failure {
-        eprintln!("error: the run stopped at {f}");
-        if let Some(s) = &summary.last_snapshot {
-            eprintln!("the last good snapshot is {s}; the summary is {}", out.join("summary.json").display());
+        for w in &summary.warnings {
+            eprintln!("warning: {w}");
         }
-        return Ok(1);
     }
-    Ok(0)
+    let summary_path = out.join(SUMMARY_FILE);
+    match summary.status {
+        RunStatus::Completed => Ok(0),
+        RunStatus::Interrupted => {
+            eprintln!("{}; the summary is {}", summary.failure.as_deref().unwrap_or("interrupted"), summary_path.display());
+            match &summary.last_checkpoint {
+                Some(c) => eprintln!("to continue from the checkpoint {c}: wgsph run --resume {}", out.display()),
+                None => eprintln!("no checkpoint was written, so the run cannot be continued (--checkpoint-every K writes them)"),
+            }
+            Ok(signals::requested().unwrap_or(StopSignal::Interrupt).exit_code())
+        }
+        RunStatus::Failed | RunStatus::Error => {
+            let f = summary.failure.as_deref().unwrap_or("an unknown failure");
+            if summary.status == RunStatus::Failed {
+                eprintln!("error: the run stopped at {f}");
+            } else {
+                eprintln!("error: the run stopped: {f}");
+            }
+            if let Some(s) = &summary.last_snapshot {
+                eprintln!("the last good snapshot is {s}; the summary is {}", summary_path.display());
+            }
+            Ok(1)
+        }
+    }
 }
 
 /// The snapshot writer of a run; a resumed run keeps the series index up to its first step.
@@ -367,6 +562,7 @@ pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_
     RunRecord {
         end_step,
         snapshot_every: opts.snapshot_every,
+        snapshot_interval: opts.snapshot_interval,
         check_every: opts.check_every,
         checkpoint_every: opts.checkpoint_every,
         formats: opts.formats.clone(),

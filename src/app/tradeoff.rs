@@ -20,8 +20,7 @@
 use super::args::TradeoffArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
-use crate::model::diagnosis::diagnose;
-use crate::model::scene::{Boundary, EquationOfState, Kernel, Scene, SceneOrigin};
+use crate::model::scene::{Boundary, EquationOfState, Kernel, Scene};
 use crate::model::state::Snapshot;
 use crate::solver::compare::{diff as distance, rms};
 use crate::solver::{open, Backend, BackendChoice, Device, Precision};
@@ -218,7 +217,7 @@ pub fn record(backend: &mut dyn Backend, scene: &Scene, times: &[f64]) -> anyhow
             let health = backend.health()?;
             r.busy += start.elapsed();
             if !health.is_ok() {
-                r.failure = Some(diagnose(&params, &health, r.last.as_ref().map_or(0.0, |s| s.max_speed())));
+                r.failure = Some(crate::solver::backend::diagnose_failure(backend, scene)?);
                 break 'outer;
             }
         }
@@ -306,8 +305,10 @@ fn engine_backend(config: &Config) -> anyhow::Result<Box<dyn Backend>> {
     let choice = match config.engine {
         Engine::CpuF64 => BackendChoice::cpu(Precision::F64),
         Engine::CpuF32 => BackendChoice::cpu(Precision::F32),
-        // Without an adapter the GPU's configurations run on the CPU in f32, its arithmetic.
-        Engine::Gpu => BackendChoice { device: Device::Auto, precision: Precision::F32, ..Default::default() },
+        // The GPU's configurations run on any adapter, a software one too; without one, on
+        // the CPU in f32, its arithmetic.
+        Engine::Gpu if crate::solver::gpu::device::compute_adapters().is_empty() => BackendChoice::cpu(Precision::F32),
+        Engine::Gpu => BackendChoice { device: Device::Gpu, precision: Precision::F32, ..Default::default() },
     };
     Ok(open(&config.scene, &choice)?.into_backend())
 }
@@ -406,8 +407,7 @@ pub fn cmd_tradeoff(args: &TradeoffArgs) -> anyhow::Result<i32> {
         return Err(InputError(format!("--time is {}; must be a finite number > 0", args.time)).into());
     }
     let scene = Scene::load(&args.scene)?;
-    let base = scene.with_fluid_particles(args.particles);
-    base.validate(&SceneOrigin::Text).map_err(|e| InputError(format!("--particles {}: {e}", args.particles)))?;
+    let base = super::args::load_scene(&args.scene, Some(args.particles), false)?;
     std::fs::create_dir_all(&args.out)?;
     let started = Instant::now();
     println!("tradeoff {}: {} fluid particles, {} s simulated, {} samples", scene.name, base.fluid_particle_count(), args.time, args.samples);

@@ -15,7 +15,7 @@
 use crate::io::atomic::AtomicFile;
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::surface::MeshFormat;
-use crate::model::state::BackendState;
+use crate::model::state::{BackendState, BadStep};
 use crate::solver::{Backend, StateArray, StatePiece};
 use anyhow::Context;
 use serde::ser::{Error as _, SerializeSeq, Serializer};
@@ -46,6 +46,9 @@ pub struct RunRecord {
     /// The step the run was heading to.
     pub end_step: u64,
     pub snapshot_every: u64,
+    /// A snapshot at the first step reaching each multiple of this simulated time (instead of
+    /// every `snapshot_every` steps).
+    pub snapshot_interval: Option<f64>,
     pub check_every: u64,
     pub checkpoint_every: u64,
     pub formats: Vec<SnapshotFormat>,
@@ -234,6 +237,8 @@ pub fn write_state_in_pieces(backend: &mut dyn Backend, w: &mut dyn std::io::Wri
         escaped: header.escaped,
         first_bad_step: header.first_bad_step,
         max_density: header.max_density,
+        max_speed: header.max_speed,
+        bad_step: header.bad_step,
         time: header.time,
         dt_min_max_last: header.dt_min_max_last,
         gpu_status: &header.gpu_status,
@@ -263,6 +268,8 @@ struct StateInPieces<'a, 'b> {
     escaped: u64,
     first_bad_step: Option<u64>,
     max_density: f64,
+    max_speed: f64,
+    bad_step: Option<BadStep>,
     time: f64,
     dt_min_max_last: [f64; 3],
     gpu_status: &'a [u32],

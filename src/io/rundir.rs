@@ -1,9 +1,23 @@
-//! The run directory: never clobbered without `--overwrite`, and holding a copy of the exact
-//! scene the run used (`DIR/scene.toml`) beside its outputs.
+//! The run directory: recognised by a marker the run writes first, never clobbered, holding a
+//! copy of the exact scene the run used (`DIR/scene.toml`) beside its outputs.
+//!
+//! A run's output locations (`--out`, and `--frames` when given) are checked before anything
+//! is written or removed: each must be a directory wgsph can write in (or one it can create),
+//! and one that holds anything must be an earlier run's (it has the marker [`MARKER`]), which
+//! only `--overwrite` replaces. Even then only the files a run writes are replaced: anything
+//! else in the directory (a user's notes, the scene file being run) is left alone. The start
+//! of a run is undone if it fails before its first step ([`StartGuard`]): the earlier run's
+//! files are moved aside, not deleted, until then, and put back.
 
-use crate::io::atomic::write_atomic;
+use crate::io::atomic::{is_temporary, write_atomic, TEMP_PREFIX};
+use crate::io::checkpoint::CHECKPOINT_FILE;
+use crate::io::snapshot::index::INDEX_NAME;
+use crate::io::snapshot::vtk::VTK_SERIES_NAME;
+use crate::io::summary::SUMMARY_FILE;
 use crate::model::scene::Scene;
-use std::path::Path;
+use anyhow::Context;
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
 
 /// An output location the user gave that cannot be used (bad input: exit code 2).
 #[derive(Debug, thiserror::Error)]
@@ -12,41 +26,437 @@ pub struct RunDirError(pub String);
 
 /// The copy of the resolved scene in a run directory.
 pub const SCENE_COPY: &str = "scene.toml";
+/// The file that marks a directory as a wgsph run's: written first, it holds the wgsph version
+/// and the time the run started.
+pub const MARKER: &str = ".wgsph-run";
+/// The name prefix of the directory an earlier run's files wait in while `--overwrite` starts
+/// a new run (removed once the new run took its first step, moved back if it did not).
+const REPLACED_PREFIX: &str = ".wgsph-replaced-";
+/// The subdirectories a run writes, and the files it writes in them.
+const SNAPSHOTS_DIR: &str = "snapshots";
+const SURFACE_DIR: &str = "surface";
 
-/// Makes `out` ready for a new run. An existing non-empty directory (or a file) is refused
-/// unless `overwrite` is set, in which case it is removed first. A directory that contains the
-/// working directory is never removed.
-pub fn prepare_out_dir(out: &Path, overwrite: bool) -> anyhow::Result<()> {
-    if out.is_file() {
-        return Err(RunDirError(format!("--out {}: is a file, not a directory", out.display())).into());
+/// The name of frame `index`'s picture: `frame_00000.png`.
+pub fn frame_file_name(index: u64) -> String {
+    format!("frame_{index:05}.png")
+}
+
+/// Whether `name`, in the directory `sub` of a run directory (`None`: the top), is a file a
+/// wgsph run writes there.
+fn is_run_output(sub: Option<&str>, name: &str) -> bool {
+    let numbered = |prefix: &str, extensions: &[&str]| {
+        name.strip_prefix(prefix).and_then(|rest| rest.split_once('.')).is_some_and(|(digits, ext)| {
+            !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()) && extensions.contains(&ext)
+        })
+    };
+    if is_temporary(name) {
+        return true;
     }
-    let non_empty = out.is_dir() && std::fs::read_dir(out)?.next().is_some();
-    if non_empty {
+    match sub {
+        None => [MARKER, SUMMARY_FILE, SCENE_COPY, CHECKPOINT_FILE].contains(&name) || numbered("frame_", &["png"]),
+        Some(SNAPSHOTS_DIR) => numbered("step_", &["csv", "vtk", "ply"]) || name == VTK_SERIES_NAME || name == INDEX_NAME,
+        Some(SURFACE_DIR) => numbered("step_", &["obj", "ply"]),
+        Some(_) => false,
+    }
+}
+
+/// Where the outputs of a run go, checked (nothing written yet).
+#[derive(Debug)]
+pub struct RunOutputs {
+    locations: Vec<Location>,
+    overwrite: bool,
+    /// The default numbered directory: it must still be free when the run starts.
+    numbered: bool,
+}
+
+#[derive(Debug, Clone)]
+struct Location {
+    /// The flag that named it, for messages.
+    flag: &'static str,
+    path: PathBuf,
+    /// Holds an earlier run (the marker is there).
+    earlier_run: bool,
+    /// With `--overwrite`: what is there that a run did not write, and stays.
+    kept: Vec<String>,
+}
+
+impl RunOutputs {
+    /// Checks the output locations of a new run before anything is written or removed: `out`,
+    /// and `frames` when pictures are written. `inputs` are files the run reads (its scene),
+    /// which it must never replace. `numbered`: `out` is the default numbered directory.
+    pub fn check(out: &Path, frames: Option<&Path>, overwrite: bool, numbered: bool, inputs: &[&Path]) -> anyhow::Result<RunOutputs> {
+        let mut locations = vec![Location { flag: "--out", path: out.to_path_buf(), earlier_run: false, kept: Vec::new() }];
+        if let Some(f) = frames {
+            if !same_place(f, out) {
+                locations.push(Location { flag: "--frames", path: f.to_path_buf(), earlier_run: false, kept: Vec::new() });
+            }
+        }
+        for l in &mut locations {
+            (l.earlier_run, l.kept) = check_location(l, overwrite, inputs)?;
+        }
+        Ok(RunOutputs { locations, overwrite, numbered })
+    }
+
+    /// Makes the locations ready for the run: an earlier run's files (with `--overwrite`) are
+    /// moved aside, the directories created and the marker written first. The returned guard
+    /// undoes all of this unless [`StartGuard::commit`] is called once the run took its first
+    /// step.
+    pub fn prepare(self) -> anyhow::Result<StartGuard> {
+        let guard = StartGuard { dirs: Vec::new(), created: Vec::new(), replaced: RefCell::new(Vec::new()), committed: RefCell::new(false) };
+        let mut guard = guard;
+        for (i, l) in self.locations.iter().enumerate() {
+            if i == 0 && self.numbered {
+                // The default directory is new: if another run took it meanwhile, stop.
+                create_missing_parents(&l.path, &mut guard.created)?;
+                std::fs::create_dir(&l.path).map_err(|e| {
+                    RunDirError(format!("cannot create the run directory {}: {e} (another run may have just taken it; run again)", l.path.display()))
+                })?;
+                guard.created.push(l.path.clone());
+            } else {
+                create_missing_parents(&l.path, &mut guard.created)?;
+                if !l.path.exists() {
+                    std::fs::create_dir(&l.path).with_context(|| format!("{} {}: cannot create it", l.flag, l.path.display()))?;
+                    guard.created.push(l.path.clone());
+                }
+            }
+            let subdirs_before = [SNAPSHOTS_DIR, SURFACE_DIR].map(|s| l.path.join(s).is_dir());
+            if l.earlier_run && self.overwrite {
+                let stash = move_outputs_aside(&l.path)?;
+                guard.replaced.borrow_mut().push(stash);
+            }
+            guard.dirs.push((l.path.clone(), subdirs_before));
+            write_marker(&l.path)?;
+        }
+        Ok(guard)
+    }
+
+    /// The run directory (`--out`).
+    pub fn out(&self) -> &Path {
+        &self.locations[0].path
+    }
+
+    /// What `--overwrite` leaves in place because no run wrote it: (directory, names).
+    pub fn kept(&self) -> Vec<(&Path, &[String])> {
+        self.locations.iter().filter(|l| !l.kept.is_empty()).map(|l| (l.path.as_path(), l.kept.as_slice())).collect()
+    }
+}
+
+/// Whether two paths are the same directory (as written, or once both exist).
+fn same_place(a: &Path, b: &Path) -> bool {
+    a == b || matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
+}
+
+/// Checks one output location; returns whether it holds an earlier run, and what of it
+/// `--overwrite` keeps (the names at its top that no run wrote).
+fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Result<(bool, Vec<String>)> {
+    let (flag, path) = (l.flag, &l.path);
+    let bad = |why: String| -> anyhow::Error { RunDirError(format!("{flag} {}: {why}", path.display())).into() };
+    if !path.exists() {
+        // It will be created: its nearest existing ancestor must be a writable directory.
+        let mut ancestor = path.parent();
+        while let Some(a) = ancestor {
+            if a.as_os_str().is_empty() || a.exists() {
+                break;
+            }
+            ancestor = a.parent();
+        }
+        let a = ancestor.filter(|a| !a.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        if !a.is_dir() {
+            return Err(bad(format!("cannot be created: {} is not a directory", a.display())));
+        }
+        probe_writable(a).map_err(|e| bad(format!("cannot be created: cannot write in {}: {e}", a.display())))?;
+        return Ok((false, Vec::new()));
+    }
+    if !path.is_dir() {
+        return Err(bad("is a file, not a directory".into()));
+    }
+    let names = list(path).map_err(|e| bad(format!("cannot read the directory: {e}")))?;
+    let earlier_run = names.iter().any(|n| n == MARKER);
+    let mut kept = Vec::new();
+    if !names.is_empty() {
+        let shown = shown_names(&names);
+        if !earlier_run {
+            return Err(bad(format!(
+                "the directory is not empty (it holds {shown}) and is not a wgsph run directory (it has no {MARKER}); wgsph writes only into a new or empty directory{}",
+                if overwrite { ", and --overwrite only replaces what a wgsph run wrote" } else { "" }
+            )));
+        }
         if !overwrite {
-            return Err(RunDirError(format!(
-                "--out {}: the directory exists and is not empty; choose another with --out, resume it with --resume, or replace it with --overwrite",
-                out.display()
-            ))
-            .into());
+            return Err(bad(format!(
+                "holds an earlier wgsph run; choose another directory, {}or replace that run with --overwrite",
+                if flag == "--out" { "continue it with --resume (when it has a checkpoint), " } else { "" }
+            )));
         }
-        let target = out.canonicalize()?;
-        let cwd = std::env::current_dir()?.canonicalize()?;
-        if cwd.starts_with(&target) {
-            return Err(RunDirError(format!(
-                "--out {} --overwrite: refusing to remove a directory that contains the working directory",
-                out.display()
-            ))
-            .into());
+        // Only the files a run writes are replaced; the run's inputs must not be among them.
+        let outputs = run_outputs(path).map_err(|e| bad(format!("cannot read the directory: {e}")))?;
+        for input in inputs {
+            if let Ok(input) = input.canonicalize() {
+                if let Some(o) = outputs.iter().find(|o| o.canonicalize().is_ok_and(|o| o == input)) {
+                    return Err(bad(format!(
+                        "--overwrite would replace {}, the scene this run reads; copy it out of the directory first, or choose another directory",
+                        o.display()
+                    )));
+                }
+            }
         }
-        std::fs::remove_dir_all(out).map_err(|e| anyhow::anyhow!("cannot remove {} for --overwrite: {e}", out.display()))?;
+        for sub in [SNAPSHOTS_DIR, SURFACE_DIR] {
+            let d = path.join(sub);
+            if d.is_dir() {
+                probe_writable(&d).map_err(|e| bad(format!("cannot replace the earlier run's files: cannot write in {}: {e}", d.display())))?;
+            }
+        }
+        kept = names
+            .iter()
+            .filter(|n| {
+                let p = path.join(n);
+                let run_dir = (n.as_str() == SNAPSHOTS_DIR || n.as_str() == SURFACE_DIR || n.starts_with(REPLACED_PREFIX)) && p.is_dir();
+                !run_dir && !(is_run_output(None, n) && p.is_file())
+            })
+            .cloned()
+            .collect();
     }
-    std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", out.display()))?;
+    probe_writable(path).map_err(|e| bad(format!("cannot write there: {e}")))?;
+    Ok((earlier_run, kept))
+}
+
+/// The names in a directory, sorted.
+fn list(dir: &Path) -> std::io::Result<Vec<String>> {
+    let mut names = Vec::new();
+    for e in std::fs::read_dir(dir)? {
+        names.push(e?.file_name().to_string_lossy().into_owned());
+    }
+    names.sort();
+    Ok(names)
+}
+
+/// A few names of a listing, for a message.
+fn shown_names(names: &[String]) -> String {
+    let mut shown: Vec<&str> = names.iter().take(4).map(String::as_str).collect();
+    if names.len() > 4 {
+        shown.push("...");
+    }
+    match names.len() {
+        1 => shown.join(", "),
+        n => format!("{} ({n} entries)", shown.join(", ")),
+    }
+}
+
+/// Whether a file can be created in `dir`: creates one and removes it.
+fn probe_writable(dir: &Path) -> std::io::Result<()> {
+    let probe = dir.join(format!("{TEMP_PREFIX}{:016x}-probe", rand::random::<u64>()));
+    std::fs::OpenOptions::new().write(true).create_new(true).open(&probe)?;
+    std::fs::remove_file(&probe)
+}
+
+/// The files of `dir` (a run directory) that a run writes, in it and its subdirectories.
+fn run_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for name in list(dir)? {
+        let path = dir.join(&name);
+        if name.starts_with(REPLACED_PREFIX) && path.is_dir() {
+            // Left by a start that was killed: an earlier run's files, already set aside.
+            out.push(path);
+        } else if (name == SNAPSHOTS_DIR || name == SURFACE_DIR) && path.is_dir() {
+            for inner in list(&path)? {
+                if is_run_output(Some(&name), &inner) && path.join(&inner).is_file() {
+                    out.push(path.join(inner));
+                }
+            }
+        } else if is_run_output(None, &name) && path.is_file() {
+            out.push(path);
+        }
+    }
+    Ok(out)
+}
+
+/// Creates the missing parents of `path`, recording each one created.
+fn create_missing_parents(path: &Path, created: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+    let mut missing = Vec::new();
+    let mut p = path.parent();
+    while let Some(a) = p {
+        if a.as_os_str().is_empty() || a.exists() {
+            break;
+        }
+        missing.push(a.to_path_buf());
+        p = a.parent();
+    }
+    for d in missing.into_iter().rev() {
+        std::fs::create_dir(&d).with_context(|| format!("cannot create {}", d.display()))?;
+        created.push(d);
+    }
     Ok(())
 }
 
-/// Writes the resolved scene (after `--particles` and imports) as `DIR/scene.toml`, which
-/// `wgsph run DIR/scene.toml` runs again.
+/// An earlier run's files, moved into a hidden directory of their run directory.
+#[derive(Debug)]
+struct Replaced {
+    dir: PathBuf,
+    stash: PathBuf,
+    /// Paths relative to `dir`.
+    files: Vec<PathBuf>,
+}
+
+fn move_outputs_aside(dir: &Path) -> anyhow::Result<Replaced> {
+    let outputs = run_outputs(dir).with_context(|| format!("cannot read {}", dir.display()))?;
+    let stash = dir.join(format!("{REPLACED_PREFIX}{:016x}", rand::random::<u64>()));
+    std::fs::create_dir(&stash).with_context(|| format!("cannot create {}", stash.display()))?;
+    let mut replaced = Replaced { dir: dir.to_path_buf(), stash, files: Vec::new() };
+    for o in outputs {
+        let rel = o.strip_prefix(dir).expect("outputs lie in their directory").to_path_buf();
+        let to = replaced.stash.join(&rel);
+        if let Some(p) = to.parent() {
+            std::fs::create_dir_all(p).with_context(|| format!("cannot create {}", p.display()))?;
+        }
+        if let Err(e) = std::fs::rename(&o, &to) {
+            // Put back what was moved, so that the failed start changes nothing.
+            let _ = replaced.restore();
+            return Err(e).with_context(|| format!("cannot move {} aside to replace it", o.display()));
+        }
+        replaced.files.push(rel);
+    }
+    Ok(replaced)
+}
+
+impl Replaced {
+    fn restore(&self) -> anyhow::Result<()> {
+        for rel in &self.files {
+            let (from, to) = (self.stash.join(rel), self.dir.join(rel));
+            if let Some(p) = to.parent() {
+                std::fs::create_dir_all(p).with_context(|| format!("cannot create {}", p.display()))?;
+            }
+            std::fs::rename(&from, &to).with_context(|| format!("cannot move {} back to {}", from.display(), to.display()))?;
+        }
+        std::fs::remove_dir_all(&self.stash).with_context(|| format!("cannot remove {}", self.stash.display()))
+    }
+
+    fn discard(&self) -> anyhow::Result<()> {
+        std::fs::remove_dir_all(&self.stash).with_context(|| format!("cannot remove the replaced run's files in {}", self.stash.display()))
+    }
+}
+
+/// The start of a run, undone unless committed: what [`RunOutputs::prepare`] did and what the
+/// run wrote since. Dropped uncommitted (the run failed before its first step), it removes the
+/// files a run writes from its directories, puts an earlier run's files back, and removes the
+/// directories it created (when empty).
+#[derive(Debug)]
+pub struct StartGuard {
+    /// Each location, with whether its snapshots/ and surface/ existed before.
+    dirs: Vec<(PathBuf, [bool; 2])>,
+    /// Directories created, parents first.
+    created: Vec<PathBuf>,
+    replaced: RefCell<Vec<Replaced>>,
+    committed: RefCell<bool>,
+}
+
+impl StartGuard {
+    /// The run took its first step: its start stays, and an earlier run's files it replaces
+    /// are removed.
+    pub fn commit(&self) -> anyhow::Result<()> {
+        if self.committed.replace(true) {
+            return Ok(());
+        }
+        for r in self.replaced.borrow_mut().drain(..) {
+            r.discard()?;
+        }
+        Ok(())
+    }
+
+    /// Undoes the start (see [`StartGuard`]); what dropping it uncommitted does, with errors.
+    pub fn rollback(self) -> anyhow::Result<()> {
+        let result = self.undo();
+        self.committed.replace(true);
+        result
+    }
+
+    fn undo(&self) -> anyhow::Result<()> {
+        let replaced = self.replaced.borrow_mut().drain(..).collect::<Vec<_>>();
+        for (dir, subdirs_before) in &self.dirs {
+            let stashes: Vec<&Path> = replaced.iter().filter(|r| &r.dir == dir).map(|r| r.stash.as_path()).collect();
+            for f in run_outputs(dir).unwrap_or_default() {
+                if !stashes.contains(&f.as_path()) {
+                    let _ = if f.is_dir() { Ok(()) } else { std::fs::remove_file(&f) };
+                }
+            }
+            for r in replaced.iter().filter(|r| &r.dir == dir) {
+                r.restore()?;
+            }
+            for (sub, existed) in [SNAPSHOTS_DIR, SURFACE_DIR].iter().zip(subdirs_before) {
+                if !existed {
+                    let _ = std::fs::remove_dir(dir.join(sub));
+                }
+            }
+        }
+        for d in self.created.iter().rev() {
+            let _ = std::fs::remove_dir(d);
+        }
+        Ok(())
+    }
+}
+
+impl Drop for StartGuard {
+    fn drop(&mut self) {
+        if !*self.committed.borrow() {
+            if let Err(e) = self.undo() {
+                eprintln!("warning: undoing the failed start: {e:#}");
+            }
+        }
+    }
+}
+
+/// Writes the marker that makes `dir` a run directory.
+fn write_marker(dir: &Path) -> anyhow::Result<()> {
+    let text = format!("wgsph {}\nstarted {}\n", env!("CARGO_PKG_VERSION"), utc_now());
+    write_atomic(&dir.join(MARKER), |w| w.write_all(text.as_bytes()))
+}
+
+/// The time now as `YYYY-MM-DDTHH:MM:SSZ`.
+fn utc_now() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    let (days, rem) = ((secs / 86_400) as i64, secs % 86_400);
+    // Days since 1970-01-01 to a civil date (H. Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem / 60 % 60, rem % 60)
+}
+
+/// The default run directory of a scene: `parent/NAME-NNN`, numbered one past the highest
+/// number there, so that every run gets a new directory and the newest has the highest number.
+pub fn numbered_run_dir(parent: &Path, scene_name: &str) -> PathBuf {
+    let name: String = scene_name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '_' }).collect();
+    let name = if name.is_empty() { "run".to_string() } else { name };
+    let prefix = format!("{name}-");
+    let highest = std::fs::read_dir(parent)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .filter_map(|e| e.file_name().to_string_lossy().strip_prefix(&prefix).and_then(|n| n.parse::<u64>().ok()))
+                .max()
+                .unwrap_or(0)
+        })
+        .unwrap_or(0);
+    parent.join(format!("{name}-{:03}", highest + 1))
+}
+
+/// Writes the resolved scene (after `--set`, `--particles` and imports) as `DIR/scene.toml`,
+/// which `wgsph run DIR/scene.toml` runs again.
 pub fn write_scene_copy(out: &Path, scene: &Scene) -> anyhow::Result<()> {
     let text = scene.to_toml();
     write_atomic(&out.join(SCENE_COPY), |w| w.write_all(text.as_bytes()))
+}
+
+/// Removes the partial files a killed run left in its directory (the atomic writer's
+/// temporary files, in the directory, `snapshots/` and `surface/`); returns them.
+pub fn remove_partial_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let mut removed = crate::io::atomic::remove_leftover_temporaries(dir)?;
+    for sub in [SNAPSHOTS_DIR, SURFACE_DIR] {
+        removed.extend(crate::io::atomic::remove_leftover_temporaries(&dir.join(sub))?);
+    }
+    Ok(removed)
 }

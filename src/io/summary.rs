@@ -4,6 +4,25 @@ use crate::io::atomic::write_atomic;
 use serde::Serialize;
 use std::path::Path;
 
+/// The summary's file in a run directory.
+pub const SUMMARY_FILE: &str = "summary.json";
+
+/// How a run ended.
+#[derive(Clone, Copy, Debug, Default, Serialize, serde::Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum RunStatus {
+    /// It reached its end.
+    #[default]
+    Completed,
+    /// The state went bad (NaN, escaped particles); `failure` says why.
+    Failed,
+    /// It could not go on (an output could not be written, the device was lost); `failure`
+    /// names the step and the file.
+    Error,
+    /// SIGINT (Ctrl-C) or SIGTERM stopped it; `failure` names the signal and the step.
+    Interrupted,
+}
+
 /// `DIR/summary.json`.
 #[derive(Clone, Debug, Serialize, serde::Deserialize, PartialEq)]
 pub struct Summary {
@@ -33,9 +52,24 @@ pub struct Summary {
     /// Pictures written (`--frames`).
     #[serde(default)]
     pub frames: u64,
+    #[serde(default)]
+    pub status: RunStatus,
+    /// The checkpoint to continue from with `--resume`, when checkpoints are on.
+    #[serde(default)]
+    pub last_checkpoint: Option<String>,
+    /// Snapshots written by this run (each in every format).
+    #[serde(default)]
+    pub snapshots: u64,
     /// DFSPH's iterations per step (absent for WCSPH).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dfsph: Option<DfsphSummary>,
+    /// The largest speed of any step over the speed of sound (absent without a speed of
+    /// sound: DFSPH).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_mach: Option<f64>,
+    /// Where the run left the weakly compressible regime without stopping (`limits.warn_*`).
+    #[serde(default)]
+    pub warnings: Vec<String>,
 }
 
 /// DFSPH's solves over a run: iterations per step and how the last step ended.

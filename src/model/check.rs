@@ -1,9 +1,9 @@
 //! Scene validation: every field checked against what is allowed before any work, with an
 //! error that names the file, the field, the value and the allowed range.
 
-use super::lattice::lattice_counts;
+use super::numbers::{short, short3};
 use super::params::MAX_PLANES;
-use super::scene::{err, Boundary, BoundaryVolume, PressureSolver, Scene, SceneError, SceneOrigin};
+use super::scene::{err, Boundary, BoundaryVolume, EquationOfState, PressureSolver, Scene, SceneError, SceneOrigin};
 
 /// Most particles a scene may hold: indices are u32 on the GPU and the CPU.
 pub const MAX_PARTICLES: u64 = 1 << 31;
@@ -14,6 +14,24 @@ pub const MAX_SOLVER_ITERATIONS: u32 = 1000;
 /// Host bytes per particle the CPU path needs at most (f64 state, sort buffers, snapshot copy).
 pub const CPU_BYTES_PER_PARTICLE: u64 = 200;
 
+/// The magnitudes a scene's constants may have, in the scene's units. No liquid in SI, cgs or
+/// millimetre units comes near these bounds (water: rho0 = 1000 kg/m^3 or 1e-6 kg/mm^3, c0 =
+/// 1480 m/s or 1.5e6 mm/s, nu = 1e-6 m^2/s, g = 9.81 m/s^2 or 9810 mm/s^2; pitch, one of the most
+/// viscous liquids, about 2e5 m^2/s), and within them the GPU's f32 arithmetic cannot overflow:
+/// the stiffness rho0 c0^2 stays below 1e25, so even the Tait pressure at ten times the rest
+/// density (1e7 k) is far below f32's largest number, 3.4e38.
+pub const REST_DENSITY_RANGE: (f64, f64) = (1e-9, 1e9);
+/// The speed of sound, given or implied by the stiffness (see [`REST_DENSITY_RANGE`]).
+pub const SPEED_OF_SOUND_RANGE: (f64, f64) = (1e-6, 1e8);
+/// The largest kinematic viscosity and the largest |gravity| (see [`REST_DENSITY_RANGE`]).
+pub const MAX_VISCOSITY: f64 = 1e9;
+pub const MAX_GRAVITY: f64 = 1e9;
+
+/// Whether two boxes share a volume (more than `tolerance` deep on every axis).
+fn boxes_overlap(a: ([f64; 3], [f64; 3]), b: ([f64; 3], [f64; 3]), tolerance: f64) -> bool {
+    (0..3).all(|k| a.1[k].min(b.1[k]) - a.0[k].max(b.0[k]) > tolerance)
+}
+
 impl Scene {
     /// Checks every field against what is allowed, before any work.
     pub fn validate(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
@@ -21,14 +39,14 @@ impl Scene {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(err(origin, field, format!("is {v}; must be a finite number > 0")))
+                Err(err(origin, field, format!("is {}; must be a finite number > 0", short(v))))
             }
         };
         let finite3 = |field: &str, v: [f64; 3]| -> Result<(), SceneError> {
             if v.iter().all(|c| c.is_finite()) {
                 Ok(())
             } else {
-                Err(err(origin, field, format!("is {v:?}; every component must be finite")))
+                Err(err(origin, field, format!("is {}; every component must be finite", short3(v))))
             }
         };
         let ordered = |field: &str, min: [f64; 3], max: [f64; 3]| -> Result<(), SceneError> {
@@ -37,7 +55,16 @@ impl Scene {
             if (0..3).all(|a| max[a] > min[a]) {
                 Ok(())
             } else {
-                Err(err(origin, field, format!("min {min:?} must be below max {max:?} on every axis")))
+                Err(err(origin, field, format!("min {} must be below max {} on every axis", short3(min), short3(max))))
+            }
+        };
+        let in_range = |field: &str, v: f64, (lo, hi): (f64, f64), what: &str| -> Result<(), SceneError> {
+            if (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err(err(origin, field, format!(
+                    "is {}; must be between {} and {} ({what}: beyond these no liquid in any usual units, and the GPU's f32 arithmetic would overflow)",
+                    short(v), short(lo), short(hi))))
             }
         };
         let p = &self.physics;
@@ -47,9 +74,29 @@ impl Scene {
         if let Some(m) = p.particle_mass {
             positive("physics.particle_mass", m)?;
         }
+        in_range("physics.rest_density", p.rest_density, REST_DENSITY_RANGE, "kg/m^3 in SI")?;
+        if p.smoothing_length < p.particle_spacing {
+            return Err(err(origin, "physics.smoothing_length", format!(
+                "is {}, below the particle spacing {}: a particle would have no neighbour within h; must be at least the spacing (twice it is usual)",
+                short(p.smoothing_length), short(p.particle_spacing))));
+        }
+        // k = rho0 c0^2 (linear) or rho0 c0^2 / 7 (Tait).
+        let stiffness_per_c2 = p.rest_density / if p.equation_of_state == EquationOfState::Tait { 7.0 } else { 1.0 };
         match (p.solver, p.stiffness, p.speed_of_sound) {
-            (PressureSolver::Wcsph, Some(k), None) => positive("physics.stiffness", k)?,
-            (PressureSolver::Wcsph, None, Some(c)) => positive("physics.speed_of_sound", c)?,
+            (PressureSolver::Wcsph, Some(k), None) => {
+                positive("physics.stiffness", k)?;
+                let c0 = (k / stiffness_per_c2).sqrt();
+                let (lo, hi) = SPEED_OF_SOUND_RANGE;
+                if !(lo..=hi).contains(&c0) {
+                    return Err(err(origin, "physics.stiffness", format!(
+                        "is {}, a speed of sound of {}; must be between {} and {} (a speed of sound between {} and {}: beyond these no liquid in any usual units, and the GPU's f32 arithmetic would overflow)",
+                        short(k), short(c0), short(stiffness_per_c2 * lo * lo), short(stiffness_per_c2 * hi * hi), short(lo), short(hi))));
+                }
+            }
+            (PressureSolver::Wcsph, None, Some(c)) => {
+                positive("physics.speed_of_sound", c)?;
+                in_range("physics.speed_of_sound", c, SPEED_OF_SOUND_RANGE, "m/s in SI")?;
+            }
             (PressureSolver::Wcsph, ..) => {
                 return Err(err(origin, "physics.stiffness", "give exactly one of stiffness and speed_of_sound"))
             }
@@ -61,40 +108,61 @@ impl Scene {
         }
         self.validate_dfsph(origin)?;
         if !(p.viscosity.is_finite() && p.viscosity >= 0.0) {
-            return Err(err(origin, "physics.viscosity", format!("is {}; must be finite and >= 0", p.viscosity)));
+            return Err(err(origin, "physics.viscosity", format!("is {}; must be finite and >= 0", short(p.viscosity))));
         }
+        in_range("physics.viscosity", p.viscosity, (0.0, MAX_VISCOSITY), "m^2/s in SI")?;
         let mut last = 0.0;
         for (i, c) in p.viscosity_schedule.iter().enumerate() {
             let f = format!("physics.viscosity_schedule[{i}]");
             if !(c.time.is_finite() && c.time >= last) {
-                return Err(err(origin, format!("{f}.time"), format!("is {}; times must be finite, >= 0 and increasing", c.time)));
+                return Err(err(origin, format!("{f}.time"), format!("is {}; times must be finite, >= 0 and increasing", short(c.time))));
             }
             if !(c.viscosity.is_finite() && c.viscosity >= 0.0) {
-                return Err(err(origin, format!("{f}.viscosity"), format!("is {}; must be finite and >= 0", c.viscosity)));
+                return Err(err(origin, format!("{f}.viscosity"), format!("is {}; must be finite and >= 0", short(c.viscosity))));
             }
+            in_range(&format!("{f}.viscosity"), c.viscosity, (0.0, MAX_VISCOSITY), "m^2/s in SI")?;
             last = c.time;
         }
         if !(p.boundary_friction.is_finite() && p.boundary_friction >= 0.0) {
-            return Err(err(origin, "physics.boundary_friction", format!("is {}; must be finite and >= 0", p.boundary_friction)));
+            return Err(err(origin, "physics.boundary_friction", format!("is {}; must be finite and >= 0", short(p.boundary_friction))));
         }
         finite3("physics.gravity", p.gravity)?;
+        // |g|, scaled so that huge components do not overflow.
+        let largest = p.gravity.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+        let g = if largest > 0.0 { largest * p.gravity.iter().map(|c| (c / largest).powi(2)).sum::<f64>().sqrt() } else { 0.0 };
+        if g > MAX_GRAVITY {
+            return Err(err(origin, "physics.gravity", format!(
+                "is {}, of magnitude {}; must be at most {} (m/s^2 in SI: beyond it no real scene in any usual units, and the GPU's f32 arithmetic would overflow)",
+                short3(p.gravity), short(g), short(MAX_GRAVITY))));
+        }
+        self.limits.validate(origin)?;
         if let Some(c) = &self.camera {
-            finite3("camera.eye", c.eye)?;
-            finite3("camera.target", c.target)?;
-            finite3("camera.up", c.up)?;
-            let d = [c.target[0] - c.eye[0], c.target[1] - c.eye[1], c.target[2] - c.eye[2]];
-            let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if dn == 0.0 {
-                return Err(err(origin, "camera.target", format!("is {:?}, the same point as camera.eye; they must differ", c.target)));
+            for (field, v) in [("camera.eye", c.eye), ("camera.target", c.target)] {
+                if let Some(v) = v {
+                    finite3(field, v)?;
+                }
             }
+            finite3("camera.up", c.up)?;
             let un = (c.up[0] * c.up[0] + c.up[1] * c.up[1] + c.up[2] * c.up[2]).sqrt();
-            let cross = [d[1] * c.up[2] - d[2] * c.up[1], d[2] * c.up[0] - d[0] * c.up[2], d[0] * c.up[1] - d[1] * c.up[0]];
-            let cn = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
-            if !(un > 0.0 && cn > 1e-6 * dn * un) {
-                return Err(err(origin, "camera.up", format!("is {:?}; must be non-zero and not parallel to the viewing direction", c.up)));
+            if un == 0.0 {
+                return Err(err(origin, "camera.up", format!("is {}; must be non-zero", short3(c.up))));
+            }
+            // The direction is known here only when both points are given (otherwise the
+            // automatic one, which is never vertical, is used).
+            if let (Some(eye), Some(target)) = (c.eye, c.target) {
+                let d = [target[0] - eye[0], target[1] - eye[1], target[2] - eye[2]];
+                let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                if dn == 0.0 {
+                    return Err(err(origin, "camera.target", format!("is {}, the same point as camera.eye; they must differ", short3(target))));
+                }
+                let cross = [d[1] * c.up[2] - d[2] * c.up[1], d[2] * c.up[0] - d[0] * c.up[2], d[0] * c.up[1] - d[1] * c.up[0]];
+                let cn = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
+                if cn <= 1e-6 * dn * un {
+                    return Err(err(origin, "camera.up", format!("is {}; must be non-zero and not parallel to the viewing direction", short3(c.up))));
+                }
             }
             if !(c.fov_degrees.is_finite() && c.fov_degrees > 1.0 && c.fov_degrees < 170.0) {
-                return Err(err(origin, "camera.fov_degrees", format!("is {}; must be between 1 and 170", c.fov_degrees)));
+                return Err(err(origin, "camera.fov_degrees", format!("is {}; must be between 1 and 170", short(c.fov_degrees))));
             }
         }
         positive("time.dt", self.time.dt)?;
@@ -111,15 +179,12 @@ impl Scene {
             ordered(&f, b.min, b.max)?;
             if !inside(b.min) || !inside(b.max) {
                 return Err(err(origin, &f, format!(
-                    "block {:?}..{:?} is not inside the domain {:?}..{:?}", b.min, b.max, self.domain.min, self.domain.max)));
+                    "block {}..{} is not inside the domain {}..{}", short3(b.min), short3(b.max), short3(self.domain.min), short3(self.domain.max))));
             }
             if !(b.jitter.is_finite() && (0.0..0.5).contains(&b.jitter)) {
-                return Err(err(origin, format!("{f}.jitter"), format!("is {}; must be in [0, 0.5)", b.jitter)));
+                return Err(err(origin, format!("{f}.jitter"), format!("is {}; must be in [0, 0.5)", short(b.jitter))));
             }
             finite3(&format!("{f}.velocity"), b.velocity)?;
-            if lattice_counts(b.min, b.max, p.particle_spacing).iter().any(|&n| n == 0) {
-                return Err(err(origin, &f, format!("is thinner than one particle spacing ({}) on some axis", p.particle_spacing)));
-            }
         }
         for (i, b) in self.boundary.iter().enumerate() {
             let f = format!("boundary[{i}]");
@@ -141,8 +206,8 @@ impl Scene {
                     let (lo, hi) = self.wall_span(b).expect("a container or a box");
                     if !inside(lo) || !inside(hi) {
                         return Err(err(origin, &f, format!(
-                            "its wall particles span {lo:?}..{hi:?}, outside the domain {:?}..{:?}; enlarge the domain",
-                            self.domain.min, self.domain.max)));
+                            "its wall particles span {}..{}, outside the domain {}..{}; enlarge the domain",
+                            short3(lo), short3(hi), short3(self.domain.min), short3(self.domain.max))));
                     }
                 }
                 Boundary::Plane { point, normal, restitution } => {
@@ -152,7 +217,7 @@ impl Scene {
                         return Err(err(origin, format!("{f}.normal"), "is zero; must be a non-zero vector"));
                     }
                     if !(restitution.is_finite() && (0.0..=1.0).contains(restitution)) {
-                        return Err(err(origin, format!("{f}.restitution"), format!("is {restitution}; must be in [0, 1]")));
+                        return Err(err(origin, format!("{f}.restitution"), format!("is {}; must be in [0, 1]", short(*restitution))));
                     }
                 }
             }
@@ -160,6 +225,7 @@ impl Scene {
         if self.boundary.iter().filter(|b| matches!(b, Boundary::Plane { .. })).count() > MAX_PLANES {
             return Err(err(origin, "boundary", format!("has more than {MAX_PLANES} planes")));
         }
+        self.validate_overlaps(origin)?;
         let grid = self.grid();
         let cells: u64 = grid.dims.iter().map(|&d| d as u64).product();
         if cells > MAX_CELLS {
@@ -215,13 +281,13 @@ impl Scene {
         }
         for (field, v) in [("time.cfl_number", t.cfl_number), ("time.force_number", t.force_number), ("time.viscous_number", t.viscous_number)] {
             if !(v.is_finite() && v > 0.0 && v <= 1.0) {
-                return Err(err(origin, field, format!("is {v}; must be in (0, 1]")));
+                return Err(err(origin, field, format!("is {}; must be in (0, 1]", short(v))));
             }
         }
         for (field, v) in [("time.dt_min", t.dt_min), ("time.dt_max", t.dt_max)] {
             if let Some(v) = v {
                 if !(v.is_finite() && v > 0.0) {
-                    return Err(err(origin, field, format!("is {v}; must be a finite number > 0")));
+                    return Err(err(origin, field, format!("is {}; must be a finite number > 0", short(v))));
                 }
             }
         }
@@ -231,7 +297,7 @@ impl Scene {
         if t.adaptive {
             let (lo, hi) = (t.dt_min.unwrap_or(t.dt * 1e-3), t.dt_max.unwrap_or(t.dt));
             if lo > hi {
-                return Err(err(origin, "time.dt_min", format!("is {lo}, above dt_max {hi}; must be <= dt_max")));
+                return Err(err(origin, "time.dt_min", format!("is {}, above dt_max {}; must be <= dt_max", short(lo), short(hi))));
             }
             if !self.physics.viscosity_schedule.is_empty() {
                 return Err(err(
@@ -244,6 +310,47 @@ impl Scene {
         Ok(())
     }
 
+    /// Fluid that could not start where it is: inside a solid (a box, a container's walls),
+    /// behind a plane, or on top of another fluid block. Faces may touch.
+    fn validate_overlaps(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
+        let tolerance = 1e-6 * self.physics.particle_spacing;
+        let solids = self.named_solids();
+        for (i, b) in self.fluid.iter().enumerate() {
+            if let Some(a) = (0..3).find(|&a| self.fluid_lattice(i)[a].count == 0) {
+                return Err(err(origin, format!("fluid[{i}]"), format!(
+                    "is {} thick along {}, too thin for one layer of the particle spacing {}; make it thicker or the spacing smaller",
+                    short(b.max[a] - b.min[a]), ["x", "y", "z"][a], short(self.physics.particle_spacing))));
+            }
+            let block = (b.min, b.max);
+            for (name, region, _) in &solids {
+                if boxes_overlap(block, (region.min, region.max), tolerance) {
+                    return Err(err(origin, format!("fluid[{i}]"), format!(
+                        "the block {}..{} overlaps {name}, which fills {}..{}: fluid must start outside solids (a particle inside a wall is thrown out of it at the first step); move or shrink the block",
+                        short3(b.min), short3(b.max), short3(region.min), short3(region.max))));
+                }
+            }
+            for (k, other) in self.fluid.iter().enumerate().take(i) {
+                if boxes_overlap(block, (other.min, other.max), tolerance) {
+                    return Err(err(origin, format!("fluid[{i}]"), format!(
+                        "the block {}..{} overlaps fluid[{k}] ({}..{}): their particles would sit on top of each other at twice the rest density; make the blocks meet at a face",
+                        short3(b.min), short3(b.max), short3(other.min), short3(other.max))));
+                }
+            }
+            for (k, boundary) in self.boundary.iter().enumerate() {
+                let Boundary::Plane { point, normal, .. } = boundary else { continue };
+                let len = normal.iter().map(|c| c * c).sum::<f64>().sqrt();
+                let offset = (0..3).map(|a| normal[a] * point[a]).sum::<f64>() / len;
+                // The corner deepest behind the plane.
+                let deepest = (0..3).map(|a| normal[a] / len * if normal[a] < 0.0 { b.max[a] } else { b.min[a] }).sum::<f64>() - offset;
+                if deepest < -tolerance {
+                    return Err(err(origin, format!("fluid[{i}]"), format!(
+                        "the block {}..{} reaches {} behind boundary[{k}] (the plane through {} with normal {}): fluid must start on the side the normal points to",
+                        short3(b.min), short3(b.max), short(-deepest), short3(*point), short3(*normal))));
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Host memory available to this process, where the platform tells.

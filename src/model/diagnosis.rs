@@ -1,46 +1,241 @@
-//! Why a run went bad: the message a failed run prints and writes into its summary.
+//! Why a run went bad: the message a failed run prints and writes into its summary, from what
+//! was measured at its first bad step (its counts, largest density and speed, dt and time) and
+//! where the fluid was when the failure was found. Each stability condition is checked against
+//! those figures, and only a condition that they break is named as the cause; when none is
+//! broken the message says the cause is unknown, with the figures.
 
+use super::numbers::short;
+use super::initial::SolidRegion;
 use super::params::Params;
-use super::state::Health;
+use super::scene::Scene;
+use super::state::{BadStep, Health};
 
-/// Why a run went bad, with the likely cause in terms of the CFL condition.
-pub fn diagnose(params: &Params, health: &Health, max_speed: f64) -> String {
-    diagnose_at(params, health, max_speed, health.first_bad_step.unwrap_or(0) as f64 * params.dt)
+/// The CFL number dt (c0 + |v|max) / h above which explicit weakly compressible SPH goes
+/// unstable (h the support radius; Monaghan 1992 gives 0.25 on h/2 ... h, the built-in scenes
+/// run at 0.225-0.25 on the support radius).
+pub const CFL_LIMIT: f64 = 0.4;
+/// The CFL number dt |v|max / h (h the support radius) DFSPH should stay below: with no sound
+/// to outrun, its condition is on the flow speed alone.
+pub const DFSPH_CFL_LIMIT: f64 = 0.25;
+/// The viscous condition dt <= 0.125 h^2 / nu (Morris et al. 1997, Eq. 27).
+pub const VISCOUS_NUMBER: f64 = 0.125;
+/// The force condition dt <= 0.25 sqrt(h / |a|) (Monaghan 1992).
+pub const FORCE_NUMBER: f64 = 0.25;
+
+/// Fluid particles found inside each solid of a scene (past the first layer of its wall
+/// particles), counted from positions handed over one at a time.
+#[derive(Clone, Debug)]
+pub struct SolidIntrusions {
+    /// (the solid's name, its region, how deep a particle must be to count, particles found).
+    pub solids: Vec<(String, SolidRegion, f64, u64)>,
 }
 
-/// `diagnose` for a run at simulated time `time` whose last step was `params.dt` (adaptive dt).
-pub fn diagnose_at(params: &Params, health: &Health, max_speed: f64, time: f64) -> String {
-    let step = health.first_bad_step.unwrap_or(0);
+impl SolidIntrusions {
+    pub fn new(scene: &Scene) -> Self {
+        SolidIntrusions { solids: scene.named_solids().into_iter().map(|(name, region, spacing)| (name, region, 0.5 * spacing, 0)).collect() }
+    }
+    /// Counts a fluid particle at `x` where it is inside a solid.
+    pub fn add(&mut self, x: [f64; 3]) {
+        for (_, r, depth, count) in &mut self.solids {
+            if (0..3).all(|a| x[a] > r.min[a] + *depth && x[a] < r.max[a] - *depth) {
+                *count += 1;
+            }
+        }
+    }
+    /// The solids with particles inside, with their counts.
+    pub fn found(&self) -> Vec<(&str, u64)> {
+        self.solids.iter().filter(|s| s.3 > 0).map(|s| (s.0.as_str(), s.3)).collect()
+    }
+}
+
+/// Why a run went bad: the first bad step and what went wrong there, then the cause that the
+/// figures of that step show (`intrusions`: the fluid inside solids when the failure was
+/// found, where the caller looked), or "cause unknown".
+pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusions>) -> String {
+    let params = scene.params();
+    let Some(bad) = health.bad_step else {
+        return "no step went bad".into();
+    };
+    let BadStep { step, measured: m, too_dense, too_fast } = bad;
+    let (h, rho0) = (params.h, params.rest_density);
     let c0 = params.speed_of_sound();
-    let cfl = params.dt * (c0 + max_speed) / params.h;
-    let g = params.gravity.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let ratio = m.max_density / rho0;
+    let mach = m.max_speed / c0;
+    let limits = &params.limits;
+
     let mut what = Vec::new();
-    if health.non_finite > 0 {
-        what.push(format!("{} particles became NaN or infinite", health.non_finite));
+    if m.non_finite > 0 {
+        what.push(format!("{} particles became NaN or infinite", m.non_finite));
     }
-    if health.escaped > 0 {
-        what.push(format!("{} particles left the domain", health.escaped));
+    if m.escaped > 0 {
+        what.push(format!("{} particles left the domain", m.escaped));
     }
-    let mut msg = format!("step {step} (t = {time:.6}): {}.", what.join(" and "));
-    if params.dfsph.is_some() {
-        msg += &format!(
-            " Likely cause: the time step is too large for the flow: the CFL number dt |v|max / h = {:.3} (dt = {}, |v|max = {:.4}, h = {}) should stay below about 0.25 with DFSPH, or a solve stopped at its iteration limit (see the summary's dfsph section): lower dt, use time.adaptive = true, or raise physics.dfsph.max_iterations.",
-            cfl, params.dt, max_speed, params.h
-        );
-        return msg;
+    if too_dense {
+        what.push(format!("the density reached {} rho0, over limits.max_density_ratio = {}", short(ratio), short(limits.max_density_ratio)));
     }
-    msg += &format!(
-        " Likely cause: the time step is too large for the stiffness: the CFL number dt (c0 + |v|max) / h = {:.3} \
-         (dt = {}, c0 = {:.4}, |v|max = {:.4}, h = {}); explicit WCSPH is stable below about 0.4",
-        cfl, params.dt, c0, max_speed, params.h
+    if too_fast {
+        what.push(format!(
+            "the speed reached {} (Mach {} against c0 = {}), over limits.max_mach = {}",
+            short(m.max_speed),
+            short(mach),
+            short(c0),
+            short(limits.max_mach)
+        ));
+    }
+    let mut msg = format!("step {step} (t = {:.6}): {}.", m.time, what.join(", and "));
+
+    // The conditions, each from the failing step's own figures.
+    let dt = m.dt;
+    let cfl = dt * (c0 + m.max_speed) / h;
+    let acoustic_cfl = dt * c0 / h;
+    let nu = params.viscosity_at_step(step.saturating_sub(1));
+    let viscous_limit = if nu > 0.0 { VISCOUS_NUMBER * h * h / nu } else { f64::INFINITY };
+    let g = params.gravity.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let force = dt * (g / h).sqrt();
+    // First the conditions the scene's own constants break at this dt (the speed of sound,
+    // the viscosity, gravity): where one is broken, the fast, dense or misplaced fluid found at
+    // the failure is what it led to, not a cause of its own.
+    let mut causes = Vec::new();
+    let dfsph = params.dfsph.is_some();
+    if acoustic_cfl > CFL_LIMIT {
+        causes.push(format!(
+            "the CFL condition: dt c0 / h = {} is over {CFL_LIMIT} before the flow adds its speed (dt = {} is too large for the speed of sound c0 = {}; h = {}): lower time.dt to 0.25 h / c0 = {} or less{}",
+            short(acoustic_cfl),
+            short(dt),
+            short(c0),
+            short(h),
+            short(0.25 * h / c0),
+            if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
+        ));
+    }
+    if dt > viscous_limit {
+        causes.push(format!(
+            "the viscous condition: dt = {} is over {VISCOUS_NUMBER} h^2 / nu = {} (nu = {}, h = {}): lower time.dt or physics.viscosity",
+            short(dt),
+            short(viscous_limit),
+            short(nu),
+            short(h)
+        ));
+    }
+    if force > FORCE_NUMBER {
+        causes.push(format!(
+            "the force condition: dt sqrt(|g| / h) = {} is over {FORCE_NUMBER} (|g| = {}): lower time.dt below {} or physics.gravity",
+            short(force),
+            short(g),
+            short(FORCE_NUMBER * (h / g).sqrt())
+        ));
+    }
+    // Then what the failing step measured.
+    if causes.is_empty() {
+        if dfsph && cfl > DFSPH_CFL_LIMIT {
+            causes.push(format!(
+                "the CFL condition: the flow's speed |v|max = {} made dt |v|max / h = {} go over {DFSPH_CFL_LIMIT}, which DFSPH needs (dt = {}, h = {}): lower time.dt below {}{}",
+                short(m.max_speed),
+                short(cfl),
+                short(dt),
+                short(h),
+                short(DFSPH_CFL_LIMIT * h / m.max_speed),
+                if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
+            ));
+        }
+        if let Some(it) = health.iterations.filter(|it| it.pressure.unconverged + it.divergence.unconverged > 0) {
+            causes.push(format!(
+                "DFSPH's solves stopped at their iteration limit with the error above its tolerance ({} pressure and {} divergence solves; the summary's dfsph section): \
+                 raise physics.dfsph.max_iterations or lower time.dt",
+                it.pressure.unconverged, it.divergence.unconverged
+            ));
+        }
+        if !dfsph && cfl > CFL_LIMIT {
+            causes.push(format!(
+                "the CFL condition: the flow's speed |v|max = {} made dt (c0 + |v|max) / h = {} go over {CFL_LIMIT} (dt = {}, c0 = {}, h = {}): lower time.dt below {}{}",
+                short(m.max_speed),
+                short(cfl),
+                short(dt),
+                short(c0),
+                short(h),
+                short(CFL_LIMIT * h / (c0 + m.max_speed)),
+                if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
+            ));
+        }
+        if too_dense && dfsph {
+            causes.push(format!(
+                "the fluid was compressed to {} rho0, which DFSPH's constant-density solve should have prevented: lower time.dt, or check what presses the fluid",
+                short(ratio)
+            ));
+        } else if too_dense {
+            causes.push(format!(
+                "the fluid was compressed to {} rho0: weakly compressible SPH holds while density varies by a few per cent, which needs a speed of sound \
+                 about 10 times the largest flow speed (rho/rho0 - 1 is about the square of the Mach number); raise physics.speed_of_sound (c0 = {}), or check what presses the fluid",
+                short(ratio),
+                short(c0)
+            ));
+        }
+        if too_fast {
+            causes.push(format!(
+                "the flow reached Mach {}: beyond about 0.3 the fluid is no longer nearly incompressible; raise physics.speed_of_sound to at least 10 times \
+                 the largest speed ({} now, c0 = {})",
+                short(mach),
+                short(m.max_speed),
+                short(c0)
+            ));
+        }
+        for (name, count) in intrusions.map(SolidIntrusions::found).unwrap_or_default() {
+            causes.push(format!("{count} fluid particles are inside {name}, past its first layer of wall particles: the fluid leaked into the solid or started in it"));
+        }
+    }
+    let figures = format!(
+        "measured at step {step}: |v|max = {}, max rho/rho0 = {}, dt = {}, CFL number dt ({}|v|max) / h = {}",
+        short(m.max_speed),
+        short(ratio),
+        short(dt),
+        if dfsph { "" } else { "c0 + " },
+        short(cfl)
     );
-    if g > 0.0 {
-        msg += &format!(", and the force condition dt sqrt(|g|/h) = {:.3} should stay below about 0.25", params.dt * (g / params.h).sqrt());
+    if causes.is_empty() {
+        msg += &format!(
+            " Cause unknown: the CFL number {} is below {}, the viscous condition (dt <= {}) and the force condition (dt sqrt(|g| / h) = {} <= {FORCE_NUMBER}) hold, \
+             the density ({} rho0){} stayed within the limits, and {}; {figures}. Check the scene's boundaries and the domain.",
+            short(cfl),
+            if dfsph { DFSPH_CFL_LIMIT } else { CFL_LIMIT },
+            short(viscous_limit),
+            short(force),
+            short(ratio),
+            if dfsph { String::new() } else { format!(" and the speed (Mach {})", short(mach)) },
+            if intrusions.is_some() { "no fluid particle is inside a solid" } else { "the particles were not checked against the solids" }
+        );
+    } else {
+        msg += &format!(" Cause: {}. ({figures}.)", causes.join("; and "));
     }
-    if let Some(a) = params.adaptive {
-        msg += &format!(". With adaptive dt (dt_min = {}, dt_max = {}): lower time.cfl_number or time.force_number, or dt_min", a.dt_min, a.dt_max);
-    }
-    msg += ". Lower dt or the stiffness, or check the scene's boundaries.";
     msg
 }
 
+/// Where a run left the weakly compressible regime without stopping: its largest density and
+/// speed against `limits.warn_density_ratio` and `limits.warn_mach`, one line each.
+pub fn regime_warnings(params: &Params, health: &Health) -> Vec<String> {
+    let limits = &params.limits;
+    let c0 = params.speed_of_sound();
+    let ratio = health.max_density / params.rest_density;
+    let mach = health.max_speed / c0;
+    let mut out = Vec::new();
+    if ratio > limits.warn_density_ratio {
+        out.push(format!(
+            "the density reached {} rho0, over limits.warn_density_ratio = {}: weakly compressible SPH stands in for a liquid while density varies by a few per cent, \
+             so the results are less accurate where it was compressed; a higher physics.speed_of_sound (c0 = {}) keeps density closer to rho0",
+            short(ratio),
+            short(limits.warn_density_ratio),
+            short(c0)
+        ));
+    }
+    // Without a speed of sound (DFSPH) there is no Mach number.
+    if c0 > 0.0 && mach > limits.warn_mach {
+        out.push(format!(
+            "the speed reached {} (Mach {} against c0 = {}), over limits.warn_mach = {}: beyond about 0.3 the fluid is no longer nearly incompressible \
+             (rho/rho0 - 1 is about Mach^2); raise physics.speed_of_sound to about 10 times the largest speed",
+            short(health.max_speed),
+            short(mach),
+            short(c0),
+            short(limits.warn_mach)
+        ));
+    }
+    out
+}

@@ -2,7 +2,8 @@
 //! lattices, and the solid regions fluid must never enter.
 
 use super::kernels::{sort_by_cell, KernelCoefficients};
-use super::lattice::lattice;
+use super::lattice::{fluid_axis, points, wall_axis, whole_spacings, AxisLattice};
+use super::numbers::short3;
 use super::params::Grid;
 use super::real::V3;
 use super::scene::{Boundary, BoundaryVolume, Kernel, Scene};
@@ -28,10 +29,19 @@ pub struct InitialState {
 impl Scene {
     /// Regions fluid must never enter: the wall shells of containers and the obstacle boxes.
     pub fn solid_regions(&self) -> Vec<SolidRegion> {
+        self.named_solids().into_iter().map(|s| s.1).collect()
+    }
+
+    /// The solid regions with the name of each (its boundary and, for a container, the wall)
+    /// and the spacing of its wall particles.
+    pub fn named_solids(&self) -> Vec<(String, SolidRegion, f64)> {
         let mut out = Vec::new();
-        for b in &self.boundary {
+        for (i, b) in self.boundary.iter().enumerate() {
             match b {
-                Boundary::Box { min, max, .. } => out.push(SolidRegion { min: *min, max: *max }),
+                Boundary::Box { min, max, walls } => {
+                    let s = walls.spacing.unwrap_or(self.physics.particle_spacing);
+                    out.push((format!("boundary[{i}] (the box {}..{})", short3(*min), short3(*max)), SolidRegion { min: *min, max: *max }, s));
+                }
                 Boundary::Container { min, max, open_top, walls } => {
                     let s = walls.spacing.unwrap_or(self.physics.particle_spacing);
                     let l = self.wall_layers(walls) as f64 * s;
@@ -42,14 +52,15 @@ impl Scene {
                         r.max[a] = hi;
                         r
                     };
-                    out.push(slab(0, min[0] - l, min[0]));
-                    out.push(slab(0, max[0], max[0] + l));
-                    out.push(slab(1, min[1] - l, min[1]));
+                    let name = |face: &str| format!("boundary[{i}] (the container's {face} wall)");
+                    out.push((name("-x"), slab(0, min[0] - l, min[0]), s));
+                    out.push((name("+x"), slab(0, max[0], max[0] + l), s));
+                    out.push((name("-y (floor)"), slab(1, min[1] - l, min[1]), s));
                     if !*open_top {
-                        out.push(slab(1, max[1], max[1] + l));
+                        out.push((name("+y (top)"), slab(1, max[1], max[1] + l), s));
                     }
-                    out.push(slab(2, min[2] - l, min[2]));
-                    out.push(slab(2, max[2], max[2] + l));
+                    out.push((name("-z"), slab(2, min[2] - l, min[2]), s));
+                    out.push((name("+z"), slab(2, max[2], max[2] + l), s));
                 }
                 Boundary::Plane { .. } => {}
             }
@@ -57,14 +68,34 @@ impl Scene {
         out
     }
 
+    /// The lattice of fluid block `i` (see [`super::lattice`]): per axis, whether a solid's
+    /// face lies on the block's min and max faces decides where a lattice that does not fill
+    /// the side exactly is placed.
+    pub fn fluid_lattice(&self, i: usize) -> [AxisLattice; 3] {
+        let b = &self.fluid[i];
+        let s = self.physics.particle_spacing;
+        let tolerance = 1e-6 * s;
+        let solids = self.named_solids();
+        // A solid whose face lies on the block's face at `at` along axis `a`, over some of it.
+        let wall_at = |a: usize, at: f64, solid_face: &dyn Fn(&SolidRegion) -> f64| {
+            solids.iter().any(|(_, r, _)| {
+                (solid_face(r) - at).abs() <= tolerance && (0..3).filter(|&k| k != a).all(|k| r.max[k].min(b.max[k]) - r.min[k].max(b.min[k]) > tolerance)
+            })
+        };
+        std::array::from_fn(|a| {
+            let walls = (wall_at(a, b.min[a], &|r: &SolidRegion| r.max[a]), wall_at(a, b.max[a], &|r: &SolidRegion| r.min[a]));
+            fluid_axis(b.min[a], b.max[a], s, walls)
+        })
+    }
+
     /// The particles at t = 0: fluid on jittered lattices, walls on regular lattices.
     pub fn initial_state(&self) -> InitialState {
         let s = self.physics.particle_spacing;
         let mut rng = rand_pcg::Pcg64::seed_from_u64(self.seed);
         let mut st = InitialState::default();
-        for b in &self.fluid {
+        for (i, b) in self.fluid.iter().enumerate() {
             let j = b.jitter * s;
-            for q in lattice(b.min, b.max, s) {
+            for q in points(self.fluid_lattice(i)) {
                 let mut q = q;
                 if j > 0.0 {
                     for c in q.iter_mut() {
@@ -82,29 +113,55 @@ impl Scene {
                 Boundary::Plane { .. } => continue,
             };
             let ws = walls.spacing.unwrap_or(s);
-            let l = self.wall_layers(walls) as f64 * ws;
-            let mass = walls.rest_density.unwrap_or(self.physics.rest_density) * ws.powi(3);
+            let layers = self.wall_layers(walls);
+            let rest_density = walls.rest_density.unwrap_or(self.physics.rest_density);
+            // A particle's mass is the wall's rest density times its lattice cell; the cells
+            // of a lattice stretched to fit a side are a little larger or smaller than ws^3.
+            let mass_of = |cell: [f64; 3]| if cell == [ws; 3] { rest_density * ws.powi(3) } else { rest_density * cell[0] * cell[1] * cell[2] };
             let inner = |q: &[f64; 3], lo: [f64; 3], hi: [f64; 3]| (0..3).all(|a| q[a] > lo[a] && q[a] < hi[a]);
             if hollow_box {
                 // Obstacle: a shell of `layers` inside its faces; the core is never reached.
-                let lo = [min[0] + l, min[1] + l, min[2] + l];
-                let hi = [max[0] - l, max[1] - l, max[2] - l];
-                for q in lattice(*min, *max, ws) {
+                let axes: [AxisLattice; 3] = std::array::from_fn(|a| wall_axis(min[a], max[a], ws));
+                let lo: [f64; 3] = std::array::from_fn(|a| min[a] + layers as f64 * axes[a].spacing);
+                let hi: [f64; 3] = std::array::from_fn(|a| max[a] - layers as f64 * axes[a].spacing);
+                let mass = mass_of(axes.map(|x| x.spacing));
+                for q in points(axes) {
                     if !inner(&q, lo, hi) {
                         st.wall_positions.push(q);
                         st.wall_masses.push(mass);
                     }
                 }
             } else {
-                let lo = [min[0] - l, min[1] - l, min[2] - l];
+                // A tank: `layers` layers outside each face, the first half a spacing from it;
+                // across a face, the wall spans the tank's side and the walls beside it.
+                let l = layers as f64 * ws;
                 let top = if open_top { max[1] } else { max[1] + l };
-                let hi = [max[0] + l, top, max[2] + l];
-                // The walls' first layer sits half a spacing outside the container's faces.
                 let cavity_hi = [max[0], if open_top { f64::INFINITY } else { max[1] }, max[2]];
-                for q in lattice(lo, hi, ws) {
-                    if !inner(&q, *min, cavity_hi) {
-                        st.wall_positions.push(q);
-                        st.wall_masses.push(mass);
+                let axes: [Vec<(f64, f64)>; 3] = std::array::from_fn(|a| {
+                    let (lo, hi) = (min[a] - l, if a == 1 { top } else { max[a] + l });
+                    if whole_spacings(hi - lo, ws).is_some() {
+                        // Whole spacings from the outer face to the outer face: one lattice.
+                        let axis = wall_axis(lo, hi, ws);
+                        (0..axis.count).map(|i| (axis.point(i), ws)).collect()
+                    } else {
+                        let side = wall_axis(min[a], max[a], ws);
+                        let mut v: Vec<(f64, f64)> = (0..layers as u64).rev().map(|k| (min[a] - (k as f64 + 0.5) * ws, ws)).collect();
+                        v.extend((0..side.count).map(|i| (side.point(i), side.spacing)));
+                        if a != 1 || !open_top {
+                            v.extend((0..layers as u64).map(|k| (max[a] + (k as f64 + 0.5) * ws, ws)));
+                        }
+                        v
+                    }
+                });
+                for &(z, cz) in &axes[2] {
+                    for &(y, cy) in &axes[1] {
+                        for &(x, cx) in &axes[0] {
+                            let q = [x, y, z];
+                            if !inner(&q, *min, cavity_hi) {
+                                st.wall_positions.push(q);
+                                st.wall_masses.push(mass_of([cx, cy, cz]));
+                            }
+                        }
                     }
                 }
             }

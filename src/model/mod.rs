@@ -9,6 +9,8 @@ pub mod import;
 pub mod initial;
 pub mod kernels;
 pub mod lattice;
+pub mod numbers;
+pub mod overrides;
 pub mod params;
 pub mod real;
 pub mod scene;

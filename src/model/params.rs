@@ -2,7 +2,7 @@
 //! neighbour grid, adaptive time stepping and the viscosity schedule.
 
 use super::real::{Real, V3};
-use super::scene::{Boundary, BoundaryPressure, BoundaryVolume, DfsphSettings, EquationOfState, Kernel, PressureSolver, Scene};
+use super::scene::{Boundary, BoundaryPressure, BoundaryVolume, DfsphSettings, EquationOfState, Kernel, Limits, PressureSolver, Scene};
 
 /// Plane in the form normal . x = offset, with a unit normal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +41,8 @@ pub struct Params {
     /// the equation of state).
     pub dfsph: Option<DfsphSettings>,
     pub boundary_volume: BoundaryVolume,
+    /// The weakly compressible regime the run must stay in.
+    pub limits: Limits,
 }
 
 impl Params {
@@ -68,6 +70,21 @@ impl Params {
             EquationOfState::Tait => (7.0 * self.stiffness / self.rest_density).sqrt(),
         }
     }
+    /// The density and the speed at which a run stops (`limits.max_density_ratio` rho0 and
+    /// `limits.max_mach` c0; infinite where a check is off or, for the speed, where the scene
+    /// has no speed of sound).
+    pub fn stop_levels(&self) -> StopLevels {
+        // Without a speed of sound (DFSPH) there is no Mach number to check.
+        let c0 = self.speed_of_sound();
+        StopLevels { density: self.limits.max_density_ratio * self.rest_density, speed: if c0 > 0.0 { self.limits.max_mach * c0 } else { f64::INFINITY } }
+    }
+}
+
+/// The largest density and speed a step may reach before the run stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopLevels {
+    pub density: f64,
+    pub speed: f64,
 }
 
 /// nu at time t from a (start time, nu) schedule.
@@ -198,6 +215,7 @@ impl Scene {
             grid: self.grid(),
             dfsph: (p.solver == PressureSolver::Dfsph).then(|| p.dfsph.clone()),
             boundary_volume: p.boundary_volume,
+            limits: self.limits,
         }
     }
 }

@@ -5,7 +5,7 @@
 //! Validation is in [`super::check`], the resolved constants in [`super::params`], the particles
 //! at t = 0 in [`super::initial`].
 
-use super::lattice::lattice_counts;
+use super::lattice::wall_axis;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -61,14 +61,98 @@ pub struct Scene {
     /// Camera of rendered frames; default: framed automatically around the tank and fluid.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera: Option<CameraSpec>,
+    /// When a run stops or warns because the fluid left the weakly compressible regime.
+    #[serde(default, skip_serializing_if = "Limits::is_default")]
+    pub limits: Limits,
 }
 
-/// A perspective camera for rendered frames.
+/// The weakly compressible regime a run must stay in: a run stops at the first step whose
+/// largest density or speed passes a `max_` level, and warns at its end when one passed a
+/// `warn_` level. Weakly compressible SPH stands in for an incompressible liquid only while
+/// density varies by a few per cent, which needs flow speeds well below the speed of sound:
+/// rho/rho0 - 1 is about (|v|/c0)^2 = Ma^2 (Monaghan 1994, Sec. 3). `inf` turns a check off.
+///
+/// The defaults: warn above 1.1 rho0 and Mach 0.3, where density errors reach 10 % and the
+/// assumption of a nearly incompressible fluid no longer holds; stop above 1.5 rho0, where the
+/// Tait pressure is 16 times the stiffness (far beyond any flow the speed of sound was chosen
+/// for), and above Mach 1, where the flow outruns its own pressure waves. Measured before
+/// choosing them (docs/validation.md): the built-in scenes (except the seed, which sets its
+/// own) and the validation cases reach at most 1.2 rho0 and Mach 0.39, at their default and
+/// their coarsest resolutions.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Limits {
+    /// Stop when a particle's density passes this multiple of rest_density.
+    #[serde(default = "default_max_density_ratio")]
+    pub max_density_ratio: f64,
+    /// Warn when a particle's density passed this multiple of rest_density.
+    #[serde(default = "default_warn_density_ratio")]
+    pub warn_density_ratio: f64,
+    /// Stop when a particle's speed passes this multiple of the speed of sound.
+    #[serde(default = "default_max_mach")]
+    pub max_mach: f64,
+    /// Warn when a particle's speed passed this multiple of the speed of sound.
+    #[serde(default = "default_warn_mach")]
+    pub warn_mach: f64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_density_ratio: default_max_density_ratio(),
+            warn_density_ratio: default_warn_density_ratio(),
+            max_mach: default_max_mach(),
+            warn_mach: default_warn_mach(),
+        }
+    }
+}
+
+impl Limits {
+    pub fn is_default(&self) -> bool {
+        *self == Limits::default()
+    }
+
+    /// Each stop level above 1 (density) or 0 (Mach), `inf` for none; each warning level at most
+    /// its stop level.
+    pub fn validate(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
+        use super::numbers::short;
+        for (field, v, lowest) in [("limits.max_density_ratio", self.max_density_ratio, 1.0), ("limits.warn_density_ratio", self.warn_density_ratio, 1.0), ("limits.max_mach", self.max_mach, 0.0), ("limits.warn_mach", self.warn_mach, 0.0)] {
+            if v.is_nan() || v <= lowest {
+                return Err(err(origin, field, format!("is {}; must be a number > {lowest}, or inf for no limit", short(v))));
+            }
+        }
+        for (warn, stop, field) in [(self.warn_density_ratio, self.max_density_ratio, "limits.warn_density_ratio"), (self.warn_mach, self.max_mach, "limits.warn_mach")] {
+            if warn > stop {
+                return Err(err(origin, field, format!("is {}, above the stop level {}; must be at most it", short(warn), short(stop))));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn default_max_density_ratio() -> f64 {
+    1.5
+}
+fn default_warn_density_ratio() -> f64 {
+    1.1
+}
+fn default_max_mach() -> f64 {
+    1.0
+}
+fn default_warn_mach() -> f64 {
+    0.3
+}
+
+/// A perspective camera for rendered frames; a field not given is chosen automatically (the
+/// target: the middle of the tank and fluid; the eye: in front, a little above, as far as
+/// the field of view needs to show them).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {
-    pub eye: [f64; 3],
-    pub target: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eye: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<[f64; 3]>,
     #[serde(default = "default_up")]
     pub up: [f64; 3],
     /// Vertical field of view in degrees.
@@ -507,14 +591,99 @@ impl Scene {
 
     /// The scene refined or coarsened to about `fluid_particles` fluid particles.
     pub fn with_fluid_particles(&self, fluid_particles: u64) -> Scene {
+        self.with_resolution(self.factor_for(fluid_particles, f64::INFINITY))
+    }
+
+    /// The factor on the spacings that gives about `fluid_particles`, at most `coarsest`. The
+    /// count is a step function of the factor (whole layers per block), so the factor that
+    /// scales the volume per particle is only where the search starts: factors within 15 % of
+    /// it are tried, and the one whose count comes nearest is kept (the nearest to the start
+    /// among equals).
+    fn factor_for(&self, fluid_particles: u64, coarsest: f64) -> f64 {
         let now = self.fluid_particle_count().max(1) as f64;
-        self.with_resolution((now / fluid_particles.max(1) as f64).cbrt())
+        let target = fluid_particles.max(1);
+        let start = (now / target as f64).cbrt().min(coarsest);
+        if start == 1.0 {
+            return start;
+        }
+        (-15..=15)
+            .map(|k: i32| (k.abs(), (start * (1.0 + 0.01 * k as f64)).min(coarsest)))
+            .min_by_key(|&(k, f)| (self.with_resolution(f).fluid_particle_count().abs_diff(target), k))
+            .map_or(start, |(_, f)| f)
+    }
+
+    /// The coarsest resolution `--particles` may ask for, as a factor on the spacings: every
+    /// fluid block at least one smoothing length h and two particle spacings thick on every
+    /// axis, so that a particle has neighbours in the layers beside it. A scene as written is
+    /// always allowed (1 at least).
+    pub fn coarsest_factor(&self) -> f64 {
+        let thinnest_allowed = self.physics.smoothing_length.max(2.0 * self.physics.particle_spacing);
+        let thinnest = self.fluid.iter().flat_map(|b| (0..3).map(move |a| b.max[a] - b.min[a])).fold(f64::INFINITY, f64::min);
+        (thinnest / thinnest_allowed).max(1.0)
+    }
+
+    /// The fewest fluid particles `--particles` may ask for: the count at
+    /// [`Scene::coarsest_factor`].
+    pub fn fewest_fluid_particles(&self) -> u64 {
+        self.with_resolution(self.coarsest_factor()).fluid_particle_count().min(self.fluid_particle_count())
+    }
+
+    /// [`Scene::with_fluid_particles`] for a user's request: refused, with the fewest the scene
+    /// allows, where the scene would be coarser than [`Scene::coarsest_factor`].
+    pub fn at_fluid_particles(&self, fluid_particles: u64) -> Result<Scene, String> {
+        let fewest = self.fewest_fluid_particles();
+        if fluid_particles < fewest {
+            let h = self.physics.smoothing_length;
+            let (i, axis, thickness) = self
+                .fluid
+                .iter()
+                .enumerate()
+                .flat_map(|(i, b)| (0..3).map(move |a| (i, a, b.max[a] - b.min[a])))
+                .fold((0, 0, f64::INFINITY), |best, x| if x.2 < best.2 { x } else { best });
+            return Err(format!(
+                "the scene '{}' allows at least {fewest} fluid particles: with fewer, fluid[{i}] ({} thick along {}) would be thinner than one smoothing length h or two particle spacings (both grow as the particles get fewer; h is {} now)",
+                self.name,
+                super::numbers::short(thickness),
+                ["x", "y", "z"][axis],
+                super::numbers::short(h)
+            ));
+        }
+        Ok(self.with_resolution(self.factor_for(fluid_particles, self.coarsest_factor())))
+    }
+
+    /// One line for each fluid block whose sides are not whole numbers of particle spacings,
+    /// saying how its lattice differs from the stated block and why (see [`super::lattice`]).
+    pub fn lattice_changes(&self) -> Vec<String> {
+        use super::numbers::short;
+        let s = self.physics.particle_spacing;
+        let mut out = Vec::new();
+        for (i, b) in self.fluid.iter().enumerate() {
+            let axes = self.fluid_lattice(i);
+            let stated: [f64; 3] = std::array::from_fn(|a| b.max[a] - b.min[a]);
+            if (0..3).all(|a| super::lattice::whole_spacings(stated[a], s).is_some()) {
+                continue;
+            }
+            let filled: [f64; 3] = std::array::from_fn(|a| axes[a].length());
+            let sides = |v: [f64; 3]| v.map(short).join(" x ");
+            let change: Vec<String> = (0..3)
+                .filter(|&a| (filled[a] - stated[a]).abs() > 1e-9 * s)
+                .map(|a| format!("{} {:+.1} %", ["x", "y", "z"][a], 100.0 * (filled[a] - stated[a]) / stated[a]))
+                .collect();
+            out.push(format!(
+                "fluid[{i}] is {} but not a whole number of particle spacings ({}): filled as {} ({}; {} particles; never nearer than half a spacing to a wall), so that the fluid keeps its spacing and starts at its rest density",
+                sides(stated),
+                short(s),
+                sides(filled),
+                change.join(", "),
+                axes.iter().map(|x| x.count).product::<u64>()
+            ));
+        }
+        out
     }
 
     /// Fluid particles of the scene, counted from the lattice sizes without creating them.
     pub fn fluid_particle_count(&self) -> u64 {
-        let s = self.physics.particle_spacing;
-        self.fluid.iter().map(|b| lattice_counts(b.min, b.max, s).iter().product::<u64>()).sum()
+        (0..self.fluid.len()).map(|i| self.fluid_lattice(i).iter().map(|a| a.count).product::<u64>()).sum()
     }
 
     /// Particle count (fluid and walls, walls over-estimated by the full shell of their box,
@@ -527,8 +696,8 @@ impl Scene {
                 let ws = walls.spacing.unwrap_or(s);
                 let l = self.wall_layers(walls) as f64 * ws;
                 let (lo, hi) = ([min[0] - l, min[1] - l, min[2] - l], [max[0] + l, max[1] + l, max[2] + l]);
-                let outer = lattice_counts(lo, hi, ws).iter().product::<u64>();
-                let inner = lattice_counts(*min, *max, ws).iter().map(|&c| c.saturating_sub(2)).product::<u64>();
+                let outer = (0..3).map(|a| wall_axis(lo[a], hi[a], ws).count).product::<u64>();
+                let inner = (0..3).map(|a| wall_axis(min[a], max[a], ws).count.saturating_sub(2)).product::<u64>();
                 n += outer.saturating_sub(inner);
             }
         }

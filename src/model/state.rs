@@ -2,6 +2,8 @@
 //! the fields of the last step, the health of the run, the time steps taken, and the complete
 //! state a checkpoint saves.
 
+use super::params::StopLevels;
+
 /// Fluid particles in their original order, widened to f64.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Snapshot {
@@ -100,31 +102,81 @@ pub struct DfsphFields {
     pub velocities: Vec<[f64; 3]>,
 }
 
-/// What a run found wrong, and the largest density seen.
+/// What a run found wrong, and the largest density and speed seen.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Health {
-    /// Particles with a non-finite position or velocity after the last step.
+    /// Particles with a non-finite position or velocity after the last step (those of the
+    /// first bad step are in `bad_step`).
     pub non_finite: u64,
     /// Particles outside the domain after the last step.
     pub escaped: u64,
-    /// The first step after which a particle was non-finite or outside the domain.
+    /// The first step after which a particle was non-finite or outside the domain, or the
+    /// largest density or speed passed its stop level.
     pub first_bad_step: Option<u64>,
     /// Largest density over all steps so far.
     pub max_density: f64,
     /// DFSPH's iterations so far (`None` for weakly compressible SPH).
     pub iterations: Option<IterationStats>,
+    /// Largest speed over all steps so far.
+    pub max_speed: f64,
+    /// What was measured at the first bad step, recorded when it happened (so that a later
+    /// read sees that step's figures, not those of a step after it).
+    pub bad_step: Option<BadStep>,
+}
+
+/// What one step measured: the counts of bad particles, the largest density (of the state it
+/// started from) and speed (after it), its dt and the time at its end.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepMeasures {
+    pub non_finite: u64,
+    pub escaped: u64,
+    pub max_density: f64,
+    pub max_speed: f64,
+    pub dt: f64,
+    pub time: f64,
+}
+
+/// The first step that went wrong, what it measured and which checks it failed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BadStep {
+    pub step: u64,
+    pub measured: StepMeasures,
+    /// The largest density passed the stop level (`limits.max_density_ratio` rho0).
+    pub too_dense: bool,
+    /// The largest speed passed the stop level (`limits.max_mach` c0).
+    pub too_fast: bool,
+}
+
+impl BadStep {
+    /// The step's measures judged against the stop levels: `None` when it went well.
+    pub fn judge(step: u64, measured: StepMeasures, stop: StopLevels) -> Option<BadStep> {
+        let too_dense = measured.max_density > stop.density;
+        let too_fast = measured.max_speed > stop.speed;
+        (measured.non_finite > 0 || measured.escaped > 0 || too_dense || too_fast).then_some(BadStep { step, measured, too_dense, too_fast })
+    }
 }
 
 impl Health {
     pub fn is_ok(&self) -> bool {
         self.first_bad_step.is_none()
     }
-    pub fn record(&mut self, step: u64, non_finite: u32, escaped: u32) {
-        self.non_finite = non_finite as u64;
-        self.escaped = escaped as u64;
-        if (non_finite > 0 || escaped > 0) && self.first_bad_step.is_none() {
-            self.first_bad_step = Some(step);
+    /// Records a step: the running maxima, and the first step that went wrong with what it
+    /// measured (later bad steps change nothing: the health describes the first).
+    pub fn record(&mut self, step: u64, measured: StepMeasures, stop: StopLevels) {
+        self.non_finite = measured.non_finite;
+        self.escaped = measured.escaped;
+        self.max_speed = self.max_speed.max(measured.max_speed);
+        if self.bad_step.is_none() {
+            if let Some(bad) = BadStep::judge(step, measured, stop) {
+                self.bad_step = Some(bad);
+                self.first_bad_step = Some(step);
+            }
         }
+    }
+    /// The counts of non-finite and escaped particles of the event that stopped the run: the
+    /// first bad step's, or after the last step where none went bad.
+    pub fn bad_counts(&self) -> (u64, u64) {
+        self.bad_step.map_or((self.non_finite, self.escaped), |b| (b.measured.non_finite, b.measured.escaped))
     }
 }
 
@@ -158,6 +210,8 @@ pub struct BackendState {
     pub escaped: u64,
     pub first_bad_step: Option<u64>,
     pub max_density: f64,
+    pub max_speed: f64,
+    pub bad_step: Option<BadStep>,
     /// The CPU's simulated time and its smallest, largest and last dt (adaptive dt makes
     /// time differ from step x dt).
     pub time: f64,
@@ -190,7 +244,15 @@ impl BackendState {
         Ok(())
     }
     pub fn health(&self) -> Health {
-        Health { non_finite: self.non_finite, escaped: self.escaped, first_bad_step: self.first_bad_step, max_density: self.max_density, iterations: None }
+        Health {
+            non_finite: self.non_finite,
+            escaped: self.escaped,
+            first_bad_step: self.first_bad_step,
+            max_density: self.max_density,
+            max_speed: self.max_speed,
+            bad_step: self.bad_step,
+            iterations: None,
+        }
     }
 }
 

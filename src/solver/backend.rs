@@ -1,7 +1,9 @@
 //! The [`Backend`] trait every layer above the solvers drives, and what it hands out.
 
 use super::gpu::buffers::ParticleBuffers;
+use crate::model::diagnosis::{diagnose, SolidIntrusions};
 use crate::model::params::Params;
+use crate::model::scene::Scene;
 use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
 
 /// One particle of a snapshot as a backend hands it over in pieces: x, y, z, vx, vy, vz,
@@ -132,4 +134,25 @@ pub trait Backend {
     /// Continues from a saved state: the following steps are bitwise those the saving backend
     /// would have computed (on the same adapter or float type).
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()>;
+}
+
+/// Why the run of `backend` (a run of `scene`) went bad: the diagnosis of its first bad step
+/// ([`crate::model::diagnosis::diagnose`]), with the fluid particles now inside the scene's
+/// solids (read in pieces where the backend streams its snapshots).
+pub fn diagnose_failure(backend: &mut dyn Backend, scene: &Scene) -> anyhow::Result<String> {
+    let health = backend.health()?;
+    let mut found = SolidIntrusions::new(scene);
+    if backend.streams_snapshots() {
+        backend.visit_snapshot_rows(&mut |_, rows| {
+            for r in rows {
+                found.add([r[0] as f64, r[1] as f64, r[2] as f64]);
+            }
+            Ok(())
+        })?;
+    } else {
+        for x in backend.snapshot()?.positions {
+            found.add(x);
+        }
+    }
+    Ok(diagnose(scene, &health, Some(&found)))
 }

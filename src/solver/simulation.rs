@@ -33,7 +33,9 @@ use crate::model::state::{Health, Snapshot};
 /// Which device runs a scene.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Device {
-    /// The GPU when an adapter exists, else the CPU with a warning.
+    /// A hardware GPU when there is one, else the CPU path: a software adapter (llvmpipe,
+    /// lavapipe, WARP) runs the same cores slower than the CPU path does. An adapter named
+    /// with `WGPU_ADAPTER_NAME`, or a device given, is used whatever its kind.
     #[default]
     Auto,
     Cpu,
@@ -90,6 +92,43 @@ pub enum Solver {
 pub struct Simulation {
     scene: Scene,
     solver: Solver,
+    /// Which backend runs it and why, in words.
+    reason: String,
+}
+
+/// What `Device::Auto` takes: a GPU adapter, or the CPU path; with the reason in words.
+enum AutoChoice {
+    Gpu(wgpu::Adapter, String),
+    Cpu(String),
+}
+
+fn auto_choice() -> AutoChoice {
+    let by_name = std::env::var_os("WGPU_ADAPTER_NAME").is_some();
+    match super::gpu::device::choose_adapter() {
+        Ok(a) => {
+            let info = a.get_info();
+            let name = format!("{} ({:?})", info.name, info.backend);
+            if by_name {
+                AutoChoice::Gpu(a, "chosen with WGPU_ADAPTER_NAME".into())
+            } else if info.device_type == wgpu::DeviceType::Cpu {
+                AutoChoice::Cpu(format!(
+                    "the only GPU adapter is the software renderer {name}, which runs slower than the CPU path on the same cores (--backend gpu runs on it)"
+                ))
+            } else {
+                AutoChoice::Gpu(a, "a hardware adapter".into())
+            }
+        }
+        Err(e) => AutoChoice::Cpu(format!("{e}")),
+    }
+}
+
+/// The device `Device::Auto` stands for on this machine, and why, in words (for commands
+/// that open many backends and say once which).
+pub fn auto_device() -> (Device, String) {
+    match auto_choice() {
+        AutoChoice::Gpu(a, why) => (Device::Gpu, format!("the GPU on {} ({:?}): {why}", a.get_info().name, a.get_info().backend)),
+        AutoChoice::Cpu(why) => (Device::Cpu, why),
+    }
 }
 
 /// The one builder: the scene (validated again, as code may have changed it) on the backend
@@ -123,18 +162,32 @@ pub fn open_with(scene: &Scene, initial: Option<InitialState>, choice: &BackendC
         Some(c) => Ok(c.clone()),
         None => GpuContext::new(),
     };
-    let solver = match choice.device {
-        Device::Cpu => cpu(initial)?,
-        Device::Gpu => gpu(context()?, initial)?,
-        Device::Auto => match context() {
-            Ok(ctx) => gpu(ctx, initial)?,
-            Err(e) => {
-                eprintln!("warning: {e:#}; falling back to the cpu backend");
-                cpu(initial)?
-            }
+    let cpu_name = match choice.precision {
+        Precision::F64 => "the CPU path in f64",
+        Precision::F32 => "the CPU path in f32",
+    };
+    let (solver, reason) = match choice.device {
+        Device::Cpu => (cpu(initial)?, format!("{cpu_name}, as asked")),
+        Device::Gpu => {
+            let ctx = context()?;
+            let name = ctx.describe();
+            (gpu(ctx, initial)?, format!("the GPU on {name}, as asked"))
+        }
+        Device::Auto => match &choice.context {
+            Some(c) => (gpu(c.clone(), initial)?, format!("the GPU on {}, the device given", c.describe())),
+            None => match auto_choice() {
+                AutoChoice::Gpu(adapter, why) => match GpuContext::from_adapter(adapter) {
+                    Ok(ctx) => {
+                        let name = ctx.describe();
+                        (gpu(ctx, initial)?, format!("the GPU on {name}: {why}"))
+                    }
+                    Err(e) => (cpu(initial)?, format!("{cpu_name}: {e:#}")),
+                },
+                AutoChoice::Cpu(why) => (cpu(initial)?, format!("{cpu_name}: {why}")),
+            },
         },
     };
-    Ok(Simulation { scene: scene.clone(), solver })
+    Ok(Simulation { scene: scene.clone(), solver, reason })
 }
 
 /// The CPU path's host memory against what the machine has (where the platform tells).
@@ -289,6 +342,10 @@ impl Simulation {
 
     pub fn scene(&self) -> &Scene {
         &self.scene
+    }
+    /// Which backend runs the simulation and why, in words (what `Device::Auto` chose).
+    pub fn backend_reason(&self) -> &str {
+        &self.reason
     }
     /// The resolved constants (h, dt, stiffness, grid, ...).
     pub fn params(&self) -> &Params {

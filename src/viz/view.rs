@@ -159,7 +159,8 @@ impl App {
                 let health = g.sim.health()?;
                 self.sim_time = g.sim.time();
                 if !health.is_ok() {
-                    let why = crate::model::diagnosis::diagnose(g.sim.params(), &health, 0.0);
+                    let scene = g.sim.scene().clone();
+                    let why = crate::solver::backend::diagnose_failure(g.sim.backend(), &scene)?;
                     eprintln!("error: the simulation went bad at {why}");
                     self.failure = Some(why);
                 }

@@ -17,9 +17,13 @@ fn summary(dir: &Path) -> Summary {
     serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
 }
 
+/// The snapshot files of a run (`snapshots/` also holds their index, `index.csv`).
 fn snapshot_names(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> =
-        std::fs::read_dir(dir.join("snapshots")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let mut v: Vec<String> = std::fs::read_dir(dir.join("snapshots"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("step_"))
+        .collect();
     v.sort();
     v
 }
@@ -44,8 +48,21 @@ fn run_writes_snapshots_and_a_summary() {
     // No temporary files are left beside the outputs.
     assert!(std::fs::read_dir(&o).unwrap().all(|e| {
         let n = e.unwrap().file_name();
-        n == "summary.json" || n == "snapshots" || n == "scene.toml"
+        n == "summary.json" || n == "snapshots" || n == "scene.toml" || n == ".wgsph-run"
     }));
+    assert!(snapshot_names_all(&o).iter().all(|n| n.starts_with("step_") || n == "index.csv"));
+}
+
+fn snapshot_names_all(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir.join("snapshots")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect()
+}
+
+/// The pictures in a frames directory (it also holds the hidden marker of a run's outputs).
+fn picture_names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).filter(|n| !n.starts_with('.')).collect();
+    names.sort();
+    names
 }
 
 #[test]
@@ -135,10 +152,7 @@ fn run_writes_frames_of_the_asked_size() {
         dir.path(),
     );
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let mut names: Vec<String> =
-        std::fs::read_dir(dir.path().join("f")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    names.sort();
-    assert_eq!(names, ["frame_00000.png", "frame_00001.png", "frame_00002.png"]);
+    assert_eq!(picture_names(&dir.path().join("f")), ["frame_00000.png", "frame_00001.png", "frame_00002.png"]);
     let img = image::open(dir.path().join("f/frame_00002.png")).unwrap();
     assert_eq!((img.width(), img.height()), (160, 90));
     assert_eq!(summary(&dir.path().join("o")).frames, 3);
@@ -155,10 +169,7 @@ fn run_writes_frames_of_the_surface_mesh() {
         dir.path(),
     );
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let mut names: Vec<String> =
-        std::fs::read_dir(dir.path().join("f")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    names.sort();
-    assert_eq!(names, ["frame_00000.png", "frame_00001.png"]);
+    assert_eq!(picture_names(&dir.path().join("f")), ["frame_00000.png", "frame_00001.png"]);
     let img = image::open(dir.path().join("f/frame_00001.png")).unwrap().to_rgb8();
     assert_eq!((img.width(), img.height()), (160, 90));
     // The fluid is drawn: a good share of the pixels are bluer than the background.

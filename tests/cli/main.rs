@@ -4,6 +4,8 @@
 mod common;
 
 mod commands;
+mod runs;
 mod profile;
 mod tradeoff;
 mod architecture;
+mod bench;

@@ -81,6 +81,7 @@ impl TestScene {
                 fluid: Vec::new(),
                 boundary: Vec::new(),
                 camera: None,
+                limits: Default::default(),
             },
         }
     }
@@ -351,6 +352,29 @@ impl TestScene {
     pub fn boundary_volume(mut self, volume: BoundaryVolume) -> TestScene {
         self.scene.physics.boundary_volume = volume;
         self
+    }
+
+    // Limits of the weakly compressible regime.
+
+    /// The stop levels: the largest rho/rho0 and Mach number a step may reach (`inf`: none).
+    pub fn stop_levels(mut self, max_density_ratio: f64, max_mach: f64) -> TestScene {
+        self.scene.limits.max_density_ratio = max_density_ratio;
+        self.scene.limits.max_mach = max_mach;
+        self.scene.limits.warn_density_ratio = self.scene.limits.warn_density_ratio.min(max_density_ratio);
+        self.scene.limits.warn_mach = self.scene.limits.warn_mach.min(max_mach);
+        self
+    }
+
+    /// The warning levels of rho/rho0 and of the Mach number.
+    pub fn warn_levels(mut self, density_ratio: f64, mach: f64) -> TestScene {
+        self.scene.limits.warn_density_ratio = density_ratio;
+        self.scene.limits.warn_mach = mach;
+        self
+    }
+
+    /// No stop or warning level: a run stops only for non-finite or escaped particles.
+    pub fn without_limits(self) -> TestScene {
+        self.stop_levels(f64::INFINITY, f64::INFINITY).warn_levels(f64::INFINITY, f64::INFINITY)
     }
 }
 

@@ -18,6 +18,7 @@ use wgsph::solver::Backend;
 use wgsph::model::state::Health;
 use wgsph::model::scene::Scene;
 use wgsph::model::state::Snapshot;
+use wgsph::io::summary::RunStatus;
 
 fn wgsph(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir).output().unwrap()
@@ -124,12 +125,16 @@ fn resumed_run_is_bitwise_the_uninterrupted_one(make: &mut dyn FnMut() -> Box<dy
     let whole = run(make().as_mut(), scene, &opts(&a, 0)).unwrap();
     assert!(whole.failure.is_none());
     let mut first = make();
-    let e = run(&mut FailingAt { inner: first.as_mut(), fail_at: 25 }, scene, &opts(&b, 20)).unwrap_err();
-    assert!(e.to_string().contains("interrupted"), "{e}");
+    // A run that stops on an error after its start still writes its summary, naming the step.
+    let stopped = run(&mut FailingAt { inner: first.as_mut(), fail_at: 25 }, scene, &opts(&b, 20)).unwrap();
+    assert_eq!(stopped.status, RunStatus::Error, "{what}");
+    let why = stopped.failure.expect("the failure is recorded");
+    assert!(why.contains("interrupted at step 25"), "{why}");
+    assert_eq!(stopped.last_checkpoint.map(|p| Path::new(&p).file_name().unwrap().to_owned()), Some(CHECKPOINT_FILE.into()));
     let c = read(&b.join(CHECKPOINT_FILE)).unwrap();
     assert_eq!((c.state.step, c.run.end_step), (20, 40), "{what}");
     let names = |d: &Path| files(d).into_iter().map(|f| f.0).collect::<Vec<_>>();
-    assert_eq!(names(&b).len(), 3 * 2 + 1, "{what}: snapshots 0, 10, 20 and the series before the resume");
+    assert_eq!(names(&b).len(), 3 * 2 + 2, "{what}: snapshots 0, 10, 20, the series and the index before the resume");
     let resumed = resume_with(make().as_mut(), &b, &c, c.run.end_step, false).unwrap();
     assert_eq!((resumed.steps, resumed.failure.clone()), (20, None));
     assert_eq!(names(&a), names(&b), "{what}");

@@ -7,6 +7,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 use vtkio::model::{Attribute, CellType, DataSet, Piece, VertexNumbers};
 use wgsph::io::snapshot::format::snapshot_file;
+use wgsph::io::snapshot::csv::SNAPSHOT_HEADER;
 use wgsph::io::snapshot::ply::write_ply;
 use wgsph::io::snapshot::vtk::write_vtk;
 use wgsph::io::snapshot::vtk::FileSeries;
@@ -130,7 +131,7 @@ fn only_the_chosen_formats_are_written_and_bad_ones_are_refused() {
     let mut names: Vec<String> =
         std::fs::read_dir(dir.path().join("v/snapshots")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     names.sort();
-    assert_eq!(names, ["particles.vtk.series", "step_000000.vtk", "step_000002.vtk"]);
+    assert_eq!(names, ["index.csv", "particles.vtk.series", "step_000000.vtk", "step_000002.vtk"]);
     let out = wgsph(&["run", "hydrostatic", "--steps", "2", "--out", "x", "--format", "obj"], dir.path());
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
@@ -151,4 +152,46 @@ fn a_snapshot_with_nan_is_never_written_in_any_format() {
         assert!(!path.exists());
     }
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "no temporary file is left");
+}
+
+/// `snapshots/index.csv` gives each snapshot's step and simulated time to a CSV reader (the
+/// snapshots keep their header as their first line); `--snapshot-every 0.005s` writes one at
+/// the first step reaching each multiple of the time, with adaptive dt too.
+#[test]
+fn snapshots_at_simulated_times_and_their_index() {
+    let dir = tempfile::tempdir().unwrap();
+    let interval = 0.005;
+    for (out, extra) in [("fixed", &[][..]), ("adaptive", &["--set", "time.adaptive=true"][..])] {
+        let o = wgsph(
+            &[&["run", "hydrostatic", "--particles", "300", "--time", "0.0305", "--snapshot-every", "0.005s", "--backend", "cpu", "--out", out], extra].concat(),
+            dir.path(),
+        );
+        assert!(o.status.success(), "{out}: {}", String::from_utf8_lossy(&o.stderr));
+        let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join(out).join("summary.json")).unwrap()).unwrap();
+        let dt_max = summary["dt_max"].as_f64().unwrap();
+        let index = std::fs::read_to_string(dir.path().join(out).join("snapshots/index.csv")).unwrap();
+        let mut lines = index.lines();
+        assert_eq!(lines.next(), Some("step,time,csv"), "{out}");
+        let rows: Vec<(u64, f64, String)> = lines
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (f[0].parse().unwrap(), f[1].parse().unwrap(), f[2].to_string())
+            })
+            .collect();
+        // t = 0, each of 0.005 ... 0.030, and the end.
+        assert_eq!(rows.len(), 8, "{out}: {index}");
+        for (k, (step, time, file)) in rows.iter().enumerate().take(7) {
+            let due = k as f64 * interval;
+            assert!(*time >= due - 1e-12 && *time < due + dt_max + 1e-12, "{out}: snapshot {k} at t = {time}, due at {due}");
+            assert_eq!(file, &format!("step_{step:06}.csv"));
+            let csv = std::fs::read_to_string(dir.path().join(out).join("snapshots").join(file)).unwrap();
+            assert_eq!(csv.lines().next(), Some(SNAPSHOT_HEADER), "{out}: {file}");
+        }
+        assert!((rows[7].1 - summary["sim_time"].as_f64().unwrap()).abs() < 1e-12, "{out}: the last row is the end");
+    }
+    for bad in ["0.02x", "-1s", "0s", "nans"] {
+        let o = wgsph(&["run", "hydrostatic", "--steps", "1", &format!("--snapshot-every={bad}")], dir.path());
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("0.02s"), "{bad}: {}", String::from_utf8_lossy(&o.stderr));
+    }
 }

@@ -5,6 +5,8 @@
 mod common;
 
 mod scene_errors;
+mod refusals;
+mod lattice;
 mod splishsplash;
 mod export;
 mod stream;

@@ -1,4 +1,6 @@
-//! The run directory: the copy of the scene, --overwrite, --quiet and RUST_LOG.
+//! The run directory: the copy of the scene, --overwrite and what it may replace, output
+//! locations checked before anything changes, a failed start undone, a full disk, --quiet and
+//! RUST_LOG.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -39,6 +41,29 @@ fn the_run_directory_holds_the_exact_scene_that_reruns_identically() {
     assert_eq!(read("a"), read("b"));
 }
 
+fn read(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Every file under `dir` (relative paths, sorted) with its bytes.
+fn tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<(String, Vec<u8>)>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                out.push((p.strip_prefix(root).unwrap().display().to_string() + "/", Vec::new()));
+                walk(root, &p, out);
+            } else {
+                out.push((p.strip_prefix(root).unwrap().display().to_string(), read(&p)));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}
+
 #[test]
 fn an_existing_output_directory_is_refused_without_overwrite_and_replaced_with_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -46,23 +71,209 @@ fn an_existing_output_directory_is_refused_without_overwrite_and_replaced_with_i
     // An empty directory is used as it is.
     std::fs::create_dir(dir.path().join("o")).unwrap();
     assert!(run(&[]).status.success());
-    std::fs::write(dir.path().join("o/notes.txt"), "mine").unwrap();
-    let before = std::fs::read(dir.path().join("o/summary.json")).unwrap();
+    let before = tree(&dir.path().join("o"));
     let o = run(&[]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--out o") && stderr(&o).contains("--overwrite"), "{}", stderr(&o));
-    assert_eq!(std::fs::read(dir.path().join("o/summary.json")).unwrap(), before);
-    assert!(dir.path().join("o/notes.txt").exists());
+    assert_eq!(tree(&dir.path().join("o")), before);
     let o = run(&["--overwrite"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(!dir.path().join("o/notes.txt").exists(), "the old directory was replaced");
     assert!(dir.path().join("o/summary.json").exists());
-    // A file in the way, and a directory holding the working directory, are refused.
+    // A file in the way is refused.
     std::fs::write(dir.path().join("f"), "").unwrap();
-    assert_eq!(wgsph(&["run", "--steps", "1", "--out", "f", "--overwrite"], dir.path()).status.code(), Some(2));
-    let o = wgsph(&["run", "--steps", "1", "--out", ".", "--overwrite"], &dir.path().join("o"));
+    let o = wgsph(&["run", "--steps", "1", "--out", "f", "--overwrite"], dir.path());
     assert_eq!(o.status.code(), Some(2));
-    assert!(dir.path().join("o/summary.json").exists(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--out f: is a file"), "{}", stderr(&o));
+}
+
+/// `--out Documents --overwrite` once removed a folder of the user's own files.
+#[test]
+fn overwrite_refuses_a_directory_that_no_run_wrote() {
+    let dir = tempfile::tempdir().unwrap();
+    let docs = dir.path().join("Documents");
+    std::fs::create_dir_all(docs.join("photos")).unwrap();
+    std::fs::write(docs.join("notes.txt"), "mine").unwrap();
+    std::fs::write(docs.join("photos/cat.png"), "meow").unwrap();
+    let before = tree(&docs);
+    for extra in [&[][..], &["--overwrite"][..]] {
+        let o = wgsph(&[&["run", "hydrostatic", "--steps", "1", "--backend", "cpu", "--out", "Documents"], extra].concat(), dir.path());
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", stderr(&o));
+        let err = stderr(&o);
+        assert!(err.contains("--out Documents") && err.contains("notes.txt") && err.contains(".wgsph-run"), "{err}");
+        assert_eq!(tree(&docs), before, "{extra:?}: the directory was changed");
+    }
+    // Also from inside it.
+    let o = wgsph(&["run", "hydrostatic", "--steps", "1", "--backend", "cpu", "--out", ".", "--overwrite"], &docs);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(tree(&docs), before);
+}
+
+/// `--overwrite` replaces the files an earlier run wrote, and nothing else: not a file the user
+/// put beside them, and not the scene being run.
+#[test]
+fn overwrite_replaces_only_what_a_run_wrote_and_never_the_scene_being_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = dir.path().join("o");
+    let run = |args: &[&str]| wgsph(&[&["run"], args, &["--backend", "cpu", "--snapshot-every", "1"]].concat(), dir.path());
+    assert!(run(&["hydrostatic", "--particles", "300", "--steps", "3", "--out", "o"]).status.success());
+    std::fs::write(o.join("notes.txt"), "mine").unwrap();
+    std::fs::write(o.join("snapshots/my_plot.csv"), "x,y").unwrap();
+    // The scene copy of the earlier run, run into its own directory: refused, nothing changed.
+    let before = tree(&o);
+    let r = run(&["o/scene.toml", "--steps", "1", "--out", "o", "--overwrite"]);
+    assert_eq!(r.status.code(), Some(2), "{}", stderr(&r));
+    assert!(stderr(&r).contains("scene.toml") && stderr(&r).contains("reads"), "{}", stderr(&r));
+    assert_eq!(tree(&o), before);
+    // A scene file the user keeps in the run directory stays.
+    std::fs::copy(o.join("scene.toml"), o.join("mine.toml")).unwrap();
+    let r = run(&["o/mine.toml", "--steps", "1", "--out", "o", "--overwrite"]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    assert!(stderr(&r).contains("keeps") && stderr(&r).contains("notes.txt"), "{}", stderr(&r));
+    let names: Vec<String> = tree(&o).into_iter().map(|f| f.0).collect();
+    for kept in ["notes.txt", "mine.toml", "snapshots/my_plot.csv"] {
+        assert!(names.contains(&kept.to_string()), "{kept} was removed: {names:?}");
+    }
+    assert!(!names.iter().any(|n| n.contains("step_000003") || n.contains("step_000002")), "the earlier run's snapshots stayed: {names:?}");
+    assert!(!names.iter().any(|n| n.contains(".wgsph-replaced") || n.contains(".wgsph-tmp")), "{names:?}");
+    let summary: serde_json::Value = serde_json::from_slice(&read(&o.join("summary.json"))).unwrap();
+    assert_eq!(summary["steps"], 1);
+}
+
+/// Runs wgsph with `dir` made read-only: in a user namespace where `dir` is a read-only bind
+/// mount (root ignores file permissions), else by its permissions. `None` where neither works.
+#[cfg(unix)]
+fn with_read_only(dir: &Path, args: &[&str], cwd: &Path) -> Option<Output> {
+    use std::os::unix::fs::PermissionsExt;
+    let bin = env!("CARGO_BIN_EXE_wgsph");
+    let d = dir.display().to_string();
+    let script = format!("mount --bind '{d}' '{d}' && mount -o remount,bind,ro '{d}' && exec \"$@\"");
+    let namespaced = Command::new("unshare").args(["-rm", "sh", "-c", &script, "sh", bin]).args(args).current_dir(cwd).env_remove("RUST_LOG").output();
+    if let Ok(o) = namespaced {
+        if !String::from_utf8_lossy(&o.stderr).contains("unshare:") && !String::from_utf8_lossy(&o.stderr).contains("mount:") {
+            return Some(o);
+        }
+    }
+    let is_root = Command::new("id").arg("-u").output().is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+    if is_root {
+        eprintln!("SKIPPED: no user namespace to make {d} read-only, and root ignores permissions");
+        return None;
+    }
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o555)).unwrap();
+    let o = wgsph(args, cwd);
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+    Some(o)
+}
+
+/// An unwritable `--out` or `--frames` is refused (exit 2, naming the path) before anything is
+/// written or removed: `--overwrite --frames /read-only/dir` once removed the earlier run first.
+#[cfg(unix)]
+#[test]
+fn unusable_output_locations_are_refused_before_anything_changes() {
+    let dir = tempfile::tempdir().unwrap();
+    let ro = dir.path().join("ro");
+    std::fs::create_dir(&ro).unwrap();
+    let args = ["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "cpu"];
+    assert!(wgsph(&[&args[..], &["--out", "o"]].concat(), dir.path()).status.success());
+    let before = tree(&dir.path().join("o"));
+    // Frames below a file, and frames in a read-only directory.
+    std::fs::write(dir.path().join("file"), "").unwrap();
+    let o = wgsph(&[&args[..], &["--out", "o", "--overwrite", "--frames", "file/frames"]].concat(), dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--frames file/frames"), "{}", stderr(&o));
+    assert_eq!(tree(&dir.path().join("o")), before, "the earlier run was changed");
+    let Some(o) = with_read_only(&ro, &[&args[..], &["--out", "o", "--overwrite", "--frames", "ro/frames"]].concat(), dir.path()) else {
+        return;
+    };
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--frames ro/frames") && stderr(&o).contains("cannot write in ro"), "{}", stderr(&o));
+    assert_eq!(tree(&dir.path().join("o")), before, "the earlier run was changed");
+    // --out in a read-only directory, and a read-only --out itself.
+    for out in ["ro/run", "ro"] {
+        let o = with_read_only(&ro, &[&args[..], &["--out", out]].concat(), dir.path()).unwrap();
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("--out {out}:")) && stderr(&o).contains("ro"), "{}", stderr(&o));
+    }
+    assert!(tree(&ro).is_empty());
+}
+
+/// A run that fails before its first step (no adapter for --backend gpu, no adapter to draw
+/// with, a state that is not finite at step 0) leaves its directories as it found them, so
+/// that the retry is not refused.
+#[test]
+fn a_start_that_fails_leaves_the_directories_as_it_found_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let no_adapter = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir.path()).env("WGPU_ADAPTER_NAME", "no such adapter").output().unwrap()
+    };
+    let args = ["run", "hydrostatic", "--particles", "300", "--steps", "2"];
+    std::fs::create_dir(dir.path().join("empty")).unwrap();
+    assert!(wgsph(&[&args[..], &["--backend", "cpu", "--out", "earlier"]].concat(), dir.path()).status.success());
+    let earlier = tree(&dir.path().join("earlier"));
+    for (what, extra) in [
+        ("--backend gpu into a new directory", &["--backend", "gpu", "--out", "a/new"][..]),
+        ("--backend gpu into an empty directory", &["--backend", "gpu", "--out", "empty"][..]),
+        ("--backend gpu over an earlier run", &["--backend", "gpu", "--out", "earlier", "--overwrite"][..]),
+        ("pictures without an adapter", &["--backend", "cpu", "--out", "b", "--frames", "b/frames"][..]),
+        ("pictures without an adapter, over an earlier run", &["--backend", "cpu", "--out", "earlier", "--overwrite", "--frames", "pictures"][..]),
+    ] {
+        let o = no_adapter(&[&args[..], extra].concat());
+        assert_ne!(o.status.code(), Some(0), "{what}");
+        assert!(!stderr(&o).contains("panicked"), "{what}: {}", stderr(&o));
+        assert!(!dir.path().join("a").exists() && !dir.path().join("b").exists() && !dir.path().join("pictures").exists(), "{what}");
+        assert!(tree(&dir.path().join("empty")).is_empty(), "{what}");
+        assert_eq!(tree(&dir.path().join("earlier")), earlier, "{what}");
+    }
+    assert_eq!(no_adapter(&[&args[..], &["--backend", "gpu", "--out", "x"]].concat()).status.code(), Some(2), "no adapter for --backend gpu is bad input");
+    // A state that is not finite at step 0 (a pressure beyond f64: rho/rho0 = 1e64, to the 7th).
+    let o = wgsph(
+        &[&args[..], &["--backend", "cpu", "--out", "c", "--set", "physics.rest_density=1e-60", "--set", "physics.particle_mass=1"]].concat(),
+        dir.path(),
+    );
+    assert_ne!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(!dir.path().join("c").exists(), "{}", stderr(&o));
+    // The retry works.
+    let o = wgsph(&[&args[..], &["--backend", "cpu", "--out", "a/new"]].concat(), dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// A full disk names the step and the file being written (not a temporary file), and the
+/// summary records the failure. Needs a small filesystem: a tmpfs in a user namespace.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_names_the_step_and_the_file_and_the_summary_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("small")).unwrap();
+    let bin = env!("CARGO_BIN_EXE_wgsph");
+    // A CSV snapshot of the hydrostatic tank is about 200 KiB: the third does not fit. The
+    // filesystem is gone with the namespace, so the summary and the listing come out on stdout.
+    let script = "mount -t tmpfs -o size=512k tmpfs small || exit 99; \"$@\"; rc=$?; echo '=== summary'; cat small/run/summary.json; echo '=== files'; ls -A small/run/snapshots; exit $rc";
+    let o = Command::new("unshare")
+        .args(["-rm", "sh", "-c", script, "sh", bin])
+        .args(["run", "hydrostatic", "--steps", "30", "--snapshot-every", "5", "--backend", "cpu", "--out", "small/run"])
+        .current_dir(dir.path())
+        .env_remove("RUST_LOG")
+        .output();
+    let o = match o {
+        Ok(o) if o.status.code() != Some(99) && !stderr(&o).contains("unshare:") => o,
+        _ => {
+            eprintln!("SKIPPED: no user namespace to mount a small filesystem in");
+            return;
+        }
+    };
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("step 10: writing the snapshot: cannot write small/run/snapshots/step_000010.csv") && err.contains("No space left"), "{err}");
+    assert!(!err.contains(".wgsph-tmp") && !err.contains(".tmp"), "{err}");
+    assert!(err.contains("the last good snapshot is small/run/snapshots/step_000005.csv"), "{err}");
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    let (_, rest) = stdout.split_once("=== summary\n").expect("the summary was printed");
+    let (json, files) = rest.split_once("=== files\n").expect("the files were listed");
+    let summary: serde_json::Value = serde_json::from_str(json).unwrap_or_else(|e| panic!("{e}: {json}"));
+    assert_eq!(summary["status"], "error");
+    assert!(summary["failure"].as_str().unwrap().contains("step_000010.csv"), "{summary}");
+    assert_eq!(summary["steps"], 10);
+    // No partial file is left.
+    assert_eq!(files.split_whitespace().collect::<Vec<_>>(), ["index.csv", "step_000000.csv", "step_000005.csv"]);
 }
 
 #[test]

@@ -151,6 +151,55 @@ fn boundary_pressure_is_mirror_by_default_and_checked() {
     assert!(e.contains("tank.toml") && e.contains("mirrored") && e.contains("mirror") && e.contains("consistent"), "{e}");
 }
 
+fn wgsph_in(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir).env_remove("RUST_LOG").output().unwrap()
+}
+
+/// `--set KEY=VALUE` changes a scene field without editing the file: checked like the file
+/// (the same error for the same value), and recorded in the run's scene.toml.
+#[test]
+fn set_changes_a_scene_field_checked_like_the_file_and_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = ["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "cpu"];
+    let o = wgsph_in(
+        dir.path(),
+        &[&run[..], &["--out", "o", "--set", "time.dt=1e-4", "--set", "physics.viscosity=0", "--set", "fluid.0.velocity=[0.5, 0, 0]", "--set", "physics.kernel=cubic_spline"]].concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let copy = Scene::load(dir.path().join("o/scene.toml").to_str().unwrap()).unwrap();
+    assert_eq!((copy.physics.viscosity, copy.fluid[0].velocity), (0.0, [0.5, 0.0, 0.0]));
+    assert_eq!(copy.physics.kernel, wgsph::model::scene::Kernel::CubicSpline);
+    // --particles scales the changed scene: dt with h, from 1e-4.
+    let mut expected = Scene::builtin("hydrostatic").unwrap();
+    expected.time.dt = 1e-4;
+    assert_eq!(copy.time.dt, expected.with_fluid_particles(300).time.dt);
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("o/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["dt"].as_f64(), Some(copy.time.dt));
+
+    // The same value in the file and by --set: the same error, naming the override.
+    let file_error = error_of(&GOOD.replace("dt = 0.001", "dt = -1.0"));
+    let message = file_error.split_once(": ").unwrap().1;
+    let o = wgsph_in(dir.path(), &["run", "hydrostatic", "--steps", "1", "--set", "time.dt=-1.0"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(message) && err.contains("--set time.dt=-1.0"), "{err}\nthe file's: {file_error}");
+    for (set, says) in [
+        ("time.dtt=1", "unknown field `dtt`"),
+        ("physics.viscosity=fast", "invalid type"),
+        ("physics.equation_of_state=cubic", "tait"),
+        ("fluid.3.jitter=0", "fluid has 1 entries"),
+        ("time.dt.x=1", "is a value"),
+        ("nonsense", "KEY=VALUE"),
+    ] {
+        let o = wgsph_in(dir.path(), &["run", "hydrostatic", "--steps", "1", "--set", set]);
+        assert_eq!(o.status.code(), Some(2), "{set}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(says), "--set {set}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    assert!(!dir.path().join("out").exists(), "a refused run wrote nothing");
+}
+
 /// GOOD with DFSPH: no stiffness, and `extra` added to [physics] (`[physics.dfsph]` goes last).
 fn dfsph_scene(extra: &str, dfsph: &str) -> String {
     let text = GOOD.replace("stiffness = 1000.0", &format!("solver = \"dfsph\"\n{extra}"));

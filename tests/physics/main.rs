@@ -7,5 +7,7 @@ mod common;
 mod kernels;
 mod cpu_reference;
 mod extremes;
+mod blowups;
+mod coarse_walls;
 mod validation;
 mod dfsph;

@@ -58,8 +58,9 @@ struct Params {
     viscous_number: f32,
     dt_min: f32,
     dt_max: f32,
-    pad1: u32,
-    pad2: u32,
+    // The run stops at a step whose largest density or speed passes these (infinite: off).
+    stop_density: f32,
+    stop_speed: f32,
     // DFSPH: m / rho0, the smallest denominator of alpha, the warm start's share, the solves'
     // iteration limits, and the error sums (fixed-point, low and high word) that meet the
     // tolerances (src/solver/cpu/dfsph_shared.rs).
@@ -91,21 +92,37 @@ const STATUS_TIME: u32 = 8u;                  // adaptive dt: time = TIME - TIME
 const STATUS_TIME_COMPENSATION: u32 = 9u;     // (a Kahan sum)
 const STATUS_DT_MIN: u32 = 10u;
 const STATUS_DT_MAX: u32 = 11u;
-const STATUS_DFSPH_ERROR_LO: u32 = 12u;       // DFSPH: the error sum of the solve under way
-const STATUS_DFSPH_ERROR_HI: u32 = 13u;
-const STATUS_DFSPH_ITERATION: u32 = 14u;      // its iterations so far
-const STATUS_DFSPH_SOLVING: u32 = 15u;        // 1 while it goes on
-const STATUS_PRESSURE_ITERATIONS: u32 = 16u;  // the constant-density solve over the run
-const STATUS_PRESSURE_ITERATIONS_MAX: u32 = 17u;
-const STATUS_PRESSURE_ITERATIONS_LAST: u32 = 18u;
-const STATUS_PRESSURE_ERROR: u32 = 19u;
-const STATUS_PRESSURE_UNCONVERGED: u32 = 20u;
-const STATUS_DIVERGENCE_ITERATIONS: u32 = 21u; // the divergence solve over the run
-const STATUS_DIVERGENCE_ITERATIONS_MAX: u32 = 22u;
-const STATUS_DIVERGENCE_ITERATIONS_LAST: u32 = 23u;
-const STATUS_DIVERGENCE_ERROR: u32 = 24u;
-const STATUS_DIVERGENCE_UNCONVERGED: u32 = 25u;
+const STATUS_STEP_MAX_DENSITY: u32 = 12u;     // this step's largest density (reset by finish_step)
+const STATUS_STEP_MAX_SPEED: u32 = 13u;       // the largest speed after this step (reset by finish_step)
+const STATUS_TOP_SPEED: u32 = 14u;            // the largest speed so far
+// The first bad step's measures, written by finish_step with STATUS_FIRST_BAD_STEP, so that
+// the host reads that step's figures and not those of a later one.
+const STATUS_BAD_CAUSES: u32 = 15u;           // CAUSE_* bits
+const STATUS_BAD_NON_FINITE: u32 = 16u;
+const STATUS_BAD_ESCAPED: u32 = 17u;
+const STATUS_BAD_MAX_DENSITY: u32 = 18u;
+const STATUS_BAD_MAX_SPEED: u32 = 19u;
+const STATUS_BAD_DT: u32 = 20u;
+const STATUS_BAD_TIME: u32 = 21u;             // adaptive dt: the time at the end of the bad step
+const STATUS_DFSPH_ERROR_LO: u32 = 22u;       // DFSPH: the error sum of the solve under way
+const STATUS_DFSPH_ERROR_HI: u32 = 23u;
+const STATUS_DFSPH_ITERATION: u32 = 24u;      // its iterations so far
+const STATUS_DFSPH_SOLVING: u32 = 25u;        // 1 while it goes on
+const STATUS_PRESSURE_ITERATIONS: u32 = 26u;  // the constant-density solve over the run
+const STATUS_PRESSURE_ITERATIONS_MAX: u32 = 27u;
+const STATUS_PRESSURE_ITERATIONS_LAST: u32 = 28u;
+const STATUS_PRESSURE_ERROR: u32 = 29u;
+const STATUS_PRESSURE_UNCONVERGED: u32 = 30u;
+const STATUS_DIVERGENCE_ITERATIONS: u32 = 31u; // the divergence solve over the run
+const STATUS_DIVERGENCE_ITERATIONS_MAX: u32 = 32u;
+const STATUS_DIVERGENCE_ITERATIONS_LAST: u32 = 33u;
+const STATUS_DIVERGENCE_ERROR: u32 = 34u;
+const STATUS_DIVERGENCE_UNCONVERGED: u32 = 35u;
 const STATUS_NO_BAD_STEP: u32 = 0xffffffffu;
+const CAUSE_NON_FINITE: u32 = 1u;
+const CAUSE_ESCAPED: u32 = 2u;
+const CAUSE_TOO_DENSE: u32 = 4u;
+const CAUSE_TOO_FAST: u32 = 8u;
 
 // Dispatches of more than 65535 workgroups wrap into rows along y.
 fn thread_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {

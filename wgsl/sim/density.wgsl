@@ -9,7 +9,7 @@
 //! array wall_starts: u32, read
 //! array densities: f32, read_write
 //! array pressures: f32, read_write
-// STATUS_MAX_DENSITY: the largest density so far.
+// STATUS_MAX_DENSITY: the largest density so far; STATUS_STEP_MAX_DENSITY: of this step.
 //! array status: u32, atomic, whole
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -48,6 +48,8 @@ fn density(
     }
     reduce_end();
     if (lid == 0u) {
-        atomicMax(&status[STATUS_MAX_DENSITY], reduce_result(0u));
+        let largest = reduce_result(0u);
+        atomicMax(&status[STATUS_MAX_DENSITY], largest);
+        atomicMax(&status[STATUS_STEP_MAX_DENSITY], largest);
     }
 }

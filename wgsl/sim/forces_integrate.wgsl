@@ -8,9 +8,19 @@
 //! include sim/integrate.wgsl
 
 @compute @workgroup_size(WORKGROUP_SIZE)
-fn forces_and_integrate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+fn forces_and_integrate(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    reduce_begin(lid);
     let i = thread_index(gid, groups);
+    var speed = 0.0;
     if (i < params.fluid_count) {
-        advance_particle(i, particle_acceleration(i), params.dt);
+        speed = advance_particle(i, particle_acceleration(i), params.dt);
+    }
+    reduce_speed(speed);
+    if (lid == 0u) {
+        atomicMax(&status[STATUS_STEP_MAX_SPEED], reduce_result(0u));
     }
 }

@@ -21,14 +21,18 @@ fn step_dt() -> f32 {
     return params.dt;
 }
 
-// Advances fluid particle i with acceleration a over dt into the output arrays. The w component
-// of the position (the particle's original index, as bits) is carried over untouched.
-fn advance_particle(i: u32, a: vec3<f32>, dt: f32) {
+// Advances fluid particle i with acceleration a over dt into the output arrays and returns the
+// speed the forces gave it, before a plane took the velocity into it away (0 for a particle
+// that is not finite; a finite velocity whose length overflows counts as infinitely fast, which
+// orders above every finite speed). The w component of the position (the particle's original
+// index, as bits) is carried over untouched.
+fn advance_particle(i: u32, a: vec3<f32>, dt: f32) -> f32 {
     let old = positions_at(i);
     var v = velocities_at(i).xyz;
     var x = old.xyz;
     v += a * dt;
     x += v * dt;
+    let speed = length(v);
     // A plane puts a particle behind it back on it and removes (or reflects, with restitution)
     // the velocity into it, so that no particle is lost through it.
     if (PLANES) {
@@ -49,16 +53,35 @@ fn advance_particle(i: u32, a: vec3<f32>, dt: f32) {
     let finite = is_finite_vec3(x) && is_finite_vec3(v);
     if (!finite) {
         atomicAdd(&status[STATUS_NON_FINITE], 1u);
+        return 0.0;
     } else if (any(x < params.domain_min.xyz) || any(x > params.domain_max.xyz)) {
         atomicAdd(&status[STATUS_ESCAPED], 1u);
     }
+    return speed;
+}
+
+// The largest new speed of the workgroup into STATUS_STEP_MAX_SPEED: call from every invocation
+// after reduce_begin, with 0 for invocations past the last particle.
+fn reduce_speed(speed: f32) {
+    reduce_offer(0u, bitcast<u32>(speed));
+    reduce_end();
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
-fn integrate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+fn integrate(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    reduce_begin(lid);
     let i = thread_index(gid, groups);
+    var speed = 0.0;
     if (i < params.fluid_count) {
-        advance_particle(i, accelerations_at(i).xyz, step_dt());
+        speed = advance_particle(i, accelerations_at(i).xyz, step_dt());
+    }
+    reduce_speed(speed);
+    if (lid == 0u) {
+        atomicMax(&status[STATUS_STEP_MAX_SPEED], reduce_result(0u));
     }
 }
 
@@ -119,13 +142,45 @@ fn choose_dt() {
     atomicStore(&status[STATUS_DT_MAX], bitcast<u32>(max(bitcast<f32>(atomicLoad(&status[STATUS_DT_MAX])), dt)));
 }
 
-// One thread after every step: counts the step and remembers the first one that went wrong.
+// One thread after every step: counts the step, keeps the largest speed so far, and at the
+// first step that went wrong (a particle non-finite or outside the domain, or the step's
+// largest density or speed past its stop level) sets the marker and records, in the same
+// thread and at the same moment, what that step measured. Then resets the step's maxima.
 @compute @workgroup_size(1)
 fn finish_step() {
     let step = atomicLoad(&status[STATUS_STEPS]) + 1u;
     atomicStore(&status[STATUS_STEPS], step);
-    let bad = atomicLoad(&status[STATUS_NON_FINITE]) + atomicLoad(&status[STATUS_ESCAPED]);
-    if (bad > 0u && atomicLoad(&status[STATUS_FIRST_BAD_STEP]) == STATUS_NO_BAD_STEP) {
+    let non_finite = atomicLoad(&status[STATUS_NON_FINITE]);
+    let escaped = atomicLoad(&status[STATUS_ESCAPED]);
+    let density = atomicLoad(&status[STATUS_STEP_MAX_DENSITY]);
+    let speed = atomicLoad(&status[STATUS_STEP_MAX_SPEED]);
+    atomicStore(&status[STATUS_STEP_MAX_DENSITY], 0u);
+    atomicStore(&status[STATUS_STEP_MAX_SPEED], 0u);
+    atomicMax(&status[STATUS_TOP_SPEED], speed);
+    var causes = 0u;
+    if (non_finite > 0u) {
+        causes |= CAUSE_NON_FINITE;
+    }
+    if (escaped > 0u) {
+        causes |= CAUSE_ESCAPED;
+    }
+    if (bitcast<f32>(density) > params.stop_density) {
+        causes |= CAUSE_TOO_DENSE;
+    }
+    if (bitcast<f32>(speed) > params.stop_speed) {
+        causes |= CAUSE_TOO_FAST;
+    }
+    if (causes != 0u && atomicLoad(&status[STATUS_FIRST_BAD_STEP]) == STATUS_NO_BAD_STEP) {
         atomicStore(&status[STATUS_FIRST_BAD_STEP], step);
+        atomicStore(&status[STATUS_BAD_CAUSES], causes);
+        atomicStore(&status[STATUS_BAD_NON_FINITE], non_finite);
+        atomicStore(&status[STATUS_BAD_ESCAPED], escaped);
+        atomicStore(&status[STATUS_BAD_MAX_DENSITY], density);
+        atomicStore(&status[STATUS_BAD_MAX_SPEED], speed);
+        atomicStore(&status[STATUS_BAD_DT], bitcast<u32>(step_dt()));
+        if (ADAPTIVE_DT) {
+            let time = bitcast<f32>(atomicLoad(&status[STATUS_TIME])) - bitcast<f32>(atomicLoad(&status[STATUS_TIME_COMPENSATION]));
+            atomicStore(&status[STATUS_BAD_TIME], bitcast<u32>(time));
+        }
     }
 }

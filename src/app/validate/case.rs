@@ -3,11 +3,11 @@
 //! the CSV writer and the energy of a state.
 
 use crate::io::atomic::write_atomic;
-use crate::model::diagnosis::diagnose;
 use crate::model::initial::{InitialState, SolidRegion};
 use crate::model::params::Params;
 use crate::model::scene::{EquationOfState, Scene};
 use crate::model::state::Snapshot;
+use crate::solver::backend::diagnose_failure;
 use crate::solver::Backend;
 use clap::ValueEnum;
 use std::path::{Path, PathBuf};
@@ -95,6 +95,8 @@ pub struct CaseReport {
     pub checked_steps: Vec<u64>,
     /// The deepest a fluid particle came past a wall's face, in particle spacings.
     pub deepest_spacings: f64,
+    /// The largest rho/rho0 and Mach number of any step of the case's runs.
+    pub regime: Regime,
     pub plot: PathBuf,
     pub csv: PathBuf,
     pub wall_seconds: f64,
@@ -119,10 +121,12 @@ impl CaseReport {
             .collect();
         let mut notes = figs.join("; ");
         notes += &format!(
-            "; fluid particles inside walls: {} over {} checked steps (deepest past a face: {} spacings)",
+            "; fluid particles inside walls: {} over {} checked steps (deepest past a face: {} spacings); largest rho/rho0 {}, Mach {}",
             self.wall_leaks,
             self.checked_steps.len(),
-            fmt_num(self.deepest_spacings)
+            fmt_num(self.deepest_spacings),
+            fmt_num(self.regime.max_density_ratio),
+            fmt_num(self.regime.max_mach)
         );
         if let Some(f) = &self.failure {
             notes += &format!("; run failed: {f}");
@@ -173,25 +177,45 @@ pub fn depth_inside(x: [f64; 3], r: &SolidRegion) -> f64 {
     (0..3).map(|a| (x[a] - r.min[a]).min(r.max[a] - x[a])).fold(f64::INFINITY, f64::min).max(0.0)
 }
 
+/// The largest density over the rest density and speed over the speed of sound of any step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Regime {
+    pub max_density_ratio: f64,
+    pub max_mach: f64,
+}
+
+impl Regime {
+    /// The larger of each.
+    pub fn max(self, o: Regime) -> Regime {
+        Regime { max_density_ratio: self.max_density_ratio.max(o.max_density_ratio), max_mach: self.max_mach.max(o.max_mach) }
+    }
+}
+
 /// Steps a backend to each of `sample_steps` (increasing), checking health and leaks at every
 /// one, and hands each snapshot to `visit`. Returns the leaks, the checked steps, and a failure.
 pub struct Sampler {
+    /// The scene sampled (for the diagnosis of a failure).
+    pub scene: Scene,
     pub solids: Vec<SolidRegion>,
     pub leak_depth: f64,
     pub wall_leaks: u64,
     /// The deepest any fluid particle was inside a solid region, at any checked step.
     pub deepest: f64,
     pub checked_steps: Vec<u64>,
+    /// The regime the sampled run reached, read with the health at every sample.
+    pub regime: Regime,
 }
 
 impl Sampler {
     pub fn new(scene: &Scene) -> Self {
         Sampler {
+            scene: scene.clone(),
             solids: scene.solid_regions(),
             leak_depth: LEAK_DEPTH_SPACINGS * scene.physics.particle_spacing,
             wall_leaks: 0,
             deepest: 0.0,
             checked_steps: Vec::new(),
+            regime: Regime::default(),
         }
     }
 
@@ -208,9 +232,10 @@ impl Sampler {
                 backend.step(target - now)?;
             }
             let health = backend.health()?;
+            let params = backend.params();
+            self.regime = self.regime.max(Regime { max_density_ratio: health.max_density / params.rest_density, max_mach: health.max_speed / params.speed_of_sound() });
             if !health.is_ok() {
-                let s = backend.snapshot().map(|s| s.max_speed()).unwrap_or(f64::NAN);
-                return Ok(Err(diagnose(backend.params(), &health, s)));
+                return Ok(Err(diagnose_failure(backend, &self.scene)?));
             }
             let snap = backend.snapshot()?;
             self.wall_leaks += particles_inside_solids(&snap.positions, &self.solids, self.leak_depth);

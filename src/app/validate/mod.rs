@@ -70,11 +70,15 @@ pub fn cmd_validate(args: &ValidateArgs) -> anyhow::Result<i32> {
             }
         }
     };
-    // Probe once: with no adapter, `auto` warns once and runs every case on the CPU.
+    // `auto` is resolved once, and said once, for every case.
     let device = match args.backend.device() {
-        Device::Auto if crate::solver::gpu::device::compute_adapters().is_empty() => {
-            eprintln!("warning: no GPU adapter with compute shaders was found; validating the cpu backend");
-            Device::Cpu
+        Device::Auto => {
+            let (device, why) = crate::solver::simulation::auto_device();
+            match device {
+                Device::Cpu => eprintln!("validate: the CPU path in f64: {why}"),
+                _ => eprintln!("validate: {why}"),
+            }
+            device
         }
         d => d,
     };

@@ -118,6 +118,7 @@ impl Tank {
                 .collect(),
             boundary,
             camera: None,
+            limits: Default::default(),
         };
         scene.validate(&SceneOrigin::BuiltIn(self.name.clone()))?;
         Ok(scene)

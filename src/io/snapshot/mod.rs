@@ -5,6 +5,7 @@
 
 pub mod csv;
 pub mod format;
+pub mod index;
 pub mod ply;
 pub mod stream;
 pub mod vtk;
@@ -12,6 +13,7 @@ pub mod vtk;
 use crate::model::state::Snapshot;
 use crate::solver::{Backend, SnapshotRow};
 use format::{snapshot_file, SnapshotFormat};
+use index::{SnapshotIndex, INDEX_NAME};
 use std::path::{Path, PathBuf};
 use stream::SnapshotStream;
 use vtk::{FileSeries, VTK_SERIES_NAME};
@@ -31,6 +33,7 @@ pub struct SnapshotWriter {
     out: PathBuf,
     formats: Vec<SnapshotFormat>,
     series: FileSeries,
+    index: SnapshotIndex,
 }
 
 impl SnapshotWriter {
@@ -42,7 +45,8 @@ impl SnapshotWriter {
                 fs.push(f);
             }
         }
-        SnapshotWriter { out: out.to_path_buf(), formats: fs, series: FileSeries::default() }
+        let index = SnapshotIndex::new(&fs);
+        SnapshotWriter { out: out.to_path_buf(), formats: fs, series: FileSeries::default(), index }
     }
 
     /// A writer continuing a run that stopped after `last_step`: the series index keeps the
@@ -53,11 +57,23 @@ impl SnapshotWriter {
         if w.formats.contains(&SnapshotFormat::Vtk) && index.exists() {
             w.series = FileSeries::read_up_to(&index, last_step)?;
         }
+        w.index = SnapshotIndex::read_up_to(&w.index_path(), &w.formats, last_step)?;
         Ok(w)
     }
 
     pub fn series_path(&self) -> PathBuf {
         self.out.join("snapshots").join(VTK_SERIES_NAME)
+    }
+
+    /// `DIR/snapshots/index.csv`: each snapshot's step, time and files.
+    pub fn index_path(&self) -> PathBuf {
+        self.out.join("snapshots").join(INDEX_NAME)
+    }
+
+    fn add_to_index(&mut self, step: u64, time: f64) -> anyhow::Result<()> {
+        let files = self.formats.iter().map(|&f| snapshot_file(&self.out, step, f).file_name().expect("a file name").to_string_lossy().into_owned()).collect();
+        let path = self.index_path();
+        self.index.add_and_write(&path, step, time, files)
     }
 
     /// Writes the backend's current state in every format through its streamed path, without
@@ -77,6 +93,7 @@ impl SnapshotWriter {
                 }
                 log::info!("wrote {}", path.display());
             }
+            self.add_to_index(s.step, s.time)?;
             let (_, first) = files.into_iter().next().ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))?;
             Ok((first, s.max_speed))
         }))
@@ -100,6 +117,7 @@ impl SnapshotWriter {
             log::info!("wrote {}", path.display());
             first.get_or_insert(path);
         }
+        self.add_to_index(s.step, s.time)?;
         first.ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))
     }
 }

@@ -14,6 +14,7 @@ use super::ply::{ply_header, PlyVertex};
 use super::vtk::{vtk_title, VtkLayout};
 use crate::io::atomic::AtomicFile;
 use crate::solver::SnapshotRow;
+use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -53,20 +54,21 @@ impl SnapshotStream {
             .iter()
             .map(|(format, path)| {
                 let mut file = AtomicFile::create(path)?;
+                let cannot = || format!("cannot write {}", path.display());
                 let opened = match format {
                     SnapshotFormat::Csv => {
-                        writeln!(file, "{SNAPSHOT_HEADER}")?;
+                        writeln!(file, "{SNAPSHOT_HEADER}").with_context(cannot)?;
                         FormatFile::Csv(file)
                     }
                     SnapshotFormat::Ply => {
                         let header = ply_header(step, time, particles as usize);
-                        ply_rs_bw::writer::Writer::<PlyVertex>::new().write_header(&mut file, &header)?;
+                        ply_rs_bw::writer::Writer::<PlyVertex>::new().write_header(&mut file, &header).with_context(cannot)?;
                         let vertex = header.elements["vertex"].clone();
                         FormatFile::Ply(file, vertex)
                     }
                     SnapshotFormat::Vtk => {
                         let layout = VtkLayout::new(particles, &vtk_title(step, time));
-                        layout.write_text(&mut file)?;
+                        layout.write_text(&mut file).with_context(cannot)?;
                         FormatFile::Vtk(file, layout)
                     }
                 };
@@ -95,20 +97,15 @@ impl SnapshotStream {
             }
         }
         for file in &mut self.files {
-            match file {
-                FormatFile::Csv(f) => {
-                    for r in rows {
-                        write_snapshot_row(f, &r.map(|x| x as f64))?;
-                    }
-                }
+            let written = match file {
+                FormatFile::Csv(f) => rows.iter().try_for_each(|r| write_snapshot_row(f, &r.map(|x| x as f64))),
                 FormatFile::Ply(f, vertex) => {
                     let writer = ply_rs_bw::writer::Writer::<PlyVertex>::new();
-                    for r in rows {
-                        writer.write_little_endian_element(f, &PlyVertex(*r), vertex)?;
-                    }
+                    rows.iter().try_for_each(|r| writer.write_little_endian_element(f, &PlyVertex(*r), vertex).map(|_| ()))
                 }
-                FormatFile::Vtk(f, layout) => layout.write_rows(f, first, rows)?,
-            }
+                FormatFile::Vtk(f, layout) => layout.write_rows(f, first, rows),
+            };
+            written.with_context(|| format!("cannot write {}", file.file().path().display()))?;
         }
         self.next += rows.len() as u64;
         Ok(())

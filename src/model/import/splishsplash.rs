@@ -248,7 +248,8 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     };
 
     // Fluid parameter blocks: top-level objects keyed by fluid id, or the older "Materials" list.
-    let mut fluids: Vec<(String, FluidParams)> = Vec::new();
+    // (fluid id, its parameters, the JSON section they were read from)
+    let mut fluids: Vec<(String, FluidParams, String)> = Vec::new();
     let block_ids: Vec<String> = root
         .get("FluidBlocks")
         .and_then(Value::as_array)
@@ -258,7 +259,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
         for (i, m) in materials.as_array().map(Vec::as_slice).unwrap_or_default().iter().enumerate() {
             if let Some(o) = object(m, &format!("Materials[{i}]"), &mut p) {
                 let id = o.get("id").and_then(Value::as_str).unwrap_or("Fluid").to_string();
-                fluids.push((id, fluid_params(&format!("Materials[{i}]"), o, &mut p)));
+                fluids.push((id, fluid_params(&format!("Materials[{i}]"), o, &mut p), format!("Materials[{i}]")));
             }
         }
     }
@@ -277,7 +278,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             }
             id if block_ids.iter().any(|b| b == id) => {
                 if let Some(o) = object(v, id, &mut p) {
-                    fluids.push((id.to_string(), fluid_params(id, o, &mut p)));
+                    fluids.push((id.to_string(), fluid_params(id, o, &mut p), id.to_string()));
                 }
             }
             _ => p.add(key, "is not a SPlisHSPlasH scene section that wgsph can import"),
@@ -333,6 +334,8 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     // wgsph simulates one fluid: every block must use the same parameters.
     let default_fluid = FluidParams { density0: 1000.0, viscosity: 0.01, viscosity_boundary: 0.0 };
     let params_of = |id: &str| fluids.iter().find(|f| f.0 == id).map(|f| f.1).unwrap_or(default_fluid);
+    // The JSON section the fluid's parameters come from (its id, where it has none).
+    let fluid_section = block_fluid.first().map(|id| fluids.iter().find(|f| &f.0 == id).map_or(id.clone(), |f| f.2.clone())).unwrap_or_else(|| "Fluid".into());
     let fluid = block_fluid.first().map(|id| params_of(id)).unwrap_or(default_fluid);
     for id in &block_fluid {
         if params_of(id) != fluid {
@@ -386,6 +389,8 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     let inside = |min: [f64; 3], max: [f64; 3], b: &FluidBlock| (0..3).all(|a| b.min[a] >= min[a] - 1e-9 && b.max[a] <= max[a] + 1e-9);
     let overlaps = |min: [f64; 3], max: [f64; 3], b: &FluidBlock| (0..3).all(|a| b.min[a] < max[a] && b.max[a] > min[a]);
     let mut boundary = Vec::new();
+    // The JSON section of each boundary (the planes of a tank come from its rigid body).
+    let mut boundary_sections: Vec<String> = Vec::new();
     let mut tanks = 0;
     for (min, max, section) in &walls {
         if !blocks.is_empty() && blocks.iter().all(|b| inside(*min, *max, b)) {
@@ -393,6 +398,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             // so the fluid stays inside it.
             tanks += 1;
             boundary.push(Boundary::Container { min: *min, max: *max, open_top: false, walls: WallParticles::default() });
+            boundary_sections.push(section.clone());
             if tanks == 1 {
                 // Planes on the inner faces back the wall particles up, as in the built-in scenes.
                 for a in 0..3 {
@@ -400,6 +406,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
                         let mut normal = [0.0; 3];
                         normal[a] = sign;
                         boundary.push(Boundary::Plane { point, normal, restitution: 0.0 });
+                        boundary_sections.push(section.clone());
                     }
                 }
             }
@@ -407,6 +414,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             p.add(section.as_str(), "the box neither contains every fluid block (a tank) nor stays clear of them (an obstacle)");
         } else {
             boundary.push(Boundary::Box { min: *min, max: *max, walls: WallParticles::default() });
+            boundary_sections.push(section.clone());
         }
     }
 
@@ -461,7 +469,56 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
         fluid: blocks,
         boundary,
         camera: None,
+        limits: Default::default(),
     };
-    scene.validate(origin)?;
+    // A scene the import built but wgsph refuses: the error names the JSON key the value came
+    // from, not the wgsph field it became.
+    scene.validate(origin).map_err(|e| {
+        let field = json_key(&e.field, &fluid_section, &boundary_sections);
+        let mut message = e.message.replace("physics.particle_spacing", "twice Configuration.particleRadius");
+        for i in (0..scene.fluid.len()).rev() {
+            message = message.replace(&format!("fluid[{i}]"), &format!("FluidBlocks[{i}]"));
+        }
+        for (j, section) in boundary_sections.iter().enumerate().rev() {
+            message = message.replace(&format!("boundary[{j}]"), section);
+        }
+        SceneError { field, message: format!("{message} (SPlisHSPlasH import)"), ..e }
+    })?;
     Ok(scene)
+}
+
+/// The SPlisHSPlasH key a field of the imported scene comes from: `fluid` is the section of the
+/// fluid's parameters, `boundaries` the rigid body of each boundary.
+fn json_key(field: &str, fluid: &str, boundaries: &[String]) -> String {
+    let indexed = |prefix: &str| -> Option<(usize, &str)> {
+        let rest = field.strip_prefix(prefix)?;
+        let (index, tail) = rest.split_once(']')?;
+        Some((index.parse().ok()?, tail))
+    };
+    if let Some((i, tail)) = indexed("fluid[") {
+        let key = match tail {
+            ".velocity" => ".initialVelocity",
+            ".min" => ".start",
+            ".max" => ".end",
+            _ => "",
+        };
+        return format!("FluidBlocks[{i}]{key}");
+    }
+    if let Some((j, _)) = indexed("boundary[") {
+        return boundaries.get(j).cloned().unwrap_or_else(|| "RigidBodies".into());
+    }
+    match field {
+        "physics.smoothing_length" | "physics.particle_spacing" => "Configuration.particleRadius".into(),
+        "physics.stiffness" | "physics.speed_of_sound" => "Configuration.stiffness".into(),
+        "physics.gravity" => "Configuration.gravitation".into(),
+        "time.dt" => "Configuration.timeStepSize".into(),
+        "time.end_time" => "Configuration.stopAt".into(),
+        "physics.rest_density" => format!("{fluid}.density0"),
+        "physics.viscosity" => format!("{fluid}.viscosity"),
+        "physics.boundary_friction" => format!("{fluid}.viscosityBoundary"),
+        "fluid" => "FluidBlocks".into(),
+        // The domain and the grid follow from the blocks and the bodies.
+        "domain" => "FluidBlocks, RigidBodies (the domain around them)".into(),
+        other => other.into(),
+    }
 }

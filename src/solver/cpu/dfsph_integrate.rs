@@ -14,7 +14,7 @@ pub fn integrate<R: Real>(positions: &mut [V3<R>], velocities: &mut [V3<R>], dt:
         .par_iter_mut()
         .zip(velocities.par_iter_mut())
         .map(|(x, v)| advance_particle(x, v, V3::zero(), dt, planes, domain))
-        .reduce(StepHealth::default, |a, b| StepHealth { non_finite: a.non_finite + b.non_finite, escaped: a.escaped + b.escaped })
+        .reduce(StepHealth::default, StepHealth::add)
 }
 
 /// The stiffness sums of the step into the warm-start arrays, by particle id.

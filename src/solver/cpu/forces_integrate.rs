@@ -28,5 +28,5 @@ pub fn forces_and_integrate<R: Real>(
             *v = input.velocities[i];
             advance_particle(x, v, a, dt, planes, domain)
         })
-        .reduce(StepHealth::default, |a, b| StepHealth { non_finite: a.non_finite + b.non_finite, escaped: a.escaped + b.escaped })
+        .reduce(StepHealth::default, StepHealth::add)
 }

@@ -3,9 +3,9 @@
 //! Twin of wgsl/sim/integrate.wgsl, one function per entry point: `integrate`,
 //! `reduce_maxima`, `choose_dt`, `finish_step`.
 
-use crate::model::params::AdaptiveDt;
+use crate::model::params::{AdaptiveDt, StopLevels};
 use crate::model::real::{Real, V3};
-use crate::model::state::Health;
+use crate::model::state::{Health, StepMeasures};
 use rayon::prelude::*;
 
 /// A plane n . x = offset in the solver's float type.
@@ -16,18 +16,23 @@ pub struct PlaneR<R> {
     pub restitution: R,
 }
 
-/// What the integration found wrong this step.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// What the integration found this step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepHealth {
     /// Particles whose position or velocity is not finite.
     pub non_finite: u32,
     /// Particles outside the domain.
     pub escaped: u32,
+    /// The largest speed the step's forces gave a particle whose position and velocity are
+    /// finite (before the planes), computed in the solver's float type (the GPU reduces it per workgroup into
+    /// `STATUS_STEP_MAX_SPEED`).
+    pub max_speed: f64,
 }
 
 impl StepHealth {
-    fn add(self, o: StepHealth) -> StepHealth {
-        StepHealth { non_finite: self.non_finite + o.non_finite, escaped: self.escaped + o.escaped }
+    /// Two parts of the particles together.
+    pub fn add(self, o: StepHealth) -> StepHealth {
+        StepHealth { non_finite: self.non_finite + o.non_finite, escaped: self.escaped + o.escaped, max_speed: self.max_speed.max(o.max_speed) }
     }
 }
 
@@ -45,6 +50,8 @@ pub struct IntegrateInput<'a, R> {
 pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, planes: &[PlaneR<R>], domain: (V3<R>, V3<R>)) -> StepHealth {
     *v += a * dt;
     *x += *v * dt;
+    // The speed the forces gave the particle, before a plane takes the velocity into it away.
+    let speed = v.length().to64();
     for plane in planes {
         let d = x.dot(plane.normal) - plane.offset;
         if d < R::zero() {
@@ -57,7 +64,9 @@ pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, 
     }
     let finite = x.is_finite() && v.is_finite();
     let inside = (0..3).all(|k| x.0[k] >= domain.0 .0[k] && x.0[k] <= domain.1 .0[k]);
-    StepHealth { non_finite: (!finite) as u32, escaped: (finite && !inside) as u32 }
+    // As on the GPU: 0 for a non-finite particle; a finite velocity whose length overflows is
+    // infinitely fast.
+    StepHealth { non_finite: (!finite) as u32, escaped: (finite && !inside) as u32, max_speed: if finite { speed } else { 0.0 } }
 }
 
 /// Every particle advanced in place; returns what went wrong in this step.
@@ -86,8 +95,19 @@ pub fn choose_dt(adaptive: &AdaptiveDt, h: f64, speed_of_sound: f64, maxima: (f6
     adaptive.dt(h, speed_of_sound, maxima.0, maxima.1, viscosity)
 }
 
-/// After every step: counts it and remembers the first one that went wrong.
-pub fn finish_step(steps: &mut u64, health: &mut Health, found: StepHealth) {
+/// After every step: counts it, keeps the largest speed so far, and remembers the first step
+/// that went wrong (a particle non-finite or outside the domain, or the largest density or
+/// speed past its stop level) with what it measured. `max_density` is the largest density the
+/// step's density stage computed, `time` the time at the end of the step.
+pub fn finish_step(steps: &mut u64, health: &mut Health, found: StepHealth, max_density: f64, dt: f64, time: f64, stop: StopLevels) {
     *steps += 1;
-    health.record(*steps, found.non_finite, found.escaped);
+    let measured = StepMeasures {
+        non_finite: found.non_finite as u64,
+        escaped: found.escaped as u64,
+        max_density,
+        max_speed: found.max_speed,
+        dt,
+        time,
+    };
+    health.record(*steps, measured, stop);
 }

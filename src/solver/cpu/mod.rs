@@ -340,27 +340,35 @@ impl<R: Real> CpuSolver<R> {
         }
         if let Some((dfsph, mut parts)) = self.dfsph_parts() {
             let (found, dt) = dfsph.step(&mut parts);
-            let max_density = self.densities.iter().fold(R::zero(), |a, &b| a.max(b)).to64();
+            let max_density = self.largest_density();
             self.health.max_density = self.health.max_density.max(max_density);
-            self.record_step(dt, found);
+            self.record_step(dt, found, max_density);
             return;
         }
         self.compute_density();
         self.compute_forces();
-        let max_density = self.densities.iter().fold(R::zero(), |a, &b| a.max(b)).to64();
+        let max_density = self.largest_density();
         self.health.max_density = self.health.max_density.max(max_density);
         let dt = self.choose_dt();
         let h = self.integrate_with(dt);
-        self.record_step(dt, h);
+        self.record_step(dt, h, max_density);
     }
 
-    /// The bookkeeping after a step of `dt`.
-    fn record_step(&mut self, dt: f64, found: integrate::StepHealth) {
+    /// The largest density of the last density stage; non-finite densities are left out, as
+    /// on the GPU (the integration counts the particles).
+    fn largest_density(&self) -> f64 {
+        self.densities.iter().map(|d| d.to64()).filter(|d| d.is_finite()).fold(0.0, f64::max)
+    }
+
+    /// The bookkeeping after a step of `dt` whose density stage's largest density was
+    /// `max_density`.
+    fn record_step(&mut self, dt: f64, found: integrate::StepHealth, max_density: f64) {
         self.time += dt;
         self.dt_stats.min = self.dt_stats.min.min(dt);
         self.dt_stats.max = self.dt_stats.max.max(dt);
         self.dt_stats.last = dt;
-        integrate::finish_step(&mut self.step, &mut self.health, found);
+        let end_time = if self.params.adaptive.is_some() { self.time } else { (self.step + 1) as f64 * self.params.dt };
+        integrate::finish_step(&mut self.step, &mut self.health, found, max_density, dt, end_time, self.params.stop_levels());
     }
 
     /// Runs up to `n` steps, stopping early after a step that went wrong.
@@ -424,6 +432,8 @@ impl<R: Real> CpuSolver<R> {
             escaped: self.health.escaped,
             first_bad_step: self.health.first_bad_step,
             max_density: self.health.max_density,
+            max_speed: self.health.max_speed,
+            bad_step: self.health.bad_step,
             time: self.time,
             dt_min_max_last: [self.dt_stats.min, self.dt_stats.max, self.dt_stats.last],
             gpu_status: Vec::new(),

@@ -108,8 +108,9 @@ uniform_block! {
         viscous_number: f32 => "f32",
         dt_min: f32 => "f32",
         dt_max: f32 => "f32",
-        pad1: u32 => "u32",
-        pad2: u32 => "u32",
+        /// The run stops at a step whose largest density or speed passes these (infinite: off).
+        stop_density: f32 => "f32",
+        stop_speed: f32 => "f32",
         /// DFSPH: the fluid particle's volume m / rho0, the smallest denominator of alpha.
         fluid_volume: f32 => "f32",
         factor_epsilon: f32 => "f32",
@@ -175,8 +176,8 @@ impl GpuParams {
             viscous_number: p.adaptive.map_or(0.0, |a| a.viscous_number as f32),
             dt_min: p.adaptive.map_or(p.dt, |a| a.dt_min) as f32,
             dt_max: p.adaptive.map_or(p.dt, |a| a.dt_max) as f32,
-            pad1: 0,
-            pad2: 0,
+            stop_density: p.stop_levels().density as f32,
+            stop_speed: p.stop_levels().speed as f32,
             fluid_volume: (p.fluid_mass / p.rest_density) as f32,
             factor_epsilon: factor_epsilon(p.h) as f32,
             warm_start_share: WARM_START_SHARE as f32,
@@ -214,9 +215,9 @@ pub mod status {
     status_words! {
         /// Steps done.
         STEPS = 0 => "STATUS_STEPS",
-        /// Particles that became non-finite this step.
+        /// Particles that became non-finite this step (cleared before each step).
         NON_FINITE = 1 => "STATUS_NON_FINITE",
-        /// Particles outside the domain this step.
+        /// Particles outside the domain this step (cleared before each step).
         ESCAPED = 2 => "STATUS_ESCAPED",
         /// The first step that went wrong ([`NO_BAD_STEP`]: none).
         FIRST_BAD_STEP = 3 => "STATUS_FIRST_BAD_STEP",
@@ -236,32 +237,58 @@ pub mod status {
         DT_MIN = 10 => "STATUS_DT_MIN",
         /// Adaptive dt: the largest dt so far.
         DT_MAX = 11 => "STATUS_DT_MAX",
+        /// The largest density of this step (reset by `finish_step`).
+        STEP_MAX_DENSITY = 12 => "STATUS_STEP_MAX_DENSITY",
+        /// The largest speed after this step's integration (reset by `finish_step`).
+        STEP_MAX_SPEED = 13 => "STATUS_STEP_MAX_SPEED",
+        /// The largest speed so far.
+        TOP_SPEED = 14 => "STATUS_TOP_SPEED",
+        /// The first bad step's measures, written by `finish_step` with the marker
+        /// FIRST_BAD_STEP: which checks it failed (`CAUSE_*` bits) ...
+        BAD_CAUSES = 15 => "STATUS_BAD_CAUSES",
+        /// ... its counts of non-finite and escaped particles ...
+        BAD_NON_FINITE = 16 => "STATUS_BAD_NON_FINITE",
+        BAD_ESCAPED = 17 => "STATUS_BAD_ESCAPED",
+        /// ... its largest density and speed ...
+        BAD_MAX_DENSITY = 18 => "STATUS_BAD_MAX_DENSITY",
+        BAD_MAX_SPEED = 19 => "STATUS_BAD_MAX_SPEED",
+        /// ... its dt, and with adaptive dt the time at its end.
+        BAD_DT = 20 => "STATUS_BAD_DT",
+        BAD_TIME = 21 => "STATUS_BAD_TIME",
         /// DFSPH: the error sum of the solve under way, fixed-point (low and high word).
-        DFSPH_ERROR_LO = 12 => "STATUS_DFSPH_ERROR_LO",
-        DFSPH_ERROR_HI = 13 => "STATUS_DFSPH_ERROR_HI",
+        DFSPH_ERROR_LO = 22 => "STATUS_DFSPH_ERROR_LO",
+        DFSPH_ERROR_HI = 23 => "STATUS_DFSPH_ERROR_HI",
         /// DFSPH: the iterations of the solve under way, and whether it goes on (1) or ended (0).
-        DFSPH_ITERATION = 14 => "STATUS_DFSPH_ITERATION",
-        DFSPH_SOLVING = 15 => "STATUS_DFSPH_SOLVING",
+        DFSPH_ITERATION = 24 => "STATUS_DFSPH_ITERATION",
+        DFSPH_SOLVING = 25 => "STATUS_DFSPH_SOLVING",
         /// DFSPH's constant-density solve over the run: iterations, most in a step, the last
         /// step's, the last step's average error (f32) and the steps that ended unconverged.
-        PRESSURE_ITERATIONS = 16 => "STATUS_PRESSURE_ITERATIONS",
-        PRESSURE_ITERATIONS_MAX = 17 => "STATUS_PRESSURE_ITERATIONS_MAX",
-        PRESSURE_ITERATIONS_LAST = 18 => "STATUS_PRESSURE_ITERATIONS_LAST",
-        PRESSURE_ERROR = 19 => "STATUS_PRESSURE_ERROR",
-        PRESSURE_UNCONVERGED = 20 => "STATUS_PRESSURE_UNCONVERGED",
+        PRESSURE_ITERATIONS = 26 => "STATUS_PRESSURE_ITERATIONS",
+        PRESSURE_ITERATIONS_MAX = 27 => "STATUS_PRESSURE_ITERATIONS_MAX",
+        PRESSURE_ITERATIONS_LAST = 28 => "STATUS_PRESSURE_ITERATIONS_LAST",
+        PRESSURE_ERROR = 29 => "STATUS_PRESSURE_ERROR",
+        PRESSURE_UNCONVERGED = 30 => "STATUS_PRESSURE_UNCONVERGED",
         /// The same for DFSPH's divergence solve.
-        DIVERGENCE_ITERATIONS = 21 => "STATUS_DIVERGENCE_ITERATIONS",
-        DIVERGENCE_ITERATIONS_MAX = 22 => "STATUS_DIVERGENCE_ITERATIONS_MAX",
-        DIVERGENCE_ITERATIONS_LAST = 23 => "STATUS_DIVERGENCE_ITERATIONS_LAST",
-        DIVERGENCE_ERROR = 24 => "STATUS_DIVERGENCE_ERROR",
-        DIVERGENCE_UNCONVERGED = 25 => "STATUS_DIVERGENCE_UNCONVERGED",
+        DIVERGENCE_ITERATIONS = 31 => "STATUS_DIVERGENCE_ITERATIONS",
+        DIVERGENCE_ITERATIONS_MAX = 32 => "STATUS_DIVERGENCE_ITERATIONS_MAX",
+        DIVERGENCE_ITERATIONS_LAST = 33 => "STATUS_DIVERGENCE_ITERATIONS_LAST",
+        DIVERGENCE_ERROR = 34 => "STATUS_DIVERGENCE_ERROR",
+        DIVERGENCE_UNCONVERGED = 35 => "STATUS_DIVERGENCE_UNCONVERGED",
     }
     /// Words of the status buffer.
-    pub const WORDS: usize = 26;
+    pub const WORDS: usize = 36;
     /// Bytes of the status buffer.
     pub const BYTES: u64 = WORDS as u64 * 4;
     /// FIRST_BAD_STEP while no step went wrong (`STATUS_NO_BAD_STEP` in WGSL).
     pub const NO_BAD_STEP: u32 = u32::MAX;
+    /// The bits of BAD_CAUSES (`CAUSE_*` in WGSL).
+    pub const CAUSE_NON_FINITE: u32 = 1;
+    pub const CAUSE_ESCAPED: u32 = 2;
+    pub const CAUSE_TOO_DENSE: u32 = 4;
+    pub const CAUSE_TOO_FAST: u32 = 8;
+    /// Every cause bit's WGSL name and value.
+    pub const WGSL_CAUSES: &[(&str, u32)] =
+        &[("CAUSE_NON_FINITE", CAUSE_NON_FINITE), ("CAUSE_ESCAPED", CAUSE_ESCAPED), ("CAUSE_TOO_DENSE", CAUSE_TOO_DENSE), ("CAUSE_TOO_FAST", CAUSE_TOO_FAST)];
 
     /// The status words of a new run.
     pub fn initial() -> [u32; WORDS] {
@@ -287,13 +314,34 @@ pub mod status {
         }
     }
 
-    /// The health counters in the status words.
-    pub fn health(s: &[u32]) -> crate::model::state::Health {
+    /// The health of the run in the status words. `fixed_dt`: the step of a run without
+    /// adaptive dt, whose time the host knows (with adaptive dt the GPU sums it).
+    pub fn health(s: &[u32], fixed_dt: Option<f64>) -> crate::model::state::Health {
+        use crate::model::state::{BadStep, StepMeasures};
+        let bad_step = (s[FIRST_BAD_STEP] != NO_BAD_STEP).then(|| {
+            let step = s[FIRST_BAD_STEP] as u64;
+            let causes = s[BAD_CAUSES];
+            BadStep {
+                step,
+                measured: StepMeasures {
+                    non_finite: s[BAD_NON_FINITE] as u64,
+                    escaped: s[BAD_ESCAPED] as u64,
+                    max_density: float(s, BAD_MAX_DENSITY),
+                    max_speed: float(s, BAD_MAX_SPEED),
+                    dt: float(s, BAD_DT),
+                    time: fixed_dt.map_or_else(|| float(s, BAD_TIME), |dt| step as f64 * dt),
+                },
+                too_dense: causes & CAUSE_TOO_DENSE != 0,
+                too_fast: causes & CAUSE_TOO_FAST != 0,
+            }
+        });
         crate::model::state::Health {
             non_finite: s[NON_FINITE] as u64,
             escaped: s[ESCAPED] as u64,
-            first_bad_step: (s[FIRST_BAD_STEP] != NO_BAD_STEP).then_some(s[FIRST_BAD_STEP] as u64),
-            max_density: f32::from_bits(s[MAX_DENSITY]) as f64,
+            first_bad_step: bad_step.map(|b| b.step),
+            max_density: float(s, MAX_DENSITY),
+            max_speed: float(s, TOP_SPEED),
+            bad_step,
             iterations: None,
         }
     }
@@ -355,6 +403,10 @@ mod tests {
         }
         assert_eq!(seen, status::WGSL_NAMES.len(), "every Rust status word is declared in WGSL");
         assert_eq!(status::WGSL_NAMES.len(), status::WORDS);
+        for (name, bit) in status::WGSL_CAUSES {
+            let line = text.lines().find(|l| l.trim_start().starts_with(&format!("const {name}:"))).unwrap_or_else(|| panic!("{name} is not declared in WGSL"));
+            assert!(line.contains(&format!("= {bit}u;")), "{name}: {line}");
+        }
         let mut indices: Vec<usize> = status::WGSL_NAMES.iter().map(|w| w.1).collect();
         indices.sort();
         assert_eq!(indices, (0..status::WORDS).collect::<Vec<_>>(), "the words are 0..WORDS, each once");

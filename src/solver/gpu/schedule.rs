@@ -1,4 +1,4 @@
-//! THE order of the GPU's work: one function, [`GpuSolver::schedule`], records a step (or the
+//! THE order of the GPU's work: one function, `GpuSolver::schedule`, records a step (or the
 //! fields of the current state) against a [`Recorder`]. The normal path records into as few
 //! compute passes as possible ([`PlainRecorder`]); the profile records the very same order with
 //! every stage in its own timed pass ([`TimedRecorder`]), so what is timed is what runs.

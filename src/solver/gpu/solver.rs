@@ -507,6 +507,11 @@ impl GpuSolver {
         Ok(words)
     }
 
+    /// The dt of every step without adaptive dt (the host then knows the time of a step).
+    fn fixed_dt(&self) -> Option<f64> {
+        self.params.adaptive.is_none().then_some(self.params.dt)
+    }
+
     pub(super) fn read_status(&self) -> anyhow::Result<[u32; status::WORDS]> {
         let data = read_buffers(&self.ctx, &[(&self.status, status::BYTES)])?;
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
@@ -616,7 +621,7 @@ impl Backend for GpuSolver {
     }
     fn health(&mut self) -> anyhow::Result<Health> {
         let words = self.read_status()?;
-        Ok(Health { iterations: self.dfsph.is_some().then(|| status::iterations(&words)), ..status::health(&words) })
+        Ok(Health { iterations: self.dfsph.is_some().then(|| status::iterations(&words)), ..status::health(&words, self.fixed_dt()) })
     }
     fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
         self.refresh_fields();
@@ -664,7 +669,7 @@ impl Backend for GpuSolver {
     }
     fn save_state_header(&mut self) -> anyhow::Result<BackendState> {
         let words = self.counted_status()?;
-        let h = status::health(&words);
+        let h = status::health(&words, self.fixed_dt());
         Ok(BackendState {
             kind: "gpu".into(),
             step: self.steps,
@@ -675,6 +680,8 @@ impl Backend for GpuSolver {
             escaped: h.escaped,
             first_bad_step: h.first_bad_step,
             max_density: h.max_density,
+            max_speed: h.max_speed,
+            bad_step: h.bad_step,
             // The GPU keeps its time and dt range in the status words, restored whole.
             time: 0.0,
             dt_min_max_last: [0.0; 3],

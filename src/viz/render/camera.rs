@@ -42,33 +42,44 @@ impl Bounds {
 }
 
 impl Camera {
-    /// The scene's camera, or the automatic one.
+    /// The scene's camera, or the automatic one; a camera field the scene leaves out is chosen
+    /// as the automatic camera chooses it.
     pub fn for_scene(scene: &Scene, aspect: f32) -> Self {
-        match &scene.camera {
-            Some(c) => Camera {
-                eye: Vec3::from(c.eye.map(|v| v as f32)),
-                target: Vec3::from(c.target.map(|v| v as f32)),
-                up: Vec3::from(c.up.map(|v| v as f32)),
-                fov_y: (c.fov_degrees as f32).to_radians(),
-            },
-            None => Camera::framing(&Bounds::of_scene(scene), aspect),
-        }
+        let bounds = Bounds::of_scene(scene);
+        let Some(c) = &scene.camera else {
+            return Camera::framing(&bounds, aspect);
+        };
+        let v = |p: [f64; 3]| Vec3::from(p.map(|x| x as f32));
+        let fov_y = (c.fov_degrees as f32).to_radians();
+        let target = c.target.map(v);
+        let mut cam = match c.eye {
+            Some(eye) => Camera { eye: v(eye), target: target.unwrap_or(bounds.center()), up: Vec3::Y, fov_y },
+            None => Camera::framing_towards(&bounds, aspect, fov_y, target.unwrap_or(bounds.center())),
+        };
+        cam.up = v(c.up);
+        cam
     }
 
     /// Looks at the box from the front, a little above and (for boxes that are not thin
     /// slabs) from the side, at the smallest distance that keeps all eight corners inside 90 %
     /// of the picture.
     pub fn framing(bounds: &Bounds, aspect: f32) -> Self {
+        Camera::framing_towards(bounds, aspect, 40f32.to_radians(), bounds.center())
+    }
+
+    /// [`Camera::framing`] with a field of view of `fov_y` radians, looking at `target`.
+    pub fn framing_towards(bounds: &Bounds, aspect: f32, fov_y: f32, target: Vec3) -> Self {
         let size = bounds.max - bounds.min;
         let slab = size.z < 0.25 * size.x.max(size.y);
         let dir = if slab { Vec3::new(0.0, 0.3, 1.0) } else { Vec3::new(0.6, 0.55, 1.0) }.normalize();
-        let mut cam = Camera { eye: bounds.center() + dir, target: bounds.center(), up: Vec3::Y, fov_y: 40f32.to_radians() };
+        let mut cam = Camera { eye: target + dir, target, up: Vec3::Y, fov_y };
         // The largest corner extent in normalised device coordinates falls as the distance grows:
         // bisect for the distance where it is 0.9.
-        let (mut near, mut far) = (bounds.radius() * 0.01, bounds.radius() * 100.0);
+        let reach = bounds.radius() + (target - bounds.center()).length();
+        let (mut near, mut far) = (reach * 0.01, reach * 100.0);
         for _ in 0..60 {
             let d = 0.5 * (near + far);
-            cam.eye = bounds.center() + dir * d;
+            cam.eye = target + dir * d;
             let vp = cam.projection(aspect, bounds) * cam.view();
             let fits = bounds.corners().iter().all(|c| {
                 let p = vp * c.extend(1.0);
@@ -80,7 +91,7 @@ impl Camera {
                 near = d;
             }
         }
-        cam.eye = bounds.center() + dir * far;
+        cam.eye = target + dir * far;
         cam
     }
 

@@ -6,6 +6,7 @@
 
 use super::{ParticleBuffers, RenderOptions, Renderer};
 use crate::io::atomic::write_atomic;
+use crate::io::rundir::frame_file_name;
 use crate::model::scene::Scene;
 use crate::solver::gpu::GpuContext;
 use crate::solver::Backend;
@@ -22,7 +23,7 @@ const MAX_IN_FLIGHT: usize = 3;
 
 /// The file of frame `index`: `DIR/frame_00000.png`.
 pub fn frame_path(dir: &Path, index: u64) -> PathBuf {
-    dir.join(format!("frame_{index:05}.png"))
+    dir.join(frame_file_name(index))
 }
 
 /// A picture read back from the GPU: tightly packed RGBA8, rows top to bottom.
@@ -281,5 +282,13 @@ impl FrameRecorder {
 
     pub fn frames_started(&self) -> u64 {
         self.next_index
+    }
+}
+
+impl Drop for FrameRecorder {
+    /// A recorder given up (the run failed) still lets its encoder finish the picture it is
+    /// writing, so that no file appears after the run has cleaned up.
+    fn drop(&mut self) {
+        let _ = self.join();
     }
 }

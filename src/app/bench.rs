@@ -1,0 +1,159 @@
+//! `wgsph bench`: the block workload that the CPU peers were measured on
+//! (docs/performance.md), on every path, in fluid particle-steps per second, with the bytes per
+//! fluid particle and the ratio to the recorded SPlisHSPlasH figure, so that anyone can repeat
+//! the comparison with one command.
+//!
+//! The workload: n^3 fluid particles of spacing 0.02 m at (i+1, j+1, k+1) 0.02 in a closed box
+//! with walls at x = 0 and 2L, y = 0 and 1.5L, z = 0 and L + 0.02 (L = n 0.02), gravity -9.81
+//! in y, rho0 = 1000, kernel support 0.04 m (the cubic spline), Tait with stiffness 50 kPa and
+//! negative pressure clamped (as SPlisHSPlasH's WCSPH), no viscosity, 200 steps of 0.4 ms.
+
+use super::args::{BenchArgs, BenchPath};
+use crate::io::atomic::write_atomic;
+use crate::model::scene::{Boundary, Domain, EquationOfState, FluidBlock, Kernel, Physics, Scene, Time, WallParticles};
+use crate::solver::gpu::device::compute_adapters;
+use crate::solver::gpu::GpuContext;
+use crate::solver::{open, BackendChoice, Precision};
+use serde::Serialize;
+use std::time::Instant;
+
+/// SPlisHSPlasH 2.16's WCSPH on the workload, fluid particle-steps per second, measured on a
+/// 2-core x86-64 machine with AVX2 (2 OpenMP threads), 2026-11-23, by n.
+pub const SPLISHSPLASH_WCSPH: [(u32, f64); 3] = [(20, 1.00e6), (30, 1.10e6), (40, 1.10e6)];
+
+/// The workload's scene at n^3 fluid particles.
+pub fn block_scene(n: u32) -> Scene {
+    let dx = 0.02;
+    let l = n as f64 * dx;
+    // wgsph's lattice sits at min + (i + 1/2) s: the block [dx/2, dx/2 + L] puts particles at
+    // (i + 1) dx; the container [dx/2, wall - dx/2] puts the first wall layer on the wall.
+    let half = dx / 2.0;
+    let walls = [2.0 * l, 1.5 * l, l + dx];
+    Scene {
+        name: format!("block_n{n}"),
+        description: format!("dam-break block, {n}^3 fluid particles, the peers' benchmark workload"),
+        seed: 1,
+        domain: Domain { min: [-3.0 * dx; 3], max: [walls[0] + 3.0 * dx, walls[1] + 3.0 * dx, walls[2] + 3.0 * dx] },
+        physics: Physics {
+            smoothing_length: 2.0 * dx,
+            rest_density: 1000.0,
+            particle_spacing: dx,
+            particle_mass: None,
+            kernel: Kernel::CubicSpline,
+            equation_of_state: EquationOfState::Tait,
+            stiffness: Some(50_000.0),
+            speed_of_sound: None,
+            clamp_negative_pressure: true,
+            viscosity: 0.0,
+            viscosity_schedule: Vec::new(),
+            boundary_friction: 0.0,
+            boundary_pressure: Default::default(),
+            gravity: [0.0, -9.81, 0.0],
+            solver: Default::default(),
+            boundary_volume: Default::default(),
+            dfsph: Default::default(),
+        },
+        time: Time::fixed(0.0004, 0.08),
+        fluid: vec![FluidBlock { min: [half; 3], max: [half + l; 3], jitter: 0.0, velocity: [0.0; 3] }],
+        boundary: vec![Boundary::Container {
+            min: [half; 3],
+            max: [walls[0] - half, walls[1] - half, walls[2] - half],
+            open_top: false,
+            walls: WallParticles::default(),
+        }],
+        camera: None,
+        limits: Default::default(),
+    }
+}
+
+/// One path's figures.
+#[derive(Serialize, Clone, Debug)]
+pub struct BenchRow {
+    pub path: String,
+    pub adapter: String,
+    pub fluid_particles: usize,
+    pub wall_particles: usize,
+    pub steps: u64,
+    pub seconds: f64,
+    pub particle_steps_per_second: f64,
+    pub bytes_per_fluid_particle: Option<f64>,
+    /// Over SPlisHSPlasH's WCSPH figure at the same n, where one was measured.
+    pub ratio_to_splishsplash: Option<f64>,
+}
+
+/// Runs the workload on one backend: the steps are timed from the first submission to the end
+/// of the last (a health read waits for the GPU), after one warm-up step (pipeline caches,
+/// first-touch of the buffers).
+fn measure(path: &str, scene: &Scene, choice: &BackendChoice, steps: u64, n: u32) -> anyhow::Result<BenchRow> {
+    let mut sim = open(scene, choice)?;
+    let backend = sim.backend();
+    backend.step(1)?;
+    backend.health()?;
+    let t = Instant::now();
+    backend.step(steps)?;
+    let health = backend.health()?;
+    let seconds = t.elapsed().as_secs_f64();
+    anyhow::ensure!(health.is_ok(), "{path}: the workload went bad at step {:?}", health.first_bad_step);
+    let fluid = backend.fluid_count();
+    let rate = steps as f64 * fluid as f64 / seconds;
+    Ok(BenchRow {
+        path: path.into(),
+        adapter: backend.adapter(),
+        fluid_particles: fluid,
+        wall_particles: backend.wall_count(),
+        steps,
+        seconds,
+        particle_steps_per_second: rate,
+        bytes_per_fluid_particle: backend.memory_bytes().map(|b| b as f64 / fluid as f64),
+        ratio_to_splishsplash: SPLISHSPLASH_WCSPH.iter().find(|r| r.0 == n).map(|r| rate / r.1),
+    })
+}
+
+/// The table `wgsph bench` prints.
+pub fn table(rows: &[BenchRow]) -> String {
+    let mut s = format!("{:<9} {:<48} {:>8} {:>6} {:>9} {:>12} {:>9} {:>8}\n", "path", "adapter", "fluid", "steps", "seconds", "p-steps/s", "B/fluid", "x SPH");
+    for r in rows {
+        let bytes = r.bytes_per_fluid_particle.map_or("-".into(), |b| format!("{b:.1}"));
+        let ratio = r.ratio_to_splishsplash.map_or("-".into(), |x| format!("{x:.2}"));
+        s += &format!(
+            "{:<9} {:<48} {:>8} {:>6} {:>9.3} {:>12.3e} {:>9} {:>8}\n",
+            r.path, r.adapter, r.fluid_particles, r.steps, r.seconds, r.particle_steps_per_second, bytes, ratio
+        );
+    }
+    s
+}
+
+pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
+    if let Some(t) = args.threads {
+        // The CPU paths' pool; set once, before any parallel work.
+        rayon::ThreadPoolBuilder::new().num_threads(t as usize).build_global().map_err(|e| anyhow::anyhow!("--threads {t}: {e}"))?;
+    }
+    let scene = block_scene(args.n);
+    println!("{}: {} fluid particles, {} steps of {} s", scene.name, scene.fluid_particle_count(), args.steps, scene.time.dt);
+    let mut rows = Vec::new();
+    for path in &args.paths {
+        match path {
+            BenchPath::CpuF32 => rows.push(measure("cpu-f32", &scene, &BackendChoice::cpu(Precision::F32), args.steps, args.n)?),
+            BenchPath::CpuF64 => rows.push(measure("cpu-f64", &scene, &BackendChoice::cpu(Precision::F64), args.steps, args.n)?),
+            BenchPath::Gpu => {
+                let adapters = if args.every_adapter { compute_adapters() } else { Vec::new() };
+                if adapters.is_empty() {
+                    rows.push(measure("gpu", &scene, &BackendChoice::gpu(), args.steps, args.n)?);
+                }
+                for a in adapters {
+                    rows.push(measure("gpu", &scene, &BackendChoice::gpu_on(GpuContext::from_adapter(a)?), args.steps, args.n)?);
+                }
+            }
+        }
+    }
+    print!("{}", table(&rows));
+    if SPLISHSPLASH_WCSPH.iter().any(|r| r.0 == args.n) {
+        println!("x SPH: over SPlisHSPlasH 2.16 WCSPH on the same workload (2 cores, AVX2; docs/performance.md)");
+    }
+    if let Some(path) = &args.out {
+        let json = serde_json::to_string_pretty(&rows)?;
+        write_atomic(path, |w| writeln!(w, "{json}"))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(0)
+}

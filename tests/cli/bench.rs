@@ -1,0 +1,44 @@
+//! `wgsph bench`: the peers' block workload, timed on the paths asked for.
+
+use std::process::Command;
+use wgsph::app::bench::block_scene;
+
+#[test]
+fn the_block_workload_is_the_one_the_peers_were_measured_on() {
+    // 30^3 fluid particles; the container's two wall layers (the first on the walls at x = 0
+    // and 2L, y = 0 and 1.5L, z = 0 and L + dx) hold 24,936 particles.
+    let scene = block_scene(30);
+    let initial = scene.initial_state();
+    assert_eq!(initial.fluid_positions.len(), 27_000);
+    assert_eq!(initial.wall_positions.len(), 24_936);
+    let lowest = initial.fluid_positions.iter().map(|x| x[0]).fold(f64::INFINITY, f64::min);
+    assert!((lowest - 0.02).abs() < 1e-12, "the first fluid particle at (i + 1) dx: {lowest}");
+    let p = scene.params();
+    assert_eq!((p.h, p.dt, p.stiffness, p.clamp_negative_pressure), (0.04, 0.0004, 50_000.0, true));
+}
+
+#[test]
+fn bench_times_each_path_asked_for_and_writes_the_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("bench.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .args(["bench", "--n", "6", "--steps", "3", "--paths", "cpu-f32,cpu-f64", "--out"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("cpu-f32") && stdout.contains("cpu-f64") && stdout.contains("p-steps/s"), "{stdout}");
+    let rows: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for r in rows {
+        assert_eq!(r["fluid_particles"], 216);
+        assert_eq!(r["steps"], 3);
+        assert!(r["particle_steps_per_second"].as_f64().unwrap() > 0.0);
+        // No peer figure was measured at n = 6.
+        assert!(r["ratio_to_splishsplash"].is_null());
+    }
+    let bad = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["bench", "--paths", "cpu-f16"]).output().unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+}

@@ -1,0 +1,272 @@
+//! Runs as a user meets them: the first run (the command without arguments), run twice; Ctrl-C
+//! and SIGTERM; `--resume` after a kill; `--backend auto` and what it says; the seed scene's
+//! note.
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+use wgsph::io::summary::{RunStatus, Summary};
+
+fn wgsph(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir).env_remove("RUST_LOG").output().unwrap()
+}
+
+fn spawn(args: &[&str], dir: &Path) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .args(args)
+        .current_dir(dir)
+        .env_remove("RUST_LOG")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+fn summary(dir: &Path) -> Summary {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Waits (at most two minutes) until `path` exists.
+fn wait_for(path: &Path, child: &mut Child) {
+    let start = Instant::now();
+    while !path.exists() {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the run ended ({status}) before {} appeared", path.display());
+        }
+        assert!(start.elapsed() < Duration::from_secs(120), "{} did not appear", path.display());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[cfg(unix)]
+fn signal(child: &Child, name: &str) {
+    assert!(Command::new("kill").args([&format!("-{name}"), &child.id().to_string()]).status().unwrap().success());
+}
+
+/// Every file name under `dir`, recursively.
+fn all_names(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        out.push(p.file_name().unwrap().to_string_lossy().into_owned());
+        if p.is_dir() {
+            out.extend(all_names(&p));
+        }
+    }
+    out
+}
+
+/// The README's first command, `cargo run --release`, is `wgsph` without arguments: it runs the
+/// dam break and shows water, and it can be run again (it once ran the seed scene, whose
+/// picture is a clump of strands at 29 times the rest density, and failed the second time).
+#[cfg(unix)]
+#[test]
+fn the_first_run_shows_water_and_can_be_run_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = wgsph(&[], dir.path());
+    let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    let run = dir.path().join("out/dam_break-001");
+    let s = summary(&run);
+    assert_eq!((s.scene.as_str(), s.status, s.failure.as_deref()), ("dam_break", RunStatus::Completed, None));
+    assert!((s.sim_time - 1.5).abs() < 1e-3, "ran to t = {}", s.sim_time);
+    assert!(s.max_density_ratio < 1.5, "water stays near its rest density, not {}", s.max_density_ratio);
+    assert_eq!((s.nan_count, s.escaped), (0, 0));
+    // What was written where is reported.
+    assert!(stdout.contains("wrote out/dam_break-001") && stdout.contains("snapshots/") && stdout.contains("index.csv"), "{stdout}");
+    assert!(stdout.contains("backend: "), "{stdout}");
+    if common::contexts().is_empty() {
+        assert!(stdout.contains("no GPU adapter"), "{stdout}");
+    } else {
+        assert!(stdout.contains("frames/") && stdout.contains("7 pictures"), "{stdout}");
+        assert_eq!(s.frames, 7);
+        // The water: at the start a column at the left of the tank; at the end spread over the
+        // whole floor, with little of it high up.
+        let water = |frame: &str| {
+            let img = image::open(run.join("frames").join(frame)).unwrap().to_rgb8();
+            let (w, h) = img.dimensions();
+            let mut thirds = [0usize; 3];
+            let (mut low, mut high) = (0usize, 0usize);
+            for (x, y, p) in img.enumerate_pixels() {
+                // The surface style draws water blue.
+                if p[2] as i32 > p[0] as i32 + 60 && p[2] as i32 > p[1] as i32 + 20 {
+                    thirds[(3 * x / w) as usize] += 1;
+                    if y >= h / 2 {
+                        low += 1;
+                    } else {
+                        high += 1;
+                    }
+                }
+            }
+            (thirds, low, high)
+        };
+        let (start, _, _) = water("frame_00000.png");
+        assert!(start[0] > 20 * start[2].max(1) && start[0] > 5000, "the column at the left: {start:?}");
+        let (end, low, high) = water("frame_00006.png");
+        assert!(end.iter().all(|&n| n > 3000), "water over the whole floor: {end:?}");
+        assert!(low > 5 * high, "the water lies low: {low} pixels low, {high} high");
+    }
+    // Run again: a new directory; the first is left as it is. Stopped once it started (SIGTERM).
+    let before = std::fs::read(run.join("summary.json")).unwrap();
+    let mut second = spawn(&[], dir.path());
+    let again = dir.path().join("out/dam_break-002");
+    wait_for(&again.join("snapshots/step_000000.csv"), &mut second);
+    signal(&second, "TERM");
+    let o = second.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(143), "{}", text(&o.stderr));
+    assert_eq!(summary(&again).status, RunStatus::Interrupted);
+    assert_eq!(std::fs::read(run.join("summary.json")).unwrap(), before);
+}
+
+/// Ctrl-C (SIGINT) and SIGTERM once ended a run without a word and without a summary. Now the
+/// run stops after the batch under way: the summary says "interrupted", a checkpoint holds the
+/// last step (with checkpoints on) and the message says how to resume; exit 130 and 143.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_and_sigterm_stop_a_run_with_its_summary_and_say_where_to_resume() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["run", "dam_break", "--backend", "cpu", "--check-every", "10", "--snapshot-every", "20"];
+    let mut child = spawn(&[&args[..], &["--out", "a", "--checkpoint-every", "30"]].concat(), dir.path());
+    wait_for(&dir.path().join("a/snapshots/step_000020.csv"), &mut child);
+    signal(&child, "INT");
+    let o = child.wait_with_output().unwrap();
+    let stderr = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{stderr}");
+    let a = dir.path().join("a");
+    let s = summary(&a);
+    assert_eq!(s.status, RunStatus::Interrupted);
+    assert!(s.failure.as_deref().unwrap().contains("SIGINT"), "{:?}", s.failure);
+    assert!(s.steps >= 20 && s.steps < 6000, "{} steps", s.steps);
+    // The checkpoint holds the step the run stopped at, not only the last multiple of 30.
+    let checkpoint = wgsph::io::checkpoint::read(&a.join("checkpoint.wgsph")).unwrap();
+    assert_eq!(checkpoint.state.step, s.steps);
+    assert_eq!(s.last_checkpoint.as_deref(), Some("a/checkpoint.wgsph"));
+    assert!(stderr.contains("interrupted by SIGINT") && stderr.contains("wgsph run --resume a"), "{stderr}");
+    assert!(!all_names(&a).iter().any(|n| n.starts_with(".wgsph-tmp")), "partial files left: {:?}", all_names(&a));
+    // It continues from there.
+    let o = wgsph(&["run", "--resume", "a", "--steps", "10"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(summary(&a).status, RunStatus::Completed);
+
+    // SIGTERM, without checkpoints: the summary, and the message says the run cannot go on.
+    let mut child = spawn(&[&args[..], &["--out", "b"]].concat(), dir.path());
+    wait_for(&dir.path().join("b/snapshots/step_000020.csv"), &mut child);
+    signal(&child, "TERM");
+    let o = child.wait_with_output().unwrap();
+    let stderr = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(143), "{stderr}");
+    let s = summary(&dir.path().join("b"));
+    assert_eq!((s.status, s.last_checkpoint), (RunStatus::Interrupted, None));
+    assert!(stderr.contains("SIGTERM") && stderr.contains("no checkpoint"), "{stderr}");
+    // Every snapshot listed in the index is whole: its header and a line per particle.
+    let index = std::fs::read_to_string(dir.path().join("b/snapshots/index.csv")).unwrap();
+    for row in index.lines().skip(1) {
+        let file = row.split(',').nth(2).unwrap();
+        let csv = std::fs::read_to_string(dir.path().join("b/snapshots").join(file)).unwrap();
+        assert_eq!(csv.lines().count(), s.fluid_particles + 1, "{file}");
+    }
+}
+
+/// A run killed while writing leaves the atomic writer's partial files; `--resume` removes
+/// them, and only them.
+#[test]
+fn resume_removes_the_partial_files_a_killed_run_left() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "10", "--backend", "cpu", "--checkpoint-every", "10", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let o_dir = dir.path().join("o");
+    let partial: Vec<PathBuf> = [
+        "snapshots/.wgsph-tmp-0123456789abcdef-step_000015.csv",
+        ".wgsph-tmp-fedcba9876543210-checkpoint.wgsph",
+        "snapshots/.wgsph-tmp-00000000000000aa-index.csv",
+    ]
+    .iter()
+    .map(|p| o_dir.join(p))
+    .collect();
+    for p in &partial {
+        std::fs::write(p, "partial").unwrap();
+    }
+    let mine = o_dir.join("snapshots/.tmp-my-notes");
+    std::fs::write(&mine, "mine").unwrap();
+    let o = wgsph(&["run", "--resume", "o", "--steps", "5"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains("removed 3 partial file"), "{}", text(&o.stdout));
+    for p in &partial {
+        assert!(!p.exists(), "{} is still there", p.display());
+    }
+    assert!(mine.exists(), "a file the writer did not name was removed");
+}
+
+/// `--backend auto` (the default) once took a software GPU adapter (llvmpipe, lavapipe) over
+/// the CPU path, which is faster on the same cores. It takes a hardware GPU, else the CPU path,
+/// and says which and why in one line; `--backend gpu` still runs on a software adapter.
+#[test]
+fn auto_takes_a_hardware_gpu_else_the_cpu_path_and_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let adapters = wgsph::solver::gpu::device::compute_adapters();
+    let hardware = adapters.iter().any(|a| a.get_info().device_type != wgpu::DeviceType::Cpu);
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--out", "auto"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    let line = stdout.lines().find(|l| l.starts_with("backend: ")).unwrap_or_else(|| panic!("no backend line: {stdout}"));
+    let s = summary(&dir.path().join("auto"));
+    if hardware {
+        assert_eq!(s.backend, "gpu", "{line}");
+        assert!(line.contains("hardware"), "{line}");
+    } else {
+        assert_eq!(s.backend, "cpu", "{line}");
+        assert!(line.contains(if adapters.is_empty() { "no GPU adapter" } else { "software" }), "{line}");
+    }
+    if let Some(software) = adapters.iter().find(|a| a.get_info().device_type == wgpu::DeviceType::Cpu) {
+        let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--out", "gpu", "--backend", "gpu"], dir.path());
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        assert_eq!(summary(&dir.path().join("gpu")).backend, "gpu");
+        // An adapter named with WGPU_ADAPTER_NAME is taken, software or not.
+        let o = Command::new(env!("CARGO_BIN_EXE_wgsph"))
+            .args(["run", "hydrostatic", "--particles", "300", "--steps", "2", "--out", "named"])
+            .env("WGPU_ADAPTER_NAME", software.get_info().name)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        assert_eq!(summary(&dir.path().join("named")).backend, "gpu");
+        assert!(text(&o.stdout).contains("WGPU_ADAPTER_NAME"), "{}", text(&o.stdout));
+    }
+}
+
+/// The seed scene is run as published, oddities and all; it says so in one line.
+#[test]
+fn the_seed_scene_states_its_oddities() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = wgsph(&["run", "seed", "--steps", "1", "--backend", "cpu", "--out", "s"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let notes: Vec<String> = text(&o.stdout).lines().filter(|l| l.starts_with("note: ")).map(String::from).collect();
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert!(notes[0].contains("seed") && notes[0].contains("dam_break"), "{}", notes[0]);
+    let o = wgsph(&["run", "seed", "--steps", "1", "--backend", "cpu", "--out", "q", "--quiet"], dir.path());
+    assert!(o.stdout.is_empty());
+}
+
+/// Without --out every run gets a new numbered directory; --overwrite needs --out.
+#[test]
+fn runs_without_out_get_numbered_directories() {
+    let dir = tempfile::tempdir().unwrap();
+    for n in 1..=2 {
+        let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "1", "--backend", "cpu", "-q"], dir.path());
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        assert!(dir.path().join(format!("out/hydrostatic-{n:03}/summary.json")).exists());
+    }
+    // A run of no steps stands too.
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "0", "--backend", "cpu", "-q"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(summary(&dir.path().join("out/hydrostatic-003")).status, RunStatus::Completed);
+    let o = wgsph(&["run", "hydrostatic", "--steps", "1", "--overwrite"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--out"), "{}", text(&o.stderr));
+}

@@ -1,0 +1,208 @@
+//! Blow-ups caught and explained: the health of a run describes its first bad step, however long
+//! after it the host reads it; a run stops when the fluid leaves the weakly compressible regime
+//! (too dense, too fast); and the diagnosis names the cause the figures of the failing step show,
+//! or says that the cause is unknown. On the f64 CPU reference and on every GPU adapter found.
+
+use crate::common;
+use crate::common::TestScene;
+
+use wgsph::app::run::{run, RunOptions};
+use wgsph::io::summary::Summary;
+use wgsph::model::initial::InitialState;
+use wgsph::model::scene::{EquationOfState, Scene};
+use wgsph::solver::Backend;
+
+/// The f64 CPU reference and one GPU solver per adapter, from the same particles.
+fn backends(scene: &Scene, initial: &InitialState) -> Vec<Box<dyn Backend>> {
+    let mut list: Vec<Box<dyn Backend>> = vec![Box::new(common::cpu_from::<f64>(scene, initial))];
+    for ctx in common::contexts() {
+        list.push(Box::new(common::gpu_from(ctx, scene, initial)));
+    }
+    list
+}
+
+/// Runs up to `steps` steps through the run loop, reading the health every `check_every` steps
+/// (snapshots only at the start and the end), and returns the summary.
+fn run_checked(backend: &mut dyn Backend, scene: &Scene, steps: u64, check_every: u64) -> Summary {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions { steps, out: dir.path().to_path_buf(), snapshot_every: 0, check_every, ..Default::default() };
+    run(backend, scene, &opts).unwrap()
+}
+
+/// A block of 4 x 4 x 3 particles thrown at 50 m/s against the floor of the tank (backed by a
+/// plane, so that nothing leaves it), whose speed of sound is 40 m/s; dt = 1e-4 keeps the CFL
+/// number at 0.23 at that speed.
+fn impact() -> TestScene {
+    tank()
+        .speed_of_sound(40.0)
+        .dt(0.0001)
+        .without_fluid()
+        .fluid([0.06, 0.06, 0.02], [0.14, 0.14, 0.08])
+        .moving_at([0.0, -50.0, 0.0])
+        .plane([0.0; 3], [0.0, 1.0, 0.0], 0.0)
+}
+
+/// The failure of a run that must fail.
+fn failure(backend: &mut dyn Backend, scene: &Scene, steps: u64, check_every: u64) -> String {
+    let who = backend.adapter();
+    run_checked(backend, scene, steps, check_every).failure.unwrap_or_else(|| panic!("{who}: the run did not stop"))
+}
+
+/// A closed tank of wall particles, 0.24 m x 0.24 m x 0.12 m, with a block of 6 x 8 x 4 fluid
+/// particles in its corner: h = 0.04, c0 = 20 m/s, dt = 2e-4 (CFL number 0.1), no planes.
+fn tank() -> TestScene {
+    TestScene::new()
+        .named("tank")
+        .domain([-0.06; 3], [0.30, 0.30, 0.18])
+        .equation_of_state(EquationOfState::Tait)
+        .speed_of_sound(20.0)
+        .clamp_negative_pressure(true)
+        .viscosity(0.001)
+        .boundary_friction(0.0)
+        .dt(0.0002)
+        .fluid([0.0; 3], [0.12, 0.16, 0.08])
+        .closed_container([0.0; 3], [0.24, 0.24, 0.12])
+}
+
+#[test]
+fn a_blow_up_read_steps_after_it_happened_reports_the_counts_of_its_first_bad_step() {
+    // The case: dam_break at dt = 0.0025 (CFL number 2.5), without the density and Mach
+    // limits, so that particles leaving the domain are what stops it (at step 4). The health is
+    // read at step 8, when that step's counters may have gone back to zero; what is reported
+    // must be step 4's, and the same as when the health is read after every step.
+    let scene = TestScene::from(Scene::builtin("dam_break").unwrap()).dt(0.0025).without_limits().build();
+    let initial = scene.initial_state();
+    for (mut late, mut early) in backends(&scene, &initial).into_iter().zip(backends(&scene, &initial)) {
+        let who = late.adapter();
+        let summary = run_checked(late.as_mut(), &scene, 400, 8);
+        let health = late.health().unwrap();
+        let bad = health.bad_step.unwrap_or_else(|| panic!("{who}: no bad step recorded"));
+        assert_eq!(health.first_bad_step, Some(bad.step), "{who}");
+        assert!(bad.step < summary.steps || who.starts_with("cpu"), "{who}: the GPU ran past the bad step ({} steps)", summary.steps);
+        assert!(summary.nan_count + summary.escaped > 0, "{who}: the summary shows no bad particle: {summary:?}");
+        assert_eq!((summary.nan_count, summary.escaped), (bad.measured.non_finite, bad.measured.escaped), "{who}");
+        let failure = summary.failure.unwrap();
+        assert!(failure.starts_with(&format!("step {} (t = ", bad.step)), "{who}: {failure}");
+        if bad.measured.escaped > 0 {
+            assert!(failure.contains(&format!("{} particles left the domain", bad.measured.escaped)), "{who}: {failure}");
+        }
+        // Read after every step: the same step, the same counts.
+        run_checked(early.as_mut(), &scene, 400, 1);
+        let h1 = early.health().unwrap();
+        assert_eq!(h1.bad_step, health.bad_step, "{who}: read after every step");
+    }
+}
+
+#[test]
+fn a_time_step_ten_times_too_large_stops_within_steps_and_names_the_cfl_condition() {
+    // dam_break at 10x its dt ran 20 steps to 275 rho0 and exited 0: now the speed and density
+    // limits stop it within its first steps, and the diagnosis names the CFL condition (2.5).
+    let scene = TestScene::from(Scene::builtin("dam_break").unwrap()).dt(0.0025).build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 20, 20);
+        let bad = b.health().unwrap().bad_step.unwrap();
+        assert!(bad.step <= 4 && (bad.too_dense || bad.too_fast), "{who}: {bad:?}");
+        assert!(bad.measured.max_density < 10.0 * 1000.0, "{who}: {bad:?}");
+        assert!(f.contains("Cause: the CFL condition: dt c0 / h = 2.5 is over 0.4"), "{who}: {f}");
+    }
+}
+
+#[test]
+fn a_50_m_per_s_impact_stops_on_its_mach_number() {
+    // A block thrown at 50 m/s against the floor of a tank whose speed of sound is 40 m/s used to
+    // "succeed" at 9 rho0; it is Mach 1.25 from the first step, and stops there.
+    let scene = impact().build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 20, 20);
+        let bad = b.health().unwrap().bad_step.unwrap();
+        assert_eq!(bad.step, 1, "{who}");
+        assert!(bad.too_fast && (bad.measured.max_speed - 50.0).abs() < 0.1, "{who}: {bad:?}");
+        assert!(f.contains("Mach 1.25") && f.contains("over limits.max_mach"), "{who}: {f}");
+        assert!(f.contains("Cause: ") && f.contains("the flow reached Mach 1.25"), "{who}: {f}");
+    }
+}
+
+#[test]
+fn the_limits_are_the_scenes_and_inf_turns_them_off() {
+    // The same impact with the Mach limit off: it runs on, over the density limit, which the
+    // scene raised to 20: it ends without stopping, and its summary warns of both.
+    let scene = impact().stop_levels(20.0, f64::INFINITY).warn_levels(1.1, 0.3).build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let summary = run_checked(b.as_mut(), &scene, 20, 20);
+        assert!(summary.failure.is_none(), "{who}: {:?}", summary.failure);
+        assert!(summary.max_mach.is_some_and(|m| m > 1.2), "{who}: {:?}", summary.max_mach);
+        assert_eq!(summary.warnings.len(), 2, "{who}: {:?}", summary.warnings);
+        assert!(summary.warnings[0].contains("over limits.warn_density_ratio = 1.1"), "{who}: {:?}", summary.warnings);
+        assert!(summary.warnings[1].contains("over limits.warn_mach = 0.3"), "{who}: {:?}", summary.warnings);
+    }
+}
+
+#[test]
+fn the_viscous_limit_is_named_when_viscosity_is_what_is_too_large() {
+    // nu = 10 m^2/s at dt = 2e-4, ten times over dt <= 0.125 h^2 / nu = 2e-5; the CFL number is 0.1.
+    let scene = tank().viscosity(10.0).fluid([0.12, 0.0, 0.0], [0.2, 0.16, 0.08]).moving_at([1.0, 0.0, 0.0]).build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 2000, 10);
+        assert!(f.contains("the viscous condition: dt = 0.0002 is over 0.125 h^2 / nu = 2e-5"), "{who}: {f}");
+        assert!(!f.contains("the CFL condition"), "{who}: {f}");
+    }
+}
+
+#[test]
+fn the_force_condition_is_named_when_gravity_is_what_is_too_large() {
+    // |g| = 1e5 m/s^2: dt sqrt(|g| / h) = 0.32, over 0.25; the CFL number is 0.1.
+    let scene = tank().gravity([0.0, -1e5, 0.0]).build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 2000, 10);
+        assert!(f.contains("the force condition: dt sqrt(|g| / h) = 0.316228 is over 0.25"), "{who}: {f}");
+        assert!(!f.contains("the viscous condition"), "{who}: {f}");
+    }
+}
+
+#[test]
+fn a_fluid_too_soft_for_its_weight_is_stopped_and_named_by_its_density() {
+    // c0 = 0.5 m/s: the column's weight compresses it far beyond 1.5 rho0 (its Mach number is
+    // large too, but this scene turns that limit off: the density is what stops it).
+    let scene = tank().speed_of_sound(0.5).stop_levels(1.5, f64::INFINITY).build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 5000, 50);
+        assert!(f.contains("Cause: the fluid was compressed to"), "{who}: {f}");
+        assert!(!f.contains("the CFL condition") && !f.contains("the flow reached Mach"), "{who}: {f}");
+    }
+}
+
+#[test]
+fn fluid_leaking_through_a_wall_is_named_with_its_wall() {
+    // The seed report's scene without the planes that back its walls: its fluid (k = 2 Pa,
+    // far too soft for its weight) seeps through the floor of wall particles, and the run stops
+    // when a particle leaves the domain below it. The diagnosis names the floor.
+    let scene = TestScene::from(Scene::builtin("seed").unwrap()).without_planes().build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 1200, 10);
+        assert!(f.contains("particles left the domain"), "{who}: {f}");
+        assert!(f.contains("fluid particles are inside boundary[0] (the container's -y (floor) wall)"), "{who}: {f}");
+    }
+}
+
+#[test]
+fn a_cause_the_figures_do_not_show_is_unknown_and_the_speed_is_that_of_the_failing_step() {
+    // One particle rising at 1 m/s out through the top of a domain with no wall: every
+    // stability condition holds and nothing is too dense or fast. Only step 0 was saved: the
+    // |v|max the message gives is the failing step's (1 m/s), not the last snapshot's.
+    let scene = TestScene::new().domain([-0.1; 3], [0.3, 0.1, 0.3]).gravity([0.0; 3]).fluid([0.0; 3], [0.02; 3]).jitter(0.0).moving_at([0.0, 1.0, 0.0]).build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 2000, 10);
+        let bad = b.health().unwrap().bad_step.unwrap();
+        assert!(bad.measured.escaped == 1 && (bad.measured.max_speed - 1.0).abs() < 1e-6, "{who}: {bad:?}");
+        assert!(f.contains("Cause unknown"), "{who}: {f}");
+        assert!(f.contains("|v|max = 1,"), "{who}: {f}");
+    }
+}
