@@ -363,6 +363,24 @@ pub enum BenchPath {
     CpuF32,
     CpuF64,
     Gpu,
+    /// The same block with DFSPH (steps of 1 ms).
+    DfsphCpuF32,
+    DfsphCpuF64,
+    DfsphGpu,
+}
+
+impl BenchPath {
+    /// The path's name, as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            BenchPath::CpuF32 => "cpu-f32",
+            BenchPath::CpuF64 => "cpu-f64",
+            BenchPath::Gpu => "gpu",
+            BenchPath::DfsphCpuF32 => "dfsph-cpu-f32",
+            BenchPath::DfsphCpuF64 => "dfsph-cpu-f64",
+            BenchPath::DfsphGpu => "dfsph-gpu",
+        }
+    }
 }
 
 /// `wgsph bench`.
@@ -375,7 +393,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..))]
     pub steps: u64,
     /// The paths to time, comma-separated.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::Gpu])]
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::Gpu, BenchPath::DfsphCpuF32, BenchPath::DfsphGpu])]
     pub paths: Vec<BenchPath>,
     /// Threads of the CPU paths (default: every core).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
@@ -383,6 +401,10 @@ pub struct BenchArgs {
     /// The GPU path on every adapter with compute shaders, not only the one a run would choose.
     #[arg(long)]
     pub every_adapter: bool,
+    /// How the dfsph-gpu path ends a solve's loop: `indirect` (default) or `readback:K` (see
+    /// `wgsph run --help`), to measure one against the other.
+    #[arg(long, value_name = "LOOP")]
+    pub solver_loop: Option<SolverLoop>,
     /// Also write the figures to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,

@@ -161,7 +161,12 @@ fn whole_dfsph_steps_agree_with_the_f64_cpu_path() {
             // 25 steps of 1 ms: the simulated time of the weakly compressible checks' 100.
             let c = step_and_compare(&mut gpu, &mut cpu, 24, &DFSPH_MANY_STEPS).unwrap();
             assert!(c.passed(), "{what}:\n{}", c.table());
-            let (g, h) = (gpu.health().unwrap().iterations.unwrap(), cpu.health().iterations.unwrap());
+            let (gh, ch) = (gpu.health().unwrap(), cpu.health());
+            // The health checks' measures: the largest speed (the integration's reduction) and
+            // density (the factors stage's) so far agree; a stage that left them out gives 0.
+            assert!(ch.max_speed > 0.0 && (gh.max_speed - ch.max_speed).abs() <= 1e-2 * ch.max_speed, "{what}: largest speed gpu {} cpu {}", gh.max_speed, ch.max_speed);
+            assert!((gh.max_density - ch.max_density).abs() <= 1e-3 * ch.max_density, "{what}: largest density gpu {} cpu {}", gh.max_density, ch.max_density);
+            let (g, h) = (gh.iterations.unwrap(), ch.iterations.unwrap());
             // A solve may stop one iteration apart on the two paths, now and then.
             for (a, b, solve) in [(g.pressure, h.pressure, "constant density"), (g.divergence, h.divergence, "divergence")] {
                 assert!(a.total.abs_diff(b.total) <= 3, "{what}: {solve} iterations gpu {a:?} cpu {b:?}");

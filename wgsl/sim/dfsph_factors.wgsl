@@ -16,7 +16,8 @@
 //! array divergence_sum: f32, read_write
 // The last step's constant-density stiffness sums, by particle id.
 //! array warm_pressure: f32, read
-// STATUS_MAX_DENSITY: the largest density so far; STATUS_DT: the last dt (adaptive dt).
+// STATUS_MAX_DENSITY: the largest density so far; STATUS_STEP_MAX_DENSITY: of this step;
+// STATUS_DT: the last dt (adaptive dt).
 //! array status: u32, atomic, whole
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -85,5 +86,6 @@ fn density_and_factor(
     reduce_end();
     if (lid == 0u) {
         atomicMax(&status[STATUS_MAX_DENSITY], reduce_result(0u));
+        atomicMax(&status[STATUS_STEP_MAX_DENSITY], reduce_result(0u));
     }
 }
