@@ -6,7 +6,7 @@ use crate::io::snapshot::format::SnapshotFormat;
 use crate::model::scene::Scene;
 use crate::io::surface::MeshFormat;
 use crate::model::overrides::Override;
-use crate::solver::gpu::{GpuOptions, WorkgroupSizes};
+use crate::solver::gpu::{GpuOptions, SolverLoop, WorkgroupSizes};
 use crate::solver::{BackendChoice, Device, Precision};
 use crate::viz::render;
 use super::validate::case::Resolution;
@@ -277,6 +277,11 @@ pub struct GpuTuning {
     /// Steps recorded into one command buffer (default 32).
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
     pub steps_per_submit: Option<u64>,
+    /// How a DFSPH solve's loop ends on the GPU: `indirect` (default: every iteration up to the
+    /// limit recorded, the GPU making those after convergence empty; no host round trip) or
+    /// `readback:K` (the host reads the solve's state back every K iterations).
+    #[arg(long, value_name = "LOOP")]
+    pub solver_loop: Option<SolverLoop>,
 }
 
 impl GpuTuning {
@@ -287,6 +292,7 @@ impl GpuTuning {
             workgroup_sizes: self.workgroup_size.unwrap_or_default(),
             steps_per_submit: self.steps_per_submit.unwrap_or(0),
             single_cells: false,
+            solver_loop: self.solver_loop.unwrap_or_default(),
         }
     }
 }
@@ -357,6 +363,24 @@ pub enum BenchPath {
     CpuF32,
     CpuF64,
     Gpu,
+    /// The same block with DFSPH (steps of 1 ms).
+    DfsphCpuF32,
+    DfsphCpuF64,
+    DfsphGpu,
+}
+
+impl BenchPath {
+    /// The path's name, as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            BenchPath::CpuF32 => "cpu-f32",
+            BenchPath::CpuF64 => "cpu-f64",
+            BenchPath::Gpu => "gpu",
+            BenchPath::DfsphCpuF32 => "dfsph-cpu-f32",
+            BenchPath::DfsphCpuF64 => "dfsph-cpu-f64",
+            BenchPath::DfsphGpu => "dfsph-gpu",
+        }
+    }
 }
 
 /// `wgsph bench`.
@@ -369,7 +393,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..))]
     pub steps: u64,
     /// The paths to time, comma-separated.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::Gpu])]
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::Gpu, BenchPath::DfsphCpuF32, BenchPath::DfsphGpu])]
     pub paths: Vec<BenchPath>,
     /// Threads of the CPU paths (default: every core).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
@@ -377,6 +401,10 @@ pub struct BenchArgs {
     /// The GPU path on every adapter with compute shaders, not only the one a run would choose.
     #[arg(long)]
     pub every_adapter: bool,
+    /// How the dfsph-gpu path ends a solve's loop: `indirect` (default) or `readback:K` (see
+    /// `wgsph run --help`), to measure one against the other.
+    #[arg(long, value_name = "LOOP")]
+    pub solver_loop: Option<SolverLoop>,
     /// Also write the figures to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,

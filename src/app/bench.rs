@@ -7,12 +7,14 @@
 //! with walls at x = 0 and 2L, y = 0 and 1.5L, z = 0 and L + 0.02 (L = n 0.02), gravity -9.81
 //! in y, rho0 = 1000, kernel support 0.04 m (the cubic spline), Tait with stiffness 50 kPa and
 //! negative pressure clamped (as SPlisHSPlasH's WCSPH), no viscosity, 200 steps of 0.4 ms.
+//! The DFSPH paths run the same block with DFSPH (average density error 0.01 %, Akinci wall
+//! volumes, as SPlisHSPlasH's DFSPH was measured) and steps of 1 ms.
 
 use super::args::{BenchArgs, BenchPath};
 use crate::io::atomic::write_atomic;
-use crate::model::scene::{Boundary, Domain, EquationOfState, FluidBlock, Kernel, Physics, Scene, Time, WallParticles};
+use crate::model::scene::{Boundary, BoundaryVolume, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, Time, WallParticles};
 use crate::solver::gpu::device::compute_adapters;
-use crate::solver::gpu::GpuContext;
+use crate::solver::gpu::{GpuContext, GpuOptions};
 use crate::solver::{open, BackendChoice, Precision};
 use serde::Serialize;
 use std::time::Instant;
@@ -20,6 +22,24 @@ use std::time::Instant;
 /// SPlisHSPlasH 2.16's WCSPH on the workload, fluid particle-steps per second, measured on a
 /// 2-core x86-64 machine with AVX2 (2 OpenMP threads), 2026-11-23, by n.
 pub const SPLISHSPLASH_WCSPH: [(u32, f64); 3] = [(20, 1.00e6), (30, 1.10e6), (40, 1.10e6)];
+
+/// SPlisHSPlasH 2.16's DFSPH on the workload at dt = 1 ms (Akinci boundaries, average density
+/// error 0.01 %), fluid particle-steps per second on the same kind of 2-core machine, by n
+/// (issue 16's reference figure), and its iterations per step (constant density + divergence).
+pub const SPLISHSPLASH_DFSPH: [(u32, f64); 1] = [(30, 0.59e6)];
+pub const SPLISHSPLASH_DFSPH_ITERATIONS: (f64, f64) = (5.9, 1.05);
+
+/// The workload with DFSPH: the same block and box, Akinci wall volumes, steps of 1 ms and the
+/// default tolerances (average density error 0.01 %, divergence error 0.1 %).
+pub fn dfsph_block_scene(n: u32) -> Scene {
+    let mut scene = block_scene(n);
+    scene.name = format!("block_n{n}_dfsph");
+    scene.physics.solver = PressureSolver::Dfsph;
+    scene.physics.stiffness = None;
+    scene.physics.boundary_volume = BoundaryVolume::Akinci;
+    scene.time = Time::fixed(0.001, 0.2);
+    scene
+}
 
 /// The workload's scene at n^3 fluid particles.
 pub fn block_scene(n: u32) -> Scene {
@@ -77,8 +97,11 @@ pub struct BenchRow {
     pub seconds: f64,
     pub particle_steps_per_second: f64,
     pub bytes_per_fluid_particle: Option<f64>,
-    /// Over SPlisHSPlasH's WCSPH figure at the same n, where one was measured.
+    /// Over SPlisHSPlasH's figure for the same method at the same n, where one was measured.
     pub ratio_to_splishsplash: Option<f64>,
+    /// DFSPH: the timed steps' mean iterations of the constant-density and the divergence solve.
+    pub pressure_iterations_per_step: Option<f64>,
+    pub divergence_iterations_per_step: Option<f64>,
 }
 
 /// Runs the workload on one backend: the steps are timed from the first submission to the end
@@ -88,7 +111,7 @@ fn measure(path: &str, scene: &Scene, choice: &BackendChoice, steps: u64, n: u32
     let mut sim = open(scene, choice)?;
     let backend = sim.backend();
     backend.step(1)?;
-    backend.health()?;
+    let before = backend.health()?.iterations;
     let t = Instant::now();
     backend.step(steps)?;
     let health = backend.health()?;
@@ -96,6 +119,11 @@ fn measure(path: &str, scene: &Scene, choice: &BackendChoice, steps: u64, n: u32
     anyhow::ensure!(health.is_ok(), "{path}: the workload went bad at step {:?}", health.first_bad_step);
     let fluid = backend.fluid_count();
     let rate = steps as f64 * fluid as f64 / seconds;
+    let per_step = |total: fn(&crate::model::state::IterationStats) -> u64| match (before, health.iterations) {
+        (Some(a), Some(b)) => Some((total(&b) - total(&a)) as f64 / steps as f64),
+        _ => None,
+    };
+    let reference = if scene.physics.solver == PressureSolver::Dfsph { &SPLISHSPLASH_DFSPH[..] } else { &SPLISHSPLASH_WCSPH[..] };
     Ok(BenchRow {
         path: path.into(),
         adapter: backend.adapter(),
@@ -105,19 +133,28 @@ fn measure(path: &str, scene: &Scene, choice: &BackendChoice, steps: u64, n: u32
         seconds,
         particle_steps_per_second: rate,
         bytes_per_fluid_particle: backend.memory_bytes().map(|b| b as f64 / fluid as f64),
-        ratio_to_splishsplash: SPLISHSPLASH_WCSPH.iter().find(|r| r.0 == n).map(|r| rate / r.1),
+        ratio_to_splishsplash: reference.iter().find(|r| r.0 == n).map(|r| rate / r.1),
+        pressure_iterations_per_step: per_step(|i| i.pressure.total),
+        divergence_iterations_per_step: per_step(|i| i.divergence.total),
     })
 }
 
 /// The table `wgsph bench` prints.
 pub fn table(rows: &[BenchRow]) -> String {
-    let mut s = format!("{:<9} {:<48} {:>8} {:>6} {:>9} {:>12} {:>9} {:>8}\n", "path", "adapter", "fluid", "steps", "seconds", "p-steps/s", "B/fluid", "x SPH");
+    let mut s = format!(
+        "{:<15} {:<48} {:>8} {:>6} {:>9} {:>12} {:>9} {:>8} {:>13}\n",
+        "path", "adapter", "fluid", "steps", "seconds", "p-steps/s", "B/fluid", "x SPH", "iterations"
+    );
     for r in rows {
         let bytes = r.bytes_per_fluid_particle.map_or("-".into(), |b| format!("{b:.1}"));
         let ratio = r.ratio_to_splishsplash.map_or("-".into(), |x| format!("{x:.2}"));
+        let iterations = match (r.pressure_iterations_per_step, r.divergence_iterations_per_step) {
+            (Some(p), Some(d)) => format!("{p:.2} + {d:.2}"),
+            _ => "-".into(),
+        };
         s += &format!(
-            "{:<9} {:<48} {:>8} {:>6} {:>9.3} {:>12.3e} {:>9} {:>8}\n",
-            r.path, r.adapter, r.fluid_particles, r.steps, r.seconds, r.particle_steps_per_second, bytes, ratio
+            "{:<15} {:<48} {:>8} {:>6} {:>9.3} {:>12.3e} {:>9} {:>8} {:>13}\n",
+            r.path, r.adapter, r.fluid_particles, r.steps, r.seconds, r.particle_steps_per_second, bytes, ratio, iterations
         );
     }
     s
@@ -128,22 +165,27 @@ pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
         // The CPU paths' pool; set once, before any parallel work.
         rayon::ThreadPoolBuilder::new().num_threads(t as usize).build_global().map_err(|e| anyhow::anyhow!("--threads {t}: {e}"))?;
     }
-    let scene = block_scene(args.n);
-    println!("{}: {} fluid particles, {} steps of {} s", scene.name, scene.fluid_particle_count(), args.steps, scene.time.dt);
+    let (scene, dfsph) = (block_scene(args.n), dfsph_block_scene(args.n));
+    println!("{}: {} fluid particles, {} steps of {} s (DFSPH: {} s)", scene.name, scene.fluid_particle_count(), args.steps, scene.time.dt, dfsph.time.dt);
     let mut rows = Vec::new();
     for path in &args.paths {
+        let (name, scene) = match path {
+            BenchPath::CpuF32 | BenchPath::CpuF64 | BenchPath::Gpu => (path.name(), &scene),
+            BenchPath::DfsphCpuF32 | BenchPath::DfsphCpuF64 | BenchPath::DfsphGpu => (path.name(), &dfsph),
+        };
         match path {
-            BenchPath::CpuF32 => rows.push(measure("cpu-f32", &scene, &BackendChoice::cpu(Precision::F32), args.steps, args.n)?),
-            BenchPath::CpuF64 => rows.push(measure("cpu-f64", &scene, &BackendChoice::cpu(Precision::F64), args.steps, args.n)?),
-            BenchPath::Gpu => {
+            BenchPath::CpuF32 | BenchPath::DfsphCpuF32 => rows.push(measure(name, scene, &BackendChoice::cpu(Precision::F32), args.steps, args.n)?),
+            BenchPath::CpuF64 | BenchPath::DfsphCpuF64 => rows.push(measure(name, scene, &BackendChoice::cpu(Precision::F64), args.steps, args.n)?),
+            BenchPath::Gpu | BenchPath::DfsphGpu => {
+                let options = GpuOptions { solver_loop: args.solver_loop.unwrap_or_default(), ..Default::default() };
                 let adapters = if args.every_adapter { compute_adapters() } else { Vec::new() };
                 if adapters.is_empty() {
-                    rows.push(measure("gpu", &scene, &BackendChoice::gpu(), args.steps, args.n)?);
+                    rows.push(measure(name, scene, &BackendChoice::gpu().with_gpu_options(options), args.steps, args.n)?);
                 }
                 for a in adapters {
                     // A listed adapter that cannot open a device is passed over with a word.
                     match GpuContext::from_adapter(a) {
-                        Ok(ctx) => rows.push(measure("gpu", &scene, &BackendChoice::gpu_on(ctx), args.steps, args.n)?),
+                        Ok(ctx) => rows.push(measure(name, scene, &BackendChoice::gpu_on(ctx).with_gpu_options(options), args.steps, args.n)?),
                         Err(e) => eprintln!("warning: passed over: {e:#}"),
                     }
                 }
@@ -153,6 +195,10 @@ pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
     print!("{}", table(&rows));
     if SPLISHSPLASH_WCSPH.iter().any(|r| r.0 == args.n) {
         println!("x SPH: over SPlisHSPlasH 2.16 WCSPH on the same workload (2 cores, AVX2; docs/performance.md)");
+    }
+    if SPLISHSPLASH_DFSPH.iter().any(|r| r.0 == args.n) {
+        let (p, d) = SPLISHSPLASH_DFSPH_ITERATIONS;
+        println!("x SPH of the dfsph paths: over SPlisHSPlasH 2.16 DFSPH ({p} + {d} iterations per step; docs/dfsph.md)");
     }
     if let Some(path) = &args.out {
         let json = serde_json::to_string_pretty(&rows)?;

@@ -11,7 +11,7 @@ use crate::model::params::Params;
 use crate::model::real::V3;
 use crate::model::scene::Scene;
 use crate::solver::gpu::memory::MemoryPlan;
-use crate::solver::gpu::schedule::PROFILED_STAGES;
+use crate::solver::gpu::schedule::{DFSPH_PROFILED_STAGES, PROFILED_STAGES};
 use crate::solver::gpu::{GpuContext, GpuOptions};
 use crate::solver::{open_with, Backend, BackendChoice};
 use rayon::prelude::*;
@@ -68,6 +68,12 @@ pub struct Profile {
     pub interactions_per_second: f64,
     pub gpu_memory_bytes: u64,
     pub gpu_bytes_per_particle: f64,
+    /// DFSPH: iterations per step of the constant-density and the divergence solve over the
+    /// profiled steps (absent for WCSPH).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pressure_iterations_per_step: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub divergence_iterations_per_step: Option<f64>,
 }
 
 /// Bytes each stage of `PROFILED_STAGES` must read and write per step, for `n` fluid particles,
@@ -98,6 +104,37 @@ pub fn stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool, fused: bool) -> [
         // (the accelerations and velocities read again by the adaptive reduction of |v|max and
         // |a|max); with fusion only the step's status words.
         if fused { BOOKKEEPING_BYTES } else { n * 80 + if adaptive { n * 32 } else { 0 } },
+    ]
+}
+
+/// Bytes each stage of [`DFSPH_PROFILED_STAGES`] must read and write per step, counted as
+/// [`stage_bytes`] counts them, with `pressure` and `divergence` iterations per step (each
+/// iteration a velocity change and a new error; the warm start one more pass of each).
+pub fn dfsph_stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool, viscous: bool, pressure: f64, divergence: f64) -> [u64; 9] {
+    let base = stage_bytes(n, w, cells, adaptive, false);
+    let starts = (cells + 1) * 4;
+    let walls = if w > 0 { w * 16 + starts } else { 0 };
+    // A pass computing D_i: positions, velocities, the wall gradient and the factor in, K out;
+    // a velocity change: positions, K, the wall gradient, the velocity and the sum in and out.
+    let rate = n * 56 + starts;
+    let apply = n * 76 + starts;
+    let solve = |iterations: f64| (rate as f64 + iterations * (rate + apply) as f64) as u64;
+    [
+        base[0],
+        base[1],
+        base[2],
+        base[3],
+        // Positions (and walls) in; density, pressure, factor, divergence sum and the wall
+        // gradient out; the last stiffness read by id.
+        n * 16 + starts + walls + n * 36 + n * 4,
+        solve(divergence),
+        // Velocities in, predicted velocities and the pressure sum out (with viscosity the
+        // neighbours' positions and densities, with adaptive dt the accelerations twice).
+        n * 36 + if viscous { n * 20 + starts + walls } else { 0 } + if adaptive { n * 32 } else { 0 },
+        solve(pressure) + n * 4 * pressure.ceil() as u64,
+        // Positions, velocities and the two sums in; positions, velocities and the two warm
+        // starts out; the bookkeeping's status words.
+        n * 80 + BOOKKEEPING_BYTES,
     ]
 }
 
@@ -149,10 +186,28 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
     gpu.advance(2);
     gpu.wait()?;
     let cells = params.grid.cell_count() as u64;
-    let bytes = stage_bytes(n, w, cells, params.adaptive.is_some(), gpu.fused());
-    let names = if gpu.fused() { FUSED_STAGE_NAMES } else { PROFILED_STAGES };
+    let before = gpu.health()?.iterations;
+    let profiled_steps = gpu.steps_done();
+    let per_step = |now: Option<crate::model::state::IterationStats>, steps: u64| {
+        now.zip(before).map(|(a, b)| {
+            let s = steps.max(1) as f64;
+            ((a.pressure.total - b.pressure.total) as f64 / s, (a.divergence.total - b.divergence.total) as f64 / s)
+        })
+    };
+    let (timing, totals) = match gpu.profile_stages(steps)? {
+        Some(totals) => ("timestamp queries", Some(totals)),
+        None => ("host (whole steps, submit and wait)", None),
+    };
+    let iterations = per_step(gpu.health()?.iterations, gpu.steps_done() - profiled_steps);
+    let (bytes, names): (Vec<u64>, Vec<&str>) = match iterations {
+        Some((p, d)) => (
+            dfsph_stage_bytes(n, w, cells, params.adaptive.is_some(), params.uses_viscosity(), p, d).to_vec(),
+            DFSPH_PROFILED_STAGES.to_vec(),
+        ),
+        None => (stage_bytes(n, w, cells, params.adaptive.is_some(), gpu.fused()).to_vec(), if gpu.fused() { FUSED_STAGE_NAMES } else { PROFILED_STAGES }.to_vec()),
+    };
 
-    let (timing, times_ns): (&str, Vec<(String, f64, u64)>) = match gpu.profile_stages(steps)? {
+    let (timing, times_ns): (&str, Vec<(String, f64, u64)>) = match totals {
         Some(totals) => (
             "timestamp queries",
             names.iter().zip(totals).zip(bytes).map(|((s, t), b)| (s.to_string(), t / steps as f64, b)).collect(),
@@ -165,7 +220,7 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
                 gpu.wait()?;
                 total += t.elapsed().as_secs_f64() * 1e9;
             }
-            ("host (whole steps, submit and wait)", vec![("step".to_string(), total / steps as f64, bytes.iter().sum())])
+            (timing, vec![("step".to_string(), total / steps as f64, bytes.iter().sum())])
         }
     };
     let t = Instant::now();
@@ -220,6 +275,8 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
         interactions_per_second: neighbour_pairs as f64 / (step_ns * 1e-9),
         gpu_memory_bytes: memory,
         gpu_bytes_per_particle: memory as f64 / n as f64,
+        pressure_iterations_per_step: iterations.map(|i| i.0),
+        divergence_iterations_per_step: iterations.map(|i| i.1),
     })
 }
 
@@ -243,6 +300,9 @@ impl Profile {
         s += &format!("particle-steps/s: {:.3e}\n", self.particle_steps_per_second);
         s += &format!("neighbour pairs per step: {}; interactions/s (PIPS): {:.3e}\n", self.neighbour_pairs, self.interactions_per_second);
         s += &format!("GPU memory: {} bytes, {:.1} bytes per particle\n", self.gpu_memory_bytes, self.gpu_bytes_per_particle);
+        if let (Some(p), Some(d)) = (self.pressure_iterations_per_step, self.divergence_iterations_per_step) {
+            s += &format!("DFSPH iterations per step: constant density {p:.2}, divergence {d:.2}\n");
+        }
         s += "bytes/step: compulsory traffic estimated from the arrays each stage reads and writes (a lower bound)\n";
         s
     }

@@ -1,6 +1,7 @@
 //! `wgsph tradeoff`: the speed/accuracy trade measured. One scene is run under many settings
 //! (time step, adaptive dt, resolution, kernel, equation of state and stiffness, neighbour-grid
-//! rebuild interval, GPU f32 against CPU f64 and f32, each model term off), every run is
+//! rebuild interval, GPU f32 against CPU f64 and f32, each model term off, and DFSPH at three
+//! tolerances of its average density error), every run is
 //! compared with a reference run of the same scene at high accuracy (f64, dt / 4), and the
 //! errors and costs go into `DIR/tradeoff.md` (a table) and `DIR/tradeoff.png` (error against
 //! cost, the Pareto front marked).
@@ -20,7 +21,7 @@
 use super::args::TradeoffArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
-use crate::model::scene::{Boundary, EquationOfState, Kernel, Scene};
+use crate::model::scene::{Boundary, DfsphSettings, EquationOfState, Kernel, PressureSolver, Scene};
 use crate::model::state::Snapshot;
 use crate::solver::compare::{diff as distance, rms};
 use crate::solver::{open, Backend, BackendChoice, Device, Precision};
@@ -45,8 +46,34 @@ pub struct Config {
     pub engine: Engine,
 }
 
+/// DFSPH's longest adaptive step, in steps of the base scene: its CFL condition is on the flow
+/// speed alone, so it may take several of a weakly compressible scene's steps at once.
+pub const DFSPH_DT_MAX_FACTOR: f64 = 8.0;
+
+/// The tolerances of DFSPH's average density error the study runs (0.01 % is the default).
+pub const DFSPH_TOLERANCES: [f64; 3] = [1e-4, 1e-3, 1e-2];
+
+/// `base` with DFSPH at `density_error`: adaptive dt up to [`DFSPH_DT_MAX_FACTOR`] of the
+/// base's step (an incompressible solve has no speed of sound to bound it), the equation of
+/// state's settings dropped (DFSPH refuses them).
+pub fn with_dfsph(base: &Scene, density_error: f64) -> Scene {
+    let mut s = base.clone();
+    if s.physics.solver != PressureSolver::Dfsph {
+        s.physics.solver = PressureSolver::Dfsph;
+        s.physics.stiffness = None;
+        s.physics.speed_of_sound = None;
+        s.time.adaptive = true;
+        s.time.dt_max = Some(DFSPH_DT_MAX_FACTOR * base.time.dt);
+        s.time.dt = DFSPH_DT_MAX_FACTOR * base.time.dt;
+        s.time.dt_min = Some(base.time.dt * 1e-3);
+    }
+    s.physics.dfsph = DfsphSettings { density_error, ..s.physics.dfsph.clone() };
+    s
+}
+
 /// The configurations of a study around `base`: the reference first, then the baseline (the
-/// scene as it is, on the GPU), then one knob turned at a time.
+/// scene as it is, on the GPU), then one knob turned at a time. A DFSPH scene has no equation
+/// of state, so its study leaves out the knobs of one.
 pub fn configs(base: &Scene) -> Vec<Config> {
     let dt = base.time.dt;
     let with = |f: &dyn Fn(&mut Scene)| {
@@ -57,7 +84,8 @@ pub fn configs(base: &Scene) -> Vec<Config> {
     let c = |name: &str, knob: &'static str, scene: Scene, engine: Engine| Config { name: name.into(), knob, scene, engine };
     let c0 = base.params().speed_of_sound();
     let fluid = base.fluid_particle_count();
-    vec![
+    let weakly_compressible = base.physics.solver == PressureSolver::Wcsph;
+    let mut all = vec![
         c("reference (f64, dt/4)", "reference", with(&|s| s.time.dt = dt / 4.0), Engine::CpuF64),
         c("baseline (gpu f32)", "baseline", base.clone(), Engine::Gpu),
         c("cpu f64", "precision", base.clone(), Engine::CpuF64),
@@ -136,7 +164,14 @@ pub fn configs(base: &Scene) -> Vec<Config> {
             with(&|s| s.physics.clamp_negative_pressure = !base.physics.clamp_negative_pressure),
             Engine::Gpu,
         ),
-    ]
+    ];
+    if !weakly_compressible {
+        all.retain(|c| !matches!(c.knob, "equation of state" | "stiffness") && c.name != "no pressure clamp");
+    }
+    for tolerance in DFSPH_TOLERANCES {
+        all.push(c(&format!("dfsph {}%", 100.0 * tolerance), "dfsph tolerance", with_dfsph(base, tolerance), Engine::Gpu));
+    }
+    all
 }
 
 /// What one sample of a run measures.

@@ -279,7 +279,7 @@ impl Scene {
         if !(1..=2).contains(&t.neighbour_rebuild_every) {
             return Err(err(origin, "time.neighbour_rebuild_every", format!("is {}; must be 1 or 2", t.neighbour_rebuild_every)));
         }
-        for (field, v) in [("time.cfl_number", t.cfl_number), ("time.force_number", t.force_number), ("time.viscous_number", t.viscous_number)] {
+        for (field, v) in [("time.cfl_number", t.cfl_number_for(self.physics.solver)), ("time.force_number", t.force_number), ("time.viscous_number", t.viscous_number)] {
             if !(v.is_finite() && v > 0.0 && v <= 1.0) {
                 return Err(err(origin, field, format!("is {}; must be in (0, 1]", short(v))));
             }

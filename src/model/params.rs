@@ -202,7 +202,7 @@ impl Scene {
             dt: self.time.dt,
             end_time: self.time.end_time,
             adaptive: self.time.adaptive.then(|| AdaptiveDt {
-                cfl_number: self.time.cfl_number,
+                cfl_number: self.time.cfl_number_for(p.solver),
                 force_number: self.time.force_number,
                 viscous_number: self.time.viscous_number,
                 dt_min: self.time.dt_min.unwrap_or(self.time.dt * 1e-3),

@@ -397,9 +397,10 @@ pub struct Time {
     /// Adaptive time stepping: dt from the CFL, force and viscous conditions every step.
     #[serde(default, skip_serializing_if = "is_false")]
     pub adaptive: bool,
-    /// C_cfl in dt <= C_cfl h / (c0 + |v|max) (adaptive only).
-    #[serde(default = "default_cfl_number")]
-    pub cfl_number: f64,
+    /// C_cfl in dt <= C_cfl h / (c0 + |v|max) (adaptive only; DFSPH has no c0). Default 0.25
+    /// with a weakly compressible fluid, 0.4 with DFSPH ([`Time::cfl_number_for`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cfl_number: Option<f64>,
     /// C_f in dt <= C_f sqrt(h / |a|max) (adaptive only).
     #[serde(default = "default_force_number")]
     pub force_number: f64,
@@ -425,7 +426,7 @@ impl Time {
             dt,
             end_time,
             adaptive: false,
-            cfl_number: default_cfl_number(),
+            cfl_number: None,
             force_number: default_force_number(),
             viscous_number: default_viscous_number(),
             dt_min: None,
@@ -435,11 +436,20 @@ impl Time {
     }
 }
 
+impl Time {
+    /// C_cfl of a run with `solver`: the scene's, else 0.25 where the speed of sound bounds
+    /// the step (weakly compressible), 0.4 where only the flow speed does (DFSPH: the
+    /// lambda ~ 0.4 of Ihmsen et al. 2014, "SPH Fluids in Computer Graphics").
+    pub fn cfl_number_for(&self, solver: PressureSolver) -> f64 {
+        self.cfl_number.unwrap_or(match solver {
+            PressureSolver::Wcsph => 0.25,
+            PressureSolver::Dfsph => 0.4,
+        })
+    }
+}
+
 fn is_false(b: &bool) -> bool {
     !*b
-}
-fn default_cfl_number() -> f64 {
-    0.25
 }
 fn default_force_number() -> f64 {
     0.25

@@ -87,6 +87,21 @@ pub struct IterationStats {
     pub divergence: SolveStats,
 }
 
+/// DFSPH's arrays at some point of a step, in original particle order (for the stage tests).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DfsphFields {
+    pub densities: Vec<f64>,
+    pub pressures: Vec<f64>,
+    pub factors: Vec<f64>,
+    pub wall_gradients: Vec<[f64; 3]>,
+    pub stiffness: Vec<f64>,
+    pub pressure_sum: Vec<f64>,
+    pub divergence_sum: Vec<f64>,
+    /// The velocities the solves work on: the state's own up to the prediction, the predicted
+    /// ones after it.
+    pub velocities: Vec<[f64; 3]>,
+}
+
 /// What a run found wrong, and the largest density and speed seen.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Health {

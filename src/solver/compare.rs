@@ -4,7 +4,9 @@
 //! reference field's RMS where it does not (a near-zero sum of large terms has no meaningful
 //! relative error):
 //! - density: |rho - rho_ref| / rho_ref;
-//! - pressure: |p - p_ref| / (stiffness), the pressure scale of the equation of state;
+//! - pressure: |p - p_ref| / (stiffness), the pressure scale of the equation of state; with
+//!   DFSPH, which has none, / max |p_ref| (a solve may stop one iteration apart on the two
+//!   paths, which changes a particle's pressure by one Jacobi step);
 //! - acceleration: |a - a_ref| / RMS(|a_ref|);
 //! - position: |x - x_ref| / h;
 //! - velocity: |v - v_ref| / max(RMS(|v_ref|), |g| dt).
@@ -25,22 +27,31 @@ pub struct FieldError {
 pub struct Comparison {
     pub steps: u64,
     pub fields: Vec<(&'static str, FieldError, f64)>,
+    /// The fields judged by their RMS error instead of their largest (see
+    /// [`Tolerances::derived_by_rms`]).
+    pub judged_by_rms: Vec<&'static str>,
 }
 
 impl Comparison {
+    /// The error a field is judged by: its largest, or its RMS.
+    fn judged(&self, name: &str, e: &FieldError) -> f64 {
+        if self.judged_by_rms.contains(&name) { e.rms } else { e.max }
+    }
     pub fn passed(&self) -> bool {
-        self.fields.iter().all(|(_, e, tol)| e.max <= *tol)
+        self.fields.iter().all(|(name, e, tol)| self.judged(name, e) <= *tol)
     }
     pub fn table(&self) -> String {
         let mut s = format!("after {} step(s):\n  {:<13} {:>12} {:>12} {:>12}  result\n", self.steps, "field", "max error", "rms error", "tolerance");
         for (name, e, tol) in &self.fields {
+            let rms = self.judged_by_rms.contains(name);
             s += &format!(
-                "  {:<13} {:>12.3e} {:>12.3e} {:>12.1e}  {}\n",
+                "  {:<13} {:>12.3e} {:>12.3e} {:>12.1e}  {}{}\n",
                 name,
                 e.max,
                 e.rms,
                 tol,
-                if e.max <= *tol { "ok" } else { "FAIL" }
+                if self.judged(name, e) <= *tol { "ok" } else { "FAIL" },
+                if rms { " (rms)" } else { "" }
             );
         }
         s
@@ -58,15 +69,32 @@ pub struct Tolerances {
     pub acceleration: f64,
     pub position: f64,
     pub velocity: f64,
+    /// Judge pressure and acceleration by their RMS error, not their largest: DFSPH's after
+    /// many steps, where a particle whose predicted density sits at rest density can be pushed
+    /// on one path and not on the other (its solve's clamp or warm start decided the other
+    /// way), and so has another pressure and acceleration in that step, while the state stays
+    /// close.
+    pub derived_by_rms: bool,
 }
 
 /// After one step: f32 rounding of sums of tens of terms (unit roundoff 6e-8).
-pub const ONE_STEP: Tolerances = Tolerances { density: 1e-5, pressure: 1e-4, acceleration: 1e-3, position: 1e-5, velocity: 1e-3 };
+pub const ONE_STEP: Tolerances = Tolerances { density: 1e-5, pressure: 1e-4, acceleration: 1e-3, position: 1e-5, velocity: 1e-3, derived_by_rms: false };
 
 /// After N steps of a chaotic flow the rounding differences grow; these bound them for the
 /// built-in scenes at N = 100 with a margin of 3-5x over the errors measured on lavapipe and
 /// llvmpipe (see docs/gpu-and-cpu.md). A wrong stage gives errors of order 1.
-pub const MANY_STEPS: Tolerances = Tolerances { density: 5e-3, pressure: 5e-2, acceleration: 0.2, position: 1e-2, velocity: 0.1 };
+pub const MANY_STEPS: Tolerances = Tolerances { density: 5e-3, pressure: 5e-2, acceleration: 0.2, position: 1e-2, velocity: 0.1, derived_by_rms: false };
+
+/// DFSPH after many steps: the state as [`MANY_STEPS`], pressure and acceleration by their RMS
+/// error (see [`Tolerances::derived_by_rms`]; measured over 25 steps of the small tank on
+/// lavapipe and llvmpipe: largest 0.15 of the largest pressure and 0.6 of the RMS acceleration,
+/// RMS 3e-3 and 5e-2).
+pub const DFSPH_MANY_STEPS: Tolerances = Tolerances { derived_by_rms: true, ..MANY_STEPS };
+
+/// The tolerances after many steps for the method of `params`.
+pub fn many_steps(params: &Params) -> Tolerances {
+    if params.dfsph.is_some() { DFSPH_MANY_STEPS } else { MANY_STEPS }
+}
 
 fn errors(values: impl Iterator<Item = f64>) -> (f64, f64, usize) {
     let (mut max, mut sum2, mut n) = (0.0f64, 0.0f64, 0usize);
@@ -113,7 +141,8 @@ pub fn compare(
     let (rf, rs) = reference;
     let n = rf.densities.len();
     let density = errors((0..n).map(|i| (tf.densities[i] - rf.densities[i]).abs() / rf.densities[i].abs()));
-    let pressure = errors((0..n).map(|i| (tf.pressures[i] - rf.pressures[i]).abs() / params.stiffness));
+    let p_scale = if params.dfsph.is_some() { rf.pressures.iter().fold(0.0f64, |m, p| m.max(p.abs())).max(1e-30) } else { params.stiffness };
+    let pressure = errors((0..n).map(|i| (tf.pressures[i] - rf.pressures[i]).abs() / p_scale));
     let a_scale = rms(rf.accelerations.iter().map(|a| norm(*a))).max(1e-30);
     let acceleration = errors((0..n).map(|i| diff(tf.accelerations[i], rf.accelerations[i]) / a_scale));
     let position = errors((0..n).map(|i| diff(ts.positions[i], rs.positions[i]) / params.h));
@@ -129,6 +158,7 @@ pub fn compare(
             ("position", field(position), tol.position),
             ("velocity", field(velocity), tol.velocity),
         ],
+        judged_by_rms: if tol.derived_by_rms { vec!["pressure", "acceleration"] } else { Vec::new() },
     }
 }
 

@@ -9,5 +9,5 @@ pub mod cpu;
 pub mod gpu;
 pub mod simulation;
 
-pub use backend::{Backend, SnapshotRow, StateArray, StatePiece};
+pub use backend::{Backend, DfsphStage, SnapshotRow, StateArray, StatePiece};
 pub use simulation::{open, open_with, BackendChoice, Device, Precision, Simulation, Solver};

@@ -1,7 +1,8 @@
 //! `wgsph bench`: the peers' block workload, timed on the paths asked for.
 
 use std::process::Command;
-use wgsph::app::bench::block_scene;
+use wgsph::app::bench::{block_scene, dfsph_block_scene};
+use wgsph::model::scene::{BoundaryVolume, PressureSolver};
 
 #[test]
 fn the_block_workload_is_the_one_the_peers_were_measured_on() {
@@ -15,6 +16,12 @@ fn the_block_workload_is_the_one_the_peers_were_measured_on() {
     assert!((lowest - 0.02).abs() < 1e-12, "the first fluid particle at (i + 1) dx: {lowest}");
     let p = scene.params();
     assert_eq!((p.h, p.dt, p.stiffness, p.clamp_negative_pressure), (0.04, 0.0004, 50_000.0, true));
+    // DFSPH's: the same particles, steps of 1 ms, Akinci wall volumes, 0.01 % density error.
+    let dfsph = dfsph_block_scene(30);
+    dfsph.validate(&wgsph::model::scene::SceneOrigin::Text).unwrap();
+    assert_eq!(dfsph.initial_state().fluid_positions, initial.fluid_positions);
+    assert_eq!((dfsph.physics.solver, dfsph.physics.boundary_volume, dfsph.time.dt), (PressureSolver::Dfsph, BoundaryVolume::Akinci, 0.001));
+    assert_eq!(dfsph.params().dfsph.unwrap().density_error, 1e-4);
 }
 
 #[test]
@@ -22,16 +29,22 @@ fn bench_times_each_path_asked_for_and_writes_the_figures() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("bench.json");
     let out = Command::new(env!("CARGO_BIN_EXE_wgsph"))
-        .args(["bench", "--n", "6", "--steps", "3", "--paths", "cpu-f32,cpu-f64", "--out"])
+        .args(["bench", "--n", "6", "--steps", "3", "--paths", "cpu-f32,cpu-f64,dfsph-cpu-f32", "--out"])
         .arg(&json)
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("cpu-f32") && stdout.contains("cpu-f64") && stdout.contains("p-steps/s"), "{stdout}");
+    assert!(stdout.contains("cpu-f32") && stdout.contains("cpu-f64") && stdout.contains("dfsph-cpu-f32") && stdout.contains("p-steps/s"), "{stdout}");
     let rows: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let rows = rows.as_array().unwrap();
-    assert_eq!(rows.len(), 2);
+    assert_eq!(rows.len(), 3);
+    // Iterations per step: DFSPH's only, at least one of each solve per step.
+    for r in &rows[..2] {
+        assert!(r["pressure_iterations_per_step"].is_null() && r["divergence_iterations_per_step"].is_null(), "{r}");
+    }
+    assert!(rows[2]["pressure_iterations_per_step"].as_f64().unwrap() >= 1.0, "{}", rows[2]);
+    assert!(rows[2]["divergence_iterations_per_step"].as_f64().unwrap() >= 1.0, "{}", rows[2]);
     for r in rows {
         assert_eq!(r["fluid_particles"], 216);
         assert_eq!(r["steps"], 3);

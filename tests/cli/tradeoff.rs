@@ -41,8 +41,8 @@ fn a_small_study_writes_the_table_and_the_plot() {
     let md = std::fs::read_to_string(dir.path().join("study/tradeoff.md")).unwrap();
     let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| configuration")).collect();
     // The reference and one row per configuration, each with its knob.
-    assert_eq!(rows.len(), 18, "{md}");
-    for knob in ["reference", "baseline", "precision", "time step", "resolution", "kernel", "equation of state", "stiffness", "neighbour grid", "model term"] {
+    assert_eq!(rows.len(), 21, "{md}");
+    for knob in ["reference", "baseline", "precision", "time step", "resolution", "kernel", "equation of state", "stiffness", "neighbour grid", "model term", "dfsph tolerance"] {
         assert!(rows.iter().any(|r| r.split('|').nth(2).unwrap().trim() == knob), "no row for {knob}:\n{md}");
     }
     assert!(rows[0].contains("0 (reference)"));
@@ -54,6 +54,14 @@ fn a_small_study_writes_the_table_and_the_plot() {
         r.split('|').nth(10).unwrap().trim().parse().unwrap()
     };
     assert!(front_error("dt x0.5") <= front_error("dt x2"), "{md}");
+    // DFSPH at each tolerance ran to the end, with steps longer than the base scene's.
+    let mean_dt = |r: &str| -> f64 { r.split('|').nth(5).unwrap().trim().parse().unwrap() };
+    let baseline = rows.iter().find(|r| r.starts_with("| baseline")).unwrap();
+    for tolerance in ["0.01%", "0.1%", "1%"] {
+        let r = rows.iter().find(|r| r.starts_with(&format!("| dfsph {tolerance} |"))).unwrap_or_else(|| panic!("no dfsph {tolerance} row:\n{md}"));
+        assert!(!r.contains("failed"), "{r}");
+        assert!(mean_dt(r) > mean_dt(baseline), "{r}");
+    }
     let png = image::open(dir.path().join("study/tradeoff.png")).unwrap();
     assert_eq!((png.width(), png.height()), (1200, 800));
     // Bad input: exit 2 naming the flag.

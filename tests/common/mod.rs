@@ -236,7 +236,7 @@ impl TestScene {
     }
 
     pub fn cfl_number(mut self, c: f64) -> TestScene {
-        self.scene.time.cfl_number = c;
+        self.scene.time.cfl_number = Some(c);
         self
     }
 

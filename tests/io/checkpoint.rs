@@ -176,7 +176,7 @@ fn cpu_restart_is_bitwise_exact() {
 
 #[test]
 fn gpu_restart_is_bitwise_exact_on_every_adapter() {
-    for (scene, how) in scenes() {
+    for (scene, how) in scenes().into_iter().chain(dfsph_scenes()) {
         for (i, ctx) in common::contexts().into_iter().enumerate() {
             let name = format!("{}, {how}", ctx.describe());
             drop(ctx);

@@ -137,10 +137,13 @@ fn gpu_snapshots_streamed_in_pieces_and_passes_equal_the_whole_array_files_on_ev
 
 #[test]
 fn gpu_checkpoints_streamed_in_pieces_equal_the_whole_state_ones_and_resume_bitwise_on_every_adapter() {
-    for (i, ctx) in common::contexts().into_iter().enumerate() {
-        // Adaptive dt: the status words (time, dt and its compensation) are in the state too.
-        let mut scene = Scene::builtin("dam_break").unwrap().with_fluid_particles(500);
-        scene.time.adaptive = true;
+    // Adaptive dt: the status words (time, dt and its compensation) are in the state too; with
+    // DFSPH also the warm-start stiffnesses, an array of their own.
+    let mut wcsph = Scene::builtin("dam_break").unwrap().with_fluid_particles(500);
+    wcsph.time.adaptive = true;
+    let dfsph = common::TestScene::from(wcsph.clone()).dfsph().build();
+    let runs = common::contexts().into_iter().enumerate().flat_map(|(i, c)| [(i, c.clone(), wcsph.clone()), (i, c, dfsph.clone())]);
+    for (i, ctx, scene) in runs {
         let mut solver = common::gpu(ctx.clone(), &scene);
         solver.step(6).unwrap();
         let dir = tempfile::tempdir().unwrap();

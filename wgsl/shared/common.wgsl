@@ -61,6 +61,19 @@ struct Params {
     // The run stops at a step whose largest density or speed passes these (infinite: off).
     stop_density: f32,
     stop_speed: f32,
+    // DFSPH: m / rho0, the smallest denominator of alpha, the warm start's share, the solves'
+    // iteration limits, and the error sums (fixed-point, low and high word) that meet the
+    // tolerances (src/solver/cpu/dfsph_shared.rs).
+    fluid_volume: f32,
+    factor_epsilon: f32,
+    warm_start_share: f32,
+    min_iterations: u32,
+    max_iterations: u32,
+    min_divergence_iterations: u32,
+    max_divergence_iterations: u32,
+    density_threshold: vec2<u32>,
+    divergence_threshold: vec2<u32>,
+    pad3: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -91,6 +104,20 @@ const STATUS_BAD_MAX_DENSITY: u32 = 18u;
 const STATUS_BAD_MAX_SPEED: u32 = 19u;
 const STATUS_BAD_DT: u32 = 20u;
 const STATUS_BAD_TIME: u32 = 21u;             // adaptive dt: the time at the end of the bad step
+const STATUS_DFSPH_ERROR_LO: u32 = 22u;       // DFSPH: the error sum of the solve under way
+const STATUS_DFSPH_ERROR_HI: u32 = 23u;
+const STATUS_DFSPH_ITERATION: u32 = 24u;      // its iterations so far
+const STATUS_DFSPH_SOLVING: u32 = 25u;        // 1 while it goes on
+const STATUS_PRESSURE_ITERATIONS: u32 = 26u;  // the constant-density solve over the run
+const STATUS_PRESSURE_ITERATIONS_MAX: u32 = 27u;
+const STATUS_PRESSURE_ITERATIONS_LAST: u32 = 28u;
+const STATUS_PRESSURE_ERROR: u32 = 29u;
+const STATUS_PRESSURE_UNCONVERGED: u32 = 30u;
+const STATUS_DIVERGENCE_ITERATIONS: u32 = 31u; // the divergence solve over the run
+const STATUS_DIVERGENCE_ITERATIONS_MAX: u32 = 32u;
+const STATUS_DIVERGENCE_ITERATIONS_LAST: u32 = 33u;
+const STATUS_DIVERGENCE_ERROR: u32 = 34u;
+const STATUS_DIVERGENCE_UNCONVERGED: u32 = 35u;
 const STATUS_NO_BAD_STEP: u32 = 0xffffffffu;
 const CAUSE_NON_FINITE: u32 = 1u;
 const CAUSE_ESCAPED: u32 = 2u;

@@ -9,19 +9,13 @@ use super::dfsph_factors::{density_and_factor, FactorsInput, FactorsOutput};
 use super::dfsph_integrate::{integrate, keep_warm_start, step_accelerations};
 use super::dfsph_predict::{choose_dt, non_pressure_accelerations, predict_from_accelerations, predict_velocities, PredictInput};
 use super::dfsph_pressure::{predict_density, pressure_apply, pressure_warm_start};
-use super::dfsph_shared::{error_threshold, Pairs, SolveInput, WarmStart, WARM_START_SHARE};
+use super::dfsph_shared::{error_threshold, factor_epsilon, Pairs, SolveInput, WarmStart, WARM_START_SHARE};
 use super::integrate::{PlaneR, StepHealth};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
 use crate::model::real::{Real, V3};
 use crate::model::scene::DfsphSettings;
 use crate::model::state::IterationStats;
-
-/// Below this, the denominator of alpha (in 1/m^2) counts as zero: a particle with so few
-/// neighbours is not pushed.
-pub fn factor_epsilon(h: f64) -> f64 {
-    1e-6 / (h * h)
-}
 
 /// DFSPH's arrays on the CPU, in the solver's cell order except the warm-start stiffnesses,
 /// which are kept by particle id (the binning reorders the particles every step).
@@ -42,6 +36,8 @@ pub struct DfsphCpu<R: Real> {
     pub stats: IterationStats,
     /// The last step's dt (0 before the first).
     pub last_dt: f64,
+    /// The dt the prediction chose for the step under way.
+    pub dt: f64,
 }
 
 /// The parts of the CPU solver a DFSPH step reads and writes.
@@ -83,6 +79,7 @@ impl<R: Real> DfsphCpu<R> {
             pairs: Pairs::default(),
             stats: IterationStats::default(),
             last_dt: 0.0,
+            dt: 0.0,
         }
     }
 
@@ -127,6 +124,7 @@ impl<R: Real> DfsphCpu<R> {
             grid: s.grid,
             fluid_mass: R::of(p.fluid_mass),
             rest_density: R::of(p.rest_density),
+            volume: R::of(p.fluid_mass / p.rest_density),
             fluid: Neighbours { positions: s.positions, starts: s.starts },
             walls: Neighbours { positions: s.wall_positions, starts: s.wall_starts },
             wall_masses: s.wall_masses,
@@ -212,6 +210,7 @@ impl<R: Real> DfsphCpu<R> {
             }
         };
         std::mem::swap(s.velocities, s.scratch);
+        self.dt = dt;
         dt
     }
 

@@ -14,6 +14,8 @@ pub struct FactorsInput<'a, R> {
     pub grid: &'a Grid<R>,
     pub fluid_mass: R,
     pub rest_density: R,
+    /// The fluid particle's volume m / rho0.
+    pub volume: R,
     pub fluid: Neighbours<'a, R>,
     pub walls: Neighbours<'a, R>,
     pub wall_masses: &'a [R],
@@ -83,7 +85,7 @@ fn particle_factors<R: Real>(input: &FactorsInput<R>, i: usize, chunk: &mut Pair
             wall_gradient += kernel.grad_w(rij, r2.sqrt()) * mw;
         }
     }
-    let volume = input.fluid_mass / input.rest_density;
+    let volume = input.volume;
     // V_b grad W = (m_b / rho0) grad W.
     let wall_gradient = wall_gradient / input.rest_density;
     let total = fluid_gradient * volume + wall_gradient;

@@ -30,15 +30,14 @@ pub const CHUNK: usize = 256;
 pub const ERROR_FRACTION_BITS: u32 = 30;
 pub const ERROR_CLAMP: f64 = 3.0;
 
-/// A particle's error as fixed-point units (truncated, as WGSL's `u32(f32)`).
+/// A particle's error as fixed-point units (truncated, as WGSL's `u32(f32)`); a non-finite
+/// error gives none (the health check reports it).
 pub fn error_units<R: Real>(error: R) -> u64 {
-    let e = error.max(R::zero()).min(R::of(ERROR_CLAMP));
-    // NaN falls to 0 units: the health check reports it.
-    if e.is_nan() {
-        0
-    } else {
-        (e * R::of((1u64 << ERROR_FRACTION_BITS) as f64)).to64() as u64
+    if !error.is_finite() {
+        return 0;
     }
+    let e = error.max(R::zero()).min(R::of(ERROR_CLAMP));
+    (e * R::of((1u64 << ERROR_FRACTION_BITS) as f64)).to64() as u64
 }
 
 /// The largest error sum of `n` particles whose average error is at most `tolerance`.
@@ -139,3 +138,9 @@ pub struct WarmStart<'a, R> {
 /// next step, with nothing to stop it, since a solve only ever adds pushing stiffness.
 pub const WARM_START_SHARE: f64 = 0.5;
 
+
+/// Below this, the denominator of alpha (in 1/m^2) counts as zero: a particle with so few
+/// neighbours is not pushed.
+pub fn factor_epsilon(h: f64) -> f64 {
+    1e-6 / (h * h)
+}

@@ -24,7 +24,7 @@ use crate::model::initial::InitialState;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
 use crate::model::real::{Real, V3};
-use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
+use crate::model::state::{BackendState, DfsphFields, DtStats, Health, Snapshot, StepFields};
 use dfsph::{DfsphCpu, StepParts};
 use integrate::PlaneR;
 
@@ -269,6 +269,24 @@ impl<R: Real> CpuSolver<R> {
         self.dfsph.as_ref()
     }
 
+    /// DFSPH's arrays in original particle order (for the stage tests).
+    pub fn dfsph_fields(&self) -> Option<DfsphFields> {
+        let d = self.dfsph.as_ref()?;
+        let ids = &self.ids;
+        let scalars = |v: &[R]| unpermute(ids, v.iter().map(|x| x.to64()));
+        let vectors = |v: &[V3<R>]| unpermute(ids, v.iter().map(|x| x.to64()));
+        Some(DfsphFields {
+            densities: scalars(&self.densities),
+            pressures: scalars(&self.pressures),
+            factors: scalars(&d.factors),
+            wall_gradients: vectors(&d.wall_gradients),
+            stiffness: scalars(&d.stiffness),
+            pressure_sum: scalars(&d.pressure_sum),
+            divergence_sum: scalars(&d.divergence_sum),
+            velocities: vectors(&self.velocities),
+        })
+    }
+
     /// Runs one DFSPH stage on the current state (for the stage tests; [`CpuSolver::step_once`]
     /// runs them all in order). Returns the error sum of a stage that reduces one, and the
     /// step's dt after the prediction.
@@ -277,7 +295,8 @@ impl<R: Real> CpuSolver<R> {
         let (d, mut s) = self.dfsph_parts()?;
         let volume = R::of(s.params.fluid_mass / s.params.rest_density);
         let input = dfsph_shared::SolveInput { pairs: &d.pairs, volume, factors: &d.factors, wall_gradients: &d.wall_gradients };
-        let dt = s.params.dt;
+        // The step's dt, as the prediction chose it.
+        let dt = if d.dt > 0.0 { d.dt } else { s.params.dt };
         let share = R::of(dfsph_shared::WARM_START_SHARE);
         Some(match stage {
             DfsphStage::Factors => {
@@ -506,4 +525,13 @@ impl<R: Real> Backend for CpuSolver<R> {
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         CpuSolver::restore_state(self, state)
     }
+}
+
+/// Values in slot order put back into original order (`ids[slot]` is the original index).
+fn unpermute<T: Copy + Default>(ids: &[u32], values: impl Iterator<Item = T>) -> Vec<T> {
+    let mut out = vec![T::default(); ids.len()];
+    for (slot, v) in values.enumerate() {
+        out[ids[slot] as usize] = v;
+    }
+    out
 }

@@ -10,7 +10,7 @@
 use super::device::GpuContext;
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
-use crate::model::scene::Scene;
+use crate::model::scene::{PressureSolver, Scene};
 
 /// One buffer of the solver.
 #[derive(Clone, Debug, PartialEq)]
@@ -95,13 +95,27 @@ impl MemoryPlan {
         MemoryPlan { fluid, walls, cells, buffers }
     }
 
+    /// The plan with DFSPH's own arrays added (for `fluid` particles).
+    pub fn with_dfsph(mut self, fluid: u64) -> MemoryPlan {
+        for (label, bytes) in super::dfsph::buffer_bytes(fluid) {
+            let per = if bytes == 32 { 0 } else { bytes / fluid.max(1) };
+            // The dispatch sizes are bound whole; every other array in segments.
+            self.buffers.push(PlannedBuffer { label, bytes: padded(bytes), bytes_per_fluid_particle: per, single_binding: per == 0 });
+        }
+        self
+    }
+
     /// The plan of a scene from its lattice sizes, before any particle is created on the host:
     /// a lower bound (walls not counted, as they are known only once generated; the fused step's
     /// arrays unless the scene has adaptive dt). The solver checks its exact plan again before
     /// it allocates.
     pub fn for_scene(scene: &Scene) -> MemoryPlan {
         let uniform = GpuParams::default().bytes().len() as u64;
-        MemoryPlan::new(scene.fluid_particle_count(), None, scene.grid().cell_count() as u64, uniform, scene.time.adaptive)
+        let plan = MemoryPlan::new(scene.fluid_particle_count(), None, scene.grid().cell_count() as u64, uniform, scene.time.adaptive);
+        match scene.physics.solver {
+            PressureSolver::Dfsph => plan.with_dfsph(scene.fluid_particle_count()),
+            PressureSolver::Wcsph => plan,
+        }
     }
 
     /// Bytes of all buffers.

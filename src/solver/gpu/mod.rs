@@ -3,6 +3,7 @@
 
 pub mod buffers;
 pub mod device;
+pub mod dfsph;
 pub mod memory;
 pub mod params;
 pub mod prefix_sum;
@@ -15,4 +16,4 @@ pub mod workgroups;
 pub use buffers::ParticleBuffers;
 pub use device::{GpuContext, GpuError};
 pub use solver::GpuSolver;
-pub use workgroups::{GpuOptions, WorkgroupSizes};
+pub use workgroups::{GpuOptions, SolverLoop, WorkgroupSizes};

@@ -4,6 +4,7 @@
 //! field by field and word by word.
 
 use crate::model::kernels::KernelCoefficients;
+use crate::solver::cpu::dfsph_shared::{error_threshold, factor_epsilon, WARM_START_SHARE};
 use crate::model::params::{Params, MAX_PLANES};
 use encase::{ShaderType, UniformBuffer};
 
@@ -28,6 +29,32 @@ impl<T> From<[T; 4]> for Vec4<T> {
 encase::impl_vector!(4, Vec4<T>; (T); using AsRef AsMut From);
 pub type Vec4f = Vec4<f32>;
 pub type Vec4u = Vec4<u32>;
+
+/// A WGSL `vec2<T>` for encase.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Vec2<T>(pub [T; 2]);
+impl<T> AsRef<[T; 2]> for Vec2<T> {
+    fn as_ref(&self) -> &[T; 2] {
+        &self.0
+    }
+}
+impl<T> AsMut<[T; 2]> for Vec2<T> {
+    fn as_mut(&mut self) -> &mut [T; 2] {
+        &mut self.0
+    }
+}
+impl<T> From<[T; 2]> for Vec2<T> {
+    fn from(v: [T; 2]) -> Self {
+        Vec2(v)
+    }
+}
+encase::impl_vector!(2, Vec2<T>; (T); using AsRef AsMut From);
+pub type Vec2u = Vec2<u32>;
+
+/// A u64 as the two u32 words of a WGSL `vec2<u32>` (low word first).
+fn words(v: u64) -> Vec2u {
+    Vec2([v as u32, (v >> 32) as u32])
+}
 
 /// Declares the uniform block once: the Rust struct (laid out by encase) and the WGSL type of
 /// every field, in order, for the mirror test.
@@ -84,6 +111,21 @@ uniform_block! {
         /// The run stops at a step whose largest density or speed passes these (infinite: off).
         stop_density: f32 => "f32",
         stop_speed: f32 => "f32",
+        /// DFSPH: the fluid particle's volume m / rho0, the smallest denominator of alpha.
+        fluid_volume: f32 => "f32",
+        factor_epsilon: f32 => "f32",
+        /// DFSPH: the share of the last step's stiffness a solve starts from.
+        warm_start_share: f32 => "f32",
+        /// DFSPH: the iteration limits of the constant-density and the divergence solve.
+        min_iterations: u32 => "u32",
+        max_iterations: u32 => "u32",
+        min_divergence_iterations: u32 => "u32",
+        max_divergence_iterations: u32 => "u32",
+        /// DFSPH: the largest error sums (fixed-point, x: low word, y: high word) that meet the
+        /// tolerances of the constant-density and the divergence solve.
+        density_threshold: Vec2u => "vec2<u32>",
+        divergence_threshold: Vec2u => "vec2<u32>",
+        pad3: u32 => "u32",
     }
 }
 
@@ -94,6 +136,8 @@ fn v4(v: [f64; 3]) -> Vec4f {
 impl GpuParams {
     /// The f32 constants, converted exactly as the f32 CPU path converts them.
     pub fn new(p: &Params, fluid_count: u32, wall_count: u32, viscosity: f64) -> Self {
+        let d = p.dfsph.clone().unwrap_or_default();
+        let n = fluid_count as usize;
         let k = KernelCoefficients::<f32>::new(p.kernel, p.h);
         let g = p.grid.cast::<f32>();
         let mut planes = [Vec4f::default(); MAX_PLANES];
@@ -134,6 +178,16 @@ impl GpuParams {
             dt_max: p.adaptive.map_or(p.dt, |a| a.dt_max) as f32,
             stop_density: p.stop_levels().density as f32,
             stop_speed: p.stop_levels().speed as f32,
+            fluid_volume: (p.fluid_mass / p.rest_density) as f32,
+            factor_epsilon: factor_epsilon(p.h) as f32,
+            warm_start_share: WARM_START_SHARE as f32,
+            min_iterations: d.min_iterations,
+            max_iterations: d.max_iterations,
+            min_divergence_iterations: d.min_divergence_iterations,
+            max_divergence_iterations: d.max_divergence_iterations,
+            density_threshold: words(error_threshold(d.density_error, n)),
+            divergence_threshold: words(error_threshold(d.divergence_error, n)),
+            pad3: 0,
         }
     }
 
@@ -201,9 +255,28 @@ pub mod status {
         /// ... its dt, and with adaptive dt the time at its end.
         BAD_DT = 20 => "STATUS_BAD_DT",
         BAD_TIME = 21 => "STATUS_BAD_TIME",
+        /// DFSPH: the error sum of the solve under way, fixed-point (low and high word).
+        DFSPH_ERROR_LO = 22 => "STATUS_DFSPH_ERROR_LO",
+        DFSPH_ERROR_HI = 23 => "STATUS_DFSPH_ERROR_HI",
+        /// DFSPH: the iterations of the solve under way, and whether it goes on (1) or ended (0).
+        DFSPH_ITERATION = 24 => "STATUS_DFSPH_ITERATION",
+        DFSPH_SOLVING = 25 => "STATUS_DFSPH_SOLVING",
+        /// DFSPH's constant-density solve over the run: iterations, most in a step, the last
+        /// step's, the last step's average error (f32) and the steps that ended unconverged.
+        PRESSURE_ITERATIONS = 26 => "STATUS_PRESSURE_ITERATIONS",
+        PRESSURE_ITERATIONS_MAX = 27 => "STATUS_PRESSURE_ITERATIONS_MAX",
+        PRESSURE_ITERATIONS_LAST = 28 => "STATUS_PRESSURE_ITERATIONS_LAST",
+        PRESSURE_ERROR = 29 => "STATUS_PRESSURE_ERROR",
+        PRESSURE_UNCONVERGED = 30 => "STATUS_PRESSURE_UNCONVERGED",
+        /// The same for DFSPH's divergence solve.
+        DIVERGENCE_ITERATIONS = 31 => "STATUS_DIVERGENCE_ITERATIONS",
+        DIVERGENCE_ITERATIONS_MAX = 32 => "STATUS_DIVERGENCE_ITERATIONS_MAX",
+        DIVERGENCE_ITERATIONS_LAST = 33 => "STATUS_DIVERGENCE_ITERATIONS_LAST",
+        DIVERGENCE_ERROR = 34 => "STATUS_DIVERGENCE_ERROR",
+        DIVERGENCE_UNCONVERGED = 35 => "STATUS_DIVERGENCE_UNCONVERGED",
     }
     /// Words of the status buffer.
-    pub const WORDS: usize = 22;
+    pub const WORDS: usize = 36;
     /// Bytes of the status buffer.
     pub const BYTES: u64 = WORDS as u64 * 4;
     /// FIRST_BAD_STEP while no step went wrong (`STATUS_NO_BAD_STEP` in WGSL).
@@ -223,6 +296,22 @@ pub mod status {
         s[FIRST_BAD_STEP] = NO_BAD_STEP;
         s[DT_MIN] = f32::INFINITY.to_bits();
         s
+    }
+
+    /// DFSPH's iterations in the status words.
+    pub fn iterations(s: &[u32]) -> crate::model::state::IterationStats {
+        use crate::model::state::{IterationStats, SolveStats};
+        let solve = |total: usize, max: usize, last: usize, error: usize, unconverged: usize| SolveStats {
+            total: s[total] as u64,
+            max: s[max],
+            last: s[last],
+            last_error: float(s, error),
+            unconverged: s[unconverged] as u64,
+        };
+        IterationStats {
+            pressure: solve(PRESSURE_ITERATIONS, PRESSURE_ITERATIONS_MAX, PRESSURE_ITERATIONS_LAST, PRESSURE_ERROR, PRESSURE_UNCONVERGED),
+            divergence: solve(DIVERGENCE_ITERATIONS, DIVERGENCE_ITERATIONS_MAX, DIVERGENCE_ITERATIONS_LAST, DIVERGENCE_ERROR, DIVERGENCE_UNCONVERGED),
+        }
     }
 
     /// The health of the run in the status words. `fixed_dt`: the step of a run without

@@ -138,3 +138,15 @@ pub fn visit_array(ctx: &GpuContext, buffer: &wgpu::Buffer, count: u64, element:
     }
     Ok(())
 }
+
+/// Hands `count` pairs of two `f32` arrays (widened) to `visit` in order, `chunk` at a time.
+pub fn visit_pairs(ctx: &GpuContext, first: &wgpu::Buffer, second: &wgpu::Buffer, count: u64, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
+    let chunk = if chunk == 0 { STREAM_CHUNK } else { chunk };
+    for slot in (0..count).step_by(chunk as usize) {
+        let n = chunk.min(count - slot);
+        let data = read_ranges(ctx, &[(first, slot * 4, n * 4), (second, slot * 4, n * 4)])?;
+        let (a, b): (&[f32], &[f32]) = (bytemuck::cast_slice(&data[0]), bytemuck::cast_slice(&data[1]));
+        visit(StatePiece::Pairs(&a.iter().zip(b).map(|(&x, &y)| [x as f64, y as f64]).collect::<Vec<_>>()))?;
+    }
+    Ok(())
+}

@@ -5,7 +5,10 @@
 
 use super::shaders::{dispatch_size, Stage};
 use super::solver::GpuSolver;
-use super::readback::read_buffers;
+use super::readback::{read_buffers, read_ranges};
+use super::buffers::storage;
+use super::dfsph::SharedBuffers;
+use super::workgroups::SolverLoop;
 use super::params::status;
 
 /// The stages of a step as the profile names them, in dispatch order. With the fused step the
@@ -13,7 +16,18 @@ use super::params::status;
 /// step's one-thread bookkeeping.
 pub const PROFILED_STAGES: [&str; 7] = ["bin_count", "prefix_sum", "bin_scatter", "reorder", "density", "forces", "integrate"];
 
-/// A profiled stage: an index into [`PROFILED_STAGES`].
+/// The stages of a DFSPH step as the profile names them, in dispatch order: a solve is timed
+/// whole (its warm start and every recorded iteration, the empty ones included); `dfsph_integrate`
+/// includes the step's bookkeeping.
+pub const DFSPH_PROFILED_STAGES: [&str; 9] =
+    ["bin_count", "prefix_sum", "bin_scatter", "reorder", "dfsph_factors", "divergence_solve", "dfsph_predict", "pressure_solve", "dfsph_integrate"];
+
+/// Every profiled stage of both methods: the weakly compressible step's seven, then DFSPH's
+/// own five.
+pub const ALL_PROFILED_STAGES: usize = 12;
+
+/// A profiled stage: an index into the timestamps (the first seven those of
+/// [`PROFILED_STAGES`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ProfiledStage {
     BinCount = 0,
@@ -23,6 +37,26 @@ pub enum ProfiledStage {
     Density = 4,
     Forces = 5,
     Integrate = 6,
+    DfsphFactors = 7,
+    DivergenceSolve = 8,
+    DfsphPredict = 9,
+    PressureSolve = 10,
+    DfsphIntegrate = 11,
+}
+
+impl ProfiledStage {
+    /// The stages of a DFSPH step, in the order of [`DFSPH_PROFILED_STAGES`].
+    pub const DFSPH: [ProfiledStage; 9] = [
+        ProfiledStage::BinCount,
+        ProfiledStage::PrefixSum,
+        ProfiledStage::BinScatter,
+        ProfiledStage::Reorder,
+        ProfiledStage::DfsphFactors,
+        ProfiledStage::DivergenceSolve,
+        ProfiledStage::DfsphPredict,
+        ProfiledStage::PressureSolve,
+        ProfiledStage::DfsphIntegrate,
+    ];
 }
 
 /// What one recording holds.
@@ -43,6 +77,9 @@ pub trait Recorder {
     fn pass(&mut self) -> &mut wgpu::ComputePass<'static>;
     /// Clears a range of a buffer (outside any pass).
     fn clear(&mut self, buffer: &wgpu::Buffer, offset: u64, size: Option<u64>);
+    /// Submits what is recorded and waits for it, so that the host can read a result back
+    /// before recording more (the DFSPH loop with readbacks). `false` where the recorder cannot.
+    fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool;
 }
 
 /// Records into as few compute passes as the clears allow.
@@ -59,6 +96,10 @@ impl PlainRecorder {
         self.pass = None;
         self.encoder.finish()
     }
+    /// Clears `bytes` bytes of `buffer` from `offset`.
+    pub fn clear_range(&mut self, buffer: &wgpu::Buffer, offset: u64, bytes: u64) {
+        self.clear(buffer, offset, Some(bytes));
+    }
 }
 
 impl Recorder for PlainRecorder {
@@ -71,6 +112,14 @@ impl Recorder for PlainRecorder {
         self.pass = None;
         self.encoder.clear_buffer(buffer, offset, size);
     }
+    fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool {
+        self.pass = None;
+        let next = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
+        let done = std::mem::replace(&mut self.encoder, next);
+        ctx.queue.submit([done.finish()]);
+        let _ = ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None });
+        true
+    }
 }
 
 /// Records every profiled stage into its own compute pass with timestamps at its start (query
@@ -80,18 +129,18 @@ pub struct TimedRecorder<'q> {
     pass: Option<wgpu::ComputePass<'static>>,
     queries: &'q wgpu::QuerySet,
     /// Which stages were recorded.
-    pub ran: [bool; 7],
+    pub ran: [bool; ALL_PROFILED_STAGES],
 }
 
 impl<'q> TimedRecorder<'q> {
     pub fn new(device: &wgpu::Device, queries: &'q wgpu::QuerySet) -> Self {
         let encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("profiled step") });
-        TimedRecorder { encoder, pass: None, queries, ran: [false; 7] }
+        TimedRecorder { encoder, pass: None, queries, ran: [false; ALL_PROFILED_STAGES] }
     }
     /// The command buffer, with the timestamps resolved into `resolved`.
     pub fn finish(mut self, resolved: &wgpu::Buffer) -> wgpu::CommandBuffer {
         self.pass = None;
-        self.encoder.resolve_query_set(self.queries, 0..2 * PROFILED_STAGES.len() as u32, resolved, 0);
+        self.encoder.resolve_query_set(self.queries, 0..2 * ALL_PROFILED_STAGES as u32, resolved, 0);
         self.encoder.finish()
     }
 }
@@ -106,7 +155,7 @@ impl Recorder for TimedRecorder<'_> {
             beginning_of_pass_write_index: Some(2 * i as u32),
             end_of_pass_write_index: Some(2 * i as u32 + 1),
         };
-        let pass = self.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(PROFILED_STAGES[i]), timestamp_writes: Some(writes) });
+        let pass = self.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("profiled stage"), timestamp_writes: Some(writes) });
         self.pass = Some(pass.forget_lifetime());
     }
     fn pass(&mut self) -> &mut wgpu::ComputePass<'static> {
@@ -116,6 +165,9 @@ impl Recorder for TimedRecorder<'_> {
     fn clear(&mut self, buffer: &wgpu::Buffer, offset: u64, size: Option<u64>) {
         self.pass = None;
         self.encoder.clear_buffer(buffer, offset, size);
+    }
+    fn submit_and_wait(&mut self, _: &super::device::GpuContext) -> bool {
+        false
     }
 }
 
@@ -141,11 +193,16 @@ impl GpuSolver {
             self.dispatch_particles(rec, &self.pipelines.reorder, &g.reorder);
             self.current = 1 - self.current;
         }
+        if self.dfsph.is_some() {
+            self.schedule_dfsph(work, rec);
+            return;
+        }
         let read = self.current;
-        let g = &self.groups[read];
+        let w = self.wcsph_stages();
+        let g = self.groups[read].wcsph.as_ref().expect("a weakly compressible scene");
         if work == Work::Fields {
             rec.begin(ProfiledStage::Density);
-            self.dispatch_particles(rec, &self.pipelines.density, &g.density);
+            self.dispatch_particles(rec, &w.density, &g.density);
             self.fields_state = read;
             self.accelerations_valid = false;
             return;
@@ -153,20 +210,20 @@ impl GpuSolver {
         // This step's counts of bad particles start from zero.
         rec.clear(&self.status, status::NON_FINITE as u64 * 4, Some(8));
         rec.begin(ProfiledStage::Density);
-        self.dispatch_particles(rec, &self.pipelines.density, &g.density);
+        self.dispatch_particles(rec, &w.density, &g.density);
         rec.begin(ProfiledStage::Forces);
         if self.pipelines.fused {
-            self.dispatch_particles(rec, &self.pipelines.advance, &g.advance);
+            self.dispatch_particles(rec, &w.advance, &g.advance);
         } else if let Some(acc) = &self.accelerations {
-            self.dispatch_particles(rec, &self.pipelines.forces, &acc.groups[read]);
+            self.dispatch_particles(rec, &w.forces, &acc.groups[read]);
         }
         rec.begin(ProfiledStage::Integrate);
-        if let Some((reduce, choose)) = &self.pipelines.adaptive {
+        if let Some((reduce, choose)) = &w.adaptive {
             self.dispatch_particles(rec, reduce, &g.advance);
             dispatch_one(rec, choose, &g.advance);
         }
         if !self.pipelines.fused {
-            self.dispatch_particles(rec, &self.pipelines.advance, &g.advance);
+            self.dispatch_particles(rec, &w.advance, &g.advance);
         }
         dispatch_one(rec, &self.pipelines.finish_step, &self.finish_group);
         self.current = 1 - read;
@@ -180,12 +237,112 @@ impl GpuSolver {
         self.steps % self.params.rebuild_every.max(1) as u64 == 0
     }
 
-    fn dispatch_particles(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup) {
+    pub(super) fn dispatch_particles(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup) {
         let pass = rec.pass();
         pass.set_pipeline(&stage.pipeline);
         pass.set_bind_group(0, group, &[]);
         let (x, y) = dispatch_size(self.fluid_count as u64, stage.threads_per_group, self.max_groups_per_dim);
         pass.dispatch_workgroups(x, y, 1);
+    }
+
+    /// THE order of a DFSPH step (after the binning, which `schedule` records): the factors on
+    /// the state just binned, the divergence solve on its velocities, the prediction into the
+    /// other buffer of the pair, the constant-density solve there, the integration and the
+    /// bookkeeping. For the fields of the current state, the factors alone (density and the
+    /// pressure of the last solve).
+    fn schedule_dfsph(&mut self, work: Work, rec: &mut dyn Recorder) {
+        let read = self.current;
+        if work == Work::Step {
+            rec.clear(&self.status, status::NON_FINITE as u64 * 4, Some(8));
+        }
+        let d = self.dfsph.as_ref().expect("a DFSPH scene");
+        let g = &d.groups[read];
+        rec.begin(ProfiledStage::DfsphFactors);
+        self.dispatch_particles(rec, &d.stages.factors, &g.factors);
+        if work == Work::Fields {
+            self.fields_state = read;
+            self.accelerations_valid = false;
+            return;
+        }
+        if d.settings.divergence_solve {
+            rec.begin(ProfiledStage::DivergenceSolve);
+            self.record_solve(rec, 0, read);
+        }
+        rec.begin(ProfiledStage::DfsphPredict);
+        match (&d.stages.adaptive, &g.adaptive) {
+            (Some([accelerations, choose, predict]), Some([ga, gc, gp])) => {
+                self.dispatch_particles(rec, accelerations, ga);
+                dispatch_one(rec, choose, gc);
+                self.dispatch_particles(rec, predict, gp);
+            }
+            _ => self.dispatch_particles(rec, &d.stages.predict, &g.predict),
+        }
+        rec.begin(ProfiledStage::PressureSolve);
+        self.record_solve(rec, 1, read);
+        rec.begin(ProfiledStage::DfsphIntegrate);
+        self.dispatch_particles(rec, &d.stages.integrate, &g.integrate);
+        dispatch_one(rec, &self.pipelines.finish_step, &self.finish_group);
+        self.current = 1 - read;
+        self.fields_state = read;
+        self.accelerations_valid = false;
+    }
+
+    /// One DFSPH solve (0: divergence, 1: constant density) on the state pair read from `read`:
+    /// the check's state reset, the warm start (its stiffness and its velocity change), the
+    /// first error, then the iterations, each a velocity change, a new error and a check. With
+    /// [`SolverLoop::Indirect`] every iteration up to the limit is recorded and the GPU's checks
+    /// make those after the last empty; with [`SolverLoop::Readback`] blocks of them are recorded
+    /// while the solve goes on, its state read back after each.
+    fn record_solve(&self, rec: &mut dyn Recorder, solve: usize, read: usize) {
+        let d = self.dfsph.as_ref().expect("a DFSPH scene");
+        let (g, st) = (&d.groups[read], &d.stages);
+        let (warm, rate, apply, gw, gr, ga) = if solve == 0 {
+            (&st.divergence_warm_start, &st.divergence_rate, &st.divergence_apply, &g.divergence_warm_start, &g.divergence_rate, &g.divergence_apply)
+        } else {
+            (&st.pressure_warm_start, &st.predict_density, &st.pressure_apply, &g.pressure_warm_start, &g.predict_density, &g.pressure_apply)
+        };
+        let (begin_group, check_group) = &d.control[solve];
+        dispatch_one(rec, &st.begin[solve], begin_group);
+        if d.settings.warm_start {
+            self.dispatch_particles(rec, warm, gw);
+            self.dispatch_particles(rec, apply, ga);
+        }
+        self.dispatch_particles(rec, rate, gr);
+        dispatch_one(rec, &st.check[solve], check_group);
+        let iteration = |rec: &mut dyn Recorder| {
+            dispatch_indirect(rec, apply, ga, &d.buffers.solve_dispatch);
+            dispatch_indirect(rec, rate, gr, &d.buffers.solve_dispatch);
+            dispatch_one(rec, &st.check[solve], check_group);
+        };
+        let limit = d.recorded_iterations(solve);
+        let block = match self.solver_loop {
+            SolverLoop::Readback(k) => k,
+            SolverLoop::Indirect => limit,
+        };
+        let mut recorded = 0;
+        while recorded < limit {
+            if recorded > 0 || block < limit {
+                // A block boundary: ask the GPU whether the solve goes on.
+                if rec.submit_and_wait(&self.ctx) && !self.solving() {
+                    break;
+                }
+            }
+            for _ in 0..block.min(limit - recorded) {
+                iteration(rec);
+            }
+            recorded += block.min(limit - recorded);
+        }
+    }
+
+    /// Whether the DFSPH solve under way goes on (a status word read back).
+    fn solving(&self) -> bool {
+        match read_ranges(&self.ctx, &[(&self.status, status::DFSPH_SOLVING as u64 * 4, 4)]) {
+            Ok(data) => u32::from_le_bytes(data[0][..4].try_into().expect("4 bytes")) != 0,
+            Err(e) => {
+                log::error!("reading the DFSPH solve's state failed: {e:#}");
+                true
+            }
+        }
     }
 
     /// Advances `n` steps, `steps_per_submit` per command buffer; a viscosity change from the
@@ -225,8 +382,67 @@ impl GpuSolver {
     pub(super) fn record_accelerations(&mut self) {
         let mut rec = PlainRecorder::new(&self.ctx.device, "accelerations");
         let acc = self.accelerations.as_ref().expect("made by the caller");
-        self.dispatch_particles(&mut rec, &self.pipelines.forces, &acc.groups[self.fields_state]);
+        self.dispatch_particles(&mut rec, &self.wcsph_stages().forces, &acc.groups[self.fields_state]);
         self.ctx.queue.submit([rec.finish()]);
+    }
+
+    /// DFSPH: the accelerations of the last step, (v_end - v_start) / dt, into the accelerations
+    /// array (made on first use with a fixed dt).
+    pub(super) fn record_step_accelerations(&mut self) {
+        let n = self.fluid_count as u64;
+        let d = self.dfsph.as_mut().expect("DFSPH");
+        let buffer = d.accelerations.get_or_insert_with(|| storage(&self.ctx.device, "accelerations", n * 16)).clone();
+        if self.step_accelerations_groups.is_none() {
+            let d = self.dfsph.as_ref().expect("DFSPH");
+            let shared = SharedBuffers {
+                state: &self.state,
+                starts: &self.starts,
+                densities: &self.densities,
+                pressures: &self.pressures,
+                status: &self.status,
+                wall_positions: &self.wall_positions,
+                wall_starts: &self.wall_starts,
+                accelerations: &buffer,
+            };
+            self.step_accelerations_groups = Some([0, 1].map(|c| d.step_accelerations_group(&self.ctx, &shared, &self.uniform, c)));
+        }
+        let d = self.dfsph.as_ref().expect("DFSPH");
+        let group = &self.step_accelerations_groups.as_ref().expect("made above")[self.fields_state];
+        let mut rec = PlainRecorder::new(&self.ctx.device, "step accelerations");
+        self.dispatch_particles(&mut rec, &d.stages.step_accelerations, group);
+        self.ctx.queue.submit([rec.finish()]);
+    }
+
+    /// Runs one DFSPH stage on the current state (for the stage tests, after a snapshot has
+    /// binned it and run the factors). Returns the error sum a stage that reduces one adds.
+    pub fn dfsph_stage(&mut self, stage: crate::solver::backend::DfsphStage) -> anyhow::Result<u64> {
+        use crate::solver::backend::DfsphStage as S;
+        let c = self.current;
+        let d = self.dfsph.as_ref().ok_or_else(|| anyhow::anyhow!("not a DFSPH scene"))?;
+        let (g, st) = (&d.groups[c], &d.stages);
+        let lo = status::DFSPH_ERROR_LO as u64 * 4;
+        let mut rec = PlainRecorder::new(&self.ctx.device, "dfsph stage");
+        rec.clear_range(&self.status, lo, 8);
+        match stage {
+            S::Factors => self.dispatch_particles(&mut rec, &st.factors, &g.factors),
+            S::DivergenceWarmStart => self.dispatch_particles(&mut rec, &st.divergence_warm_start, &g.divergence_warm_start),
+            S::DivergenceRate => self.dispatch_particles(&mut rec, &st.divergence_rate, &g.divergence_rate),
+            S::DivergenceApply => self.dispatch_particles(&mut rec, &st.divergence_apply, &g.divergence_apply),
+            S::Predict => match (&st.adaptive, &g.adaptive) {
+                (Some([a, choose, p]), Some([ga, gc, gp])) => {
+                    self.dispatch_particles(&mut rec, a, ga);
+                    self.dispatch_one(&mut rec, choose, gc);
+                    self.dispatch_particles(&mut rec, p, gp);
+                }
+                _ => self.dispatch_particles(&mut rec, &st.predict, &g.predict),
+            },
+            S::PressureWarmStart => self.dispatch_particles(&mut rec, &st.pressure_warm_start, &g.pressure_warm_start),
+            S::PredictDensity => self.dispatch_particles(&mut rec, &st.predict_density, &g.predict_density),
+            S::PressureApply => self.dispatch_particles(&mut rec, &st.pressure_apply, &g.pressure_apply),
+        }
+        self.ctx.queue.submit([rec.finish()]);
+        let words = self.read_status()?;
+        Ok(words[status::DFSPH_ERROR_LO] as u64 | (words[status::DFSPH_ERROR_HI] as u64) << 32)
     }
 
     /// Whether the device can time stages (wgpu `TIMESTAMP_QUERY`).
@@ -234,17 +450,23 @@ impl GpuSolver {
         self.ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY)
     }
 
-    /// Runs `steps` steps in the order of `GpuSolver::schedule`, each stage in its own timed
-    /// pass, and returns the total GPU time of each stage of [`PROFILED_STAGES`] in nanoseconds
-    /// (a stage that did not run, like the binning between neighbour rebuilds, adds 0). `None`
-    /// when the device has no timestamp queries. Each step is submitted and read back on its
-    /// own: slower than `advance`, but the GPU time of the stages holds no host round trip.
-    pub fn profile_stages(&mut self, steps: u64) -> anyhow::Result<Option<[f64; 7]>> {
+    /// Runs `steps` steps in the order of [`GpuSolver::schedule`], each stage in its own timed
+    /// pass, and returns the total GPU time of each stage of [`PROFILED_STAGES`] (DFSPH:
+    /// [`DFSPH_PROFILED_STAGES`]) in nanoseconds (a stage that did not run, like the binning
+    /// between neighbour rebuilds, adds 0). `None` when the device has no timestamp queries.
+    /// Each step is submitted and read back on its own: slower than `advance`, but the GPU time
+    /// of the stages holds no host round trip.
+    pub fn profile_stages(&mut self, steps: u64) -> anyhow::Result<Option<Vec<f64>>> {
         if !self.has_timestamps() {
             return Ok(None);
         }
+        anyhow::ensure!(
+            self.solver_loop == SolverLoop::Indirect,
+            "the profile times the DFSPH loop without host round trips (--solver-loop indirect); time {} with `wgsph run`",
+            self.solver_loop
+        );
         let device = &self.ctx.device;
-        let count = 2 * PROFILED_STAGES.len() as u32;
+        let count = 2 * ALL_PROFILED_STAGES as u32;
         let queries = device.create_query_set(&wgpu::QuerySetDescriptor { label: Some("stage timestamps"), ty: wgpu::QueryType::Timestamp, count });
         let resolved = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("resolved timestamps"),
@@ -253,7 +475,7 @@ impl GpuSolver {
             mapped_at_creation: false,
         });
         let period_ns = self.ctx.queue.get_timestamp_period() as f64;
-        let mut totals = [0.0f64; 7];
+        let mut totals = [0.0f64; ALL_PROFILED_STAGES];
         for _ in 0..steps {
             let nu = self.params.viscosity_at_step(self.steps);
             self.set_viscosity(nu);
@@ -271,7 +493,26 @@ impl GpuSolver {
                 }
             }
         }
-        Ok(Some(totals))
+        Ok(Some(if self.dfsph.is_some() {
+            ProfiledStage::DFSPH.iter().map(|&s| totals[s as usize]).collect()
+        } else {
+            totals[..PROFILED_STAGES.len()].to_vec()
+        }))
+    }
+}
+
+/// A particle stage whose dispatch size the GPU wrote into `args` (its first three words).
+fn dispatch_indirect(rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup, args: &wgpu::Buffer) {
+    let pass = rec.pass();
+    pass.set_pipeline(&stage.pipeline);
+    pass.set_bind_group(0, group, &[]);
+    pass.dispatch_workgroups_indirect(args, 0);
+}
+
+impl GpuSolver {
+    /// A one-thread stage.
+    pub(super) fn dispatch_one(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup) {
+        dispatch_one(rec, stage, group);
     }
 }
 

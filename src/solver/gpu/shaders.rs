@@ -22,6 +22,13 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/forces.wgsl", include_str!("../../../wgsl/sim/forces.wgsl")),
     ("sim/integrate.wgsl", include_str!("../../../wgsl/sim/integrate.wgsl")),
     ("sim/forces_integrate.wgsl", include_str!("../../../wgsl/sim/forces_integrate.wgsl")),
+    ("shared/dfsph.wgsl", include_str!("../../../wgsl/shared/dfsph.wgsl")),
+    ("sim/dfsph_factors.wgsl", include_str!("../../../wgsl/sim/dfsph_factors.wgsl")),
+    ("sim/dfsph_divergence.wgsl", include_str!("../../../wgsl/sim/dfsph_divergence.wgsl")),
+    ("sim/dfsph_predict.wgsl", include_str!("../../../wgsl/sim/dfsph_predict.wgsl")),
+    ("sim/dfsph_pressure.wgsl", include_str!("../../../wgsl/sim/dfsph_pressure.wgsl")),
+    ("sim/dfsph_convergence.wgsl", include_str!("../../../wgsl/sim/dfsph_convergence.wgsl")),
+    ("sim/dfsph_integrate.wgsl", include_str!("../../../wgsl/sim/dfsph_integrate.wgsl")),
 ];
 
 /// The text of a simulation file (`sim/density.wgsl`, `shared/common.wgsl`, ...).

@@ -8,9 +8,10 @@ use super::device::GpuContext;
 use super::memory::MemoryPlan;
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
-use super::readback::{read_buffers, visit_array, visit_rows, Element, RowArrays};
+use super::readback::{read_buffers, visit_array, visit_pairs, visit_rows, Element, RowArrays};
 use super::shaders::{constants, stage, storage_bindings, Stage};
-use super::workgroups::GpuOptions;
+use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, SharedBuffers};
+use super::workgroups::{GpuOptions, SolverLoop};
 use crate::model::initial::InitialState;
 use crate::model::kernels::sort_by_cell;
 use crate::model::params::Params;
@@ -27,6 +28,12 @@ pub(super) struct ParityBindGroups {
     pub bin_count: wgpu::BindGroup,
     pub bin_scatter: wgpu::BindGroup,
     pub reorder: wgpu::BindGroup,
+    /// The weakly compressible step's (`None` with DFSPH).
+    pub wcsph: Option<WcsphBindGroups>,
+}
+
+/// The weakly compressible step's bind groups of one parity.
+pub(super) struct WcsphBindGroups {
     pub density: wgpu::BindGroup,
     /// The integration (after `forces`, adaptive dt) or the fused forces and integration.
     pub advance: wgpu::BindGroup,
@@ -36,18 +43,24 @@ pub(super) struct Pipelines {
     pub bin_count: Stage,
     pub bin_scatter: Stage,
     pub reorder: Stage,
+    /// The weakly compressible step's stages (`None` with DFSPH, whose are in `GpuSolver::dfsph`).
+    pub wcsph: Option<WcsphStages>,
+    pub finish_step: Stage,
+    /// Forces and integration in one pass (fixed dt only; see `GpuOptions`): no accelerations
+    /// array.
+    pub fused: bool,
+}
+
+/// The weakly compressible step's own stages.
+pub(super) struct WcsphStages {
     pub density: Stage,
     /// The forces alone: every step with adaptive dt; otherwise only when the accelerations are
     /// asked for (`step_fields`).
     pub forces: Stage,
-    /// `integrate` (two passes) or `forces_and_integrate` (fused, see `fused`).
+    /// `integrate` (two passes) or `forces_and_integrate` (fused, see `Pipelines::fused`).
     pub advance: Stage,
-    pub finish_step: Stage,
     /// Adaptive dt only: the reduction of |v|max and |a|max, and the choice of dt.
     pub adaptive: Option<(Stage, Stage)>,
-    /// Forces and integration in one pass (fixed dt only; see `GpuOptions`): no accelerations
-    /// array.
-    pub fused: bool,
 }
 
 /// The accelerations array with the forces' bind groups of each parity.
@@ -89,6 +102,12 @@ pub struct GpuSolver {
     pub(super) pipelines: Pipelines,
     pub(super) groups: [ParityBindGroups; 2],
     pub(super) finish_group: wgpu::BindGroup,
+    /// DFSPH's stages, arrays and bind groups, when the scene uses it.
+    pub(super) dfsph: Option<DfsphGpu>,
+    /// How a DFSPH solve's loop ends.
+    pub(super) solver_loop: SolverLoop,
+    /// DFSPH: the bind groups of `step_accelerations` of each parity, made on request.
+    pub(super) step_accelerations_groups: Option<[wgpu::BindGroup; 2]>,
     pub(super) steps: u64,
     /// The adapter's `max_compute_workgroups_per_dimension`.
     pub(super) max_groups_per_dim: u32,
@@ -114,7 +133,7 @@ impl ArrayCounts {
             "starts" | "counts" => self.cells_plus_one,
             "wall_positions" => self.walls,
             "wall_starts" => self.wall_cells_plus_one,
-            "status" => 0,
+            "status" | "solve_dispatch" => 0,
             _ => self.fluid,
         }
     }
@@ -124,7 +143,6 @@ impl GpuSolver {
     /// Uploads a scene's particles and builds every pipeline and bind group. Programs build a
     /// solver through [`crate::solver::open`], which checks the memory plan first.
     pub(crate) fn with_options(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions) -> anyhow::Result<Self> {
-        anyhow::ensure!(params.dfsph.is_none(), "physics.solver = \"dfsph\" runs on the cpu backend only so far (--backend cpu)");
         let n = initial.fluid_positions.len() as u64;
         let cells = params.grid.cell_count() as u64;
         let viscosity = params.viscosity_at_step(0);
@@ -140,14 +158,21 @@ impl GpuSolver {
         let len = |name: &str| counts.len(name);
         // Forces and integration can be fused with fixed dt, unless the fused stage's bindings
         // exceed the adapter's (arrays in many segments): then they run as two passes.
+        let dfsph = params.dfsph.is_some();
         let can_fuse = params.adaptive.is_none()
+            && !dfsph
             && storage_bindings(&ctx, "forces_integrate", &without_accelerations) <= ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
         let uniform_bytes = gpu_params.bytes().len() as u64;
         let fused = can_fuse
             && options.fuse_forces_and_integration.unwrap_or_else(|| {
                 ctx.info.device_type != wgpu::DeviceType::Cpu || MemoryPlan::new(n, Some(w), cells, uniform_bytes, true).check(&ctx).is_err()
             });
-        let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, !fused);
+        // DFSPH keeps accelerations with adaptive dt only (fixed dt: in registers).
+        let plan = if dfsph {
+            MemoryPlan::new(n, Some(w), cells, uniform_bytes, params.adaptive.is_some()).with_dfsph(n)
+        } else {
+            MemoryPlan::new(n, Some(w), cells, uniform_bytes, !fused)
+        };
         plan.check(&ctx)?;
 
         // The pipelines come first: they check that the stages' bindings (one per segment of
@@ -167,24 +192,34 @@ impl GpuSolver {
             bin_count: stage(&ctx, "bin_count", "bin_count", &len, &sized(ws.bin_count))?,
             bin_scatter: stage(&ctx, "bin_scatter", "bin_scatter", &len, &sized(ws.bin_scatter))?,
             reorder: stage(&ctx, "reorder", "reorder", &len, &sized(ws.reorder))?,
-            density: stage(&ctx, "density", "density", &len, &sized(ws.density))?,
-            forces: stage(&ctx, "forces", "forces", &len, &sized(ws.forces))?,
-            advance: if fused {
-                stage(&ctx, "forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
+            wcsph: if dfsph {
+                None
             } else {
-                stage(&ctx, "integrate", "integrate", &len, &sized(ws.integrate))?
+                Some(WcsphStages {
+                    density: stage(&ctx, "density", "density", &len, &sized(ws.density))?,
+                    forces: stage(&ctx, "forces", "forces", &len, &sized(ws.forces))?,
+                    advance: if fused {
+                        stage(&ctx, "forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
+                    } else {
+                        stage(&ctx, "integrate", "integrate", &len, &sized(ws.integrate))?
+                    },
+                    adaptive: match params.adaptive {
+                        Some(_) => Some((
+                            stage(&ctx, "integrate", "reduce_maxima", &len, &sized(ws.integrate))?,
+                            stage(&ctx, "integrate", "choose_dt", &len, &k)?,
+                        )),
+                        None => None,
+                    },
+                })
             },
             // One thread on the status words.
             finish_step: stage(&ctx, "integrate", "finish_step", &without_accelerations, &k)?,
-            adaptive: match params.adaptive {
-                Some(_) => Some((
-                    stage(&ctx, "integrate", "reduce_maxima", &len, &sized(ws.integrate))?,
-                    stage(&ctx, "integrate", "choose_dt", &len, &k)?,
-                )),
-                None => None,
-            },
             fused,
         };
+        // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
+        // placeholder (until `step_fields` asks for them).
+        let dfsph_len = |name: &str| if name == "accelerations" && params.adaptive.is_none() { 0 } else { counts.len(name) };
+        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len)?) } else { None };
 
         let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -210,7 +245,7 @@ impl GpuSolver {
         let densities = storage(device, "densities", n * 4);
         let pressures = storage(device, "pressures", n * 4);
         let placeholder = storage(device, "placeholder", 16);
-        let accelerations = (!fused).then(|| storage(device, "accelerations", n * 16));
+        let accelerations = if dfsph { params.adaptive.is_some() } else { !fused }.then(|| storage(device, "accelerations", n * 16));
         let status = storage_init(device, "status", bytemuck::cast_slice(&status::initial()));
         let scan = Scan::new(&ctx, &uniform, &starts, cells + 1)?;
 
@@ -254,17 +289,33 @@ impl GpuSolver {
                 bin_count: p.bin_count.bind_group(device, "bin_count", u, &b),
                 bin_scatter: p.bin_scatter.bind_group(device, "bin_scatter", u, &b),
                 reorder: p.reorder.bind_group(device, "reorder", u, &b),
-                density: p.density.bind_group(device, "density", u, &b),
-                advance: if fused {
-                    p.advance.bind_group(device, "forces_and_integrate", u, &without_accelerations(c))
-                } else {
-                    p.advance.bind_group(device, "integrate", u, &b)
-                },
+                wcsph: p.wcsph.as_ref().map(|w| WcsphBindGroups {
+                    density: w.density.bind_group(device, "density", u, &b),
+                    advance: if fused {
+                        w.advance.bind_group(device, "forces_and_integrate", u, &without_accelerations(c))
+                    } else {
+                        w.advance.bind_group(device, "integrate", u, &b)
+                    },
+                }),
             }
         };
         let groups = [make_parity(0), make_parity(1)];
         let finish_group = p.finish_step.bind_group(device, "finish_step", u, &without_accelerations(0));
         let max_groups_per_dim = device.limits().max_compute_workgroups_per_dimension;
+        let dfsph = dfsph_stages.map(|stages| {
+            let shared = SharedBuffers {
+                state: &state,
+                starts: &starts,
+                densities: &densities,
+                pressures: &pressures,
+                status: &status,
+                wall_positions: &wall_positions,
+                wall_starts: &wall_starts,
+                accelerations: accelerations.as_ref().unwrap_or(&placeholder),
+            };
+            let buffers = DfsphBuffers::new(&ctx, n, solve_threads(&ws), max_groups_per_dim);
+            DfsphGpu::new(&ctx, params.dfsph.as_ref().expect("DFSPH"), stages, buffers, &shared, &uniform)
+        });
         let memory = plan.total();
         let mut solver = GpuSolver {
             params: params.clone(),
@@ -288,14 +339,19 @@ impl GpuSolver {
             groups,
             pipelines,
             finish_group,
+            dfsph,
+            solver_loop: options.solver_loop,
+            step_accelerations_groups: None,
             steps: 0,
             max_groups_per_dim,
             steps_per_submit: if options.steps_per_submit == 0 { STEPS_PER_SUBMIT } else { options.steps_per_submit },
             memory,
             ctx,
         };
-        if let Some(buffer) = accelerations {
-            solver.accelerations = Some(solver.forces_groups(buffer));
+        match (&mut solver.dfsph, accelerations) {
+            (Some(d), buffer) => d.accelerations = buffer,
+            (None, Some(buffer)) => solver.accelerations = Some(solver.forces_groups(buffer)),
+            (None, None) => {}
         }
         Ok(solver)
     }
@@ -305,7 +361,7 @@ impl GpuSolver {
         let device = &self.ctx.device;
         let group = |c: usize| {
             let st = &self.state[c];
-            self.pipelines.forces.bind_group(device, "forces", &self.uniform, &|name: &str| {
+            self.wcsph_stages().forces.bind_group(device, "forces", &self.uniform, &|name: &str| {
                 match name {
                     "positions" => &st.positions,
                     "velocities" => &st.velocities,
@@ -331,12 +387,69 @@ impl GpuSolver {
         if self.accelerations_valid {
             return;
         }
+        if self.dfsph.is_some() {
+            self.record_step_accelerations();
+            self.accelerations_valid = true;
+            return;
+        }
         if self.accelerations.is_none() {
             let buffer = storage(&self.ctx.device, "accelerations", self.fluid_count as u64 * 16);
             self.accelerations = Some(self.forces_groups(buffer));
         }
         self.record_accelerations();
         self.accelerations_valid = true;
+    }
+
+    /// The accelerations array `step_fields` reads.
+    fn accelerations_buffer(&self) -> &wgpu::Buffer {
+        match &self.dfsph {
+            Some(d) => d.accelerations.as_ref().expect("made by ensure_accelerations"),
+            None => &self.accelerations.as_ref().expect("made by ensure_accelerations").buffer,
+        }
+    }
+
+    /// DFSPH's arrays in original particle order (for the stage tests): `velocities` are the
+    /// current state's, or with `predicted` the other buffer's, where the prediction writes.
+    pub fn dfsph_fields(&self, predicted: bool) -> anyhow::Result<crate::model::state::DfsphFields> {
+        let d = self.dfsph.as_ref().ok_or_else(|| anyhow::anyhow!("not a DFSPH scene"))?;
+        let n = self.fluid_count as u64;
+        let b = &d.buffers;
+        let c = self.current;
+        let velocities = &self.state[if predicted { 1 - c } else { c }].velocities;
+        let data = read_buffers(&self.ctx, &[
+            (&self.state[c].positions, n * 16),
+            (&self.densities, n * 4),
+            (&self.pressures, n * 4),
+            (&b.factors, n * 4),
+            (&b.wall_gradients, n * 16),
+            (&b.stiffness, n * 4),
+            (&b.pressure_sum, n * 4),
+            (&b.divergence_sum, n * 4),
+            (velocities, n * 16),
+        ])?;
+        let ids = ids_of(bytemuck::cast_slice(&data[0]));
+        let scalars = |k: usize| unpermute(&ids, bytemuck::pod_collect_to_vec::<u8, f32>(&data[k]).iter().map(|&v| v as f64));
+        let vectors = |k: usize| unpermute(&ids, bytemuck::pod_collect_to_vec::<u8, [f32; 4]>(&data[k]).iter().map(widen));
+        Ok(crate::model::state::DfsphFields {
+            densities: scalars(1),
+            pressures: scalars(2),
+            factors: scalars(3),
+            wall_gradients: vectors(4),
+            stiffness: scalars(5),
+            pressure_sum: scalars(6),
+            divergence_sum: scalars(7),
+            velocities: vectors(8),
+        })
+    }
+
+    /// The weakly compressible step's stages (the solver of a WCSPH scene has them).
+    pub(super) fn wcsph_stages(&self) -> &WcsphStages {
+        self.pipelines.wcsph.as_ref().expect("a weakly compressible scene")
+    }
+
+    /// Whether the scene runs DFSPH.
+    pub fn is_dfsph(&self) -> bool {
+        self.dfsph.is_some()
     }
 
     /// Whether forces and integration run as one pass.
@@ -399,7 +512,7 @@ impl GpuSolver {
         self.params.adaptive.is_none().then_some(self.params.dt)
     }
 
-    fn read_status(&self) -> anyhow::Result<[u32; status::WORDS]> {
+    pub(super) fn read_status(&self) -> anyhow::Result<[u32; status::WORDS]> {
         let data = read_buffers(&self.ctx, &[(&self.status, status::BYTES)])?;
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
         Ok(words.try_into().expect("the status buffer has status::WORDS words"))
@@ -413,8 +526,12 @@ impl GpuSolver {
     /// Bytes of the buffers as created, summed from the buffers themselves (to check the plan).
     pub fn allocated_bytes(&self) -> u64 {
         let s = self;
-        // With the fused step the accelerations exist only after `step_fields` asked for them.
-        let planned_accelerations = s.accelerations.as_ref().filter(|_| !s.pipelines.fused).map(|a| &a.buffer);
+        // With the fused step (and DFSPH with a fixed dt) the accelerations exist only after
+        // `step_fields` asked for them.
+        let planned_accelerations = match &s.dfsph {
+            Some(d) => d.accelerations.as_ref().filter(|_| s.params.adaptive.is_some()),
+            None => s.accelerations.as_ref().filter(|_| !s.pipelines.fused).map(|a| &a.buffer),
+        };
         [&s.uniform, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
             .into_iter()
             .chain(planned_accelerations)
@@ -422,6 +539,7 @@ impl GpuSolver {
             .chain(s.state.iter().flat_map(|st| [st.positions.size(), st.velocities.size()]))
             .sum::<u64>()
             + s.scan.bytes()
+            + s.dfsph.as_ref().map_or(0, |d| d.buffers.bytes())
     }
 
     /// The snapshot rows of the current state (after a refresh) in pieces of `chunk` slots: the
@@ -441,7 +559,10 @@ impl GpuSolver {
             StateArray::Positions => visit_array(&self.ctx, &st.positions, n, Element::Vector, chunk, visit),
             StateArray::Velocities => visit_array(&self.ctx, &st.velocities, n, Element::Vector, chunk, visit),
             StateArray::Ids => visit_array(&self.ctx, &st.positions, n, Element::IdInW, chunk, visit),
-            StateArray::WarmStart => Ok(()),
+            StateArray::WarmStart => match &self.dfsph {
+                Some(d) => visit_pairs(&self.ctx, &d.buffers.warm_pressure, &d.buffers.warm_divergence, n, chunk, visit),
+                None => Ok(()),
+            },
         }
     }
 }
@@ -499,7 +620,8 @@ impl Backend for GpuSolver {
         Some(self.memory)
     }
     fn health(&mut self) -> anyhow::Result<Health> {
-        Ok(status::health(&self.read_status()?, self.fixed_dt()))
+        let words = self.read_status()?;
+        Ok(Health { iterations: self.dfsph.is_some().then(|| status::iterations(&words)), ..status::health(&words, self.fixed_dt()) })
     }
     fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
         self.refresh_fields();
@@ -531,12 +653,13 @@ impl Backend for GpuSolver {
     }
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
         let mut state = self.save_state_header()?;
-        for (array, chunk) in [(StateArray::Positions, 0), (StateArray::Velocities, 0), (StateArray::Ids, 0)] {
+        for (array, chunk) in [(StateArray::Positions, 0), (StateArray::Velocities, 0), (StateArray::Ids, 0), (StateArray::WarmStart, 0)] {
             self.visit_state_in_pieces(array, chunk, &mut |piece| {
                 match (array, piece) {
                     (StateArray::Positions, StatePiece::Vectors(v)) => state.positions.extend_from_slice(v),
                     (StateArray::Velocities, StatePiece::Vectors(v)) => state.velocities.extend_from_slice(v),
                     (StateArray::Ids, StatePiece::Ids(v)) => state.ids.extend_from_slice(v),
+                    (StateArray::WarmStart, StatePiece::Pairs(v)) => state.warm_start.extend_from_slice(v),
                     _ => unreachable!("each array hands out its own kind of piece"),
                 }
                 Ok(())
@@ -579,6 +702,13 @@ impl Backend for GpuSolver {
             status::WORDS
         );
         self.state[0].upload(&self.ctx, &state.positions, &state.velocities, |i| state.ids[i]);
+        if let Some(d) = &self.dfsph {
+            let n = self.fluid_count as usize;
+            anyhow::ensure!(state.warm_start.len() == n, "the state holds {} warm-start stiffnesses for DFSPH; the scene has {n} particles", state.warm_start.len());
+            let (p, v): (Vec<f32>, Vec<f32>) = state.warm_start.iter().map(|w| (w[0] as f32, w[1] as f32)).unzip();
+            self.ctx.queue.write_buffer(&d.buffers.warm_pressure, 0, bytemuck::cast_slice(&p));
+            self.ctx.queue.write_buffer(&d.buffers.warm_divergence, 0, bytemuck::cast_slice(&v));
+        }
         let q = &self.ctx.queue;
         q.write_buffer(&self.status, 0, bytemuck::cast_slice(&state.gpu_status));
         q.submit([]);
@@ -591,7 +721,7 @@ impl Backend for GpuSolver {
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {
         let n = self.fluid_count as u64;
         self.ensure_accelerations();
-        let acc = &self.accelerations.as_ref().expect("ensured").buffer;
+        let acc = self.accelerations_buffer();
         let data = read_buffers(&self.ctx, &[
             (&self.densities, n * 4),
             (&self.pressures, n * 4),

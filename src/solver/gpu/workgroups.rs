@@ -115,6 +115,45 @@ impl FromStr for WorkgroupSizes {
     }
 }
 
+/// How the GPU ends the loop of a DFSPH solve (the same iterations, so the same values, either
+/// way).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SolverLoop {
+    /// Every iteration up to the limit is recorded with the step; after each one a one-thread
+    /// check decides whether the solve goes on and sizes the next iteration's dispatches: the
+    /// full size, or zero workgroups once it has ended. No host round trip.
+    #[default]
+    Indirect,
+    /// The host reads the solve's state back after every block of this many iterations and
+    /// records another block while it goes on (the same checks and dispatches, fewer recorded,
+    /// a host round trip per block).
+    Readback(u32),
+}
+
+impl fmt::Display for SolverLoop {
+    fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        match self {
+            SolverLoop::Indirect => write!(f, "indirect"),
+            SolverLoop::Readback(k) => write!(f, "readback:{k}"),
+        }
+    }
+}
+
+/// `indirect` or `readback:K` (K iterations per round trip, K >= 1).
+impl FromStr for SolverLoop {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        let allowed = "allowed: indirect, or readback:K with K iterations per host round trip (K from 1 to 1000)";
+        match text.trim() {
+            "indirect" => Ok(SolverLoop::Indirect),
+            other => match other.strip_prefix("readback:").map(|k| k.trim().parse::<u32>()) {
+                Some(Ok(k)) if (1..=1000).contains(&k) => Ok(SolverLoop::Readback(k)),
+                _ => Err(format!("'{other}' is not a solver loop; {allowed}")),
+            },
+        }
+    }
+}
+
 /// Choices of the GPU step that do not change its results.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GpuOptions {
@@ -131,11 +170,23 @@ pub struct GpuOptions {
     /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 (to measure what
     /// the runs gain; the same values).
     pub single_cells: bool,
+    /// How a DFSPH solve's loop ends on the GPU.
+    pub solver_loop: SolverLoop,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn solver_loops_parse() {
+        assert_eq!("indirect".parse::<SolverLoop>().unwrap(), SolverLoop::Indirect);
+        assert_eq!("readback:4".parse::<SolverLoop>().unwrap(), SolverLoop::Readback(4));
+        assert_eq!(SolverLoop::Readback(4).to_string().parse::<SolverLoop>().unwrap(), SolverLoop::Readback(4));
+        for bad in ["readback", "readback:0", "readback:x", "loop"] {
+            assert!(bad.parse::<SolverLoop>().unwrap_err().contains("indirect"), "{bad}");
+        }
+    }
 
     #[test]
     fn sizes_parse_for_all_stages_or_some() {

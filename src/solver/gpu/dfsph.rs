@@ -1,0 +1,295 @@
+//! DFSPH on the GPU: the pipelines of its stages (wgsl/sim/dfsph_*.wgsl), its arrays and the
+//! bind groups of both parities of the state pair. The order in which a step records them is in
+//! `schedule.rs`, with the weakly compressible step's.
+//!
+//! A step reads state `c` (after the binning) and leaves the new state in `1 - c`: the
+//! divergence solve changes the velocities of `c` in place, the prediction writes v* into the
+//! velocities of `1 - c`, the constant-density solve changes those in place, and the integration
+//! writes the new positions next to them. The warm-start stiffnesses are kept by particle id.
+
+use super::buffers::{storage, StateBuffers};
+use super::device::{GpuContext, GpuError};
+use super::shaders::{dispatch_size, stage, ArrayLengths, Stage};
+use super::workgroups::WorkgroupSizes;
+use crate::model::params::Params;
+use crate::model::scene::DfsphSettings;
+
+/// The pipelines of DFSPH's stages.
+pub(super) struct DfsphStages {
+    pub factors: Stage,
+    pub divergence_warm_start: Stage,
+    pub divergence_rate: Stage,
+    pub divergence_apply: Stage,
+    /// Fixed dt: viscosity, gravity and v* in one pass.
+    pub predict: Stage,
+    /// Adaptive dt: the accelerations with the maxima, the choice of dt, then v*.
+    pub adaptive: Option<[Stage; 3]>,
+    pub pressure_warm_start: Stage,
+    pub predict_density: Stage,
+    pub pressure_apply: Stage,
+    /// `begin_solve` and `check_convergence` of the divergence solve (0) and the
+    /// constant-density solve (1).
+    pub begin: [Stage; 2],
+    pub check: [Stage; 2],
+    pub integrate: Stage,
+    pub step_accelerations: Stage,
+}
+
+/// DFSPH's arrays.
+pub(super) struct DfsphBuffers {
+    pub factors: wgpu::Buffer,
+    pub wall_gradients: wgpu::Buffer,
+    pub stiffness: wgpu::Buffer,
+    pub pressure_sum: wgpu::Buffer,
+    pub divergence_sum: wgpu::Buffer,
+    /// By particle id.
+    pub warm_pressure: wgpu::Buffer,
+    pub warm_divergence: wgpu::Buffer,
+    /// The dispatch size of the next iteration's passes (words 0-2) and the full size (4-6).
+    pub solve_dispatch: wgpu::Buffer,
+}
+
+/// The bind groups of one parity: reading state `c`, writing state `1 - c`.
+pub(super) struct DfsphGroups {
+    pub factors: wgpu::BindGroup,
+    pub divergence_warm_start: wgpu::BindGroup,
+    pub divergence_rate: wgpu::BindGroup,
+    pub divergence_apply: wgpu::BindGroup,
+    pub predict: wgpu::BindGroup,
+    pub adaptive: Option<[wgpu::BindGroup; 3]>,
+    pub pressure_warm_start: wgpu::BindGroup,
+    pub predict_density: wgpu::BindGroup,
+    pub pressure_apply: wgpu::BindGroup,
+    pub integrate: wgpu::BindGroup,
+}
+
+/// DFSPH on the GPU: its settings, pipelines, arrays and bind groups.
+pub(super) struct DfsphGpu {
+    pub settings: DfsphSettings,
+    pub stages: DfsphStages,
+    pub buffers: DfsphBuffers,
+    pub groups: [DfsphGroups; 2],
+    /// The bind groups of `begin_solve` and `check_convergence` of the divergence solve (0) and
+    /// the constant-density solve (1).
+    pub control: [(wgpu::BindGroup, wgpu::BindGroup); 2],
+    /// The accelerations: with adaptive dt from the start; with a fixed dt made when the step's
+    /// fields are asked for.
+    pub accelerations: Option<wgpu::Buffer>,
+}
+
+/// The shared buffers a DFSPH stage binds besides its own.
+pub(super) struct SharedBuffers<'a> {
+    pub state: &'a [StateBuffers; 2],
+    pub starts: &'a wgpu::Buffer,
+    pub densities: &'a wgpu::Buffer,
+    pub pressures: &'a wgpu::Buffer,
+    pub status: &'a wgpu::Buffer,
+    pub wall_positions: &'a wgpu::Buffer,
+    pub wall_starts: &'a wgpu::Buffer,
+    /// The accelerations (adaptive dt), or a placeholder.
+    pub accelerations: &'a wgpu::Buffer,
+}
+
+/// Threads per workgroup of the solves' passes, whose dispatch size the GPU's checks write.
+pub(super) fn solve_threads(sizes: &WorkgroupSizes) -> u32 {
+    sizes.forces
+}
+
+impl DfsphStages {
+    /// Every DFSPH pipeline, with the scene's constants `k` and the workgroup sizes (density:
+    /// the factors; forces: the prediction and the solves; integrate: the integration).
+    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths) -> Result<Self, GpuError> {
+        let settings = params.dfsph.as_ref().expect("a DFSPH scene");
+        let sized = |size: u32| {
+            let mut c = k.to_vec();
+            c.push(("WORKGROUP_SIZE", size as f64));
+            c
+        };
+        let solve = sized(solve_threads(sizes));
+        let control = |which: u32, warm: bool| {
+            let mut c = k.to_vec();
+            c.push(("SOLVE", which as f64));
+            c.push(("WARM_START", if warm { 1.0 } else { 0.0 }));
+            c
+        };
+        let warm = settings.warm_start;
+        let one = |entry: &str, consts: &[(&str, f64)]| stage(ctx, entry_file(entry), entry, lens, consts);
+        Ok(DfsphStages {
+            factors: one("density_and_factor", &sized(sizes.density))?,
+            divergence_warm_start: one("divergence_warm_start", &solve)?,
+            divergence_rate: one("divergence_rate", &solve)?,
+            divergence_apply: one("divergence_apply", &solve)?,
+            predict: one("predict_velocities", &solve)?,
+            adaptive: match params.adaptive {
+                Some(_) => Some([one("non_pressure_accelerations", &solve)?, one("choose_dt", k)?, one("predict_from_accelerations", &solve)?]),
+                None => None,
+            },
+            pressure_warm_start: one("pressure_warm_start", &solve)?,
+            predict_density: one("predict_density", &solve)?,
+            pressure_apply: one("pressure_apply", &solve)?,
+            begin: [one("begin_solve", &control(0, warm))?, one("begin_solve", &control(1, warm))?],
+            check: [one("check_convergence", &control(0, warm))?, one("check_convergence", &control(1, warm))?],
+            integrate: one("integrate", &sized(sizes.integrate))?,
+            step_accelerations: one("step_accelerations", &sized(sizes.integrate))?,
+        })
+    }
+}
+
+/// The stage file of an entry point.
+fn entry_file(entry: &str) -> &'static str {
+    match entry {
+        "density_and_factor" => "dfsph_factors",
+        "divergence_warm_start" | "divergence_rate" | "divergence_apply" => "dfsph_divergence",
+        "predict_velocities" | "non_pressure_accelerations" | "choose_dt" | "predict_from_accelerations" => "dfsph_predict",
+        "pressure_warm_start" | "predict_density" | "pressure_apply" => "dfsph_pressure",
+        "begin_solve" | "check_convergence" => "dfsph_convergence",
+        "integrate" | "step_accelerations" => "dfsph_integrate",
+        other => panic!("no DFSPH entry point {other}"),
+    }
+}
+
+/// Bytes of DFSPH's own arrays for `n` fluid particles (the memory plan lists them).
+pub fn buffer_bytes(n: u64) -> [(&'static str, u64); 8] {
+    [
+        ("dfsph factors", n * 4),
+        ("dfsph wall gradients", n * 16),
+        ("dfsph stiffness", n * 4),
+        ("dfsph pressure stiffness sum", n * 4),
+        ("dfsph divergence stiffness sum", n * 4),
+        ("dfsph warm start (pressure)", n * 4),
+        ("dfsph warm start (divergence)", n * 4),
+        ("dfsph solve dispatch", 32),
+    ]
+}
+
+impl DfsphBuffers {
+    /// The arrays of `n` particles; the dispatch sizes of the solves' passes written in.
+    pub fn new(ctx: &GpuContext, n: u64, threads: u32, max_groups_per_dim: u32) -> Self {
+        let device = &ctx.device;
+        let b = buffer_bytes(n);
+        let (x, y) = dispatch_size(n, threads, max_groups_per_dim);
+        let solve_dispatch = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(b[7].0),
+            size: b[7].1,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        ctx.queue.write_buffer(&solve_dispatch, 0, bytemuck::cast_slice(&[x, y, 1, 0, x, y, 1, 0u32]));
+        DfsphBuffers {
+            factors: storage(device, b[0].0, b[0].1),
+            wall_gradients: storage(device, b[1].0, b[1].1),
+            stiffness: storage(device, b[2].0, b[2].1),
+            pressure_sum: storage(device, b[3].0, b[3].1),
+            divergence_sum: storage(device, b[4].0, b[4].1),
+            warm_pressure: storage(device, b[5].0, b[5].1),
+            warm_divergence: storage(device, b[6].0, b[6].1),
+            solve_dispatch,
+        }
+    }
+
+    pub fn bytes(&self) -> u64 {
+        [&self.factors, &self.wall_gradients, &self.stiffness, &self.pressure_sum, &self.divergence_sum, &self.warm_pressure, &self.warm_divergence, &self.solve_dispatch]
+            .iter()
+            .map(|b| b.size())
+            .sum()
+    }
+}
+
+impl DfsphGpu {
+    pub fn new(ctx: &GpuContext, settings: &DfsphSettings, stages: DfsphStages, buffers: DfsphBuffers, shared: &SharedBuffers, uniform: &wgpu::Buffer) -> Self {
+        let device = &ctx.device;
+        let groups = [0, 1].map(|c| {
+            let lookup = |velocities_of: usize| {
+                let (read, write) = (&shared.state[c], &shared.state[1 - c]);
+                let (b, s) = (&buffers, shared);
+                move |name: &str| -> wgpu::Buffer {
+                    match name {
+                        "positions" => read.positions.clone(),
+                        // The velocities a stage works on: the state's own (the divergence
+                        // solve, the prediction) or the predicted ones (the constant-density
+                        // solve, the integration).
+                        "velocities" => shared.state[velocities_of].velocities.clone(),
+                        "velocities_out" => write.velocities.clone(),
+                        "velocities_start" => read.velocities.clone(),
+                        "positions_out" => write.positions.clone(),
+                        "starts" => s.starts.clone(),
+                        "densities" => s.densities.clone(),
+                        "pressures" => s.pressures.clone(),
+                        "status" => s.status.clone(),
+                        "wall_positions" => s.wall_positions.clone(),
+                        "wall_starts" => s.wall_starts.clone(),
+                        "accelerations" => s.accelerations.clone(),
+                        "factors" => b.factors.clone(),
+                        "wall_gradients" => b.wall_gradients.clone(),
+                        "stiffness" => b.stiffness.clone(),
+                        "pressure_sum" => b.pressure_sum.clone(),
+                        "divergence_sum" => b.divergence_sum.clone(),
+                        "warm_pressure" => b.warm_pressure.clone(),
+                        "warm_divergence" => b.warm_divergence.clone(),
+                        other => panic!("no DFSPH buffer holds the array '{other}'"),
+                    }
+                }
+            };
+            let own = lookup(c);
+            let predicted = lookup(1 - c);
+            let st = &stages;
+            DfsphGroups {
+                factors: st.factors.bind_group(device, "density_and_factor", uniform, &own),
+                divergence_warm_start: st.divergence_warm_start.bind_group(device, "divergence_warm_start", uniform, &own),
+                divergence_rate: st.divergence_rate.bind_group(device, "divergence_rate", uniform, &own),
+                divergence_apply: st.divergence_apply.bind_group(device, "divergence_apply", uniform, &own),
+                predict: st.predict.bind_group(device, "predict_velocities", uniform, &own),
+                adaptive: st.adaptive.as_ref().map(|[a, d, p]| {
+                    [
+                        a.bind_group(device, "non_pressure_accelerations", uniform, &own),
+                        d.bind_group(device, "choose_dt", uniform, &own),
+                        p.bind_group(device, "predict_from_accelerations", uniform, &own),
+                    ]
+                }),
+                pressure_warm_start: st.pressure_warm_start.bind_group(device, "pressure_warm_start", uniform, &predicted),
+                predict_density: st.predict_density.bind_group(device, "predict_density", uniform, &predicted),
+                pressure_apply: st.pressure_apply.bind_group(device, "pressure_apply", uniform, &predicted),
+                integrate: st.integrate.bind_group(device, "integrate", uniform, &predicted),
+            }
+        });
+        let control_buffers = |name: &str| match name {
+            "status" => shared.status.clone(),
+            "solve_dispatch" => buffers.solve_dispatch.clone(),
+            other => panic!("no buffer holds the array '{other}'"),
+        };
+        let control = [0, 1].map(|s| {
+            (stages.begin[s].bind_group(device, "begin_solve", uniform, &control_buffers), stages.check[s].bind_group(device, "check_convergence", uniform, &control_buffers))
+        });
+        DfsphGpu { settings: settings.clone(), stages, buffers, groups, control, accelerations: None }
+    }
+
+    /// The bind groups of `step_accelerations` for the state pair read from `c` (made on
+    /// request, with the accelerations array then in use).
+    pub fn step_accelerations_group(&self, ctx: &GpuContext, shared: &SharedBuffers, uniform: &wgpu::Buffer, c: usize) -> wgpu::BindGroup {
+        let (read, write) = (&shared.state[c], &shared.state[1 - c]);
+        let b = &self.buffers;
+        self.stages.step_accelerations.bind_group(&ctx.device, "step_accelerations", uniform, &|name: &str| {
+            match name {
+                "positions" => &read.positions,
+                "velocities" => &write.velocities,
+                "velocities_start" => &read.velocities,
+                "positions_out" => &write.positions,
+                "pressure_sum" => &b.pressure_sum,
+                "divergence_sum" => &b.divergence_sum,
+                "warm_pressure" => &b.warm_pressure,
+                "warm_divergence" => &b.warm_divergence,
+                "accelerations" => shared.accelerations,
+                "status" => shared.status,
+                other => panic!("no buffer holds the array '{other}'"),
+            }
+            .clone()
+        })
+    }
+
+    /// Iterations recorded per solve with the indirect loop: up to the limit (the warm start
+    /// counts as the first).
+    pub fn recorded_iterations(&self, solve: usize) -> u32 {
+        let max = if solve == 0 { self.settings.max_divergence_iterations } else { self.settings.max_iterations };
+        max.saturating_sub(self.settings.warm_start as u32)
+    }
+}

@@ -1,0 +1,160 @@
+// DFSPH, between the two solves: the accelerations of every force but pressure (viscosity and
+// gravity), the step's dt (adaptive dt) and the predicted velocities v* = v + dt a, written to
+// the other buffer of the state pair. Twin of src/solver/cpu/dfsph_predict.rs, one function per
+// entry point.
+
+//! include shared/common.wgsl
+//! include shared/reduce.wgsl
+//! array positions: vec4<f32>, read
+//! array velocities: vec4<f32>, read
+//! array densities: f32, read
+//! array starts: u32, read
+//! array wall_positions: vec4<f32>, read
+//! array wall_starts: u32, read
+//! array accelerations: vec4<f32>, read_write
+//! array velocities_out: vec4<f32>, read_write
+//! array pressure_sum: f32, read_write
+// Adaptive dt: the maxima, dt, time and dt range.
+//! array status: u32, atomic, whole
+
+// Viscosity and gravity on fluid particle i: the viscosity term of wgsl/sim/forces.wgsl (the
+// CPU twin, src/solver/cpu/forces.rs, explains it), without pressure.
+fn non_pressure_acceleration(i: u32) -> vec3<f32> {
+    var g = vec3<f32>(0.0);
+    if (GRAVITY) {
+        g = params.gravity.xyz;
+    }
+    if (!(VISCOSITY && params.viscosity > 0.0)) {
+        return g;
+    }
+    let cubic = KERNEL == 1u;
+    let eps = 0.01 * params.h2;
+    let xi = positions_at(i).xyz;
+    let ui = velocities_at(i).xyz;
+    let c = cell_coords(xi);
+    var fluid_visc = vec3<f32>(0.0);
+    var wall_visc = vec3<f32>(0.0);
+    for (var run = 0u; run < stencil_span_count(); run++) {
+        let cells = stencil_run(c, run);
+        for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
+            let rij = xi - positions_at(j).xyz;
+            let r2 = dot(rij, rij);
+            if (r2 >= params.h2) {
+                continue;
+            }
+            let r = sqrt(r2);
+            let inv_rho = 1.0 / densities_at(j);
+            let uij = ui - velocities_at(j).xyz;
+            if (cubic) {
+                fluid_visc += kernel_grad(rij, r) * (inv_rho * dot(uij, rij) / (r2 + eps));
+            } else {
+                fluid_visc -= uij * (inv_rho * kernel_laplacian(r));
+            }
+        }
+        if (WALLS) {
+            for (var j = wall_starts_at(cells.x); j < wall_starts_at(cells.y); j++) {
+                let w = wall_positions_at(j);  // w: mass
+                let rij = xi - w.xyz;
+                let r2 = dot(rij, rij);
+                if (r2 >= params.h2) {
+                    continue;
+                }
+                let r = sqrt(r2);
+                if (cubic) {
+                    wall_visc += kernel_grad(rij, r) * (w.w * dot(ui, rij) / (r2 + eps));
+                } else {
+                    wall_visc -= ui * (w.w * kernel_laplacian(r));
+                }
+            }
+        }
+    }
+    let rho_i = densities_at(i);
+    let nu = select(params.viscosity, 10.0 * params.viscosity, cubic);
+    let visc = fluid_visc * (nu * params.rest_density * params.fluid_mass / rho_i) + wall_visc * (nu * params.boundary_friction / rho_i);
+    return visc + g;
+}
+
+// Fixed dt: v*_i = v_i + dt a_i; the constant-density solve's stiffness sum starts at 0.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn predict_velocities(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let v = velocities_at(i);
+        velocities_out_set(i, vec4<f32>(v.xyz + non_pressure_acceleration(i) * params.dt, v.w));
+        pressure_sum_set(i, 0.0);
+    }
+}
+
+// Adaptive dt, 1 of 3: every particle's acceleration, and the largest |v| and |a| reduced per
+// workgroup into the status words (a non-finite value left out).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn non_pressure_accelerations(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    reduce_begin(lid);
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let a = non_pressure_acceleration(i);
+        accelerations_set(i, vec4<f32>(a, 0.0));
+        let speed = length(velocities_at(i).xyz);
+        let accel = length(a);
+        if (is_finite_f32(speed)) {
+            reduce_offer(0u, bitcast<u32>(speed));
+        }
+        if (is_finite_f32(accel)) {
+            reduce_offer(1u, bitcast<u32>(accel));
+        }
+    }
+    reduce_end();
+    if (lid == 0u) {
+        atomicMax(&status[STATUS_MAX_SPEED], reduce_result(0u));
+        atomicMax(&status[STATUS_MAX_ACCELERATION], reduce_result(1u));
+    }
+}
+
+// Adaptive dt, 2 of 3 (one thread): dt = clamp(min(C_cfl h / |v|max, C_f sqrt(h / |a|max),
+// C_visc h^2 / nu), dt_min, dt_max): the CFL condition on the flow speed alone, an incompressible
+// fluid having no speed of sound; a condition whose quantity is zero is left out. Then the
+// simulated time (a Kahan sum) and the dt range, as wgsl/sim/integrate.wgsl `choose_dt` keeps
+// them. Twin of AdaptiveDt::dt in src/model/params.rs with c0 = 0.
+@compute @workgroup_size(1)
+fn choose_dt() {
+    let speed = bitcast<f32>(atomicLoad(&status[STATUS_MAX_SPEED]));
+    let accel = bitcast<f32>(atomicLoad(&status[STATUS_MAX_ACCELERATION]));
+    atomicStore(&status[STATUS_MAX_SPEED], 0u);
+    atomicStore(&status[STATUS_MAX_ACCELERATION], 0u);
+    var dt = params.dt_max;
+    if (speed > 0.0) {
+        dt = min(dt, params.cfl_number * params.h / speed);
+    }
+    if (accel > 0.0) {
+        dt = min(dt, params.force_number * sqrt(params.h / accel));
+    }
+    if (VISCOSITY && params.viscosity > 0.0) {
+        dt = min(dt, params.viscous_number * params.h2 / params.viscosity);
+    }
+    dt = clamp(dt, params.dt_min, params.dt_max);
+    atomicStore(&status[STATUS_DT], bitcast<u32>(dt));
+    let sum = bitcast<f32>(atomicLoad(&status[STATUS_TIME]));
+    let compensation = bitcast<f32>(atomicLoad(&status[STATUS_TIME_COMPENSATION]));
+    let y = dt - compensation;
+    let t = sum + y;
+    atomicStore(&status[STATUS_TIME_COMPENSATION], bitcast<u32>((t - sum) - y));
+    atomicStore(&status[STATUS_TIME], bitcast<u32>(t));
+    atomicStore(&status[STATUS_DT_MIN], bitcast<u32>(min(bitcast<f32>(atomicLoad(&status[STATUS_DT_MIN])), dt)));
+    atomicStore(&status[STATUS_DT_MAX], bitcast<u32>(max(bitcast<f32>(atomicLoad(&status[STATUS_DT_MAX])), dt)));
+}
+
+// Adaptive dt, 3 of 3: v*_i = v_i + dt a_i; the stiffness sum starts at 0.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn predict_from_accelerations(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let v = velocities_at(i);
+        let dt = bitcast<f32>(atomicLoad(&status[STATUS_DT]));
+        velocities_out_set(i, vec4<f32>(v.xyz + accelerations_at(i).xyz * dt, v.w));
+        pressure_sum_set(i, 0.0);
+    }
+}

@@ -1,0 +1,69 @@
+// DFSPH's constant-density solve: Jacobi steps on the predicted density, so that the density the
+// velocities would give after dt is the rest density (Bender & Koschier 2017, Sec. 4.3). Twin of
+// src/solver/cpu/dfsph_pressure.rs. The velocities are the predicted ones (the other buffer of
+// the state pair), changed in place.
+
+//! include shared/common.wgsl
+//! include shared/dfsph.wgsl
+//! array velocities: vec4<f32>, read_write
+//! array densities: f32, read
+//! array factors: f32, read
+//! array stiffness: f32, read_write
+//! array pressure_sum: f32, read_write
+// The last step's constant-density stiffness sums, by particle id.
+//! array warm_pressure: f32, read
+// The error sum of the solve; STATUS_DT, this step's dt (adaptive dt).
+//! array status: u32, atomic, whole
+
+fn step_dt() -> f32 {
+    if (ADAPTIVE_DT) {
+        return bitcast<f32>(atomicLoad(&status[STATUS_DT]));
+    }
+    return params.dt;
+}
+
+// rho_i / rho0 + dt D_i: the density the velocities give after dt.
+fn predicted_density(i: u32, p: vec4<f32>) -> f32 {
+    return densities_at(i) / params.rest_density + step_dt() * density_rate(i, p.xyz, velocities_at(i).xyz);
+}
+
+// The stiffness the solve starts from: a share of the last step's (by particle id) where the
+// predicted density is above rest density, none elsewhere.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn pressure_warm_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let p = positions_at(i);
+        stiffness_set(i, select(0.0, params.warm_start_share * warm_pressure_at(bitcast<u32>(p.w)), predicted_density(i, p) > 1.0));
+    }
+}
+
+// rho*_i = max(rho_i / rho0 + dt D_i, 1), K_i = (rho*_i - 1) alpha_i, and the error rho*_i - 1
+// into the solve's sum.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn predict_density(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    error_begin(lid);
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let error = max(predicted_density(i, positions_at(i)), 1.0) - 1.0;
+        stiffness_set(i, error * factors_at(i));
+        error_offer(error);
+    }
+    error_end(lid);
+}
+
+// One Jacobi step: v_i -= (V sum_j (K_i + K_j) grad W_ij + K_i g_i^w) / dt; K_i added to the sum.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn pressure_apply(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let ki = stiffness_at(i);
+        let v = velocities_at(i);
+        velocities_set(i, vec4<f32>(v.xyz - stiffness_push(i, positions_at(i).xyz, ki) * (1.0 / step_dt()), v.w));
+        pressure_sum_set(i, pressure_sum_at(i) + ki);
+    }
+}
