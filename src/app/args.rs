@@ -277,9 +277,10 @@ pub struct GpuTuning {
     /// Steps recorded into one command buffer (default 32).
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
     pub steps_per_submit: Option<u64>,
-    /// How a DFSPH solve's loop ends on the GPU: `indirect` (default: every iteration up to the
-    /// limit recorded, the GPU making those after convergence empty; no host round trip) or
-    /// `readback:K` (the host reads the solve's state back every K iterations).
+    /// How a DFSPH solve's loop ends on the GPU (the GPU makes iterations recorded past the
+    /// end empty): `adaptive` (default: a first block as long as the last step's solve, then
+    /// blocks of 4, the host asking after each), `indirect` (every iteration up to the limit
+    /// recorded; no host round trip) or `readback:K` (blocks of K iterations).
     #[arg(long, value_name = "LOOP")]
     pub solver_loop: Option<SolverLoop>,
 }
@@ -401,8 +402,8 @@ pub struct BenchArgs {
     /// The GPU path on every adapter with compute shaders, not only the one a run would choose.
     #[arg(long)]
     pub every_adapter: bool,
-    /// How the dfsph-gpu path ends a solve's loop: `indirect` (default) or `readback:K` (see
-    /// `wgsph run --help`), to measure one against the other.
+    /// How the dfsph-gpu path ends a solve's loop: `adaptive` (default), `indirect` or
+    /// `readback:K` (see `wgsph run --help`), to measure one against another.
     #[arg(long, value_name = "LOOP")]
     pub solver_loop: Option<SolverLoop>,
     /// Also write the figures to this JSON file.

@@ -249,3 +249,18 @@ fn akinci_walls_are_read_and_checked() {
     let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_volume = \"psi\""));
     assert!(e.contains("lattice") && e.contains("akinci"), "{e}");
 }
+
+/// The adaptive step's CFL number defaults by method: 0.25 where the speed of sound bounds the
+/// step, 0.4 with DFSPH, whose condition is on the flow speed alone; a scene's own value is
+/// kept for both, and an out-of-range one is refused naming the field.
+#[test]
+fn the_cfl_number_defaults_by_method_and_a_given_one_is_kept() {
+    let cfl = |text: &str| Scene::from_toml_str(text, &SceneOrigin::Text).unwrap().params().adaptive.expect("adaptive dt").cfl_number;
+    let adaptive = |text: String, extra: &str| text.replace("dt = 0.001", &format!("dt = 0.001\nadaptive = true\n{extra}"));
+    assert_eq!(cfl(&adaptive(GOOD.to_string(), "")), 0.25);
+    assert_eq!(cfl(&adaptive(dfsph_scene("", ""), "")), 0.4);
+    assert_eq!(cfl(&adaptive(GOOD.to_string(), "cfl_number = 0.3")), 0.3);
+    assert_eq!(cfl(&adaptive(dfsph_scene("", ""), "cfl_number = 0.6")), 0.6);
+    let e = Scene::from_toml_str(&adaptive(dfsph_scene("", ""), "cfl_number = 1.5"), &SceneOrigin::Text).unwrap_err().to_string();
+    assert!(e.contains("time.cfl_number") && e.contains("1.5"), "{e}");
+}

@@ -8,7 +8,7 @@ use super::solver::GpuSolver;
 use super::readback::{read_buffers, read_ranges};
 use super::buffers::storage;
 use super::dfsph::SharedBuffers;
-use super::workgroups::SolverLoop;
+use super::workgroups::{SolverLoop, ADAPTIVE_BLOCK};
 use super::params::status;
 
 /// The stages of a step as the profile names them, in dispatch order. With the fused step the
@@ -315,32 +315,47 @@ impl GpuSolver {
             dispatch_one(rec, &st.check[solve], check_group);
         };
         let limit = d.recorded_iterations(solve);
-        let block = match self.solver_loop {
-            SolverLoop::Readback(k) => k,
-            SolverLoop::Indirect => limit,
+        let warm = d.settings.warm_start as u32;
+        let (first, later) = match self.solver_loop {
+            SolverLoop::Indirect => (limit, limit),
+            SolverLoop::Readback(k) => (k, k),
+            SolverLoop::Adaptive => (self.last_iterations.get()[solve] + 1, ADAPTIVE_BLOCK),
         };
         let mut recorded = 0;
+        let mut block = first.clamp(1, limit.max(1));
         while recorded < limit {
-            if recorded > 0 || block < limit {
-                // A block boundary: ask the GPU whether the solve goes on.
-                if rec.submit_and_wait(&self.ctx) && !self.solving() {
+            let n = block.min(limit - recorded);
+            for _ in 0..n {
+                iteration(rec);
+            }
+            recorded += n;
+            block = later;
+            // A block boundary: ask the GPU whether the solve goes on (a recorder that cannot
+            // wait, the profile's, records every iteration up to the limit).
+            if recorded < limit && rec.submit_and_wait(&self.ctx) {
+                if let Some(done) = self.solve_ended() {
+                    let mut last = self.last_iterations.get();
+                    last[solve] = done.saturating_sub(warm);
+                    self.last_iterations.set(last);
                     break;
                 }
             }
-            for _ in 0..block.min(limit - recorded) {
-                iteration(rec);
-            }
-            recorded += block.min(limit - recorded);
         }
     }
 
-    /// Whether the DFSPH solve under way goes on (a status word read back).
-    fn solving(&self) -> bool {
-        match read_ranges(&self.ctx, &[(&self.status, status::DFSPH_SOLVING as u64 * 4, 4)]) {
-            Ok(data) => u32::from_le_bytes(data[0][..4].try_into().expect("4 bytes")) != 0,
+    /// The iterations of the DFSPH solve under way once it has ended (the warm start counts
+    /// as one), `None` while it goes on (two status words read back).
+    fn solve_ended(&self) -> Option<u32> {
+        let words = status::DFSPH_ITERATION as u64 * 4;
+        debug_assert_eq!(status::DFSPH_SOLVING, status::DFSPH_ITERATION + 1);
+        match read_ranges(&self.ctx, &[(&self.status, words, 8)]) {
+            Ok(data) => {
+                let word = |k: usize| u32::from_le_bytes(data[0][4 * k..4 * k + 4].try_into().expect("4 bytes"));
+                (word(1) == 0).then(|| word(0))
+            }
             Err(e) => {
                 log::error!("reading the DFSPH solve's state failed: {e:#}");
-                true
+                None
             }
         }
     }
@@ -455,16 +470,13 @@ impl GpuSolver {
     /// [`DFSPH_PROFILED_STAGES`]) in nanoseconds (a stage that did not run, like the binning
     /// between neighbour rebuilds, adds 0). `None` when the device has no timestamp queries.
     /// Each step is submitted and read back on its own: slower than `advance`, but the GPU time
-    /// of the stages holds no host round trip.
+    /// of the stages holds no host round trip. A DFSPH solve is recorded as with
+    /// [`SolverLoop::Indirect`], whatever the solver's loop (the timed passes cannot wait for a
+    /// readback): the same iterations, timed with the empty ones after convergence.
     pub fn profile_stages(&mut self, steps: u64) -> anyhow::Result<Option<Vec<f64>>> {
         if !self.has_timestamps() {
             return Ok(None);
         }
-        anyhow::ensure!(
-            self.solver_loop == SolverLoop::Indirect,
-            "the profile times the DFSPH loop without host round trips (--solver-loop indirect); time {} with `wgsph run`",
-            self.solver_loop
-        );
         let device = &self.ctx.device;
         let count = 2 * ALL_PROFILED_STAGES as u32;
         let queries = device.create_query_set(&wgpu::QuerySetDescriptor { label: Some("stage timestamps"), ty: wgpu::QueryType::Timestamp, count });

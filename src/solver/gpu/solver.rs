@@ -106,6 +106,9 @@ pub struct GpuSolver {
     pub(super) dfsph: Option<DfsphGpu>,
     /// How a DFSPH solve's loop ends.
     pub(super) solver_loop: SolverLoop,
+    /// DFSPH with [`SolverLoop::Adaptive`]: the iterations each solve (0: divergence, 1:
+    /// constant density) recorded past its warm start in the last step that read them back.
+    pub(super) last_iterations: std::cell::Cell<[u32; 2]>,
     /// DFSPH: the bind groups of `step_accelerations` of each parity, made on request.
     pub(super) step_accelerations_groups: Option<[wgpu::BindGroup; 2]>,
     pub(super) steps: u64,
@@ -341,6 +344,7 @@ impl GpuSolver {
             finish_group,
             dfsph,
             solver_loop: options.solver_loop,
+            last_iterations: std::cell::Cell::new([0; 2]),
             step_accelerations_groups: None,
             steps: 0,
             max_groups_per_dim,

@@ -116,36 +116,46 @@ impl FromStr for WorkgroupSizes {
 }
 
 /// How the GPU ends the loop of a DFSPH solve (the same iterations, so the same values, either
-/// way).
+/// way). In every mode a one-thread check after each iteration decides on the GPU whether the
+/// solve goes on and sizes the next iteration's dispatches (indirect): the full size, or zero
+/// workgroups once it has ended, so that iterations recorded past the end are empty. The modes
+/// differ in how many iterations the host records before it asks whether the solve has ended.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum SolverLoop {
-    /// Every iteration up to the limit is recorded with the step; after each one a one-thread
-    /// check decides whether the solve goes on and sizes the next iteration's dispatches: the
-    /// full size, or zero workgroups once it has ended. No host round trip.
-    #[default]
+    /// Every iteration up to the limit is recorded with the step: no host round trip, but up
+    /// to `max_iterations` empty iterations per solve.
     Indirect,
     /// The host reads the solve's state back after every block of this many iterations and
-    /// records another block while it goes on (the same checks and dispatches, fewer recorded,
-    /// a host round trip per block).
+    /// records another block while it goes on (a host round trip per block).
     Readback(u32),
+    /// As `Readback`, with a first block as long as the same solve needed in the last step
+    /// (plus one) and blocks of [`ADAPTIVE_BLOCK`] after it: usually one round trip per solve
+    /// and few empty iterations. Measured fastest (docs/dfsph.md).
+    #[default]
+    Adaptive,
 }
+
+/// The blocks of [`SolverLoop::Adaptive`] after its first.
+pub const ADAPTIVE_BLOCK: u32 = 4;
 
 impl fmt::Display for SolverLoop {
     fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
         match self {
             SolverLoop::Indirect => write!(f, "indirect"),
             SolverLoop::Readback(k) => write!(f, "readback:{k}"),
+            SolverLoop::Adaptive => write!(f, "adaptive"),
         }
     }
 }
 
-/// `indirect` or `readback:K` (K iterations per round trip, K >= 1).
+/// `adaptive`, `indirect` or `readback:K` (K iterations per round trip, K >= 1).
 impl FromStr for SolverLoop {
     type Err = String;
     fn from_str(text: &str) -> Result<Self, String> {
-        let allowed = "allowed: indirect, or readback:K with K iterations per host round trip (K from 1 to 1000)";
+        let allowed = "allowed: adaptive, indirect, or readback:K with K iterations per host round trip (K from 1 to 1000)";
         match text.trim() {
             "indirect" => Ok(SolverLoop::Indirect),
+            "adaptive" => Ok(SolverLoop::Adaptive),
             other => match other.strip_prefix("readback:").map(|k| k.trim().parse::<u32>()) {
                 Some(Ok(k)) if (1..=1000).contains(&k) => Ok(SolverLoop::Readback(k)),
                 _ => Err(format!("'{other}' is not a solver loop; {allowed}")),
@@ -181,6 +191,8 @@ mod tests {
     #[test]
     fn solver_loops_parse() {
         assert_eq!("indirect".parse::<SolverLoop>().unwrap(), SolverLoop::Indirect);
+        assert_eq!("adaptive".parse::<SolverLoop>().unwrap(), SolverLoop::Adaptive);
+        assert_eq!(SolverLoop::Adaptive.to_string().parse::<SolverLoop>().unwrap(), SolverLoop::Adaptive);
         assert_eq!("readback:4".parse::<SolverLoop>().unwrap(), SolverLoop::Readback(4));
         assert_eq!(SolverLoop::Readback(4).to_string().parse::<SolverLoop>().unwrap(), SolverLoop::Readback(4));
         for bad in ["readback", "readback:0", "readback:x", "loop"] {
