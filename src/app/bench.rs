@@ -63,6 +63,7 @@ pub fn block_scene(n: u32) -> Scene {
         }],
         camera: None,
         limits: Default::default(),
+        probe: Vec::new(),
     }
 }
 

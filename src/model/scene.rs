@@ -64,6 +64,9 @@ pub struct Scene {
     /// When a run stops or warns because the fluid left the weakly compressible regime.
     #[serde(default, skip_serializing_if = "Limits::is_default")]
     pub limits: Limits,
+    /// Probes sampled during a run (`[[probe]]` tables; see [`super::probes`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub probe: Vec<super::probes::ProbeSpec>,
 }
 
 /// The weakly compressible regime a run must stay in: a run stops at the first step whose

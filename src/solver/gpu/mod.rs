@@ -6,6 +6,7 @@ pub mod device;
 pub mod memory;
 pub mod params;
 pub mod prefix_sum;
+pub mod probes;
 pub mod readback;
 pub mod schedule;
 pub mod shaders;

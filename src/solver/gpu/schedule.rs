@@ -154,6 +154,14 @@ impl GpuSolver {
         rec.clear(&self.status, status::NON_FINITE as u64 * 4, Some(8));
         rec.begin(ProfiledStage::Density);
         self.dispatch_particles(rec, &self.pipelines.density, &g.density);
+        // The probes sample the state the step starts from, with its density stage's fields;
+        // only in a scene with probes, only on the steps where one is due (profiled with the
+        // density).
+        if let Some(probes) = self.probes.as_mut() {
+            if self.params.probes.samples_step(self.steps, self.params.dt, self.params.adaptive.is_some()) {
+                probes.record(rec, read, self.steps);
+            }
+        }
         rec.begin(ProfiledStage::Forces);
         if self.pipelines.fused {
             self.dispatch_particles(rec, &self.pipelines.advance, &g.advance);

@@ -22,6 +22,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/forces.wgsl", include_str!("../../../wgsl/sim/forces.wgsl")),
     ("sim/integrate.wgsl", include_str!("../../../wgsl/sim/integrate.wgsl")),
     ("sim/forces_integrate.wgsl", include_str!("../../../wgsl/sim/forces_integrate.wgsl")),
+    ("sim/probes.wgsl", include_str!("../../../wgsl/sim/probes.wgsl")),
 ];
 
 /// The text of a simulation file (`sim/density.wgsl`, `shared/common.wgsl`, ...).
