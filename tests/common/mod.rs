@@ -127,7 +127,7 @@ impl TestScene {
     }
 
     /// Adds a `[[probe]]` table.
-    pub fn probe(mut self, probe: wgsph::model::probes::ProbeSpec) -> TestScene {
+    pub fn probe(mut self, probe: wgsph::model::scene::ProbeSpec) -> TestScene {
         self.scene.probe.push(probe);
         self
     }

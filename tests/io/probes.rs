@@ -7,7 +7,8 @@ use std::path::Path;
 use wgsph::app::resume::resume_with;
 use wgsph::app::run::{run, RunOptions};
 use wgsph::io::checkpoint::{read, CHECKPOINT_FILE};
-use wgsph::model::probes::{ProbeGeometry, ProbeInterval, ProbeSpec, ProbeType};
+use wgsph::model::probes::{ProbeGeometry, ProbeInterval};
+use wgsph::model::scene::{ProbeSpec, ProbeType};
 use wgsph::model::scene::{Scene, SceneOrigin};
 use wgsph::solver::Backend;
 

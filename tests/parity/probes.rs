@@ -4,7 +4,8 @@
 
 use crate::common;
 use crate::common::TestScene;
-use wgsph::model::probes::{ProbeSample, ProbeSpec, ProbeType};
+use wgsph::model::probes::ProbeSample;
+use wgsph::model::scene::{ProbeSpec, ProbeType};
 use wgsph::model::scene::Scene;
 use wgsph::solver::Backend;
 

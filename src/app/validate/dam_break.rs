@@ -19,7 +19,7 @@ use super::case::{noise_around_moving_mean, write_csv, Case, CaseReport, Figure,
 use crate::viz::plot::{Corner, Plot};
 use crate::model::scene::BoundaryPressure;
 use crate::model::scene::Kernel;
-use crate::model::probes::ProbeSpec;
+use crate::model::scene::ProbeSpec;
 use std::path::Path;
 
 /// Artificial viscosity coefficient of the dam breaks (nu = alpha h c0 / 8): low, as for a

@@ -18,7 +18,7 @@ use super::case::{noise_around_moving_mean, write_csv, Case, CaseReport, Figure,
 use crate::viz::plot::{Corner, Mark, Plot};
 use crate::model::scene::BoundaryPressure;
 use crate::model::scene::Kernel;
-use crate::model::probes::ProbeSpec;
+use crate::model::scene::ProbeSpec;
 use std::path::Path;
 
 /// Water depth H and tank width (m).

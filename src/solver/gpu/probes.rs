@@ -9,7 +9,6 @@ use super::buffers::{storage, storage_init};
 use super::device::GpuContext;
 use super::params::status;
 use super::readback::read_ranges;
-use super::schedule::Recorder;
 use super::shaders::{dispatch_size, stage, ArrayBuffers, ArrayLengths, Stage};
 use crate::model::params::Params;
 use crate::model::probes::{ProbeGeometry, ProbeSample};
@@ -148,8 +147,9 @@ impl GpuProbes {
         self.pending.len() as u64 >= ROW_CAPACITY
     }
 
-    /// Records a sample of the state `read` (after its density stage) taken after `step` steps.
-    pub(super) fn record(&mut self, rec: &mut dyn Recorder, read: usize, step: u64) {
+    /// Records into `pass` a sample of the state `read` (after its density stage) taken after
+    /// `step` steps.
+    pub(super) fn record(&mut self, pass: &mut wgpu::ComputePass<'static>, read: usize, step: u64) {
         if self.full() {
             // Only a caller that steps without ever reading the samples gets here.
             if !self.warned_full {
@@ -159,7 +159,6 @@ impl GpuProbes {
             return;
         }
         let g = &self.groups[read];
-        let pass = rec.pass();
         if let Some(points) = &self.points {
             pass.set_pipeline(&points.pipeline);
             pass.set_bind_group(0, &g[0], &[]);

@@ -159,7 +159,7 @@ impl GpuSolver {
         // density).
         if let Some(probes) = self.probes.as_mut() {
             if self.params.probes.samples_step(self.steps, self.params.dt, self.params.adaptive.is_some()) {
-                probes.record(rec, read, self.steps);
+                probes.record(rec.pass(), read, self.steps);
             }
         }
         rec.begin(ProfiledStage::Forces);
