@@ -48,6 +48,7 @@ fn drop_scene() -> Scene {
         boundary: vec![Boundary::Container { min: [0.0; 3], max: [0.5; 3], open_top: false, walls: WallParticles::default() }],
         camera: None,
         limits: Default::default(),
+        probe: Vec::new(),
     }
 }
 

@@ -85,6 +85,7 @@ pub fn block_scene(n: u32) -> Scene {
         }],
         camera: None,
         limits: Default::default(),
+        probe: Vec::new(),
     }
 }
 

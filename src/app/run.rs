@@ -5,6 +5,7 @@ use super::args::{RunArgs, SnapshotInterval};
 use super::errors::InputError;
 use super::signals::{self, StopSignal};
 use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
+use crate::io::probes::ProbeWriter;
 use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, StartGuard};
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::snapshot::SnapshotWriter;
@@ -16,6 +17,7 @@ use crate::model::state::Snapshot;
 use crate::model::diagnosis::regime_warnings;
 use crate::solver::backend::diagnose_failure;
 use crate::solver::{open, Backend};
+use crate::viz::probe_plots::plot_probes;
 use crate::viz::render::frames::FrameRecorder;
 use crate::viz::render::RenderOptions;
 use anyhow::Context;
@@ -132,6 +134,20 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let checkpoint_path = opts.out.join(CHECKPOINT_FILE);
     let mut last_checkpoint = (opts.resumed.is_some() && checkpoint_path.exists()).then(|| checkpoint_path.clone());
     let mut writer = snapshot_writer(opts, start)?;
+    // The probes' time series: a resumed run keeps the lines before its first step.
+    let mut probe_writer = match (params.probes.is_empty(), opts.resumed.is_some()) {
+        (true, _) => None,
+        (false, false) => Some(ProbeWriter::new(&opts.out, &params.probes)),
+        (false, true) => Some(ProbeWriter::resume(&opts.out, &params.probes, start)?),
+    };
+    // The samples the backend took since the last call, added to the series and written.
+    let write_probes = |backend: &mut dyn Backend, w: &mut Option<ProbeWriter>| -> anyhow::Result<()> {
+        let Some(w) = w else { return Ok(()) };
+        let step = backend.steps_done();
+        let samples = backend.take_probe_samples().with_context(|| format!("step {step}: reading the probes"))?;
+        w.add(&samples);
+        w.write().with_context(|| format!("step {step}: writing the probes' time series"))
+    };
     let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
         let step = backend.steps_done();
         let s = (|| -> anyhow::Result<Option<Snapshot>> {
@@ -220,6 +236,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         }
         backend.step(target - step)?;
         step = backend.steps_done();
+        write_probes(backend, &mut probe_writer)?;
         if !started {
             started = true;
             if let Some(guard) = &opts.start {
@@ -269,6 +286,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             write_checkpoint(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
             last_checkpoint = Some(checkpoint_path.clone());
         }
+    }
+    if let Some(w) = &probe_writer {
+        plot_probes(w).context("plotting the probes' time series")?;
     }
     if stopped_by.is_some() && opts.checkpoint_every > 0 && step % opts.checkpoint_every != 0 {
         // Stopped between checkpoints: one more, so that nothing computed is lost.
@@ -331,6 +351,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         dfsph: health.iterations.map(|it| DfsphSummary::of(&it, backend.steps_done())),
         max_mach: (params.speed_of_sound() > 0.0).then(|| health.max_speed / params.speed_of_sound()),
         warnings: regime_warnings(&params, &health),
+        probes: params.probes.probes.iter().map(|p| p.name.clone()).collect(),
     };
     // The run stands (a run of no steps too): its start is no longer undone.
     if let Some(guard) = &opts.start {
@@ -507,6 +528,9 @@ pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[
     }
     if s.last_checkpoint.is_some() {
         println!("  checkpoint.wgsph  the state to continue from with `wgsph run --resume {}`", out.display());
+    }
+    if !s.probes.is_empty() {
+        println!("  probes/        {} probe time series (NAME.csv) and their plots (NAME.png): {}", s.probes.len(), s.probes.join(", "));
     }
     println!("  summary.json   what the run did and how it ended");
     println!("  scene.toml     the scene as run (`wgsph run {}` runs it again)", out.join("scene.toml").display());

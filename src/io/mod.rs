@@ -4,6 +4,7 @@
 
 pub mod atomic;
 pub mod checkpoint;
+pub mod probes;
 pub mod rundir;
 pub mod snapshot;
 pub mod summary;

@@ -35,6 +35,10 @@ const REPLACED_PREFIX: &str = ".wgsph-replaced-";
 /// The subdirectories a run writes, and the files it writes in them.
 const SNAPSHOTS_DIR: &str = "snapshots";
 const SURFACE_DIR: &str = "surface";
+/// The probes' time series and plots (`probes/NAME.csv`, `probes/NAME.png`).
+pub const PROBES_DIR: &str = "probes";
+/// The subdirectories a run writes into.
+const RUN_SUBDIRS: [&str; 3] = [SNAPSHOTS_DIR, SURFACE_DIR, PROBES_DIR];
 
 /// The name of frame `index`'s picture: `frame_00000.png`.
 pub fn frame_file_name(index: u64) -> String {
@@ -56,6 +60,10 @@ fn is_run_output(sub: Option<&str>, name: &str) -> bool {
         None => [MARKER, SUMMARY_FILE, SCENE_COPY, CHECKPOINT_FILE].contains(&name) || numbered("frame_", &["png"]),
         Some(SNAPSHOTS_DIR) => numbered("step_", &["csv", "vtk", "ply"]) || name == VTK_SERIES_NAME || name == INDEX_NAME,
         Some(SURFACE_DIR) => numbered("step_", &["obj", "ply"]),
+        // A probe's name is letters, digits, '_' and '-' (checked at load).
+        Some(PROBES_DIR) => name.rsplit_once('.').is_some_and(|(stem, ext)| {
+            !stem.is_empty() && stem.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-') && (ext == "csv" || ext == "png")
+        }),
         Some(_) => false,
     }
 }
@@ -119,7 +127,7 @@ impl RunOutputs {
                     guard.created.push(l.path.clone());
                 }
             }
-            let subdirs_before = [SNAPSHOTS_DIR, SURFACE_DIR].map(|s| l.path.join(s).is_dir());
+            let subdirs_before = RUN_SUBDIRS.map(|s| l.path.join(s).is_dir());
             if l.earlier_run && self.overwrite {
                 let stash = move_outputs_aside(&l.path)?;
                 guard.replaced.borrow_mut().push(stash);
@@ -199,7 +207,7 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
                 }
             }
         }
-        for sub in [SNAPSHOTS_DIR, SURFACE_DIR] {
+        for sub in RUN_SUBDIRS {
             let d = path.join(sub);
             if d.is_dir() {
                 probe_writable(&d).map_err(|e| bad(format!("cannot replace the earlier run's files: cannot write in {}: {e}", d.display())))?;
@@ -209,7 +217,7 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
             .iter()
             .filter(|n| {
                 let p = path.join(n);
-                let run_dir = (n.as_str() == SNAPSHOTS_DIR || n.as_str() == SURFACE_DIR || n.starts_with(REPLACED_PREFIX)) && p.is_dir();
+                let run_dir = (RUN_SUBDIRS.contains(&n.as_str()) || n.starts_with(REPLACED_PREFIX)) && p.is_dir();
                 !run_dir && !(is_run_output(None, n) && p.is_file())
             })
             .cloned()
@@ -256,7 +264,7 @@ fn run_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
         if name.starts_with(REPLACED_PREFIX) && path.is_dir() {
             // Left by a start that was killed: an earlier run's files, already set aside.
             out.push(path);
-        } else if (name == SNAPSHOTS_DIR || name == SURFACE_DIR) && path.is_dir() {
+        } else if RUN_SUBDIRS.contains(&name.as_str()) && path.is_dir() {
             for inner in list(&path)? {
                 if is_run_output(Some(&name), &inner) && path.join(&inner).is_file() {
                     out.push(path.join(inner));
@@ -341,7 +349,7 @@ impl Replaced {
 #[derive(Debug)]
 pub struct StartGuard {
     /// Each location, with whether its snapshots/ and surface/ existed before.
-    dirs: Vec<(PathBuf, [bool; 2])>,
+    dirs: Vec<(PathBuf, [bool; 3])>,
     /// Directories created, parents first.
     created: Vec<PathBuf>,
     replaced: RefCell<Vec<Replaced>>,
@@ -380,7 +388,7 @@ impl StartGuard {
             for r in replaced.iter().filter(|r| &r.dir == dir) {
                 r.restore()?;
             }
-            for (sub, existed) in [SNAPSHOTS_DIR, SURFACE_DIR].iter().zip(subdirs_before) {
+            for (sub, existed) in RUN_SUBDIRS.iter().zip(subdirs_before) {
                 if !existed {
                     let _ = std::fs::remove_dir(dir.join(sub));
                 }
@@ -455,7 +463,7 @@ pub fn write_scene_copy(out: &Path, scene: &Scene) -> anyhow::Result<()> {
 /// temporary files, in the directory, `snapshots/` and `surface/`); returns them.
 pub fn remove_partial_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut removed = crate::io::atomic::remove_leftover_temporaries(dir)?;
-    for sub in [SNAPSHOTS_DIR, SURFACE_DIR] {
+    for sub in RUN_SUBDIRS {
         removed.extend(crate::io::atomic::remove_leftover_temporaries(&dir.join(sub))?);
     }
     Ok(removed)

@@ -70,6 +70,9 @@ pub struct Summary {
     /// Where the run left the weakly compressible regime without stopping (`limits.warn_*`).
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// The names of the scene's probes, whose time series are in `probes/NAME.csv`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub probes: Vec<String>,
 }
 
 /// DFSPH's solves over a run: iterations per step and how the last step ended.

@@ -226,6 +226,7 @@ impl Scene {
             return Err(err(origin, "boundary", format!("has more than {MAX_PLANES} planes")));
         }
         self.validate_overlaps(origin)?;
+        self.validate_probes(origin)?;
         let grid = self.grid();
         let cells: u64 = grid.dims.iter().map(|&d| d as u64).product();
         if cells > MAX_CELLS {

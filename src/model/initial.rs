@@ -24,6 +24,8 @@ pub struct InitialState {
     pub fluid_velocities: Vec<[f64; 3]>,
     pub wall_positions: Vec<[f64; 3]>,
     pub wall_masses: Vec<f64>,
+    /// The index in the scene's `[[boundary]]` list of each wall particle's boundary.
+    pub wall_boundaries: Vec<u32>,
 }
 
 impl Scene {
@@ -106,7 +108,7 @@ impl Scene {
                 st.fluid_velocities.push(b.velocity);
             }
         }
-        for b in &self.boundary {
+        for (index, b) in self.boundary.iter().enumerate() {
             let (min, max, walls, open_top, hollow_box) = match b {
                 Boundary::Container { min, max, walls, open_top } => (min, max, walls, *open_top, false),
                 Boundary::Box { min, max, walls } => (min, max, walls, false, true),
@@ -129,6 +131,7 @@ impl Scene {
                     if !inner(&q, lo, hi) {
                         st.wall_positions.push(q);
                         st.wall_masses.push(mass);
+                        st.wall_boundaries.push(index as u32);
                     }
                 }
             } else {
@@ -160,6 +163,7 @@ impl Scene {
                             if !inner(&q, *min, cavity_hi) {
                                 st.wall_positions.push(q);
                                 st.wall_masses.push(mass_of([cx, cy, cz]));
+                                st.wall_boundaries.push(index as u32);
                             }
                         }
                     }

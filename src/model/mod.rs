@@ -12,6 +12,7 @@ pub mod lattice;
 pub mod numbers;
 pub mod overrides;
 pub mod params;
+pub mod probes;
 pub mod real;
 pub mod scene;
 pub mod state;

@@ -43,6 +43,8 @@ pub struct Params {
     pub boundary_volume: BoundaryVolume,
     /// The weakly compressible regime the run must stay in.
     pub limits: Limits,
+    /// The probes sampled during a run (none: no probe stage runs).
+    pub probes: super::probes::Probes,
 }
 
 impl Params {
@@ -216,6 +218,7 @@ impl Scene {
             dfsph: (p.solver == PressureSolver::Dfsph).then(|| p.dfsph.clone()),
             boundary_volume: p.boundary_volume,
             limits: self.limits,
+            probes: self.probes(),
         }
     }
 }

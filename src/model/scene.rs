@@ -64,6 +64,9 @@ pub struct Scene {
     /// When a run stops or warns because the fluid left the weakly compressible regime.
     #[serde(default, skip_serializing_if = "Limits::is_default")]
     pub limits: Limits,
+    /// Probes sampled during a run (`[[probe]]` tables; see [`super::probes`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub probe: Vec<ProbeSpec>,
 }
 
 /// The weakly compressible regime a run must stay in: a run stops at the first step whose
@@ -743,5 +746,117 @@ impl Scene {
             })
             .reduce(f64::min)
             .unwrap_or(self.physics.particle_spacing)
+    }
+}
+
+/// A `[[probe]]` table of a scene: a name, a type and the fields of that type's geometry (a
+/// field of another type is refused, naming the probe).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeSpec {
+    /// The file name of its time series: probes/NAME.csv.
+    pub name: String,
+    #[serde(rename = "type")]
+    pub kind: ProbeType,
+    /// point: the point; gauge: the bottom of its vertical line (the height is measured from
+    /// its y).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position: Option<[f64; 3]>,
+    /// gauge: the y of the line's top; default the domain's top.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub top: Option<f64>,
+    /// force: the index of the solid in the scene's `[[boundary]]` list (a box or a container).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub boundary: Option<usize>,
+    /// force: only the wall particles inside [min, max] count (default: all of the boundary's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max: Option<[f64; 3]>,
+    /// force: the point the moment is taken about; default the boundary's centre.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moment_about: Option<[f64; 3]>,
+    /// front: the direction the front advances along (default +x).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direction: Option<[f64; 3]>,
+    /// front: the y of the floor; default the bottom of the lowest fluid block.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub floor: Option<f64>,
+    /// front: fluid counts when its y is below floor + height; default h.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height: Option<f64>,
+    /// Sample every this many steps (default 1 when `every_seconds` is not given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub every_steps: Option<u64>,
+    /// Sample at the first step reaching each multiple of this simulated time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub every_seconds: Option<f64>,
+}
+
+/// What a probe measures.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ProbeType {
+    Point,
+    Gauge,
+    Force,
+    Front,
+}
+
+impl ProbeType {
+    /// The geometry fields a probe of this type may have.
+    pub(crate) fn fields(self) -> &'static [&'static str] {
+        match self {
+            ProbeType::Point => &["position"],
+            ProbeType::Gauge => &["position", "top"],
+            ProbeType::Force => &["boundary", "min", "max", "moment_about"],
+            ProbeType::Front => &["direction", "floor", "height"],
+        }
+    }
+}
+
+impl ProbeSpec {
+    /// The geometry fields this table gives.
+    pub(crate) fn given(&self) -> Vec<&'static str> {
+        let mut g = Vec::new();
+        let mut add = |name: &'static str, present: bool| {
+            if present {
+                g.push(name);
+            }
+        };
+        add("position", self.position.is_some());
+        add("top", self.top.is_some());
+        add("boundary", self.boundary.is_some());
+        add("min", self.min.is_some());
+        add("max", self.max.is_some());
+        add("moment_about", self.moment_about.is_some());
+        add("direction", self.direction.is_some());
+        add("floor", self.floor.is_some());
+        add("height", self.height.is_some());
+        g
+    }
+
+    /// A point probe at `position` sampled every `every_steps` steps.
+    pub fn point(name: &str, position: [f64; 3], every_steps: u64) -> Self {
+        ProbeSpec { position: Some(position), every_steps: Some(every_steps), ..ProbeSpec::of(name, ProbeType::Point) }
+    }
+
+    /// A probe of type `kind` with no geometry given (every default).
+    pub fn of(name: &str, kind: ProbeType) -> Self {
+        ProbeSpec {
+            name: name.into(),
+            kind,
+            position: None,
+            top: None,
+            boundary: None,
+            min: None,
+            max: None,
+            moment_about: None,
+            direction: None,
+            floor: None,
+            height: None,
+            every_steps: None,
+            every_seconds: None,
+        }
     }
 }

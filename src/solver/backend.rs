@@ -3,6 +3,7 @@
 use super::gpu::buffers::ParticleBuffers;
 use crate::model::diagnosis::{diagnose, SolidIntrusions};
 use crate::model::params::Params;
+use crate::model::probes::ProbeSample;
 use crate::model::scene::Scene;
 use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
 
@@ -134,6 +135,13 @@ pub trait Backend {
     /// Continues from a saved state: the following steps are bitwise those the saving backend
     /// would have computed (on the same adapter or float type).
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()>;
+    /// The samples of the scene's probes taken since the last call, in step order: each holds
+    /// every probe's values, for the steps at which some probe was due
+    /// ([`crate::model::probes::Probes::samples_step`]). A few numbers per sample: no particle
+    /// array is read back.
+    fn take_probe_samples(&mut self) -> anyhow::Result<Vec<ProbeSample>> {
+        Ok(Vec::new())
+    }
 }
 
 /// Why the run of `backend` (a run of `scene`) went bad: the diagnosis of its first bad step

@@ -3,6 +3,7 @@
 //! solver hands out.
 
 pub mod plot;
+pub mod probe_plots;
 pub mod render;
 #[cfg(feature = "view")]
 pub mod view;

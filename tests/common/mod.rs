@@ -88,6 +88,7 @@ impl TestScene {
                 boundary: Vec::new(),
                 camera: None,
                 limits: Default::default(),
+                probe: Vec::new(),
             },
         }
     }
@@ -123,6 +124,12 @@ impl TestScene {
             Ok(()) => panic!("the scene was expected to be refused:\n{}", self.scene.to_toml()),
             Err(e) => e.to_string(),
         }
+    }
+
+    /// Adds a `[[probe]]` table.
+    pub fn probe(mut self, probe: wgsph::model::scene::ProbeSpec) -> TestScene {
+        self.scene.probe.push(probe);
+        self
     }
 
     pub fn named(mut self, name: &str) -> TestScene {

@@ -94,6 +94,9 @@ impl Backend for FailingAt<'_> {
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         self.inner.restore_state(state)
     }
+    fn take_probe_samples(&mut self) -> anyhow::Result<Vec<wgsph::model::probes::ProbeSample>> {
+        self.inner.take_probe_samples()
+    }
 }
 
 fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {

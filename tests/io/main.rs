@@ -13,3 +13,4 @@ mod stream;
 mod checkpoint;
 mod run_dir;
 mod surface;
+mod probes;

@@ -11,3 +11,4 @@ mod adaptive;
 mod specialise;
 mod scale;
 mod dfsph;
+mod probes;

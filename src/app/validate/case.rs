@@ -75,10 +75,48 @@ impl Figure {
     pub fn new(name: impl Into<String>, value: f64, tolerance: f64) -> Self {
         Figure { name: name.into(), value, tolerance }
     }
+    /// A figure measured and shown with no bound to meet (its tolerance is infinite).
+    pub fn reported(name: impl Into<String>, value: f64) -> Self {
+        Figure { name: name.into(), value, tolerance: f64::INFINITY }
+    }
     /// NaN never passes.
     pub fn passed(&self) -> bool {
         self.value <= self.tolerance
     }
+    /// The bound as shown: `<= TOLERANCE`, or `reported` where there is none.
+    pub fn bound(&self) -> String {
+        if self.tolerance.is_finite() {
+            format!("<= {}", fmt_num(self.tolerance))
+        } else {
+            "reported".into()
+        }
+    }
+}
+
+/// The pressure-noise figure of a probe's series of (time, pressure): the standard deviation
+/// of the pressure around its moving mean over `window` seconds centred on each sample (NaN for
+/// fewer than two samples). The moving mean keeps the flow's own change of pressure; what
+/// remains is the sample-to-sample scatter of weakly compressible SPH.
+pub fn noise_around_moving_mean(series: &[(f64, f64)], window: f64) -> f64 {
+    if series.len() < 2 {
+        return f64::NAN;
+    }
+    let mut prefix = vec![0.0; series.len() + 1];
+    for (i, &(_, p)) in series.iter().enumerate() {
+        prefix[i + 1] = prefix[i] + p;
+    }
+    let (mut lo, mut hi, mut sum2) = (0, 0, 0.0);
+    for &(t, p) in series {
+        while series[lo].0 < t - 0.5 * window {
+            lo += 1;
+        }
+        while hi < series.len() && series[hi].0 <= t + 0.5 * window {
+            hi += 1;
+        }
+        let mean = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
+        sum2 += (p - mean) * (p - mean);
+    }
+    (sum2 / series.len() as f64).sqrt()
 }
 
 /// What a case found.
@@ -117,7 +155,7 @@ impl CaseReport {
             .figures
             .iter()
             // A '|' would end the table cell.
-            .map(|f| format!("{} = {} (<= {}{})", f.name.replace('|', "\\|"), fmt_num(f.value), fmt_num(f.tolerance), if f.passed() { "" } else { ", FAILED" }))
+            .map(|f| format!("{} = {} ({}{})", f.name.replace('|', "\\|"), fmt_num(f.value), f.bound(), if f.passed() { "" } else { ", FAILED" }))
             .collect();
         let mut notes = figs.join("; ");
         notes += &format!(

@@ -7,13 +7,19 @@
 //! cube of side s, so the water's edge lies s/2 beyond its centre; at t = 0 this gives exactly
 //! the column's width). The residual height is measured the same way upwards along the back
 //! wall: the particles within h of it, from the floor up to the first gap wider than h, plus s/2.
+//!
+//! A point probe on the far wall, a tenth of the column's width above the floor, sampled every
+//! step, gives the pressure-noise figure: the standard deviation of its pressure around its
+//! 20 ms moving mean over the run, over rho g H with H = 2a the column's height (reported,
+//! with no bound: it measures how noisy the pressure of plain weakly compressible SPH is).
 
 use super::data::{self, relative_errors};
 use super::scenes::{WALL_LAYERS, H_OVER_SPACING, sample_steps, Tank, GRAVITY, SLAB_SPACINGS};
-use super::case::{write_csv, Case, CaseReport, Figure, MakeBackend, Resolution, Sampler};
+use super::case::{noise_around_moving_mean, write_csv, Case, CaseReport, Figure, MakeBackend, Resolution, Sampler};
 use crate::viz::plot::{Corner, Plot};
 use crate::model::scene::BoundaryPressure;
 use crate::model::scene::Kernel;
+use crate::model::scene::ProbeSpec;
 use std::path::Path;
 
 /// Artificial viscosity coefficient of the dam breaks (nu = alpha h c0 / 8): low, as for a
@@ -109,11 +115,24 @@ pub struct Collapse {
     pub fluid_particles: usize,
     pub adapter: String,
     pub spacing: f64,
+    /// The far wall's pressure-noise figure (see the module's documentation).
+    pub wall_noise: f64,
+}
+
+/// The moving mean the pressure noise is taken around (s).
+pub const NOISE_WINDOW: f64 = 0.02;
+
+/// The pressure-noise figure of a collapse.
+pub fn noise_figure(run: &Collapse) -> Figure {
+    Figure::reported("pressure noise at the far wall (std around the 20 ms moving mean) / rho g H", run.wall_noise)
 }
 
 /// Runs a column collapse, sampling every `every` seconds.
 pub fn collapse(tank: &Tank, every: f64, make: &mut MakeBackend) -> anyhow::Result<Collapse> {
-    let scene = tank.scene()?;
+    let mut scene = tank.scene()?;
+    let column = &tank.fluid[0];
+    let (width, column_height) = (column.1[0] - column.0[0], column.1[1] - column.0[1]);
+    scene.probe.push(ProbeSpec::point("far_wall", [tank.size[0], 0.1 * width, 0.5 * tank.size[2]], 1));
     let params = scene.params();
     let mut backend = make(&scene, None)?;
     let mut sampler = Sampler::new(&scene);
@@ -127,7 +146,9 @@ pub fn collapse(tank: &Tank, every: f64, make: &mut MakeBackend) -> anyhow::Resu
         let (front, height) = measure(&snap.positions, h, s);
         samples.push(CollapseSample { time: snap.time, front, height });
     })?;
-    Ok(Collapse { samples, sampler, failure: result.err(), fluid_particles: backend.fluid_count(), adapter: backend.adapter(), spacing: s })
+    let wall: Vec<(f64, f64)> = backend.take_probe_samples()?.iter().map(|p| (p.time, p.values[0])).collect();
+    let wall_noise = noise_around_moving_mean(&wall, NOISE_WINDOW) / (params.rest_density * GRAVITY * column_height);
+    Ok(Collapse { samples, sampler, failure: result.err(), fluid_particles: backend.fluid_count(), adapter: backend.adapter(), spacing: s, wall_noise })
 }
 
 /// Martin & Moyce (1952): Z = x/a against T = t sqrt(2g/a), H = h/(2a) against tau = t sqrt(g/a).
@@ -155,6 +176,7 @@ pub fn run_martin_moyce(resolution: Resolution, out: &Path, make: &mut MakeBacke
         Figure::new("front max relative error", zm, tol.front_max),
         Figure::new("height RMS relative error", hr, tol.height_rms),
         Figure::new("height max relative error", hm, tol.height_max),
+        noise_figure(&run),
     ];
     let name = Case::DamBreakMartinMoyce.name();
     let plot = out.join(format!("{name}.png"));
@@ -197,7 +219,7 @@ pub fn run_koshizuka_oka(resolution: Resolution, out: &Path, make: &mut MakeBack
         |t| t >= t_from,
     );
     let tol = tolerances(resolution);
-    let figures = vec![Figure::new("front RMS relative error", rms, tol.front_rms), Figure::new("front max relative error", max, tol.front_max)];
+    let figures = vec![Figure::new("front RMS relative error", rms, tol.front_rms), Figure::new("front max relative error", max, tol.front_max), noise_figure(&run)];
     let name = Case::DamBreakKoshizukaOka.name();
     let plot = out.join(format!("{name}.png"));
     let csv = out.join(format!("{name}.csv"));

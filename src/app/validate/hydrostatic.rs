@@ -7,12 +7,18 @@
 //! and then per horizontal layer one support radius h thick, over the particles more than h from
 //! the side walls. H is the depth the fluid's mass fills
 //! at the rest density (the initial block's height).
+//!
+//! The pressure is also read as an instrument would, through point probes on the tank's
+//! vertical centre line (sampled on the device every 10 ms, averaged over the same window), and
+//! a probe at mid-depth sampled every step gives the pressure-noise figure: the standard
+//! deviation of its pressure around its 20 ms moving mean over the window, over rho g H.
 
 use super::scenes::{WALL_LAYERS, sample_steps, Tank, GRAVITY, H_OVER_SPACING};
-use super::case::{write_csv, Case, CaseReport, Figure, MakeBackend, Resolution, Sampler};
+use super::case::{noise_around_moving_mean, write_csv, Case, CaseReport, Figure, MakeBackend, Resolution, Sampler};
 use crate::viz::plot::{Corner, Mark, Plot};
 use crate::model::scene::BoundaryPressure;
 use crate::model::scene::Kernel;
+use crate::model::scene::ProbeSpec;
 use std::path::Path;
 
 /// Water depth H and tank width (m).
@@ -20,6 +26,10 @@ pub const DEPTH: f64 = 0.4;
 /// Settling time, then the averaging window (s).
 pub const SETTLE: f64 = 0.8;
 pub const WINDOW: f64 = 0.4;
+/// Heights of the point probes on the centre line, as fractions of the depth.
+pub const PROBE_HEIGHTS: [f64; 6] = [0.125, 0.25, 0.375, 0.5, 0.625, 0.75];
+/// The moving mean the pressure noise is taken around (s).
+pub const NOISE_WINDOW: f64 = 0.02;
 
 pub fn layers(r: Resolution) -> f64 {
     20.0 * r.refinement()
@@ -58,7 +68,14 @@ pub fn tank(resolution: Resolution) -> Tank {
 
 pub fn run(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow::Result<CaseReport> {
     let tank = tank(resolution);
-    let scene = tank.scene()?;
+    let mut scene = tank.scene()?;
+    let centre = 0.5 * DEPTH;
+    for (j, f) in PROBE_HEIGHTS.iter().enumerate() {
+        let mut probe = ProbeSpec::point(&format!("centre_{j}"), [centre, f * DEPTH, centre], 1);
+        (probe.every_steps, probe.every_seconds) = (None, Some(0.01));
+        scene.probe.push(probe);
+    }
+    scene.probe.push(ProbeSpec::point("noise", [centre, 0.5 * DEPTH, centre], 1));
     let params = scene.params();
     let mut backend = make(&scene, None)?;
     let n = backend.fluid_count();
@@ -85,6 +102,8 @@ pub fn run(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow
             last_speed = snap.max_speed();
         }
     })?;
+    let samples = backend.take_probe_samples()?;
+    let offsets = params.probes.offsets();
     let rho0 = params.rest_density;
     let g = GRAVITY;
     let h = params.h;
@@ -130,12 +149,30 @@ pub fn run(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow
         err_all = f64::NAN;
         rho_dev = f64::NAN;
     }
+    // The probes: their pressure averaged over the window against rho0 g (H - y), and the
+    // noise of the one sampled every step.
+    let in_window = |s: &&crate::model::probes::ProbeSample| s.time > SETTLE;
+    let mut probe_rows = Vec::new();
+    let mut err_probes = if samples.iter().any(|s| in_window(&s)) { 0.0f64 } else { f64::NAN };
+    for (j, f) in PROBE_HEIGHTS.iter().enumerate() {
+        let probe = &params.probes.probes[j];
+        let kept: Vec<f64> = samples.iter().filter(in_window).filter(|s| probe.due(s.step, s.time, s.previous_time)).map(|s| s.values[offsets[j]]).collect();
+        let mean = kept.iter().sum::<f64>() / kept.len().max(1) as f64;
+        let y = f * DEPTH;
+        err_probes = err_probes.max((mean - rho0 * g * (DEPTH - y)).abs() / scale);
+        probe_rows.push((mean, y));
+    }
+    let noise_at = offsets[PROBE_HEIGHTS.len()];
+    let noise_series: Vec<(f64, f64)> = samples.iter().filter(in_window).map(|s| (s.time, s.values[noise_at])).collect();
+    let noise = noise_around_moving_mean(&noise_series, NOISE_WINDOW) / scale;
     let tol = tolerances(resolution);
     let figures = vec![
         Figure::new("pressure error / rho g H below the top h", err_interior, tol[0]),
         Figure::new("pressure error / rho g H, whole depth", err_all, tol[1]),
         Figure::new("layer density deviation from rest below the top h", rho_dev, tol[2]),
         Figure::new("residual speed / sqrt(g H)", last_speed / (g * DEPTH).sqrt(), tol[3]),
+        Figure::new("point-probe pressure error / rho g H", err_probes, tol[0]),
+        Figure::reported("pressure noise (std around the 20 ms moving mean) / rho g H", noise),
     ];
     let name = Case::Hydrostatic.name();
     let plot = out.join(format!("{name}.png"));
@@ -152,6 +189,7 @@ pub fn run(resolution: Resolution, out: &Path, make: &mut MakeBackend) -> anyhow
             highlight: true,
             color: None,
         })
+        .points("point probes on the centre line", probe_rows)
         .line("rho0 g (H - y)", exact)
         .legend(Corner::UpperRight)
         .write_png(&plot)?;

@@ -90,7 +90,7 @@ pub fn cmd_validate(args: &ValidateArgs) -> anyhow::Result<i32> {
         let r = run_case(case, args.resolution, &args.out, &mut make)?;
         println!("{}: {} ({:.0} s)", case.name(), if r.passed() { "pass" } else { "FAIL" }, r.wall_seconds);
         for f in &r.figures {
-            println!("  {} = {} (tolerance {}){}", f.name, fmt_num(f.value), fmt_num(f.tolerance), if f.passed() { "" } else { "  FAILED" });
+            println!("  {} = {} ({}){}", f.name, fmt_num(f.value), f.bound(), if f.passed() { "" } else { "  FAILED" });
         }
         println!("  fluid particles inside walls: {} over {} checked steps", r.wall_leaks, r.checked_steps.len());
         if let Some(f) = &r.failure {

@@ -119,6 +119,7 @@ impl Tank {
             boundary,
             camera: None,
             limits: Default::default(),
+            probe: Vec::new(),
         };
         scene.validate(&SceneOrigin::BuiltIn(self.name.clone()))?;
         Ok(scene)

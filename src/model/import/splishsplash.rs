@@ -470,6 +470,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
         boundary,
         camera: None,
         limits: Default::default(),
+        probe: Vec::new(),
     };
     // A scene the import built but wgsph refuses: the error names the JSON key the value came
     // from, not the wgsph field it became.

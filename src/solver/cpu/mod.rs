@@ -17,12 +17,14 @@ pub mod forces;
 pub mod forces_integrate;
 pub mod integrate;
 pub mod prefix_sum;
+pub mod probes;
 pub mod reorder;
 
 use super::backend::Backend;
 use crate::model::initial::InitialState;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
+use crate::model::probes::ProbeSample;
 use crate::model::real::{Real, V3};
 use crate::model::state::{BackendState, DfsphFields, DtStats, Health, Snapshot, StepFields};
 use dfsph::{DfsphCpu, StepParts};
@@ -59,6 +61,10 @@ pub struct CpuSolver<R: Real> {
     dt_stats: DtStats,
     /// DFSPH's arrays, when the scene uses it.
     dfsph: Option<DfsphCpu<R>>,
+    /// Each sorted wall particle's mask of the force probes that read it (empty without them).
+    wall_probe_masks: Vec<u32>,
+    /// The probe samples taken since they were last handed out.
+    probe_samples: Vec<ProbeSample>,
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -69,6 +75,8 @@ impl<R: Real> CpuSolver<R> {
         // Walls never move: sort them by cell once.
         let walls: Vec<V3<R>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
         let (wall_order, wall_starts) = sort_by_cell(&grid, &walls);
+        let masks = params.probes.wall_masks(&initial.wall_positions, &initial.wall_boundaries);
+        let wall_probe_masks = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
         // Without walls no stage visits them: no per-cell array.
         let wall_starts = if walls.is_empty() { Vec::new() } else { wall_starts };
         let planes = params
@@ -101,6 +109,8 @@ impl<R: Real> CpuSolver<R> {
             time: 0.0,
             dt_stats: DtStats { min: f64::INFINITY, ..DtStats::default() },
             dfsph: params.dfsph.as_ref().map(|settings| DfsphCpu::new(settings, n)),
+            wall_probe_masks,
+            probe_samples: Vec::new(),
         }
     }
 
@@ -346,12 +356,53 @@ impl<R: Real> CpuSolver<R> {
             return;
         }
         self.compute_density();
+        if !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some()) {
+            self.sample_probes();
+        }
         self.compute_forces();
         let max_density = self.largest_density();
         self.health.max_density = self.health.max_density.max(max_density);
         let dt = self.choose_dt();
         let h = self.integrate_with(dt);
         self.record_step(dt, h, max_density);
+    }
+
+    /// Samples every probe on the state the step starts from and the fields of its density
+    /// stage (wgsl/sim/probes.wgsl's three entry points in order).
+    pub fn sample_probes(&mut self) {
+        let p = &self.params;
+        let input = probes::ProbeInput {
+            kernel: &self.kernel,
+            grid: &self.grid,
+            fluid_mass: R::of(p.fluid_mass),
+            viscosity: R::of(p.viscosity_at_step(self.step)),
+            boundary_friction: R::of(p.boundary_friction),
+            boundary_pressure: p.boundary_pressure,
+            fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+            velocities: &self.velocities,
+            densities: &self.densities,
+            pressures: &self.pressures,
+            walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
+            wall_masses: &self.wall_masses,
+            wall_masks: &self.wall_probe_masks,
+        };
+        let list = &p.probes.probes;
+        let offsets = p.probes.offsets();
+        let mut values = vec![R::zero(); p.probes.value_count()];
+        probes::probe_points(&input, list, &offsets, &mut values);
+        let mut partials = Vec::new();
+        probes::probe_particles(&input, list, &mut partials);
+        probes::probe_finish(list, &offsets, &partials, &mut values);
+        let (time, previous_time) = match p.adaptive {
+            Some(_) => (self.time, if self.step == 0 { 0.0 } else { self.time - self.dt_stats.last }),
+            None => (self.step as f64 * p.dt, self.step.saturating_sub(1) as f64 * p.dt),
+        };
+        self.probe_samples.push(ProbeSample { step: self.step, time, previous_time, values: values.iter().map(|v| v.to64()).collect() });
+    }
+
+    /// The probe samples taken since the last call, in step order.
+    pub fn take_probe_samples(&mut self) -> Vec<ProbeSample> {
+        std::mem::take(&mut self.probe_samples)
     }
 
     /// The largest density of the last density stage; non-finite densities are left out, as
@@ -451,6 +502,7 @@ impl<R: Real> CpuSolver<R> {
         self.velocities = state.velocities.iter().map(|&v| V3::from64(v)).collect();
         self.ids = state.ids.clone();
         self.step = state.step;
+        self.probe_samples.clear();
         self.health = state.health();
         self.time = state.time;
         let [min, max, last] = state.dt_min_max_last;
@@ -524,6 +576,9 @@ impl<R: Real> Backend for CpuSolver<R> {
     }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         CpuSolver::restore_state(self, state)
+    }
+    fn take_probe_samples(&mut self) -> anyhow::Result<Vec<ProbeSample>> {
+        Ok(CpuSolver::take_probe_samples(self))
     }
 }
 

@@ -7,6 +7,7 @@ pub mod dfsph;
 pub mod memory;
 pub mod params;
 pub mod prefix_sum;
+pub mod probes;
 pub mod readback;
 pub mod schedule;
 pub mod shaders;

@@ -198,7 +198,8 @@ impl GpuSolver {
             return;
         }
         let read = self.current;
-        let w = self.wcsph_stages();
+        // Field borrows, not a method's, so that the probes below can be borrowed mutably.
+        let w = self.pipelines.wcsph.as_ref().expect("a weakly compressible scene");
         let g = self.groups[read].wcsph.as_ref().expect("a weakly compressible scene");
         if work == Work::Fields {
             rec.begin(ProfiledStage::Density);
@@ -211,6 +212,14 @@ impl GpuSolver {
         rec.clear(&self.status, status::NON_FINITE as u64 * 4, Some(8));
         rec.begin(ProfiledStage::Density);
         self.dispatch_particles(rec, &w.density, &g.density);
+        // The probes sample the state the step starts from, with its density stage's fields;
+        // only in a scene with probes, only on the steps where one is due (profiled with the
+        // density).
+        if let Some(probes) = self.probes.as_mut() {
+            if self.params.probes.samples_step(self.steps, self.params.dt, self.params.adaptive.is_some()) {
+                probes.record(rec.pass(), read, self.steps);
+            }
+        }
         rec.begin(ProfiledStage::Forces);
         if self.pipelines.fused {
             self.dispatch_particles(rec, &w.advance, &g.advance);

@@ -29,6 +29,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/dfsph_pressure.wgsl", include_str!("../../../wgsl/sim/dfsph_pressure.wgsl")),
     ("sim/dfsph_convergence.wgsl", include_str!("../../../wgsl/sim/dfsph_convergence.wgsl")),
     ("sim/dfsph_integrate.wgsl", include_str!("../../../wgsl/sim/dfsph_integrate.wgsl")),
+    ("sim/probes.wgsl", include_str!("../../../wgsl/sim/probes.wgsl")),
 ];
 
 /// The text of a simulation file (`sim/density.wgsl`, `shared/common.wgsl`, ...).

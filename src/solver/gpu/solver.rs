@@ -8,6 +8,7 @@ use super::device::GpuContext;
 use super::memory::MemoryPlan;
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
+use super::probes::GpuProbes;
 use super::readback::{read_buffers, visit_array, visit_pairs, visit_rows, Element, RowArrays};
 use super::shaders::{constants, stage, storage_bindings, Stage};
 use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, SharedBuffers};
@@ -16,6 +17,7 @@ use crate::model::initial::InitialState;
 use crate::model::kernels::sort_by_cell;
 use crate::model::params::Params;
 use crate::model::real::V3;
+use crate::model::probes::ProbeSample;
 use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
 use crate::solver::backend::{Backend, SnapshotRow, StateArray, StatePiece};
 use wgpu::util::DeviceExt;
@@ -116,6 +118,8 @@ pub struct GpuSolver {
     pub(super) max_groups_per_dim: u32,
     /// Steps per command buffer.
     pub(super) steps_per_submit: u64,
+    /// The probe stage, in a scene with probes.
+    pub(super) probes: Option<GpuProbes>,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
 }
@@ -303,6 +307,14 @@ impl GpuSolver {
             }
         };
         let groups = [make_parity(0), make_parity(1)];
+        let probes = if params.probes.is_empty() {
+            None
+        } else {
+            let masks = params.probes.wall_masks(&initial.wall_positions, &initial.wall_boundaries);
+            let sorted_masks: Vec<u32> = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
+            let (b0, b1) = (buffers(0), buffers(1));
+            Some(GpuProbes::new(&ctx, params, n, &sorted_masks, &k, &len, u, [&b0, &b1])?)
+        };
         let finish_group = p.finish_step.bind_group(device, "finish_step", u, &without_accelerations(0));
         let max_groups_per_dim = device.limits().max_compute_workgroups_per_dimension;
         let dfsph = dfsph_stages.map(|stages| {
@@ -319,7 +331,7 @@ impl GpuSolver {
             let buffers = DfsphBuffers::new(&ctx, n, solve_threads(&ws), max_groups_per_dim);
             DfsphGpu::new(&ctx, params.dfsph.as_ref().expect("DFSPH"), stages, buffers, &shared, &uniform)
         });
-        let memory = plan.total();
+        let memory = plan.total() + probes.as_ref().map_or(0, |p| p.bytes());
         let mut solver = GpuSolver {
             params: params.clone(),
             fluid_count: n as u32,
@@ -350,6 +362,7 @@ impl GpuSolver {
             max_groups_per_dim,
             steps_per_submit: if options.steps_per_submit == 0 { STEPS_PER_SUBMIT } else { options.steps_per_submit },
             memory,
+            probes,
             ctx,
         };
         match (&mut solver.dfsph, accelerations) {
@@ -456,6 +469,14 @@ impl GpuSolver {
         self.dfsph.is_some()
     }
 
+    /// Reads the probe rows recorded so far back into the host's samples.
+    fn read_probe_rows(&mut self) -> anyhow::Result<()> {
+        match &mut self.probes {
+            Some(p) => p.read_rows(&self.ctx, &self.params),
+            None => Ok(()),
+        }
+    }
+
     /// Whether forces and integration run as one pass.
     pub fn fused(&self) -> bool {
         self.pipelines.fused
@@ -544,6 +565,7 @@ impl GpuSolver {
             .sum::<u64>()
             + s.scan.bytes()
             + s.dfsph.as_ref().map_or(0, |d| d.buffers.bytes())
+            + s.probes.as_ref().map_or(0, |p| p.bytes())
     }
 
     /// The snapshot rows of the current state (after a refresh) in pieces of `chunk` slots: the
@@ -588,7 +610,32 @@ impl Backend for GpuSolver {
         self.wall_count as usize
     }
     fn step(&mut self, n: u64) -> anyhow::Result<()> {
-        self.advance(n);
+        if self.probes.is_none() {
+            self.advance(n);
+            return Ok(());
+        }
+        // In runs of steps whose samples fit the row buffer, read back in between.
+        let mut left = n;
+        while left > 0 {
+            let probes = self.probes.as_ref().expect("checked above");
+            let mut room = super::probes::ROW_CAPACITY - probes.pending.len() as u64;
+            let mut run = 0;
+            while run < left {
+                if self.params.probes.samples_step(self.steps + run, self.params.dt, self.params.adaptive.is_some()) {
+                    if room == 0 {
+                        break;
+                    }
+                    room -= 1;
+                }
+                run += 1;
+            }
+            if run == 0 {
+                self.read_probe_rows()?;
+                continue;
+            }
+            self.advance(run);
+            left -= run;
+        }
         Ok(())
     }
     fn steps_done(&self) -> u64 {
@@ -697,8 +744,15 @@ impl Backend for GpuSolver {
     fn visit_state_array(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
         self.visit_state_in_pieces(array, chunk, visit)
     }
+    fn take_probe_samples(&mut self) -> anyhow::Result<Vec<ProbeSample>> {
+        self.read_probe_rows()?;
+        Ok(self.probes.as_mut().map(|p| std::mem::take(&mut p.samples)).unwrap_or_default())
+    }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         state.check_fits("gpu", self.fluid_count as usize)?;
+        if let Some(p) = &mut self.probes {
+            p.reset(&self.ctx);
+        }
         anyhow::ensure!(
             state.gpu_status.len() == status::WORDS,
             "the state holds {} status words; this solver has {}",

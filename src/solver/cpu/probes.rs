@@ -1,0 +1,259 @@
+//! Probes sampled on the state a step starts from: twin of wgsl/sim/probes.wgsl, with the same
+//! three entry points. `probe_points` evaluates the point probes and gauges (one invocation per
+//! probe on the GPU), `probe_particles` sums the force probes and finds the fronts over the
+//! fluid particles in workgroups of [`PROBE_WORKGROUP`] (one partial per workgroup and slot),
+//! and `probe_finish` reduces the partials into the sample. What each probe measures is in
+//! [`crate::model::probes`] and docs/probes.md.
+
+use crate::model::kernels::{KernelCoefficients, Neighbours};
+use crate::model::params::Grid;
+use crate::model::probes::{Probe, ProbeGeometry, GAUGE_FRACTION};
+use crate::model::real::{Real, V3};
+use crate::model::scene::{BoundaryPressure, Kernel};
+use rayon::prelude::*;
+
+/// Particles per workgroup of `probe_particles` (PROBE_WORKGROUP in probes.wgsl).
+pub const PROBE_WORKGROUP: usize = 128;
+/// Values per force probe in the partials: force and moment.
+pub const FORCE_SLOTS: usize = 6;
+/// Values per front probe in the partials: the farthest projection and the particle count.
+pub const FRONT_SLOTS: usize = 2;
+
+/// What the probes read: the state a step starts from and the fields of its density stage.
+pub struct ProbeInput<'a, R> {
+    pub kernel: &'a KernelCoefficients<R>,
+    pub grid: &'a Grid<R>,
+    pub fluid_mass: R,
+    pub viscosity: R,
+    pub boundary_friction: R,
+    pub boundary_pressure: BoundaryPressure,
+    pub fluid: Neighbours<'a, R>,
+    pub velocities: &'a [V3<R>],
+    pub densities: &'a [R],
+    pub pressures: &'a [R],
+    pub walls: Neighbours<'a, R>,
+    pub wall_masses: &'a [R],
+    /// Bit k: the wall particle belongs to the k-th force probe.
+    pub wall_masks: &'a [u32],
+}
+
+/// Shepard sums at a point over the fluid particles within h: sum V_j W, and sum V_j W f_j for
+/// pressure, density and velocity, with V_j = m / rho_j.
+fn shepard_sums<R: Real>(input: &ProbeInput<R>, x: V3<R>) -> (R, R, R, V3<R>) {
+    let (mut fraction, mut p, mut rho, mut v) = (R::zero(), R::zero(), R::zero(), V3::zero());
+    for (k0, k1) in input.grid.stencil_runs(input.grid.cell_coords(x)) {
+        for j in input.fluid.span(k0, k1) {
+            let w = input.kernel.w((x - input.fluid.positions[j]).length_squared());
+            let vw = input.fluid_mass / input.densities[j] * w;
+            fraction = fraction + vw;
+            p = p + vw * input.pressures[j];
+            rho = rho + vw * input.densities[j];
+            v += input.velocities[j] * vw;
+        }
+    }
+    (fraction, p, rho, v)
+}
+
+/// The fluid fraction sum_j V_j W at a point.
+fn fluid_fraction<R: Real>(input: &ProbeInput<R>, x: V3<R>) -> R {
+    shepard_sums(input, x).0
+}
+
+/// Point probes and gauges: each writes its columns at its offset of `values`.
+pub fn probe_points<R: Real>(input: &ProbeInput<R>, probes: &[Probe], offsets: &[usize], values: &mut [R]) {
+    let results: Vec<(usize, Vec<R>)> = probes
+        .par_iter()
+        .zip(offsets)
+        .filter_map(|(probe, &at)| match &probe.geometry {
+            ProbeGeometry::Point { position } => {
+                let (fraction, p, rho, v) = shepard_sums(input, V3::from64(*position));
+                // No fluid within h: zeros (the fraction column says so).
+                let r = if fraction > R::zero() { R::one() / fraction } else { R::zero() };
+                Some((at, vec![p * r, rho * r, v.x() * r, v.y() * r, v.z() * r, fraction]))
+            }
+            ProbeGeometry::Gauge { x, z, bottom, top, step } => {
+                let surface = gauge_surface(input, R::of(*x), R::of(*z), R::of(*bottom), R::of(*top), R::of(*step));
+                Some((at, vec![surface, surface - R::of(*bottom)]))
+            }
+            _ => None,
+        })
+        .collect();
+    for (at, v) in results {
+        values[at..at + v.len()].copy_from_slice(&v);
+    }
+}
+
+/// The highest point of the line where the fluid fraction reaches [`GAUGE_FRACTION`]: levels
+/// from the top down, `step` apart (the last one at the bottom), interpolated linearly between
+/// the first level that reaches it and the one above; the bottom when none does.
+pub fn gauge_surface<R: Real>(input: &ProbeInput<R>, x: R, z: R, bottom: R, top: R, step: R) -> R {
+    let half = R::of(GAUGE_FRACTION);
+    let levels = ((top - bottom) / step).to64().floor() as u32 + 1;
+    let (mut above, mut above_y) = (R::zero(), top);
+    for k in 0..=levels {
+        let y = (top - step * R::of(k as f64)).max(bottom);
+        let f = fluid_fraction(input, V3::new(x, y, z));
+        if f >= half {
+            if k == 0 {
+                return y;
+            }
+            return y + (above_y - y) * (f - half) / (f - above);
+        }
+        (above, above_y) = (f, y);
+        if y <= bottom {
+            break;
+        }
+    }
+    bottom
+}
+
+/// The force and moment on the force probes' walls and the fronts, per particle, reduced per
+/// workgroup of [`PROBE_WORKGROUP`] particles into `partials` (slot-major: slot s of workgroup
+/// g at s * groups + g; force probe k holds slots 6k..6k+6, front probe q slots 6F + 2q and
+/// 6F + 2q + 1).
+pub fn probe_particles<R: Real>(input: &ProbeInput<R>, probes: &[Probe], partials: &mut Vec<R>) {
+    let forces: Vec<[f64; 3]> = probes
+        .iter()
+        .filter_map(|p| match &p.geometry {
+            ProbeGeometry::Force { centre, .. } => Some(*centre),
+            _ => None,
+        })
+        .collect();
+    let fronts: Vec<([f64; 3], f64, f64)> = probes
+        .iter()
+        .filter_map(|p| match &p.geometry {
+            ProbeGeometry::Front { direction, floor, height } => Some((*direction, *floor, *height)),
+            _ => None,
+        })
+        .collect();
+    let slots = FORCE_SLOTS * forces.len() + FRONT_SLOTS * fronts.len();
+    let n = input.fluid.positions.len();
+    let groups = n.div_ceil(PROBE_WORKGROUP).max(1);
+    let centres: Vec<V3<R>> = forces.iter().map(|&c| V3::from64(c)).collect();
+    let per_group: Vec<Vec<R>> = (0..groups)
+        .into_par_iter()
+        .map(|g| {
+            let mut sums = vec![R::zero(); slots];
+            for i in g * PROBE_WORKGROUP..((g + 1) * PROBE_WORKGROUP).min(n) {
+                let xi = input.fluid.positions[i];
+                if !centres.is_empty() {
+                    let f = particle_wall_forces(input, i, &centres);
+                    for (s, v) in f.iter().enumerate() {
+                        sums[s] = sums[s] + *v;
+                    }
+                }
+                for (q, (direction, floor, height)) in fronts.iter().enumerate() {
+                    let s = FORCE_SLOTS * forces.len() + FRONT_SLOTS * q;
+                    if xi.y() < R::of(floor + height) {
+                        let along = xi.dot(V3::from64(*direction));
+                        sums[s] = if sums[s + 1] == R::zero() { along } else { sums[s].max(along) };
+                        sums[s + 1] = sums[s + 1] + R::one();
+                    }
+                }
+            }
+            sums
+        })
+        .collect();
+    partials.clear();
+    partials.resize(slots * groups, R::zero());
+    for (g, sums) in per_group.iter().enumerate() {
+        for (s, v) in sums.iter().enumerate() {
+            partials[s * groups + g] = *v;
+        }
+    }
+}
+
+/// The force (and its moment about `centres[k]`) fluid particle `i` exerts on the wall
+/// particles of each force probe k: the reaction to the wall terms of its acceleration in
+/// forces.rs (pressure and viscosity), m_i times minus what wall particle w adds to a_i.
+pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &[V3<R>]) -> Vec<R> {
+    let kernel = input.kernel;
+    let cubic = kernel.kind == Kernel::CubicSpline;
+    let viscous = input.viscosity > R::zero();
+    let eps = R::of(0.01) * kernel.h2;
+    let xi = input.fluid.positions[i];
+    let ui = input.velocities[i];
+    let rho_i = input.densities[i];
+    let p_i = input.pressures[i];
+    let wall_p_over = match input.boundary_pressure {
+        BoundaryPressure::Mirror => R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i),
+        BoundaryPressure::Consistent => p_i / (rho_i * rho_i),
+    };
+    let nu = if cubic { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let visc_factor = nu * input.boundary_friction / rho_i;
+    let mut out = vec![R::zero(); FORCE_SLOTS * centres.len()];
+    if input.wall_masses.is_empty() {
+        return out;
+    }
+    for (k0, k1) in input.grid.stencil_runs(input.grid.cell_coords(xi)) {
+        for j in input.walls.span(k0, k1) {
+            let mask = input.wall_masks[j];
+            if mask == 0 {
+                continue;
+            }
+            let xw = input.walls.positions[j];
+            let rij = xi - xw;
+            let r2 = rij.length_squared();
+            if r2 >= kernel.h2 {
+                continue;
+            }
+            let r = r2.sqrt();
+            let grad = kernel.grad_w(rij, r);
+            let mw = input.wall_masses[j];
+            // What wall particle w adds to a_i, and the opposite force on the wall.
+            let mut a = grad * (-mw * wall_p_over);
+            if viscous {
+                a += if cubic { grad * (visc_factor * mw * ui.dot(rij) / (r2 + eps)) } else { ui * (-visc_factor * mw * kernel.lap_w(r)) };
+            }
+            let f = a * (-input.fluid_mass);
+            for (k, c) in centres.iter().enumerate() {
+                if mask & (1 << k) == 0 {
+                    continue;
+                }
+                let arm = xw - *c;
+                let m = [arm.y() * f.z() - arm.z() * f.y(), arm.z() * f.x() - arm.x() * f.z(), arm.x() * f.y() - arm.y() * f.x()];
+                let s = FORCE_SLOTS * k;
+                for (a, v) in [f.x(), f.y(), f.z(), m[0], m[1], m[2]].into_iter().enumerate() {
+                    out[s + a] = out[s + a] + v;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Reduces the workgroups' partials into the force and front probes' columns of `values`: sums
+/// in workgroup order, the front's farthest projection over the workgroups that saw fluid in
+/// its band (0 when none did).
+pub fn probe_finish<R: Real>(probes: &[Probe], offsets: &[usize], partials: &[R], values: &mut [R]) {
+    let forces = probes.iter().filter(|p| matches!(p.geometry, ProbeGeometry::Force { .. })).count();
+    let slots = FORCE_SLOTS * forces + FRONT_SLOTS * probes.iter().filter(|p| matches!(p.geometry, ProbeGeometry::Front { .. })).count();
+    let groups = if slots == 0 { 1 } else { partials.len() / slots };
+    let slot = |s: usize| &partials[s * groups..(s + 1) * groups];
+    let (mut force, mut front) = (0, 0);
+    for (probe, &at) in probes.iter().zip(offsets) {
+        match probe.geometry {
+            ProbeGeometry::Force { .. } => {
+                for a in 0..FORCE_SLOTS {
+                    values[at + a] = slot(FORCE_SLOTS * force + a).iter().fold(R::zero(), |s, &v| s + v);
+                }
+                force += 1;
+            }
+            ProbeGeometry::Front { .. } => {
+                let s = FORCE_SLOTS * forces + FRONT_SLOTS * front;
+                let mut count = R::zero();
+                let mut far = R::zero();
+                for (&x, &c) in slot(s).iter().zip(slot(s + 1)) {
+                    if c > R::zero() {
+                        far = if count == R::zero() { x } else { far.max(x) };
+                        count = count + c;
+                    }
+                }
+                values[at] = far;
+                values[at + 1] = count;
+                front += 1;
+            }
+            _ => {}
+        }
+    }
+}

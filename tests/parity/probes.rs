@@ -1,0 +1,96 @@
+//! The probe stage (wgsl/sim/probes.wgsl) against its CPU twin, for every probe type, on every
+//! adapter; and probes that change nothing: a scene runs the same trajectory with and without
+//! them.
+
+use crate::common;
+use crate::common::TestScene;
+use wgsph::model::probes::ProbeSample;
+use wgsph::model::scene::{ProbeSpec, ProbeType};
+use wgsph::model::scene::Scene;
+use wgsph::solver::Backend;
+
+/// The small tank (a block moving towards a plane, in an open container, viscosity, walls with
+/// friction) with a probe of every type, sampled every 5 steps: points in the fluid and on the
+/// container's floor, a gauge through the block, the force on the whole container and on its
+/// -x wall alone, and the front along +x and along a slanted direction.
+fn probed_tank() -> Scene {
+    let every = |mut p: ProbeSpec| {
+        p.every_steps = Some(5);
+        p
+    };
+    let gauge = ProbeSpec { position: Some([0.1, 0.0, 0.1]), ..ProbeSpec::of("gauge", ProbeType::Gauge) };
+    let force = ProbeSpec { boundary: Some(0), ..ProbeSpec::of("container", ProbeType::Force) };
+    let back_wall = ProbeSpec { boundary: Some(0), max: Some([0.0, 1.0, 1.0]), moment_about: Some([0.0; 3]), ..ProbeSpec::of("back_wall", ProbeType::Force) };
+    let front = ProbeSpec::of("front", ProbeType::Front);
+    let slanted = ProbeSpec { direction: Some([1.0, 0.0, 1.0]), height: Some(0.1), ..ProbeSpec::of("slanted", ProbeType::Front) };
+    TestScene::small_tank()
+        .probe(ProbeSpec::point("inside", [0.1, 0.1, 0.1], 5))
+        .probe(ProbeSpec::point("floor", [0.1, 0.0, 0.1], 5))
+        .probe(every(gauge))
+        .probe(every(force))
+        .probe(every(back_wall))
+        .probe(every(front))
+        .probe(every(slanted))
+        .build()
+}
+
+fn samples(backend: &mut dyn Backend, steps: u64) -> Vec<ProbeSample> {
+    backend.step(steps).unwrap();
+    backend.take_probe_samples().unwrap()
+}
+
+#[test]
+fn every_probe_type_agrees_with_its_cpu_twin() {
+    let scene = probed_tank();
+    let probes = scene.params().probes;
+    let mut cpu = common::cpu::<f64>(&scene);
+    let expected = samples(&mut cpu, 21);
+    assert_eq!(expected.iter().map(|s| s.step).collect::<Vec<_>>(), vec![0, 5, 10, 15, 20]);
+    // The force on the container holds the block up: about its weight, upwards.
+    let weight = cpu.fluid_count() as f64 * scene.params().fluid_mass * 9.81;
+    let up = expected[4].values[probes.offsets()[3] + 1];
+    assert!(up < 0.0 && (up.abs() - weight).abs() < 0.5 * weight, "the container carries {up} N; the water weighs {weight} N");
+    for ctx in common::contexts() {
+        let name = ctx.describe();
+        let mut gpu = common::gpu(ctx, &scene);
+        let got = samples(&mut gpu, 21);
+        assert_eq!(got.len(), expected.len(), "{name}");
+        for (g, c) in got.iter().zip(&expected) {
+            assert_eq!((g.step, g.time, g.previous_time), (c.step, c.time, c.previous_time), "{name}");
+            for (probe, at) in probes.probes.iter().zip(probes.offsets()) {
+                for (k, column) in probe.geometry.columns().iter().enumerate() {
+                    let (a, b) = (g.values[at + k], c.values[at + k]);
+                    // The column's scale over the run: f32 rounding of the state and of the
+                    // sums, which grows over the steps like the state's own difference.
+                    let scale = expected.iter().map(|s| s.values[at + k].abs()).fold(0.0, f64::max).max(1e-6);
+                    let tolerance = match *column {
+                        "particles" => 2.0,
+                        _ => 2e-3 * scale,
+                    };
+                    assert!((a - b).abs() <= tolerance, "{name}: probe '{}' {column} at step {}: gpu {a}, cpu {b} (tolerance {tolerance})", probe.name, g.step);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn probes_change_no_trajectory() {
+    let with = probed_tank();
+    let mut without = with.clone();
+    without.probe.clear();
+    let mut a = common::cpu::<f64>(&with);
+    let mut b = common::cpu::<f64>(&without);
+    a.step(12);
+    b.step(12);
+    assert_eq!(a.snapshot().positions, b.snapshot().positions, "cpu");
+    for ctx in common::contexts() {
+        let name = ctx.describe();
+        let mut a = common::gpu(ctx.clone(), &with);
+        let mut b = common::gpu(ctx, &without);
+        a.step(12).unwrap();
+        b.step(12).unwrap();
+        assert_eq!(a.snapshot().unwrap().positions, b.snapshot().unwrap().positions, "{name}");
+        assert!(b.take_probe_samples().unwrap().is_empty(), "{name}");
+    }
+}

@@ -1,0 +1,333 @@
+// Probes sampled on the state a step starts from (after its density stage): point probes and
+// gauges (probe_points, one invocation per probe), force probes and fronts (probe_particles,
+// one invocation per fluid particle, one partial per workgroup and slot), and the reduction of
+// the partials into a row of the sample buffer (probe_finish, one invocation). Recorded only on
+// the steps where a probe is due, and only in scenes with probes. What each probe measures is
+// in src/model/probes.rs and docs/probes.md. Twin of src/solver/cpu/probes.rs.
+
+//! include shared/common.wgsl
+//! array positions: vec4<f32>, read
+//! array velocities: vec4<f32>, read
+//! array densities: f32, read
+//! array pressures: f32, read
+//! array starts: u32, read
+//! array wall_positions: vec4<f32>, read
+//! array wall_starts: u32, read
+// Bit k: the wall particle belongs to the k-th force probe.
+//! array wall_probe_masks: u32, read
+// The probe table written by the host (src/solver/gpu/probes.rs): floats as their bits, so that
+// every word reaches the shader unchanged (no float move may flush a small integer's bits).
+//! array probe_table: vec4<u32>, read
+// [0]: rows written; then every probe's values; the partials; the rows (floats as their bits).
+//! array probe_data: u32, read_write
+//! array status: u32, atomic, whole
+
+const PROBE_WORKGROUP: u32 = 128u;
+const FORCE_SLOTS: u32 = 6u;
+const FRONT_SLOTS: u32 = 2u;
+// 4 force probes of 6 slots and 4 front probes of 2 (src/model/probes.rs MAX_*_PROBES).
+const MAX_SLOTS: u32 = 32u;
+const PROBE_POINT: u32 = 0u;
+const PROBE_GAUGE: u32 = 1u;
+const PROBE_FORCE: u32 = 2u;
+const PROBE_FRONT: u32 = 3u;
+const GAUGE_FRACTION: f32 = 0.5;
+const LOWEST: f32 = -3.4028235e38;
+
+// The table's header: probes, force probes, front probes, workgroups of probe_particles;
+// values per sample, where the partials and the rows start, rows the buffer holds.
+fn table_counts() -> vec4<u32> {
+    return probe_table_at(0u);
+}
+fn table_layout() -> vec4<u32> {
+    return probe_table_at(1u);
+}
+// Probe p: (type, first value, -, -), then its point or direction, and more, as floats.
+fn probe_head(p: u32) -> vec4<u32> {
+    return probe_table_at(2u + 3u * p);
+}
+fn probe_entry(p: u32, k: u32) -> vec4<f32> {
+    return bitcast<vec4<f32>>(probe_table_at(2u + 3u * p + k));
+}
+fn data_float(i: u32) -> f32 {
+    return bitcast<f32>(probe_data_at(i));
+}
+fn set_data_float(i: u32, v: f32) {
+    probe_data_set(i, bitcast<u32>(v));
+}
+
+// Shepard sums at x over the fluid within h: sum V_j W, and sum V_j W f_j of pressure,
+// density and velocity (V_j = m / rho_j).
+struct ShepardSums {
+    fraction: f32,
+    pressure: f32,
+    density: f32,
+    velocity: vec3<f32>,
+}
+
+fn shepard_sums(x: vec3<f32>) -> ShepardSums {
+    var s = ShepardSums(0.0, 0.0, 0.0, vec3<f32>(0.0));
+    let c = cell_coords(x);
+    for (var run = 0u; run < stencil_span_count(); run++) {
+        let cells = stencil_run(c, run);
+        for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
+            let d = x - positions_at(j).xyz;
+            let w = kernel_w(dot(d, d));
+            let rho_j = densities_at(j);
+            let vw = params.fluid_mass / rho_j * w;
+            s.fraction += vw;
+            s.pressure += vw * pressures_at(j);
+            s.density += vw * rho_j;
+            s.velocity += velocities_at(j).xyz * vw;
+        }
+    }
+    return s;
+}
+
+// The highest point of the line where the fluid fraction reaches GAUGE_FRACTION: levels from
+// the top down, `step` apart, interpolated between the first that reaches it and the one above.
+fn gauge_surface(x: f32, z: f32, bottom: f32, top: f32, step: f32) -> f32 {
+    let levels = u32(floor((top - bottom) / step)) + 1u;
+    var above = 0.0;
+    var above_y = top;
+    for (var k = 0u; k <= levels; k++) {
+        let y = max(top - step * f32(k), bottom);
+        let f = shepard_sums(vec3<f32>(x, y, z)).fraction;
+        if (f >= GAUGE_FRACTION) {
+            if (k == 0u) {
+                return y;
+            }
+            return y + (above_y - y) * (f - GAUGE_FRACTION) / (f - above);
+        }
+        above = f;
+        above_y = y;
+        if (y <= bottom) {
+            break;
+        }
+    }
+    return bottom;
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn probe_points(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let p = thread_index(gid, groups);
+    if (p >= table_counts().x) {
+        return;
+    }
+    let head = probe_head(p);
+    let at = 1u + head.y;
+    let g = probe_entry(p, 1u);
+    if (head.x == PROBE_POINT) {
+        let s = shepard_sums(g.xyz);
+        // No fluid within h: zeros (the fraction column says so).
+        var r = 0.0;
+        if (s.fraction > 0.0) {
+            r = 1.0 / s.fraction;
+        }
+        set_data_float(at, s.pressure * r);
+        set_data_float(at + 1u, s.density * r);
+        set_data_float(at + 2u, s.velocity.x * r);
+        set_data_float(at + 3u, s.velocity.y * r);
+        set_data_float(at + 4u, s.velocity.z * r);
+        set_data_float(at + 5u, s.fraction);
+    } else if (head.x == PROBE_GAUGE) {
+        let surface = gauge_surface(g.x, g.z, g.y, g.w, probe_entry(p, 2u).x);
+        set_data_float(at, surface);
+        set_data_float(at + 1u, surface - g.y);
+    }
+}
+
+// A thread's sums over its particle, one per slot.
+var<private> slot_sums: array<f32, MAX_SLOTS>;
+var<workgroup> group_values: array<vec4<f32>, PROBE_WORKGROUP>;
+
+// Adds the force fluid particle i exerts on the force probes' wall particles (and its moments)
+// to slot_sums: the reaction to the wall terms of its acceleration in forces.wgsl, m_i times
+// minus what wall particle w adds to a_i.
+fn add_wall_forces(i: u32, forces: u32) {
+    let cubic = KERNEL == 1u;
+    let viscous = VISCOSITY && params.viscosity > 0.0;
+    let eps = 0.01 * params.h2;
+    let xi = positions_at(i).xyz;
+    let ui = velocities_at(i).xyz;
+    let rho_i = densities_at(i);
+    let p_i = pressures_at(i);
+    let wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), p_i / (rho_i * rho_i), CONSISTENT_WALL_PRESSURE);
+    let nu = select(params.viscosity, 10.0 * params.viscosity, cubic);
+    let visc_factor = nu * params.boundary_friction / rho_i;
+    let c = cell_coords(xi);
+    for (var run = 0u; run < stencil_span_count(); run++) {
+        let cells = stencil_run(c, run);
+        for (var j = wall_starts_at(cells.x); j < wall_starts_at(cells.y); j++) {
+            let mask = wall_probe_masks_at(j);
+            if (mask == 0u) {
+                continue;
+            }
+            let w = wall_positions_at(j);  // w: mass
+            let rij = xi - w.xyz;
+            let r2 = dot(rij, rij);
+            if (r2 >= params.h2) {
+                continue;
+            }
+            let r = sqrt(r2);
+            let grad = kernel_grad(rij, r);
+            var a = grad * (-w.w * wall_p_over);
+            if (viscous) {
+                if (cubic) {
+                    a += grad * (visc_factor * w.w * dot(ui, rij) / (r2 + eps));
+                } else {
+                    a += ui * (-visc_factor * w.w * kernel_laplacian(r));
+                }
+            }
+            let f = a * (-params.fluid_mass);
+            for (var k = 0u; k < forces; k++) {
+                if ((mask & (1u << k)) == 0u) {
+                    continue;
+                }
+                let arm = w.xyz - probe_entry(force_probe(k), 1u).xyz;
+                let m = cross(arm, f);
+                let s = FORCE_SLOTS * k;
+                slot_sums[s] += f.x;
+                slot_sums[s + 1u] += f.y;
+                slot_sums[s + 2u] += f.z;
+                slot_sums[s + 3u] += m.x;
+                slot_sums[s + 4u] += m.y;
+                slot_sums[s + 5u] += m.z;
+            }
+        }
+    }
+}
+
+// The probe index of the k-th force probe (or front probe, with `kind`).
+fn nth_probe(kind: u32, k: u32) -> u32 {
+    var seen = 0u;
+    for (var p = 0u; p < table_counts().x; p++) {
+        if (probe_head(p).x == kind) {
+            if (seen == k) {
+                return p;
+            }
+            seen++;
+        }
+    }
+    return 0u;
+}
+fn force_probe(k: u32) -> u32 {
+    return nth_probe(PROBE_FORCE, k);
+}
+
+// Whether slot s of the partials keeps a largest value (a front's projection) and not a sum.
+fn is_max_slot(s: u32, forces: u32) -> bool {
+    return s >= FORCE_SLOTS * forces && (s - FORCE_SLOTS * forces) % FRONT_SLOTS == 0u;
+}
+
+@compute @workgroup_size(PROBE_WORKGROUP)
+fn probe_particles(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let counts = table_counts();
+    let forces = counts.y;
+    let fronts = counts.z;
+    let slots = FORCE_SLOTS * forces + FRONT_SLOTS * fronts;
+    for (var s = 0u; s < MAX_SLOTS; s++) {
+        slot_sums[s] = select(0.0, LOWEST, is_max_slot(s, forces));
+    }
+    let i = gid.x + gid.y * groups.x * PROBE_WORKGROUP;
+    if (i < params.fluid_count) {
+        if (WALLS && forces > 0u) {
+            add_wall_forces(i, forces);
+        }
+        let xi = positions_at(i).xyz;
+        for (var q = 0u; q < fronts; q++) {
+            let e = probe_entry(nth_probe(PROBE_FRONT, q), 1u);
+            let band = probe_entry(nth_probe(PROBE_FRONT, q), 2u);
+            if (xi.y < band.x + band.y) {
+                let s = FORCE_SLOTS * forces + FRONT_SLOTS * q;
+                slot_sums[s] = max(slot_sums[s], dot(xi, e.xyz));
+                slot_sums[s + 1u] += 1.0;
+            }
+        }
+    }
+    // Each slot folded over the workgroup in particle order by one invocation, four at a time.
+    let group = wid.x + wid.y * groups.x;
+    let partials = table_layout().y;
+    let group_count = counts.w;
+    for (var s0 = 0u; s0 < MAX_SLOTS; s0 += 4u) {
+        group_values[lid] = vec4<f32>(slot_sums[s0], slot_sums[s0 + 1u], slot_sums[s0 + 2u], slot_sums[s0 + 3u]);
+        workgroupBarrier();
+        if (lid == 0u && s0 < slots) {
+            var total = group_values[0];
+            for (var t = 1u; t < PROBE_WORKGROUP; t++) {
+                let v = group_values[t];
+                for (var c = 0u; c < 4u; c++) {
+                    if (is_max_slot(s0 + c, forces)) {
+                        total[c] = max(total[c], v[c]);
+                    } else {
+                        total[c] += v[c];
+                    }
+                }
+            }
+            for (var c = 0u; c < 4u; c++) {
+                if (s0 + c < slots) {
+                    set_data_float(1u + partials + (s0 + c) * group_count + group, total[c]);
+                }
+            }
+        }
+        workgroupBarrier();
+    }
+}
+
+@compute @workgroup_size(1)
+fn probe_finish() {
+    let counts = table_counts();
+    let sizes = table_layout();
+    let forces = counts.y;
+    let groups = counts.w;
+    let partial = 1u + sizes.y;
+    var force = 0u;
+    var front = 0u;
+    for (var p = 0u; p < counts.x; p++) {
+        let head = probe_head(p);
+        let at = 1u + head.y;
+        if (head.x == PROBE_FORCE) {
+            for (var a = 0u; a < FORCE_SLOTS; a++) {
+                let s = FORCE_SLOTS * force + a;
+                var total = 0.0;
+                for (var g = 0u; g < groups; g++) {
+                    total += data_float(partial + s * groups + g);
+                }
+                set_data_float(at + a, total);
+            }
+            force++;
+        } else if (head.x == PROBE_FRONT) {
+            let s = FORCE_SLOTS * forces + FRONT_SLOTS * front;
+            var count = 0.0;
+            var far = 0.0;
+            for (var g = 0u; g < groups; g++) {
+                let c = data_float(partial + (s + 1u) * groups + g);
+                if (c > 0.0) {
+                    let x = data_float(partial + s * groups + g);
+                    far = select(max(far, x), x, count == 0.0);
+                    count += c;
+                }
+            }
+            set_data_float(at, far);
+            set_data_float(at + 1u, count);
+            front++;
+        }
+    }
+    // The row: the step, the time (a compensated pair), the step's dt, then every value.
+    let written = probe_data_at(0u);
+    let values = sizes.x;
+    let row = 1u + sizes.z + written * (4u + values);
+    probe_data_set(row, atomicLoad(&status[STATUS_STEPS]));
+    probe_data_set(row + 1u, atomicLoad(&status[STATUS_TIME]));
+    probe_data_set(row + 2u, atomicLoad(&status[STATUS_TIME_COMPENSATION]));
+    probe_data_set(row + 3u, atomicLoad(&status[STATUS_DT]));
+    for (var v = 0u; v < values; v++) {
+        probe_data_set(row + 4u + v, probe_data_at(1u + v));
+    }
+    probe_data_set(0u, written + 1u);
+}
