@@ -10,3 +10,4 @@ mod gpu;
 mod adaptive;
 mod specialise;
 mod scale;
+mod pressure;

@@ -4,6 +4,7 @@
 
 pub mod bin_count;
 pub mod bin_scatter;
+pub mod continuity;
 pub mod density;
 pub mod dfsph;
 pub mod dfsph_convergence;
@@ -43,6 +44,11 @@ pub struct CpuSolver<R: Real> {
     densities: Vec<R>,
     pressures: Vec<R>,
     accelerations: Vec<V3<R>>,
+    /// With continuity density: the densities the particles carry, and their rates of the
+    /// last forces stage (both empty otherwise).
+    carried_densities: Vec<R>,
+    density_rates: Vec<R>,
+    scratch_r: Vec<R>,
     keys: Vec<u32>,
     counts: Vec<u32>,
     starts: Vec<u32>,
@@ -87,6 +93,9 @@ impl<R: Real> CpuSolver<R> {
             densities: vec![R::zero(); n],
             pressures: vec![R::zero(); n],
             accelerations: vec![V3::zero(); n],
+            carried_densities: if params.continuity_density { (0..n).map(|i| R::of(initial.fluid_density(i, params.rest_density))).collect() } else { Vec::new() },
+            density_rates: if params.continuity_density { vec![R::zero(); n] } else { Vec::new() },
+            scratch_r: Vec::new(),
             keys: vec![0; n],
             counts: vec![0; grid.cell_count()],
             starts: vec![0; grid.cell_count() + 1],
@@ -139,6 +148,7 @@ impl<R: Real> CpuSolver<R> {
             + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
             + self.wall_positions.len() as u64 * (v3 + r)
             + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
+            + (self.carried_densities.len() + self.density_rates.len() + self.scratch_r.capacity()) as u64 * r
     }
 
     /// Stage 1: counting-sort binning and reordering of the state into cell order.
@@ -153,11 +163,26 @@ impl<R: Real> CpuSolver<R> {
         std::mem::swap(&mut self.velocities, &mut self.scratch_v3);
         reorder::reorder(&self.sorted, &self.ids, &mut self.scratch_ids);
         std::mem::swap(&mut self.ids, &mut self.scratch_ids);
+        if !self.carried_densities.is_empty() {
+            reorder::reorder(&self.sorted, &self.carried_densities, &mut self.scratch_r);
+            std::mem::swap(&mut self.carried_densities, &mut self.scratch_r);
+        }
     }
 
     /// Stage 2: density and pressure of every particle.
     pub fn compute_density(&mut self) {
         let p = &self.params;
+        if p.continuity_density {
+            let input = continuity::ContinuityInput {
+                carried: &self.carried_densities,
+                rest_density: R::of(p.rest_density),
+                stiffness: R::of(p.stiffness),
+                eos: p.eos,
+                clamp_negative_pressure: p.clamp_negative_pressure,
+            };
+            continuity::continuity_density(&input, &mut self.densities, &mut self.pressures);
+            return;
+        }
         let input = density::DensityInput {
             kernel: &self.kernel,
             grid: &self.grid,
@@ -191,14 +216,21 @@ impl<R: Real> CpuSolver<R> {
             pressures: &self.pressures,
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
+            continuity: p.continuity_density,
+            diffusion_factor: R::of(p.diffusion_factor()),
+            artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
+            stiffness: R::of(p.stiffness),
+            eos: p.eos,
         }
     }
 
-    /// Stage 3: accelerations.
+    /// Stage 3: accelerations (and with continuity density the density rates).
     pub fn compute_forces(&mut self) {
         let mut accelerations = std::mem::take(&mut self.accelerations);
-        forces::forces(&self.forces_input(), &mut accelerations);
+        let mut rates = std::mem::take(&mut self.density_rates);
+        forces::forces(&self.forces_input(), &mut accelerations, &mut rates);
         self.accelerations = accelerations;
+        self.density_rates = rates;
     }
 
     /// Stages 3 and 4 fused with fixed dt ([`forces_integrate::forces_and_integrate`]): the
@@ -207,8 +239,9 @@ impl<R: Real> CpuSolver<R> {
     pub fn forces_and_integrate(&self) -> (Vec<V3<R>>, Vec<V3<R>>, integrate::StepHealth) {
         let n = self.positions.len();
         let (mut x, mut v) = (vec![V3::zero(); n], vec![V3::zero(); n]);
+        let mut rho = vec![R::zero(); self.carried_densities.len()];
         let domain = (V3::from64(self.params.domain_min), V3::from64(self.params.domain_max));
-        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.planes, domain, &mut x, &mut v);
+        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.planes, domain, &mut x, &mut v, &self.carried_densities, &mut rho);
         (x, v, found)
     }
 
@@ -236,8 +269,9 @@ impl<R: Real> CpuSolver<R> {
             domain_min: V3::from64(self.params.domain_min),
             domain_max: V3::from64(self.params.domain_max),
             accelerations: &self.accelerations,
+            density_rates: &self.density_rates,
         };
-        integrate::integrate(&input, &mut self.positions, &mut self.velocities)
+        integrate::integrate(&input, &mut self.positions, &mut self.velocities, &mut self.carried_densities)
     }
 
     /// The parts of the solver a DFSPH stage reads and writes, and DFSPH's own arrays.
@@ -423,6 +457,7 @@ impl<R: Real> CpuSolver<R> {
                 None => Vec::new(),
             },
             iterations: self.dfsph.as_ref().map(|d| d.stats).unwrap_or_default(),
+            densities: self.carried_densities.iter().map(|d| d.to64()).collect(),
         }
     }
 
@@ -431,6 +466,13 @@ impl<R: Real> CpuSolver<R> {
         self.positions = state.positions.iter().map(|&p| V3::from64(p)).collect();
         self.velocities = state.velocities.iter().map(|&v| V3::from64(v)).collect();
         self.ids = state.ids.clone();
+        anyhow::ensure!(
+            state.densities.len() == self.carried_densities.len(),
+            "the state holds {} carried densities; the scene's density method needs {}",
+            state.densities.len(),
+            self.carried_densities.len()
+        );
+        self.carried_densities = state.densities.iter().map(|&d| R::of(d)).collect();
         self.step = state.step;
         self.health = state.health();
         self.time = state.time;

@@ -84,6 +84,9 @@ uniform_block! {
         /// The run stops at a step whose largest density or speed passes these (infinite: off).
         stop_density: f32 => "f32",
         stop_speed: f32 => "f32",
+        /// delta h c0 of density diffusion, alpha h_s c0 of artificial viscosity.
+        diffusion_factor: f32 => "f32",
+        artificial_viscosity_factor: f32 => "f32",
     }
 }
 
@@ -134,6 +137,8 @@ impl GpuParams {
             dt_max: p.adaptive.map_or(p.dt, |a| a.dt_max) as f32,
             stop_density: p.stop_levels().density as f32,
             stop_speed: p.stop_levels().speed as f32,
+            diffusion_factor: p.diffusion_factor() as f32,
+            artificial_viscosity_factor: p.artificial_viscosity_factor() as f32,
         }
     }
 
