@@ -1,7 +1,6 @@
 // Accelerations: the symmetric pressure force (report Eq. 6), viscosity (Eq. 7 with the volumes
 // m_k / rho_k of Eq. 4, in the symmetric form of Mueller et al. 2003 Eq. 14), Monaghan's
-// artificial viscosity, wall particles and gravity; with continuity density also the density
-// rate (continuity equation and delta-SPH diffusion with the Fourtakas et al. 2019 correction).
+// artificial viscosity, wall particles and gravity.
 // Twin of src/solver/cpu/forces.rs, which explains the wall and viscosity models.
 
 //! include shared/common.wgsl
@@ -14,8 +13,8 @@
 //! array wall_starts: u32, read
 //! array accelerations: vec4<f32>, read_write
 
-// The acceleration of fluid particle i (xyz) and, with CONTINUITY, its density rate (w; 0
-// otherwise).
+// The acceleration of fluid particle i (xyz) and, with CONTINUITY, its density (w, which the
+// integration carries to the next step; 0 otherwise).
 fn particle_acceleration(i: u32) -> vec4<f32> {
     let cubic = KERNEL == 1u;
     let viscous = VISCOSITY && params.viscosity > 0.0;
@@ -32,9 +31,6 @@ fn particle_acceleration(i: u32) -> vec4<f32> {
     var fluid_visc = vec3<f32>(0.0);
     var wall_pressure = vec3<f32>(0.0);
     var wall_visc = vec3<f32>(0.0);
-    var fluid_rate = 0.0;
-    var wall_rate = 0.0;
-    var diffusive = 0.0;
     var fluid_artificial = vec3<f32>(0.0);
     var wall_artificial = vec3<f32>(0.0);
     for (var run = 0u; run < stencil_span_count(); run++) {
@@ -57,18 +53,6 @@ fn particle_acceleration(i: u32) -> vec4<f32> {
                     fluid_visc += grad * (inv_rho * dot(uij, rij) / (r2 + eps));
                 } else {
                     fluid_visc -= uij * (inv_rho * kernel_laplacian(r));
-                }
-            }
-            if (CONTINUITY) {
-                let uij = ui - velocities_at(j).xyz;
-                fluid_rate += dot(uij, grad);
-                // r2 = 0 only for i itself, whose gradient is zero.
-                if (DENSITY_DIFFUSION && r2 > 0.0) {
-                    var drho = rho_j - rho_i;
-                    if (GRAVITY) {
-                        drho -= density_above_rest(-params.rest_density * dot(params.gravity.xyz, rij));
-                    }
-                    diffusive += dot(rij, grad) * (drho / (rho_j * r2));
                 }
             }
             if (ARTIFICIAL_VISCOSITY) {
@@ -97,9 +81,6 @@ fn particle_acceleration(i: u32) -> vec4<f32> {
                         wall_visc -= ui * (w.w * kernel_laplacian(r));
                     }
                 }
-                if (CONTINUITY) {
-                    wall_rate += dot(ui, grad) * w.w;
-                }
                 if (ARTIFICIAL_VISCOSITY) {
                     let approach = dot(ui, rij);
                     if (approach < 0.0) {
@@ -119,11 +100,7 @@ fn particle_acceleration(i: u32) -> vec4<f32> {
     if (GRAVITY) {
         a += params.gravity.xyz;
     }
-    var rate = 0.0;
-    if (CONTINUITY) {
-        rate = (fluid_rate - params.diffusion_factor * diffusive) * params.fluid_mass + wall_rate;
-    }
-    return vec4<f32>(a, rate);
+    return vec4<f32>(a, select(0.0, rho_i, CONTINUITY));
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)

@@ -26,12 +26,11 @@ fn step_dt() -> f32 {
 // that is not finite; a finite velocity whose length overflows counts as infinitely fast, which
 // orders above every finite speed). The w component of the position (the particle's original
 // index, as bits) is carried over untouched. With CONTINUITY the w of the velocity carries the
-// density, advanced with the rate in a.w; otherwise it is 0.
+// density of this step (a4.w) to the next, whose continuity stage advances it; otherwise it is 0.
 fn advance_particle(i: u32, a4: vec4<f32>, dt: f32) -> f32 {
     let a = a4.xyz;
     let old = positions_at(i);
-    let old_v = velocities_at(i);
-    var v = old_v.xyz;
+    var v = velocities_at(i).xyz;
     var x = old.xyz;
     v += a * dt;
     x += v * dt;
@@ -52,12 +51,8 @@ fn advance_particle(i: u32, a4: vec4<f32>, dt: f32) -> f32 {
         }
     }
     positions_out_set(i, vec4<f32>(x, old.w));
-    var rho = 0.0;
-    if (CONTINUITY) {
-        rho = old_v.w + a4.w * dt;
-    }
-    velocities_out_set(i, vec4<f32>(v, rho));
-    let finite = is_finite_vec3(x) && is_finite_vec3(v) && (!CONTINUITY || is_finite_f32(rho));
+    velocities_out_set(i, vec4<f32>(v, a4.w));
+    let finite = is_finite_vec3(x) && is_finite_vec3(v) && (!CONTINUITY || is_finite_f32(a4.w));
     if (!finite) {
         atomicAdd(&status[STATUS_NON_FINITE], 1u);
         return 0.0;

@@ -1,10 +1,10 @@
 //! Accelerations: symmetric pressure (report Eq. 6), viscosity (Eq. 7), walls and gravity:
 //! twin of wgsl/sim/forces.wgsl.
 
-use crate::model::kernels::{density_above_rest, KernelCoefficients, Neighbours};
+use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::params::Grid;
 use crate::model::real::{Real, V3};
-use crate::model::scene::{BoundaryPressure, EquationOfState, Kernel};
+use crate::model::scene::{BoundaryPressure, Kernel};
 use rayon::prelude::*;
 
 pub struct ForcesInput<'a, R> {
@@ -22,15 +22,8 @@ pub struct ForcesInput<'a, R> {
     pub pressures: &'a [R],
     pub walls: Neighbours<'a, R>,
     pub wall_masses: &'a [R],
-    /// The density rate of the continuity equation is computed (continuity density).
-    pub continuity: bool,
-    /// delta h c0 of density diffusion ([`crate::model::params::Params::diffusion_factor`]; 0: off).
-    pub diffusion_factor: R,
     /// alpha h_s c0 of artificial viscosity (0: off).
     pub artificial_viscosity_factor: R,
-    /// For the hydrostatic density differences of diffusion.
-    pub stiffness: R,
-    pub eos: EquationOfState,
 }
 
 /// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
@@ -46,29 +39,17 @@ pub struct ForcesInput<'a, R> {
 /// gradient of sum_i m_i e(rho_i) through the wall particles' share of rho_i, so that the walls
 /// do no net work over a cycle of compression and release. A wall particle takes part in
 /// viscosity at rest with the volume m_w/rho_i, scaled by the boundary friction.
-///
-/// With continuity density, also each particle's density rate into `density_rates`
-/// (see [`particle_acceleration`]); otherwise `density_rates` is empty.
-pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>], density_rates: &mut [R]) {
-    if input.continuity {
-        accelerations.par_iter_mut().zip(density_rates.par_iter_mut()).enumerate().for_each(|(i, (acc, rate))| (*acc, *rate) = particle_acceleration(input, i));
-    } else {
-        accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i).0);
-    }
+pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
+    accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
 }
 
-/// The acceleration of fluid particle `i` and, with continuity density, its density rate
-/// (0 otherwise) (wgsl/sim/forces.wgsl `particle_acceleration`, which returns them as one vec4).
+/// The acceleration of fluid particle `i` (wgsl/sim/forces.wgsl `particle_acceleration`, whose
+/// w carries the particle's density to the integration with continuity density).
 ///
-/// The density rate is the continuity equation d rho_i/dt = sum_k m_k (u_i - u_k) . grad W_ik
-/// (walls at rest) plus, with diffusion, the delta-SPH term -delta h c0 sum_j m_j/rho_j
-/// (rho_j - rho_i - rho^H_ji) (x_ij . grad W_ij) / |x_ij|^2 (Molteni & Colagrossi 2009;
-/// Antuono et al. 2010) over fluid pairs only, where rho^H_ji is the hydrostatic density
-/// difference of Fourtakas et al. 2019 (Eq. 12), so that a still column's density gradient is not
-/// diffused away. Artificial viscosity (Monaghan 1992, Eq. 4.1) adds -sum_k m_k Pi_ik grad W_ik with
+/// Artificial viscosity (Monaghan 1992, Eq. 4.1) adds -sum_k m_k Pi_ik grad W_ik with
 /// Pi_ik = -alpha c0 h_s mu_ik / rho_ik, mu_ik = (u_ik . x_ik) / (|x_ik|^2 + 0.01 h^2), for
 /// approaching pairs (u_ik . x_ik < 0) only; rho_ik is the pair's mean density (rho_i for a wall).
-pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> (V3<R>, R) {
+pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R> {
     let kernel = input.kernel;
     let cubic = kernel.kind == Kernel::CubicSpline;
     let viscous = input.viscosity > R::zero();
@@ -92,11 +73,7 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> (V3<R
     let mut fluid_visc = V3::zero();
     let mut wall_pressure = V3::zero();
     let mut wall_visc = V3::zero();
-    let diffusion = input.diffusion_factor > R::zero();
     let artificial = input.artificial_viscosity_factor > R::zero();
-    let mut fluid_rate = R::zero();
-    let mut wall_rate = R::zero();
-    let mut diffusive = R::zero();
     let mut fluid_artificial = V3::zero();
     let mut wall_artificial = V3::zero();
     for (k0, k1) in input.grid.stencil_runs(c) {
@@ -118,18 +95,6 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> (V3<R
                     fluid_visc += grad * (inv_rho * uij.dot(rij) / (r2 + eps));
                 } else {
                     fluid_visc -= uij * (inv_rho * kernel.lap_w(r));
-                }
-            }
-            if input.continuity {
-                let uij = ui - input.velocities[j];
-                fluid_rate = fluid_rate + uij.dot(grad);
-                // r2 = 0 only for i itself, whose gradient is zero.
-                if diffusion && r2 > R::zero() {
-                    let mut drho = rho_j - rho_i;
-                    if gravity {
-                        drho = drho - density_above_rest(-input.rest_density * input.gravity.dot(rij), input.rest_density, input.stiffness, input.eos);
-                    }
-                    diffusive = diffusive + rij.dot(grad) * (drho / (rho_j * r2));
                 }
             }
             if artificial {
@@ -157,9 +122,6 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> (V3<R
                     wall_visc -= ui * (mw * kernel.lap_w(r));
                 }
             }
-            if input.continuity {
-                wall_rate = wall_rate + ui.dot(grad) * mw;
-            }
             if artificial {
                 let approach = ui.dot(rij);
                 if approach < R::zero() {
@@ -178,9 +140,5 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> (V3<R
     if gravity {
         a += input.gravity;
     }
-    let mut rate = R::zero();
-    if input.continuity {
-        rate = (fluid_rate - input.diffusion_factor * diffusive) * input.fluid_mass + wall_rate;
-    }
-    (a, rate)
+    a
 }

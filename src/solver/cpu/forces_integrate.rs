@@ -5,12 +5,12 @@
 //! other particles still read the old one.
 
 use super::forces::{particle_acceleration, ForcesInput};
-use super::integrate::{advance_density, advance_particle, PlaneR, StepHealth};
+use super::integrate::{advance_particle, carry_density, PlaneR, StepHealth};
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
 
 /// The next positions and velocities of every particle into `positions_out`, `velocities_out`,
-/// and with continuity density the next densities (from `densities_in`) into `densities_out`.
+/// and with continuity density each particle's density of this step into `carried_out`.
 #[allow(clippy::too_many_arguments)]
 pub fn forces_and_integrate<R: Real>(
     input: &ForcesInput<R>,
@@ -19,25 +19,23 @@ pub fn forces_and_integrate<R: Real>(
     domain: (V3<R>, V3<R>),
     positions_out: &mut [V3<R>],
     velocities_out: &mut [V3<R>],
-    densities_in: &[R],
-    densities_out: &mut [R],
+    carried_out: &mut [R],
 ) -> StepHealth {
     let advance = |i: usize, x: &mut V3<R>, v: &mut V3<R>| {
-        let (a, rate) = particle_acceleration(input, i);
+        let a = particle_acceleration(input, i);
         *x = input.fluid.positions[i];
         *v = input.velocities[i];
-        (advance_particle(x, v, a, dt, planes, domain), rate)
+        advance_particle(x, v, a, dt, planes, domain)
     };
-    if input.continuity {
+    if !carried_out.is_empty() {
         return positions_out
             .par_iter_mut()
             .zip(velocities_out.par_iter_mut())
-            .zip(densities_out.par_iter_mut())
+            .zip(carried_out.par_iter_mut())
             .enumerate()
             .map(|(i, ((x, v), rho))| {
-                let (found, rate) = advance(i, x, v);
-                *rho = densities_in[i];
-                advance_density(rho, rate, dt, found)
+                let found = advance(i, x, v);
+                carry_density(rho, input.densities[i], found)
             })
             .reduce(StepHealth::default, StepHealth::add);
     }
@@ -45,6 +43,6 @@ pub fn forces_and_integrate<R: Real>(
         .par_iter_mut()
         .zip(velocities_out.par_iter_mut())
         .enumerate()
-        .map(|(i, (x, v))| advance(i, x, v).0)
+        .map(|(i, (x, v))| advance(i, x, v))
         .reduce(StepHealth::default, StepHealth::add)
 }

@@ -42,8 +42,8 @@ pub struct IntegrateInput<'a, R> {
     pub domain_min: V3<R>,
     pub domain_max: V3<R>,
     pub accelerations: &'a [V3<R>],
-    /// With continuity density, each particle's density rate (empty otherwise).
-    pub density_rates: &'a [R],
+    /// With continuity density, each particle's density of this step (empty otherwise).
+    pub densities: &'a [R],
 }
 
 /// Advances one particle with acceleration `a` over `dt` (wgsl `advance_particle`): a plane puts
@@ -71,11 +71,11 @@ pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, 
     StepHealth { non_finite: (!finite) as u32, escaped: (finite && !inside) as u32, max_speed: if finite { speed } else { 0.0 } }
 }
 
-/// Advances a density carried by the continuity equation over `dt` (the part of wgsl
+/// Carries the density of this step to the next, with continuity density (the part of wgsl
 /// `advance_particle` under CONTINUITY): a particle whose density is not finite counts as
 /// non-finite, with no speed, as on the GPU.
-pub fn advance_density<R: Real>(rho: &mut R, rate: R, dt: R, found: StepHealth) -> StepHealth {
-    *rho = *rho + rate * dt;
+pub fn carry_density<R: Real>(carried: &mut R, rho: R, found: StepHealth) -> StepHealth {
+    *carried = rho;
     if rho.is_finite() || found.non_finite > 0 {
         found
     } else {
@@ -83,19 +83,19 @@ pub fn advance_density<R: Real>(rho: &mut R, rate: R, dt: R, found: StepHealth) 
     }
 }
 
-/// Every particle advanced in place, and with continuity density (`densities` not empty) its
-/// density; returns what went wrong in this step.
-pub fn integrate<R: Real>(input: &IntegrateInput<R>, positions: &mut [V3<R>], velocities: &mut [V3<R>], densities: &mut [R]) -> StepHealth {
+/// Every particle advanced in place, and with continuity density (`carried` not empty) its
+/// density carried to the next step; returns what went wrong in this step.
+pub fn integrate<R: Real>(input: &IntegrateInput<R>, positions: &mut [V3<R>], velocities: &mut [V3<R>], carried: &mut [R]) -> StepHealth {
     let domain = (input.domain_min, input.domain_max);
-    if !densities.is_empty() {
+    if !carried.is_empty() {
         return positions
             .par_iter_mut()
             .zip(velocities.par_iter_mut())
-            .zip(densities.par_iter_mut())
+            .zip(carried.par_iter_mut())
             .enumerate()
             .map(|(i, ((x, v), rho))| {
                 let found = advance_particle(x, v, input.accelerations[i], input.dt, input.planes, domain);
-                advance_density(rho, input.density_rates[i], input.dt, found)
+                carry_density(rho, input.densities[i], found)
             })
             .reduce(StepHealth::default, StepHealth::add);
     }

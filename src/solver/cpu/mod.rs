@@ -44,10 +44,9 @@ pub struct CpuSolver<R: Real> {
     densities: Vec<R>,
     pressures: Vec<R>,
     accelerations: Vec<V3<R>>,
-    /// With continuity density: the densities the particles carry, and their rates of the
-    /// last forces stage (both empty otherwise).
+    /// With continuity density: the density each particle carries from the last step (empty
+    /// otherwise).
     carried_densities: Vec<R>,
-    density_rates: Vec<R>,
     scratch_r: Vec<R>,
     keys: Vec<u32>,
     counts: Vec<u32>,
@@ -94,7 +93,6 @@ impl<R: Real> CpuSolver<R> {
             pressures: vec![R::zero(); n],
             accelerations: vec![V3::zero(); n],
             carried_densities: if params.continuity_density { (0..n).map(|i| R::of(initial.fluid_density(i, params.rest_density))).collect() } else { Vec::new() },
-            density_rates: if params.continuity_density { vec![R::zero(); n] } else { Vec::new() },
             scratch_r: Vec::new(),
             keys: vec![0; n],
             counts: vec![0; grid.cell_count()],
@@ -148,7 +146,7 @@ impl<R: Real> CpuSolver<R> {
             + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
             + self.wall_positions.len() as u64 * (v3 + r)
             + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
-            + (self.carried_densities.len() + self.density_rates.len() + self.scratch_r.capacity()) as u64 * r
+            + (self.carried_densities.len() + self.scratch_r.capacity()) as u64 * r
     }
 
     /// Stage 1: counting-sort binning and reordering of the state into cell order.
@@ -174,11 +172,21 @@ impl<R: Real> CpuSolver<R> {
         let p = &self.params;
         if p.continuity_density {
             let input = continuity::ContinuityInput {
-                carried: &self.carried_densities,
+                kernel: &self.kernel,
+                grid: &self.grid,
+                dt: R::of(p.dt),
+                fluid_mass: R::of(p.fluid_mass),
                 rest_density: R::of(p.rest_density),
                 stiffness: R::of(p.stiffness),
                 eos: p.eos,
                 clamp_negative_pressure: p.clamp_negative_pressure,
+                gravity: V3::from64(p.gravity),
+                diffusion_factor: R::of(p.diffusion_factor()),
+                fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+                velocities: &self.velocities,
+                carried: &self.carried_densities,
+                walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
+                wall_masses: &self.wall_masses,
             };
             continuity::continuity_density(&input, &mut self.densities, &mut self.pressures);
             return;
@@ -216,21 +224,15 @@ impl<R: Real> CpuSolver<R> {
             pressures: &self.pressures,
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
-            continuity: p.continuity_density,
-            diffusion_factor: R::of(p.diffusion_factor()),
             artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
-            stiffness: R::of(p.stiffness),
-            eos: p.eos,
         }
     }
 
-    /// Stage 3: accelerations (and with continuity density the density rates).
+    /// Stage 3: accelerations.
     pub fn compute_forces(&mut self) {
         let mut accelerations = std::mem::take(&mut self.accelerations);
-        let mut rates = std::mem::take(&mut self.density_rates);
-        forces::forces(&self.forces_input(), &mut accelerations, &mut rates);
+        forces::forces(&self.forces_input(), &mut accelerations);
         self.accelerations = accelerations;
-        self.density_rates = rates;
     }
 
     /// Stages 3 and 4 fused with fixed dt ([`forces_integrate::forces_and_integrate`]): the
@@ -241,7 +243,7 @@ impl<R: Real> CpuSolver<R> {
         let (mut x, mut v) = (vec![V3::zero(); n], vec![V3::zero(); n]);
         let mut rho = vec![R::zero(); self.carried_densities.len()];
         let domain = (V3::from64(self.params.domain_min), V3::from64(self.params.domain_max));
-        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.planes, domain, &mut x, &mut v, &self.carried_densities, &mut rho);
+        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.planes, domain, &mut x, &mut v, &mut rho);
         (x, v, found)
     }
 
@@ -269,7 +271,7 @@ impl<R: Real> CpuSolver<R> {
             domain_min: V3::from64(self.params.domain_min),
             domain_max: V3::from64(self.params.domain_max),
             accelerations: &self.accelerations,
-            density_rates: &self.density_rates,
+            densities: if self.carried_densities.is_empty() { &[] } else { &self.densities },
         };
         integrate::integrate(&input, &mut self.positions, &mut self.velocities, &mut self.carried_densities)
     }
