@@ -98,35 +98,53 @@ pub struct Simulation {
 
 /// What `Device::Auto` takes: a GPU adapter, or the CPU path; with the reason in words.
 enum AutoChoice {
-    Gpu(wgpu::Adapter, String),
+    Gpu(GpuContext, String),
     Cpu(String),
 }
 
 fn auto_choice() -> AutoChoice {
     let by_name = std::env::var_os("WGPU_ADAPTER_NAME").is_some();
-    match super::gpu::device::choose_adapter() {
-        Ok(a) => {
-            let info = a.get_info();
-            let name = format!("{} ({:?})", info.name, info.backend);
-            if by_name {
-                AutoChoice::Gpu(a, "chosen with WGPU_ADAPTER_NAME".into())
-            } else if info.device_type == wgpu::DeviceType::Cpu {
-                AutoChoice::Cpu(format!(
-                    "the only GPU adapter is the software renderer {name}, which runs slower than the CPU path on the same cores (--backend gpu runs on it)"
-                ))
-            } else {
-                AutoChoice::Gpu(a, "a hardware adapter".into())
-            }
-        }
-        Err(e) => AutoChoice::Cpu(format!("{e}")),
+    let candidates = super::gpu::device::candidate_adapters();
+    if candidates.is_empty() {
+        return match super::gpu::device::choose_adapter() {
+            Err(e) => AutoChoice::Cpu(format!("{e}")),
+            Ok(_) => AutoChoice::Cpu("no GPU adapter with compute shaders".into()),
+        };
     }
+    // Best first: the first adapter that opens a device is taken, unless it is a software
+    // renderer (then no hardware adapter opened, and the CPU path is faster on the same cores).
+    let mut failures = Vec::new();
+    for a in candidates {
+        let info = a.get_info();
+        let name = format!("{} ({:?})", info.name, info.backend);
+        if info.device_type == wgpu::DeviceType::Cpu && !by_name {
+            let mut why = format!(
+                "the only GPU adapter that opens is the software renderer {name}, which runs slower than the CPU path on the same cores (--backend gpu runs on it)"
+            );
+            if !failures.is_empty() {
+                why += &format!("; passed over: {}", failures.join("; "));
+            }
+            return AutoChoice::Cpu(why);
+        }
+        match GpuContext::from_adapter(a) {
+            Ok(ctx) => {
+                let mut why = if by_name { "chosen with WGPU_ADAPTER_NAME".to_string() } else { "a hardware adapter".to_string() };
+                if !failures.is_empty() {
+                    why += &format!("; passed over: {}", failures.join("; "));
+                }
+                return AutoChoice::Gpu(ctx, why);
+            }
+            Err(e) => failures.push(format!("{e:#}")),
+        }
+    }
+    AutoChoice::Cpu(format!("no GPU adapter could open a device: {}", failures.join("; ")))
 }
 
 /// The device `Device::Auto` stands for on this machine, and why, in words (for commands
 /// that open many backends and say once which).
 pub fn auto_device() -> (Device, String) {
     match auto_choice() {
-        AutoChoice::Gpu(a, why) => (Device::Gpu, format!("the GPU on {} ({:?}): {why}", a.get_info().name, a.get_info().backend)),
+        AutoChoice::Gpu(ctx, why) => (Device::Gpu, format!("the GPU on {} ({:?}): {why}", ctx.info.name, ctx.info.backend)),
         AutoChoice::Cpu(why) => (Device::Cpu, why),
     }
 }
@@ -176,13 +194,10 @@ pub fn open_with(scene: &Scene, initial: Option<InitialState>, choice: &BackendC
         Device::Auto => match &choice.context {
             Some(c) => (gpu(c.clone(), initial)?, format!("the GPU on {}, the device given", c.describe())),
             None => match auto_choice() {
-                AutoChoice::Gpu(adapter, why) => match GpuContext::from_adapter(adapter) {
-                    Ok(ctx) => {
-                        let name = ctx.describe();
-                        (gpu(ctx, initial)?, format!("the GPU on {name}: {why}"))
-                    }
-                    Err(e) => (cpu(initial)?, format!("{cpu_name}: {e:#}")),
-                },
+                AutoChoice::Gpu(ctx, why) => {
+                    let name = ctx.describe();
+                    (gpu(ctx, initial)?, format!("the GPU on {name}: {why}"))
+                }
                 AutoChoice::Cpu(why) => (cpu(initial)?, format!("{cpu_name}: {why}")),
             },
         },

@@ -95,13 +95,28 @@ pub fn choose_adapter() -> Result<wgpu::Adapter, GpuError> {
     choose_from(adapters())
 }
 
+/// The adapters a run may use, best first: those with compute shaders whose name matches
+/// `WGPU_ADAPTER_NAME` (all of them when it is unset).
+pub fn candidate_adapters() -> Vec<wgpu::Adapter> {
+    let wanted = wanted_name();
+    adapters().into_iter().filter(supports_compute).filter(|a| name_matches(a, wanted.as_deref())).collect()
+}
+
+fn wanted_name() -> Option<String> {
+    std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase())
+}
+
+fn name_matches(a: &wgpu::Adapter, wanted: Option<&str>) -> bool {
+    wanted.is_none_or(|w| a.get_info().name.to_lowercase().contains(w))
+}
+
 /// The best of `all` (sorted best first) with compute shaders, filtered by `WGPU_ADAPTER_NAME`.
 pub fn choose_from(all: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter, GpuError> {
-    let wanted = std::env::var("WGPU_ADAPTER_NAME").ok().map(|s| s.to_lowercase());
+    let wanted = wanted_name();
     let names: Vec<String> = all.iter().map(|a| format!("{} ({:?})", a.get_info().name, a.get_info().backend)).collect();
     all.into_iter()
         .filter(supports_compute)
-        .find(|a| wanted.as_ref().is_none_or(|w| a.get_info().name.to_lowercase().contains(w)))
+        .find(|a| name_matches(a, wanted.as_deref()))
         .ok_or_else(|| {
             let mut why = String::new();
             if let Some(w) = &wanted {
@@ -116,11 +131,30 @@ pub fn choose_from(all: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter, GpuError> {
         })
 }
 
+/// The first of `candidates` (best first) that `open` opens, or every failure in words.
+pub fn first_that_opens<A, C>(candidates: Vec<A>, mut open: impl FnMut(A) -> anyhow::Result<C>) -> Result<C, Vec<String>> {
+    let mut failures = Vec::new();
+    for candidate in candidates {
+        match open(candidate) {
+            Ok(opened) => return Ok(opened),
+            Err(e) => failures.push(format!("{e:#}")),
+        }
+    }
+    Err(failures)
+}
+
 impl GpuContext {
-    /// Opens the chosen adapter with all of its limits, so big scenes can use big buffers.
+    /// Opens the best adapter that can open a device, with all of its limits, so big scenes can
+    /// use big buffers. An adapter that is listed with compute shaders but fails to open a device
+    /// (a driver that lists an OpenGL context it cannot create, say) is passed over for the next.
     pub fn new() -> anyhow::Result<Self> {
-        let adapter = choose_adapter()?;
-        Self::from_adapter(adapter)
+        let candidates = candidate_adapters();
+        if candidates.is_empty() {
+            // The error that names what was found and why none fits.
+            choose_adapter()?;
+        }
+        first_that_opens(candidates, Self::from_adapter)
+            .map_err(|failures| anyhow::anyhow!("no GPU adapter could open a device: {}", failures.join("; ")))
     }
 
     pub fn from_adapter(adapter: wgpu::Adapter) -> anyhow::Result<Self> {
@@ -196,8 +230,17 @@ pub fn describe_adapters() -> Vec<String> {
         .map(|a| {
             let i = a.get_info();
             let l = a.limits();
+            // Opening a device is the only sure test: some drivers list adapters they cannot open.
+            let opens = if !supports_compute(a) {
+                "-".to_string()
+            } else {
+                match GpuContext::from_adapter(a.clone()) {
+                    Ok(_) => "yes".to_string(),
+                    Err(e) => format!("no ({e:#}; passed over)"),
+                }
+            };
             format!(
-                "{} | backend {:?} | type {:?} | driver {} {} | compute {} | max_storage_buffer_binding_size {} MiB | max_buffer_size {} MiB | storage buffers per stage {} | workgroups per dimension {} | timestamps {}",
+                "{} | backend {:?} | type {:?} | driver {} {} | compute {} | opens a device {opens} | max_storage_buffer_binding_size {} MiB | max_buffer_size {} MiB | storage buffers per stage {} | workgroups per dimension {} | timestamps {}",
                 i.name,
                 i.backend,
                 i.device_type,
@@ -212,4 +255,20 @@ pub fn describe_adapters() -> Vec<String> {
             )
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::first_that_opens;
+
+    #[test]
+    fn an_adapter_that_cannot_open_a_device_is_passed_over() {
+        let open = |name: &str| if name.starts_with("gl") { Err(anyhow::anyhow!("{name}: parent device is lost")) } else { Ok(name.to_string()) };
+        assert_eq!(first_that_opens(vec!["gl-nvidia", "vulkan-nvidia", "vulkan-llvmpipe"], open), Ok("vulkan-nvidia".to_string()));
+        assert_eq!(
+            first_that_opens(vec!["gl-a", "gl-b"], open),
+            Err(vec!["gl-a: parent device is lost".to_string(), "gl-b: parent device is lost".to_string()])
+        );
+        assert_eq!(first_that_opens(Vec::<&str>::new(), open), Err(vec![]));
+    }
 }
