@@ -20,7 +20,7 @@
 use super::args::TradeoffArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
-use crate::model::scene::{Boundary, EquationOfState, Kernel, Scene};
+use crate::model::scene::{Boundary, DensityMethod, EquationOfState, InitialPressure, Kernel, Scene};
 use crate::model::state::Snapshot;
 use crate::solver::compare::{diff as distance, rms};
 use crate::solver::{open, Backend, BackendChoice, Device, Precision};
@@ -136,7 +136,42 @@ pub fn configs(base: &Scene) -> Vec<Config> {
             with(&|s| s.physics.clamp_negative_pressure = !base.physics.clamp_negative_pressure),
             Engine::Gpu,
         ),
+        c("continuity density", "density", with(&|s| continuity(s, 0.0)), Engine::Gpu),
+        c("continuity + diffusion 0.1", "density diffusion", with(&|s| continuity(s, 0.1)), Engine::Gpu),
+        c("continuity + diffusion 0.2", "density diffusion", with(&|s| continuity(s, 0.2)), Engine::Gpu),
+        c(
+            "continuity + diffusion 0.1 + hydrostatic start",
+            "initial state",
+            with(&|s| {
+                continuity(s, 0.1);
+                s.physics.initial_pressure = InitialPressure::Hydrostatic;
+            }),
+            Engine::Gpu,
+        ),
+        c(
+            "artificial viscosity 0.02 (no viscosity)",
+            "viscosity model",
+            with(&|s| {
+                s.physics.viscosity = 0.0;
+                s.physics.viscosity_schedule.clear();
+                s.physics.artificial_viscosity = 0.02;
+            }),
+            Engine::Gpu,
+        ),
     ]
+}
+
+/// The scene with continuity density and density diffusion `delta` (0: none); continuity
+/// density needs a fixed dt, so an adaptive scene runs at its largest step.
+fn continuity(s: &mut Scene, delta: f64) {
+    s.physics.density = DensityMethod::Continuity;
+    s.physics.density_diffusion = delta;
+    if s.time.adaptive {
+        s.time.adaptive = false;
+        s.time.dt = s.time.dt_max.unwrap_or(s.time.dt);
+        s.time.dt_min = None;
+        s.time.dt_max = None;
+    }
 }
 
 /// What one sample of a run measures.
