@@ -21,7 +21,7 @@
 use super::args::TradeoffArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
-use crate::model::scene::{Boundary, DfsphSettings, EquationOfState, Kernel, PressureSolver, Scene};
+use crate::model::scene::{Boundary, DensityMethod, DfsphSettings, EquationOfState, InitialPressure, Kernel, PressureSolver, Scene};
 use crate::model::state::Snapshot;
 use crate::solver::compare::{diff as distance, rms};
 use crate::solver::{open, Backend, BackendChoice, Device, Precision};
@@ -164,14 +164,52 @@ pub fn configs(base: &Scene) -> Vec<Config> {
             with(&|s| s.physics.clamp_negative_pressure = !base.physics.clamp_negative_pressure),
             Engine::Gpu,
         ),
-    ];
+        c("continuity density", "density", with(&|s| continuity(s, 0.0)), Engine::Gpu),
+        c("continuity + diffusion 0.1", "density diffusion", with(&|s| continuity(s, 0.1)), Engine::Gpu),
+        c("continuity + diffusion 0.2", "density diffusion", with(&|s| continuity(s, 0.2)), Engine::Gpu),
+        c(
+            "continuity + diffusion 0.1 + hydrostatic start",
+            "initial state",
+            with(&|s| {
+                continuity(s, 0.1);
+                s.physics.initial_pressure = InitialPressure::Hydrostatic;
+            }),
+            Engine::Gpu,
+        ),
+        c(
+            "artificial viscosity 0.02 (no viscosity)",
+            "viscosity model",
+            with(&|s| {
+                s.physics.viscosity = 0.0;
+                s.physics.viscosity_schedule.clear();
+                s.physics.artificial_viscosity = 0.02;
+            }),
+            Engine::Gpu,
+        ),
+        ];
     if !weakly_compressible {
-        all.retain(|c| !matches!(c.knob, "equation of state" | "stiffness") && c.name != "no pressure clamp");
+        // DFSPH has no equation of state, and carries no density by the continuity equation.
+        all.retain(|c| {
+            !matches!(c.knob, "equation of state" | "stiffness" | "density" | "density diffusion" | "initial state" | "viscosity model") && c.name != "no pressure clamp"
+        });
     }
     for tolerance in DFSPH_TOLERANCES {
         all.push(c(&format!("dfsph {}%", 100.0 * tolerance), "dfsph tolerance", with_dfsph(base, tolerance), Engine::Gpu));
     }
     all
+}
+
+/// The scene with continuity density and density diffusion `delta` (0: none); continuity
+/// density needs a fixed dt, so an adaptive scene runs at its largest step.
+fn continuity(s: &mut Scene, delta: f64) {
+    s.physics.density = DensityMethod::Continuity;
+    s.physics.density_diffusion = delta;
+    if s.time.adaptive {
+        s.time.adaptive = false;
+        s.time.dt = s.time.dt_max.unwrap_or(s.time.dt);
+        s.time.dt_min = None;
+        s.time.dt_max = None;
+    }
 }
 
 /// What one sample of a run measures.

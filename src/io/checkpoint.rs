@@ -27,7 +27,7 @@ use std::path::Path;
 pub const CHECKPOINT_FILE: &str = "checkpoint.wgsph";
 const MAGIC: &[u8; 8] = b"WGSPHCKP";
 /// Bumped whenever the payload's layout or meaning changes.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// The wgsph version written into (and required of) checkpoints.
 pub const WGSPH_VERSION: &str = env!("CARGO_PKG_VERSION");
 
@@ -244,6 +244,7 @@ pub fn write_state_in_pieces(backend: &mut dyn Backend, w: &mut dyn std::io::Wri
         gpu_status: &header.gpu_status,
         warm_start: array(StateArray::WarmStart),
         iterations: header.iterations,
+        densities: array(StateArray::Densities),
     };
     let result = postcard::to_io(&state, w);
     drop(state);
@@ -275,6 +276,7 @@ struct StateInPieces<'a, 'b> {
     gpu_status: &'a [u32],
     warm_start: StateArrayInPieces<'a, 'b>,
     iterations: crate::model::state::IterationStats,
+    densities: StateArrayInPieces<'a, 'b>,
 }
 
 /// One particle array of the state, serialised as a sequence handed over piece by piece.
@@ -298,6 +300,7 @@ impl Serialize for StateArrayInPieces<'_, '_> {
                 StatePiece::Vectors(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
                 StatePiece::Ids(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
                 StatePiece::Pairs(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
+                StatePiece::Scalars(v) => v.iter().try_for_each(|x| seq.serialize_element(x)),
             };
             r.map_err(|e| {
                 let why = anyhow::anyhow!("cannot serialise the state: {e}");

@@ -3,7 +3,7 @@
 
 use super::numbers::{short, short3};
 use super::params::MAX_PLANES;
-use super::scene::{err, Boundary, BoundaryVolume, EquationOfState, PressureSolver, Scene, SceneError, SceneOrigin};
+use super::scene::{err, Boundary, BoundaryVolume, DensityMethod, EquationOfState, InitialPressure, PressureSolver, Scene, SceneError, SceneOrigin};
 
 /// Most particles a scene may hold: indices are u32 on the GPU and the CPU.
 pub const MAX_PARTICLES: u64 = 1 << 31;
@@ -23,6 +23,9 @@ pub const CPU_BYTES_PER_PARTICLE: u64 = 200;
 pub const REST_DENSITY_RANGE: (f64, f64) = (1e-9, 1e9);
 /// The speed of sound, given or implied by the stiffness (see [`REST_DENSITY_RANGE`]).
 pub const SPEED_OF_SOUND_RANGE: (f64, f64) = (1e-6, 1e8);
+/// The allowed delta of density diffusion (0 = off) and alpha of artificial viscosity.
+pub const DENSITY_DIFFUSION_RANGE: (f64, f64) = (0.0, 1.0);
+pub const ARTIFICIAL_VISCOSITY_RANGE: (f64, f64) = (0.0, 1.0);
 /// The largest kinematic viscosity and the largest |gravity| (see [`REST_DENSITY_RANGE`]).
 pub const MAX_VISCOSITY: f64 = 1e9;
 pub const MAX_GRAVITY: f64 = 1e9;
@@ -126,6 +129,7 @@ impl Scene {
         if !(p.boundary_friction.is_finite() && p.boundary_friction >= 0.0) {
             return Err(err(origin, "physics.boundary_friction", format!("is {}; must be finite and >= 0", short(p.boundary_friction))));
         }
+        self.validate_pressure_options(origin)?;
         finite3("physics.gravity", p.gravity)?;
         // |g|, scaled so that huge components do not overflow.
         let largest = p.gravity.iter().fold(0.0f64, |m, c| m.max(c.abs()));
@@ -307,6 +311,46 @@ impl Scene {
                     "cannot be combined with time.adaptive = true (the GPU picks its step itself, so the host cannot time a viscosity change); use one viscosity or a fixed dt",
                 ));
             }
+        }
+        Ok(())
+    }
+
+    /// Continuity density, density diffusion, artificial viscosity and the hydrostatic start:
+    /// each value in its range, and each only where it means something.
+    fn validate_pressure_options(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
+        let p = &self.physics;
+        let continuity = p.density == DensityMethod::Continuity;
+        if p.solver == PressureSolver::Dfsph {
+            if continuity {
+                return Err(err(origin, "physics.density", "is \"continuity\"; DFSPH keeps its density by its own solve: use density = \"summation\" with solver = \"dfsph\""));
+            }
+            if p.artificial_viscosity != 0.0 {
+                return Err(err(origin, "physics.artificial_viscosity", format!(
+                    "is {}; Monaghan's artificial viscosity scales with the speed of sound, which DFSPH has none of: use viscosity, or solver = \"wcsph\"",
+                    short(p.artificial_viscosity))));
+            }
+        }
+        let (lo, hi) = DENSITY_DIFFUSION_RANGE;
+        if !(p.density_diffusion.is_finite() && (lo..=hi).contains(&p.density_diffusion)) {
+            return Err(err(origin, "physics.density_diffusion", format!(
+                "is {}; must be between {} (off) and {} (delta of delta-SPH; 0.1 is usual)", short(p.density_diffusion), short(lo), short(hi))));
+        }
+        if p.density_diffusion > 0.0 && !continuity {
+            return Err(err(origin, "physics.density_diffusion", format!(
+                "is {}; density diffusion acts on the density that the continuity equation carries: add physics.density = \"continuity\", or set density_diffusion = 0",
+                short(p.density_diffusion))));
+        }
+        let (lo, hi) = ARTIFICIAL_VISCOSITY_RANGE;
+        if !(p.artificial_viscosity.is_finite() && (lo..=hi).contains(&p.artificial_viscosity)) {
+            return Err(err(origin, "physics.artificial_viscosity", format!(
+                "is {}; must be between {} (off) and {} (alpha of Monaghan's artificial viscosity; 0.01 to 0.1 is usual)",
+                short(p.artificial_viscosity), short(lo), short(hi))));
+        }
+        if continuity && self.time.adaptive {
+            return Err(err(origin, "physics.density", "is \"continuity\", which advances each density by the step's dt before the forces, where adaptive time steps have not chosen it yet: use a fixed dt (time.adaptive = false), or density = \"summation\""));
+        }
+        if p.initial_pressure == InitialPressure::Hydrostatic && !continuity {
+            return Err(err(origin, "physics.initial_pressure", "is \"hydrostatic\", which sets each particle's density, and only the continuity equation keeps a density that was set: add physics.density = \"continuity\", or use initial_pressure = \"zero\""));
         }
         Ok(())
     }

@@ -1,12 +1,12 @@
 //! The particles of a scene at t = 0: fluid blocks on jittered lattices, walls on regular
 //! lattices, and the solid regions fluid must never enter.
 
-use super::kernels::{sort_by_cell, KernelCoefficients};
+use super::kernels::{density_above_rest, sort_by_cell, KernelCoefficients};
 use super::lattice::{fluid_axis, points, wall_axis, whole_spacings, AxisLattice};
 use super::numbers::short3;
-use super::params::Grid;
+use super::params::{Grid, Params};
 use super::real::V3;
-use super::scene::{Boundary, BoundaryVolume, Kernel, Scene};
+use super::scene::{Boundary, BoundaryVolume, DensityMethod, InitialPressure, Kernel, Scene};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
@@ -26,6 +26,16 @@ pub struct InitialState {
     pub wall_masses: Vec<f64>,
     /// The index in the scene's `[[boundary]]` list of each wall particle's boundary.
     pub wall_boundaries: Vec<u32>,
+    /// Each fluid particle's density at t = 0, for a scene whose density the continuity
+    /// equation carries; empty otherwise (summation finds it from the positions).
+    pub fluid_densities: Vec<f64>,
+}
+
+impl InitialState {
+    /// Fluid particle `i`'s density at t = 0 (rest density where none was set).
+    pub fn fluid_density(&self, i: usize, rest_density: f64) -> f64 {
+        self.fluid_densities.get(i).copied().unwrap_or(rest_density)
+    }
 }
 
 impl Scene {
@@ -90,11 +100,32 @@ impl Scene {
         })
     }
 
+    /// The density at t = 0 of a fluid particle at `x` in the block `min..max`: rest density, or
+    /// with a hydrostatic start the density the equation of state gives p = rho0 |g| d, d the
+    /// depth of `x` below the block's top face along gravity (the block is taken as one still
+    /// column; a particle of a jittered lattice above the face counts as at the surface).
+    pub fn initial_density(&self, params: &Params, x: [f64; 3], min: [f64; 3], max: [f64; 3]) -> f64 {
+        let p = &self.physics;
+        let g = p.gravity;
+        let g_len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        if p.initial_pressure != InitialPressure::Hydrostatic || g_len == 0.0 {
+            return p.rest_density;
+        }
+        let down = [g[0] / g_len, g[1] / g_len, g[2] / g_len];
+        // The block's top face: the corner highest against gravity.
+        let top = (0..3).map(|a| -down[a] * if down[a] < 0.0 { max[a] } else { min[a] }).sum::<f64>();
+        let height = -(0..3).map(|a| down[a] * x[a]).sum::<f64>();
+        let depth = (top - height).max(0.0);
+        p.rest_density + density_above_rest(p.rest_density * g_len * depth, p.rest_density, params.stiffness, params.eos)
+    }
+
     /// The particles at t = 0: fluid on jittered lattices, walls on regular lattices.
     pub fn initial_state(&self) -> InitialState {
         let s = self.physics.particle_spacing;
         let mut rng = rand_pcg::Pcg64::seed_from_u64(self.seed);
         let mut st = InitialState::default();
+        let continuity = self.physics.density == DensityMethod::Continuity;
+        let params = self.params();
         for (i, b) in self.fluid.iter().enumerate() {
             let j = b.jitter * s;
             for q in points(self.fluid_lattice(i)) {
@@ -106,6 +137,9 @@ impl Scene {
                 }
                 st.fluid_positions.push(q);
                 st.fluid_velocities.push(b.velocity);
+                if continuity {
+                    st.fluid_densities.push(self.initial_density(&params, q, b.min, b.max));
+                }
             }
         }
         for (index, b) in self.boundary.iter().enumerate() {

@@ -109,6 +109,17 @@ pub fn pressure<R: Real>(density: R, rest_density: R, stiffness: R, eos: Equatio
     }
 }
 
+/// The density above rest density at which the equation of state gives the pressure `p`:
+/// rho0 p / k (linear) or rho0 ((1 + p / k)^(1/7) - 1) (Tait). With p = rho0 g . (x_j - x_i),
+/// the hydrostatic density difference between two particles (Fourtakas et al. 2019, Eq. 12);
+/// with p = rho0 |g| depth, a still column's density at that depth.
+pub fn density_above_rest<R: Real>(p: R, rest_density: R, stiffness: R, eos: EquationOfState) -> R {
+    match eos {
+        EquationOfState::Linear => rest_density * p / stiffness,
+        EquationOfState::Tait => rest_density * ((R::one() + p / stiffness).powf(R::one() / R::of(7.0)) - R::one()),
+    }
+}
+
 impl<R: Real> Grid<R> {
     /// Integer cell coordinates of a point, clamped into the grid so that a particle outside
     /// the domain still has a valid cell (it is counted as escaped elsewhere); the same formula

@@ -2,7 +2,7 @@
 //! neighbour grid, adaptive time stepping and the viscosity schedule.
 
 use super::real::{Real, V3};
-use super::scene::{Boundary, BoundaryPressure, BoundaryVolume, DfsphSettings, EquationOfState, Kernel, Limits, PressureSolver, Scene};
+use super::scene::{Boundary, BoundaryPressure, BoundaryVolume, DensityMethod, DfsphSettings, EquationOfState, Kernel, Limits, PressureSolver, Scene};
 
 /// Plane in the form normal . x = offset, with a unit normal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,6 +45,12 @@ pub struct Params {
     pub limits: Limits,
     /// The probes sampled during a run (none: no probe stage runs).
     pub probes: super::probes::Probes,
+    /// Density carried by the continuity equation instead of kernel summation.
+    pub continuity_density: bool,
+    /// delta of the density diffusion (0: off; continuity density only).
+    pub density_diffusion: f64,
+    /// alpha of Monaghan's artificial viscosity (0: off).
+    pub artificial_viscosity: f64,
 }
 
 impl Params {
@@ -57,6 +63,17 @@ impl Params {
     /// Whether any viscosity of the scene (its schedule included) is above zero.
     pub fn uses_viscosity(&self) -> bool {
         self.viscosity.iter().any(|&(_, nu)| nu > 0.0)
+    }
+    /// The delta-SPH term D_i = delta h_s c0 sum_j psi_ij . grad W_ij V_j
+    /// with psi_ij = 2 (rho_j - rho_i) (x_j - x_i) / |x_ij|^2 (Molteni & Colagrossi 2009; Antuono
+    /// et al. 2010, Eq. 5), h_s = h / 2 the smoothing length of a kernel of support h, so that
+    /// the factor 2 delta h_s c0 = delta h c0. 0 when diffusion is off.
+    pub fn diffusion_factor(&self) -> f64 {
+        self.density_diffusion * self.h * self.speed_of_sound()
+    }
+    /// alpha h_s c0 of Monaghan's artificial viscosity (Monaghan 1992, Eq. 4.1), h_s = h / 2.
+    pub fn artificial_viscosity_factor(&self) -> f64 {
+        self.artificial_viscosity * 0.5 * self.h * self.speed_of_sound()
     }
     pub fn uses_gravity(&self) -> bool {
         self.gravity.iter().any(|&g| g != 0.0)
@@ -219,6 +236,9 @@ impl Scene {
             boundary_volume: p.boundary_volume,
             limits: self.limits,
             probes: self.probes(),
+            continuity_density: p.density == DensityMethod::Continuity,
+            density_diffusion: p.density_diffusion,
+            artificial_viscosity: p.artificial_viscosity,
         }
     }
 }

@@ -264,6 +264,62 @@ pub struct Physics {
     /// Tolerances and iteration limits of DFSPH (`solver = "dfsph"` only).
     #[serde(default, skip_serializing_if = "DfsphSettings::is_default")]
     pub dfsph: DfsphSettings,
+    /// How each particle's density is found: kernel summation, or carried by the continuity
+    /// equation (see docs/pressure.md).
+    #[serde(default, skip_serializing_if = "DensityMethod::is_default")]
+    pub density: DensityMethod,
+    /// delta of the delta-SPH density diffusion (Molteni & Colagrossi 2009, with the hydrostatic
+    /// correction of Fourtakas et al. 2019); 0 = off. Needs `density = "continuity"`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub density_diffusion: f64,
+    /// alpha of Monaghan's artificial viscosity (Monaghan 1992), acting on approaching pairs
+    /// only; 0 = off. Beside `viscosity`, which acts on every pair.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub artificial_viscosity: f64,
+    /// The density and pressure of the fluid at t = 0: at rest, or hydrostatic (continuity
+    /// density only).
+    #[serde(default, skip_serializing_if = "InitialPressure::is_default")]
+    pub initial_pressure: InitialPressure,
+}
+
+/// How a particle's density is found.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum DensityMethod {
+    /// rho_i = sum_k m_k W_ik, evaluated anew every step.
+    #[default]
+    Summation,
+    /// d rho_i / dt = sum_k m_k (u_i - u_k) . grad W_ik, integrated with the particle (as
+    /// DualSPHysics does); the only method that density diffusion applies to.
+    Continuity,
+}
+
+impl DensityMethod {
+    fn is_default(&self) -> bool {
+        *self == DensityMethod::default()
+    }
+}
+
+/// The fluid's density and pressure at t = 0.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum InitialPressure {
+    /// Rest density, zero pressure: a still column rings as gravity compresses it.
+    #[default]
+    Zero,
+    /// p = rho0 |g| d at depth d below the top of the particle's fluid block, and the density
+    /// the equation of state gives it.
+    Hydrostatic,
+}
+
+impl InitialPressure {
+    fn is_default(&self) -> bool {
+        *self == InitialPressure::default()
+    }
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// How pressure is found.

@@ -224,6 +224,9 @@ pub struct BackendState {
     pub warm_start: Vec<[f64; 2]>,
     /// DFSPH on the CPU: the iterations so far (the GPU keeps them in its status words).
     pub iterations: IterationStats,
+    /// With continuity density: each particle's carried density, in the order of `positions`;
+    /// empty otherwise.
+    pub densities: Vec<f64>,
 }
 
 impl BackendState {
@@ -232,7 +235,7 @@ impl BackendState {
         anyhow::ensure!(self.kind == kind, "the state was saved by the {} backend, not {kind}", self.kind);
         let n = fluid_count;
         anyhow::ensure!(
-            self.positions.len() == n && self.velocities.len() == n && self.ids.len() == n,
+            self.positions.len() == n && self.velocities.len() == n && self.ids.len() == n && (self.densities.is_empty() || self.densities.len() == n),
             "the state holds {} particles; the scene has {n}",
             self.positions.len()
         );

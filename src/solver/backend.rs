@@ -20,6 +20,8 @@ pub enum StateArray {
     Ids,
     /// DFSPH's warm-start stiffnesses by particle id (empty for WCSPH).
     WarmStart,
+    /// The densities the continuity equation carries (empty with summation density).
+    Densities,
 }
 
 /// A stage of a DFSPH step, run alone by the stage tests (`CpuSolver::dfsph_stage`,
@@ -49,6 +51,7 @@ pub enum StatePiece<'a> {
     Vectors(&'a [[f64; 3]]),
     Ids(&'a [u32]),
     Pairs(&'a [[f64; 2]]),
+    Scalars(&'a [f64]),
 }
 
 /// A simulation the layers above can drive: the CPU reference or the GPU pipeline. It knows no
@@ -111,6 +114,7 @@ pub trait Backend {
         state.velocities = Vec::new();
         state.ids = Vec::new();
         state.warm_start = Vec::new();
+        state.densities = Vec::new();
         Ok(state)
     }
     /// Elements of one particle array of the saved state: every fluid particle's, but DFSPH's
@@ -118,6 +122,7 @@ pub trait Backend {
     fn state_array_len(&self, array: StateArray) -> usize {
         match array {
             StateArray::WarmStart if self.params().dfsph.is_none() => 0,
+            StateArray::Densities if !self.params().continuity_density => 0,
             _ => self.fluid_count(),
         }
     }
@@ -130,6 +135,7 @@ pub trait Backend {
             StateArray::Velocities => state.velocities.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
             StateArray::Ids => state.ids.chunks(chunk).try_for_each(|c| visit(StatePiece::Ids(c))),
             StateArray::WarmStart => state.warm_start.chunks(chunk).try_for_each(|c| visit(StatePiece::Pairs(c))),
+            StateArray::Densities => state.densities.chunks(chunk).try_for_each(|c| visit(StatePiece::Scalars(c))),
         }
     }
     /// Continues from a saved state: the following steps are bitwise those the saving backend

@@ -7,7 +7,7 @@
 use wgsph::model::initial::InitialState;
 use wgsph::model::real::Real;
 use wgsph::model::scene::{
-    Boundary, BoundaryPressure, BoundaryVolume, DfsphSettings, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, SceneOrigin, Time,
+    Boundary, BoundaryPressure, BoundaryVolume, DensityMethod, DfsphSettings, InitialPressure, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, SceneOrigin, Time,
     ViscosityChange, WallParticles,
 };
 use wgsph::solver::cpu::CpuSolver;
@@ -81,6 +81,10 @@ impl TestScene {
                     gravity: [0.0, -9.81, 0.0],
                     solver: Default::default(),
                     boundary_volume: Default::default(),
+                    density: Default::default(),
+                    density_diffusion: 0.0,
+                    artificial_viscosity: 0.0,
+                    initial_pressure: Default::default(),
                     dfsph: Default::default(),
                 },
                 time: Time::fixed(0.0004, 1.0),
@@ -210,6 +214,30 @@ impl TestScene {
 
     pub fn boundary_pressure(mut self, pressure: BoundaryPressure) -> TestScene {
         self.scene.physics.boundary_pressure = pressure;
+        self
+    }
+
+    /// Density carried by the continuity equation.
+    pub fn continuity(mut self) -> TestScene {
+        self.scene.physics.density = DensityMethod::Continuity;
+        self
+    }
+
+    /// delta of the density diffusion (continuity density only).
+    pub fn density_diffusion(mut self, delta: f64) -> TestScene {
+        self.scene.physics.density_diffusion = delta;
+        self
+    }
+
+    /// alpha of Monaghan's artificial viscosity.
+    pub fn artificial_viscosity(mut self, alpha: f64) -> TestScene {
+        self.scene.physics.artificial_viscosity = alpha;
+        self
+    }
+
+    /// The fluid starts at its hydrostatic density and pressure (continuity density only).
+    pub fn hydrostatic_start(mut self) -> TestScene {
+        self.scene.physics.initial_pressure = InitialPressure::Hydrostatic;
         self
     }
 

@@ -151,13 +151,14 @@ fn resumed_run_is_bitwise_the_uninterrupted_one(make: &mut dyn FnMut() -> Box<dy
     assert_eq!(read(&b.join(CHECKPOINT_FILE)).unwrap().state.step, 40);
 }
 
-/// The dam break with a fixed step, and with adaptive dt (whose time, dt and compensation
-/// live in the state too).
+/// The dam break with a fixed step, with adaptive dt (whose time, dt and compensation live in
+/// the state too), and with continuity density (whose carried densities do).
 fn scenes() -> Vec<(Scene, &'static str)> {
     let fixed = Scene::builtin("dam_break").unwrap();
     let mut adaptive = fixed.clone();
     adaptive.time.adaptive = true;
-    vec![(fixed, "fixed dt"), (adaptive, "adaptive dt")]
+    let continuity = common::TestScene::from(fixed.clone()).continuity().density_diffusion(0.1).hydrostatic_start().build();
+    vec![(fixed, "fixed dt"), (adaptive, "adaptive dt"), (continuity, "continuity density")]
 }
 
 /// The dam break with DFSPH (whose warm start and iteration counts live in the state too), with

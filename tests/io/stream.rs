@@ -137,41 +137,44 @@ fn gpu_snapshots_streamed_in_pieces_and_passes_equal_the_whole_array_files_on_ev
 
 #[test]
 fn gpu_checkpoints_streamed_in_pieces_equal_the_whole_state_ones_and_resume_bitwise_on_every_adapter() {
-    // Adaptive dt: the status words (time, dt and its compensation) are in the state too; with
-    // DFSPH also the warm-start stiffnesses, an array of their own.
-    let mut wcsph = Scene::builtin("dam_break").unwrap().with_fluid_particles(500);
-    wcsph.time.adaptive = true;
-    let dfsph = common::TestScene::from(wcsph.clone()).dfsph().build();
-    let runs = common::contexts().into_iter().enumerate().flat_map(|(i, c)| [(i, c.clone(), wcsph.clone()), (i, c, dfsph.clone())]);
-    for (i, ctx, scene) in runs {
-        let mut solver = common::gpu(ctx.clone(), &scene);
-        solver.step(6).unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let opts = RunOptions { steps: 10, out: dir.path().to_path_buf(), checkpoint_every: 6, ..Default::default() };
-        let record = run_record(&solver, &opts, 10, None, 0.5);
-        let whole = capture(&mut solver, &scene.to_toml(), record.clone()).unwrap();
-        let whole_path = dir.path().join("whole.wgsph");
-        write(&whole_path, &whole).unwrap();
-        let expected = std::fs::read(&whole_path).unwrap();
-        for chunk in [1, 7, 64, STREAM_CHUNK] {
-            let path = dir.path().join(format!("streamed_{chunk}.wgsph"));
-            write_with_state(&path, &whole.scene_toml, &whole.run, |w| write_state_in_pieces(&mut solver, w, chunk)).unwrap();
-            assert!(std::fs::read(&path).unwrap() == expected, "chunk {chunk} on {}", ctx.describe());
+    // Adaptive dt: the status words (time, dt and its compensation) are in the state too;
+    // continuity density: the densities the particles carry.
+    let mut adaptive = Scene::builtin("dam_break").unwrap().with_fluid_particles(500);
+    adaptive.time.adaptive = true;
+    let continuity = common::TestScene::from(Scene::builtin("dam_break").unwrap().with_fluid_particles(500)).continuity().density_diffusion(0.1).build();
+    // DFSPH: the warm-start stiffnesses, an array of their own.
+    let dfsph = common::TestScene::from(adaptive.clone()).dfsph().build();
+    for (i, ctx) in common::contexts().into_iter().enumerate() {
+        for scene in [&adaptive, &continuity, &dfsph] {
+            let mut solver = common::gpu(ctx.clone(), &scene);
+            solver.step(6).unwrap();
+            let dir = tempfile::tempdir().unwrap();
+            let opts = RunOptions { steps: 10, out: dir.path().to_path_buf(), checkpoint_every: 6, ..Default::default() };
+            let record = run_record(&solver, &opts, 10, None, 0.5);
+            let whole = capture(&mut solver, &scene.to_toml(), record.clone()).unwrap();
+            let whole_path = dir.path().join("whole.wgsph");
+            write(&whole_path, &whole).unwrap();
+            let expected = std::fs::read(&whole_path).unwrap();
+            for chunk in [1, 7, 64, STREAM_CHUNK] {
+                let path = dir.path().join(format!("streamed_{chunk}.wgsph"));
+                write_with_state(&path, &whole.scene_toml, &whole.run, |w| write_state_in_pieces(&mut solver, w, chunk)).unwrap();
+                assert!(std::fs::read(&path).unwrap() == expected, "chunk {chunk} on {}", ctx.describe());
+            }
+            // What the run loop writes (the streamed path) is the same file too.
+            let saved = dir.path().join("saved.wgsph");
+            wgsph::io::checkpoint::save(&mut solver, &scene.to_toml(), &record, &saved).unwrap();
+            assert!(std::fs::read(&saved).unwrap() == expected, "{}", ctx.describe());
+            // Resumed from the checkpoint written in the smallest pieces, a fresh solver continues
+            // bitwise as the original does.
+            let c = read(&dir.path().join("streamed_7.wgsph")).unwrap();
+            assert!(c == whole);
+            let mut resumed = common::gpu(common::contexts().into_iter().nth(i).unwrap(), &scene);
+            resumed.restore_state(&c.state).unwrap();
+            solver.step(4).unwrap();
+            resumed.step(4).unwrap();
+            let (a, b) = (solver.snapshot().unwrap(), resumed.snapshot().unwrap());
+            assert!(a == b, "{}: the resumed run differs", ctx.describe());
+            assert_eq!(a.step, 10);
         }
-        // What the run loop writes (the streamed path) is the same file too.
-        let saved = dir.path().join("saved.wgsph");
-        wgsph::io::checkpoint::save(&mut solver, &scene.to_toml(), &record, &saved).unwrap();
-        assert!(std::fs::read(&saved).unwrap() == expected, "{}", ctx.describe());
-        // Resumed from the checkpoint written in the smallest pieces, a fresh solver continues
-        // bitwise as the original does.
-        let c = read(&dir.path().join("streamed_7.wgsph")).unwrap();
-        assert!(c == whole);
-        let mut resumed = common::gpu(common::contexts().into_iter().nth(i).unwrap(), &scene);
-        resumed.restore_state(&c.state).unwrap();
-        solver.step(4).unwrap();
-        resumed.step(4).unwrap();
-        let (a, b) = (solver.snapshot().unwrap(), resumed.snapshot().unwrap());
-        assert!(a == b, "{}: the resumed run differs", ctx.describe());
-        assert_eq!(a.step, 10);
     }
 }

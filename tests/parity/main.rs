@@ -12,3 +12,4 @@ mod specialise;
 mod scale;
 mod dfsph;
 mod probes;
+mod pressure;

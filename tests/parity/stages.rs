@@ -170,6 +170,8 @@ fn variants() -> Vec<Scene> {
         scene_with(Kernel::Mueller, EquationOfState::Tait, BoundaryPressure::Mirror, 0.005),
         scene_with(Kernel::Mueller, EquationOfState::Linear, BoundaryPressure::Consistent, 0.0),
         scene_with(Kernel::CubicSpline, EquationOfState::Tait, BoundaryPressure::Consistent, 0.005),
+        // Continuity density with diffusion, artificial viscosity and a hydrostatic start.
+        TestScene::small_tank().viscosity(0.0).continuity().density_diffusion(0.1).artificial_viscosity(0.05).hydrostatic_start().build(),
     ]
 }
 
@@ -183,6 +185,9 @@ fn moved_state(scene: &Scene) -> wgsph::model::state::BackendState {
     for v in state.positions.iter_mut().chain(state.velocities.iter_mut()) {
         *v = v.map(|x| x as f32 as f64);
     }
+    for d in state.densities.iter_mut() {
+        *d = *d as f32 as f64;
+    }
     state
 }
 
@@ -193,6 +198,7 @@ fn both(ctx: GpuContext, scene: &Scene, state: &wgsph::model::state::BackendStat
     gpu_state.positions = state.positions.clone();
     gpu_state.velocities = state.velocities.clone();
     gpu_state.ids = state.ids.clone();
+    gpu_state.densities = state.densities.clone();
     gpu.restore_state(&gpu_state).unwrap();
     let mut f32s = common::cpu::<f32>(scene);
     let mut f64s = common::cpu::<f64>(scene);

@@ -11,3 +11,4 @@ mod blowups;
 mod coarse_walls;
 mod validation;
 mod dfsph;
+mod pressure;

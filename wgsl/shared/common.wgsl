@@ -15,6 +15,10 @@ override WALLS: bool = true;                    // the scene has wall particles
 override PLANES: bool = true;                   // the scene has analytic planes
 override GRAVITY: bool = true;                  // gravity is not zero
 override ADAPTIVE_DT: bool = false;             // dt chosen on the GPU every step (integrate.wgsl)
+// Density carried by the continuity equation (in each velocity's w) instead of summed.
+override CONTINUITY: bool = false;
+override DENSITY_DIFFUSION: bool = false;       // delta-SPH diffusion (with CONTINUITY only)
+override ARTIFICIAL_VISCOSITY: bool = false;    // Monaghan's, on approaching pairs
 // The neighbour stencil as 9 runs of 3 cells (true) or as 27 single cells (false, kept to
 // measure what the runs gain; the same neighbours in the same order).
 override STENCIL_RUNS: bool = true;
@@ -73,7 +77,12 @@ struct Params {
     max_divergence_iterations: u32,
     density_threshold: vec2<u32>,
     divergence_threshold: vec2<u32>,
+    // delta h c0 of density diffusion, alpha h_s c0 of artificial viscosity (src/model/params.rs).
+    diffusion_factor: f32,
+    artificial_viscosity_factor: f32,
     pad3: u32,
+    pad4: u32,
+    pad5: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -220,6 +229,16 @@ fn eos_pressure(density: f32) -> f32 {
         p = 0.0;
     }
     return p;
+}
+
+// The density above rest density at which the equation of state gives the pressure p
+// (Fourtakas et al. 2019, Eq. 12, for p = rho0 g . x_ji). Twin of density_above_rest in
+// src/model/kernels.rs.
+fn density_above_rest(p: f32) -> f32 {
+    if (EOS == 0u) {
+        return params.rest_density * p / params.stiffness;
+    }
+    return params.rest_density * (pow(1.0 + p / params.stiffness, 1.0 / 7.0) - 1.0);
 }
 
 // Spans of the stencil a particle visits: 9 runs of up to 3 cells, or 27 single cells.

@@ -1,6 +1,6 @@
 // Accelerations: the symmetric pressure force (report Eq. 6), viscosity (Eq. 7 with the volumes
-// m_k / rho_k of Eq. 4, in the symmetric form of Mueller et al. 2003 Eq. 14), wall particles and
-// gravity.
+// m_k / rho_k of Eq. 4, in the symmetric form of Mueller et al. 2003 Eq. 14), Monaghan's
+// artificial viscosity, wall particles and gravity.
 // Twin of src/solver/cpu/forces.rs, which explains the wall and viscosity models.
 
 //! include shared/common.wgsl
@@ -13,8 +13,9 @@
 //! array wall_starts: u32, read
 //! array accelerations: vec4<f32>, read_write
 
-// The acceleration of fluid particle i.
-fn particle_acceleration(i: u32) -> vec3<f32> {
+// The acceleration of fluid particle i (xyz) and, with CONTINUITY, its density (w, which the
+// integration carries to the next step; 0 otherwise).
+fn particle_acceleration(i: u32) -> vec4<f32> {
     let cubic = KERNEL == 1u;
     let viscous = VISCOSITY && params.viscosity > 0.0;
     let eps = 0.01 * params.h2;
@@ -30,6 +31,8 @@ fn particle_acceleration(i: u32) -> vec3<f32> {
     var fluid_visc = vec3<f32>(0.0);
     var wall_pressure = vec3<f32>(0.0);
     var wall_visc = vec3<f32>(0.0);
+    var fluid_artificial = vec3<f32>(0.0);
+    var wall_artificial = vec3<f32>(0.0);
     for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);
         for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
@@ -52,6 +55,13 @@ fn particle_acceleration(i: u32) -> vec3<f32> {
                     fluid_visc -= uij * (inv_rho * kernel_laplacian(r));
                 }
             }
+            if (ARTIFICIAL_VISCOSITY) {
+                let uij = ui - velocities_at(j).xyz;
+                let approach = dot(uij, rij);
+                if (approach < 0.0) {
+                    fluid_artificial += grad * (approach / ((r2 + eps) * (rho_i + rho_j)));
+                }
+            }
         }
         if (WALLS) {
             for (var j = wall_starts_at(cells.x); j < wall_starts_at(cells.y); j++) {
@@ -71,22 +81,32 @@ fn particle_acceleration(i: u32) -> vec3<f32> {
                         wall_visc -= ui * (w.w * kernel_laplacian(r));
                     }
                 }
+                if (ARTIFICIAL_VISCOSITY) {
+                    let approach = dot(ui, rij);
+                    if (approach < 0.0) {
+                        wall_artificial += grad * (w.w * approach / ((r2 + eps) * rho_i));
+                    }
+                }
             }
         }
     }
     let nu = select(params.viscosity, 10.0 * params.viscosity, cubic);
     let visc = fluid_visc * (nu * params.rest_density * params.fluid_mass / rho_i) + wall_visc * (nu * params.boundary_friction / rho_i);
     var a = fluid_pressure * params.fluid_mass + wall_pressure * wall_p_over + visc;
+    if (ARTIFICIAL_VISCOSITY) {
+        let av = params.artificial_viscosity_factor;
+        a += fluid_artificial * (2.0 * av * params.fluid_mass) + wall_artificial * av;
+    }
     if (GRAVITY) {
         a += params.gravity.xyz;
     }
-    return a;
+    return vec4<f32>(a, select(0.0, rho_i, CONTINUITY));
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn forces(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        accelerations_set(i, vec4<f32>(particle_acceleration(i), 0.0));
+        accelerations_set(i, particle_acceleration(i));
     }
 }

@@ -25,8 +25,10 @@ fn step_dt() -> f32 {
 // speed the forces gave it, before a plane took the velocity into it away (0 for a particle
 // that is not finite; a finite velocity whose length overflows counts as infinitely fast, which
 // orders above every finite speed). The w component of the position (the particle's original
-// index, as bits) is carried over untouched.
-fn advance_particle(i: u32, a: vec3<f32>, dt: f32) -> f32 {
+// index, as bits) is carried over untouched. With CONTINUITY the w of the velocity carries the
+// density of this step (a4.w) to the next, whose continuity stage advances it; otherwise it is 0.
+fn advance_particle(i: u32, a4: vec4<f32>, dt: f32) -> f32 {
+    let a = a4.xyz;
     let old = positions_at(i);
     var v = velocities_at(i).xyz;
     var x = old.xyz;
@@ -49,8 +51,8 @@ fn advance_particle(i: u32, a: vec3<f32>, dt: f32) -> f32 {
         }
     }
     positions_out_set(i, vec4<f32>(x, old.w));
-    velocities_out_set(i, vec4<f32>(v, 0.0));
-    let finite = is_finite_vec3(x) && is_finite_vec3(v);
+    velocities_out_set(i, vec4<f32>(v, a4.w));
+    let finite = is_finite_vec3(x) && is_finite_vec3(v) && (!CONTINUITY || is_finite_f32(a4.w));
     if (!finite) {
         atomicAdd(&status[STATUS_NON_FINITE], 1u);
         return 0.0;
@@ -77,7 +79,7 @@ fn integrate(
     let i = thread_index(gid, groups);
     var speed = 0.0;
     if (i < params.fluid_count) {
-        speed = advance_particle(i, accelerations_at(i).xyz, step_dt());
+        speed = advance_particle(i, accelerations_at(i), step_dt());
     }
     reduce_speed(speed);
     if (lid == 0u) {

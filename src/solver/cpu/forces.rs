@@ -22,6 +22,8 @@ pub struct ForcesInput<'a, R> {
     pub pressures: &'a [R],
     pub walls: Neighbours<'a, R>,
     pub wall_masses: &'a [R],
+    /// alpha h_s c0 of artificial viscosity (0: off).
+    pub artificial_viscosity_factor: R,
 }
 
 /// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
@@ -41,7 +43,12 @@ pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
 }
 
-/// The acceleration of fluid particle `i` (wgsl/sim/forces.wgsl `particle_acceleration`).
+/// The acceleration of fluid particle `i` (wgsl/sim/forces.wgsl `particle_acceleration`, whose
+/// w carries the particle's density to the integration with continuity density).
+///
+/// Artificial viscosity (Monaghan 1992, Eq. 4.1) adds -sum_k m_k Pi_ik grad W_ik with
+/// Pi_ik = -alpha c0 h_s mu_ik / rho_ik, mu_ik = (u_ik . x_ik) / (|x_ik|^2 + 0.01 h^2), for
+/// approaching pairs (u_ik . x_ik < 0) only; rho_ik is the pair's mean density (rho_i for a wall).
 pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R> {
     let kernel = input.kernel;
     let cubic = kernel.kind == Kernel::CubicSpline;
@@ -66,6 +73,9 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
     let mut fluid_visc = V3::zero();
     let mut wall_pressure = V3::zero();
     let mut wall_visc = V3::zero();
+    let artificial = input.artificial_viscosity_factor > R::zero();
+    let mut fluid_artificial = V3::zero();
+    let mut wall_artificial = V3::zero();
     for (k0, k1) in input.grid.stencil_runs(c) {
         for j in input.fluid.span(k0, k1) {
             let rij = xi - input.fluid.positions[j];
@@ -87,6 +97,13 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
                     fluid_visc -= uij * (inv_rho * kernel.lap_w(r));
                 }
             }
+            if artificial {
+                let uij = ui - input.velocities[j];
+                let approach = uij.dot(rij);
+                if approach < R::zero() {
+                    fluid_artificial += grad * (approach / ((r2 + eps) * (rho_i + rho_j)));
+                }
+            }
         }
         for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {
             let rij = xi - input.walls.positions[j];
@@ -105,14 +122,23 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
                     wall_visc -= ui * (mw * kernel.lap_w(r));
                 }
             }
+            if artificial {
+                let approach = ui.dot(rij);
+                if approach < R::zero() {
+                    wall_artificial += grad * (mw * approach / ((r2 + eps) * rho_i));
+                }
+            }
         }
     }
     let nu = if cubic { ten * input.viscosity } else { input.viscosity };
     let visc = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
-    let a = fluid_pressure * input.fluid_mass + wall_pressure * wall_p_over + visc;
-    if gravity {
-        a + input.gravity
-    } else {
-        a
+    let mut a = fluid_pressure * input.fluid_mass + wall_pressure * wall_p_over + visc;
+    if artificial {
+        let av = input.artificial_viscosity_factor;
+        a += fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + wall_artificial * av;
     }
+    if gravity {
+        a += input.gravity;
+    }
+    a
 }

@@ -42,6 +42,8 @@ pub struct IntegrateInput<'a, R> {
     pub domain_min: V3<R>,
     pub domain_max: V3<R>,
     pub accelerations: &'a [V3<R>],
+    /// With continuity density, each particle's density of this step (empty otherwise).
+    pub densities: &'a [R],
 }
 
 /// Advances one particle with acceleration `a` over `dt` (wgsl `advance_particle`): a plane puts
@@ -69,9 +71,34 @@ pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, 
     StepHealth { non_finite: (!finite) as u32, escaped: (finite && !inside) as u32, max_speed: if finite { speed } else { 0.0 } }
 }
 
-/// Every particle advanced in place; returns what went wrong in this step.
-pub fn integrate<R: Real>(input: &IntegrateInput<R>, positions: &mut [V3<R>], velocities: &mut [V3<R>]) -> StepHealth {
+/// Carries the density of this step to the next, with continuity density (the part of wgsl
+/// `advance_particle` under CONTINUITY): a particle whose density is not finite counts as
+/// non-finite, with no speed, as on the GPU.
+pub fn carry_density<R: Real>(carried: &mut R, rho: R, found: StepHealth) -> StepHealth {
+    *carried = rho;
+    if rho.is_finite() || found.non_finite > 0 {
+        found
+    } else {
+        StepHealth { non_finite: 1, escaped: 0, max_speed: 0.0 }
+    }
+}
+
+/// Every particle advanced in place, and with continuity density (`carried` not empty) its
+/// density carried to the next step; returns what went wrong in this step.
+pub fn integrate<R: Real>(input: &IntegrateInput<R>, positions: &mut [V3<R>], velocities: &mut [V3<R>], carried: &mut [R]) -> StepHealth {
     let domain = (input.domain_min, input.domain_max);
+    if !carried.is_empty() {
+        return positions
+            .par_iter_mut()
+            .zip(velocities.par_iter_mut())
+            .zip(carried.par_iter_mut())
+            .enumerate()
+            .map(|(i, ((x, v), rho))| {
+                let found = advance_particle(x, v, input.accelerations[i], input.dt, input.planes, domain);
+                carry_density(rho, input.densities[i], found)
+            })
+            .reduce(StepHealth::default, StepHealth::add);
+    }
     positions
         .par_iter_mut()
         .zip(velocities.par_iter_mut())

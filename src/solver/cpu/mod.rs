@@ -4,6 +4,7 @@
 
 pub mod bin_count;
 pub mod bin_scatter;
+pub mod continuity;
 pub mod density;
 pub mod dfsph;
 pub mod dfsph_convergence;
@@ -45,6 +46,10 @@ pub struct CpuSolver<R: Real> {
     densities: Vec<R>,
     pressures: Vec<R>,
     accelerations: Vec<V3<R>>,
+    /// With continuity density: the density each particle carries from the last step (empty
+    /// otherwise).
+    carried_densities: Vec<R>,
+    scratch_r: Vec<R>,
     keys: Vec<u32>,
     counts: Vec<u32>,
     starts: Vec<u32>,
@@ -95,6 +100,8 @@ impl<R: Real> CpuSolver<R> {
             densities: vec![R::zero(); n],
             pressures: vec![R::zero(); n],
             accelerations: vec![V3::zero(); n],
+            carried_densities: if params.continuity_density { (0..n).map(|i| R::of(initial.fluid_density(i, params.rest_density))).collect() } else { Vec::new() },
+            scratch_r: Vec::new(),
             keys: vec![0; n],
             counts: vec![0; grid.cell_count()],
             starts: vec![0; grid.cell_count() + 1],
@@ -149,6 +156,7 @@ impl<R: Real> CpuSolver<R> {
             + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
             + self.wall_positions.len() as u64 * (v3 + r)
             + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
+            + (self.carried_densities.len() + self.scratch_r.capacity()) as u64 * r
     }
 
     /// Stage 1: counting-sort binning and reordering of the state into cell order.
@@ -163,11 +171,36 @@ impl<R: Real> CpuSolver<R> {
         std::mem::swap(&mut self.velocities, &mut self.scratch_v3);
         reorder::reorder(&self.sorted, &self.ids, &mut self.scratch_ids);
         std::mem::swap(&mut self.ids, &mut self.scratch_ids);
+        if !self.carried_densities.is_empty() {
+            reorder::reorder(&self.sorted, &self.carried_densities, &mut self.scratch_r);
+            std::mem::swap(&mut self.carried_densities, &mut self.scratch_r);
+        }
     }
 
     /// Stage 2: density and pressure of every particle.
     pub fn compute_density(&mut self) {
         let p = &self.params;
+        if p.continuity_density {
+            let input = continuity::ContinuityInput {
+                kernel: &self.kernel,
+                grid: &self.grid,
+                dt: R::of(p.dt),
+                fluid_mass: R::of(p.fluid_mass),
+                rest_density: R::of(p.rest_density),
+                stiffness: R::of(p.stiffness),
+                eos: p.eos,
+                clamp_negative_pressure: p.clamp_negative_pressure,
+                gravity: V3::from64(p.gravity),
+                diffusion_factor: R::of(p.diffusion_factor()),
+                fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+                velocities: &self.velocities,
+                carried: &self.carried_densities,
+                walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
+                wall_masses: &self.wall_masses,
+            };
+            continuity::continuity_density(&input, &mut self.densities, &mut self.pressures);
+            return;
+        }
         let input = density::DensityInput {
             kernel: &self.kernel,
             grid: &self.grid,
@@ -201,6 +234,7 @@ impl<R: Real> CpuSolver<R> {
             pressures: &self.pressures,
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
+            artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
         }
     }
 
@@ -217,8 +251,9 @@ impl<R: Real> CpuSolver<R> {
     pub fn forces_and_integrate(&self) -> (Vec<V3<R>>, Vec<V3<R>>, integrate::StepHealth) {
         let n = self.positions.len();
         let (mut x, mut v) = (vec![V3::zero(); n], vec![V3::zero(); n]);
+        let mut rho = vec![R::zero(); self.carried_densities.len()];
         let domain = (V3::from64(self.params.domain_min), V3::from64(self.params.domain_max));
-        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.planes, domain, &mut x, &mut v);
+        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.planes, domain, &mut x, &mut v, &mut rho);
         (x, v, found)
     }
 
@@ -246,8 +281,9 @@ impl<R: Real> CpuSolver<R> {
             domain_min: V3::from64(self.params.domain_min),
             domain_max: V3::from64(self.params.domain_max),
             accelerations: &self.accelerations,
+            densities: if self.carried_densities.is_empty() { &[] } else { &self.densities },
         };
-        integrate::integrate(&input, &mut self.positions, &mut self.velocities)
+        integrate::integrate(&input, &mut self.positions, &mut self.velocities, &mut self.carried_densities)
     }
 
     /// The parts of the solver a DFSPH stage reads and writes, and DFSPH's own arrays.
@@ -493,6 +529,7 @@ impl<R: Real> CpuSolver<R> {
                 None => Vec::new(),
             },
             iterations: self.dfsph.as_ref().map(|d| d.stats).unwrap_or_default(),
+            densities: self.carried_densities.iter().map(|d| d.to64()).collect(),
         }
     }
 
@@ -501,6 +538,13 @@ impl<R: Real> CpuSolver<R> {
         self.positions = state.positions.iter().map(|&p| V3::from64(p)).collect();
         self.velocities = state.velocities.iter().map(|&v| V3::from64(v)).collect();
         self.ids = state.ids.clone();
+        anyhow::ensure!(
+            state.densities.len() == self.carried_densities.len(),
+            "the state holds {} carried densities; the scene's density method needs {}",
+            state.densities.len(),
+            self.carried_densities.len()
+        );
+        self.carried_densities = state.densities.iter().map(|&d| R::of(d)).collect();
         self.step = state.step;
         self.probe_samples.clear();
         self.health = state.health();

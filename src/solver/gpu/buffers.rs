@@ -50,12 +50,12 @@ impl StateBuffers {
     /// integration writes them), `STREAM_CHUNK` particles at a time with a submission after
     /// each piece, so the host converts and stages one piece instead of two whole `vec4` arrays
     /// (32 bytes per particle).
-    pub fn upload(&self, ctx: &GpuContext, positions: &[[f64; 3]], velocities: &[[f64; 3]], id: impl Fn(usize) -> u32) {
+    pub fn upload(&self, ctx: &GpuContext, positions: &[[f64; 3]], velocities: &[[f64; 3]], id: impl Fn(usize) -> u32, velocity_w: &dyn Fn(usize) -> f32) {
         let chunk = STREAM_CHUNK as usize;
         for first in (0..positions.len()).step_by(chunk) {
             let end = (first + chunk).min(positions.len());
             let pos = vec4s(&positions[first..end], |i| f32::from_bits(id(first + i)));
-            let vel = vec4s(&velocities[first..end], |_| 0.0);
+            let vel = vec4s(&velocities[first..end], |i| velocity_w(first + i));
             ctx.queue.write_buffer(&self.positions, first as u64 * 16, bytemuck::cast_slice(&pos));
             ctx.queue.write_buffer(&self.velocities, first as u64 * 16, bytemuck::cast_slice(&vel));
             ctx.queue.submit([]);

@@ -125,7 +125,12 @@ uniform_block! {
         /// tolerances of the constant-density and the divergence solve.
         density_threshold: Vec2u => "vec2<u32>",
         divergence_threshold: Vec2u => "vec2<u32>",
+        /// delta h c0 of density diffusion, alpha h_s c0 of artificial viscosity.
+        diffusion_factor: f32 => "f32",
+        artificial_viscosity_factor: f32 => "f32",
         pad3: u32 => "u32",
+        pad4: u32 => "u32",
+        pad5: u32 => "u32",
     }
 }
 
@@ -187,7 +192,11 @@ impl GpuParams {
             max_divergence_iterations: d.max_divergence_iterations,
             density_threshold: words(error_threshold(d.density_error, n)),
             divergence_threshold: words(error_threshold(d.divergence_error, n)),
+            diffusion_factor: p.diffusion_factor() as f32,
+            artificial_viscosity_factor: p.artificial_viscosity_factor() as f32,
             pad3: 0,
+            pad4: 0,
+            pad5: 0,
         }
     }
 

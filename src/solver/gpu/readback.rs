@@ -122,6 +122,8 @@ pub enum Element {
     Vector,
     /// The u32 bits in the w (the ids in the positions).
     IdInW,
+    /// The float in the w, widened (the carried densities in the velocities).
+    ScalarInW,
 }
 
 /// Hands `count` elements of a `vec4<f32>` array to `visit` in slot order, `chunk` at a time.
@@ -134,6 +136,7 @@ pub fn visit_array(ctx: &GpuContext, buffer: &wgpu::Buffer, count: u64, element:
         match element {
             Element::Vector => visit(StatePiece::Vectors(&values.iter().map(widen).collect::<Vec<_>>()))?,
             Element::IdInW => visit(StatePiece::Ids(&values.iter().map(|v| v[3].to_bits()).collect::<Vec<_>>()))?,
+            Element::ScalarInW => visit(StatePiece::Scalars(&values.iter().map(|v| v[3] as f64).collect::<Vec<_>>()))?,
         }
     }
     Ok(())

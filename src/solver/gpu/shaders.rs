@@ -19,6 +19,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/bin_scatter.wgsl", include_str!("../../../wgsl/sim/bin_scatter.wgsl")),
     ("sim/reorder.wgsl", include_str!("../../../wgsl/sim/reorder.wgsl")),
     ("sim/density.wgsl", include_str!("../../../wgsl/sim/density.wgsl")),
+    ("sim/continuity.wgsl", include_str!("../../../wgsl/sim/continuity.wgsl")),
     ("sim/forces.wgsl", include_str!("../../../wgsl/sim/forces.wgsl")),
     ("sim/integrate.wgsl", include_str!("../../../wgsl/sim/integrate.wgsl")),
     ("sim/forces_integrate.wgsl", include_str!("../../../wgsl/sim/forces_integrate.wgsl")),
@@ -127,6 +128,9 @@ pub fn constants(params: &Params) -> Vec<(&'static str, f64)> {
         ("PLANES", flag(!params.planes.is_empty())),
         ("GRAVITY", flag(params.uses_gravity())),
         ("ADAPTIVE_DT", flag(params.adaptive.is_some())),
+        ("CONTINUITY", flag(params.continuity_density)),
+        ("DENSITY_DIFFUSION", flag(params.continuity_density && params.density_diffusion > 0.0)),
+        ("ARTIFICIAL_VISCOSITY", flag(params.artificial_viscosity > 0.0)),
     ]
 }
 

@@ -203,7 +203,12 @@ impl GpuSolver {
                 None
             } else {
                 Some(WcsphStages {
-                    density: stage(&ctx, "density", "density", &len, &sized(ws.density))?,
+                    // The density stage: summation, or with continuity density the carried density.
+                    density: if params.continuity_density {
+                        stage(&ctx, "continuity", "continuity_density", &len, &sized(ws.density))?
+                    } else {
+                        stage(&ctx, "density", "density", &len, &sized(ws.density))?
+                    },
                     forces: stage(&ctx, "forces", "forces", &len, &sized(ws.forces))?,
                     advance: if fused {
                         stage(&ctx, "forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
@@ -247,7 +252,9 @@ impl GpuSolver {
         let wall_starts = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
 
         let state = [StateBuffers::new(device, 0, n), StateBuffers::new(device, 1, n)];
-        state[0].upload(&ctx, &initial.fluid_positions, &initial.fluid_velocities, |i| i as u32);
+        // With continuity density the w of each velocity carries the particle's density.
+        let carried = |i: usize| if params.continuity_density { initial.fluid_density(i, params.rest_density) as f32 } else { 0.0 };
+        state[0].upload(&ctx, &initial.fluid_positions, &initial.fluid_velocities, |i| i as u32, &carried);
         let starts = storage(device, "cell starts", (cells + 1) * 4);
         let densities = storage(device, "densities", n * 4);
         let pressures = storage(device, "pressures", n * 4);
@@ -589,6 +596,8 @@ impl GpuSolver {
                 Some(d) => visit_pairs(&self.ctx, &d.buffers.warm_pressure, &d.buffers.warm_divergence, n, chunk, visit),
                 None => Ok(()),
             },
+            StateArray::Densities if !self.params.continuity_density => Ok(()),
+            StateArray::Densities => visit_array(&self.ctx, &st.velocities, n, Element::ScalarInW, chunk, visit),
         }
     }
 }
@@ -704,13 +713,14 @@ impl Backend for GpuSolver {
     }
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
         let mut state = self.save_state_header()?;
-        for (array, chunk) in [(StateArray::Positions, 0), (StateArray::Velocities, 0), (StateArray::Ids, 0), (StateArray::WarmStart, 0)] {
+        for (array, chunk) in [(StateArray::Positions, 0), (StateArray::Velocities, 0), (StateArray::Ids, 0), (StateArray::WarmStart, 0), (StateArray::Densities, 0)] {
             self.visit_state_in_pieces(array, chunk, &mut |piece| {
                 match (array, piece) {
                     (StateArray::Positions, StatePiece::Vectors(v)) => state.positions.extend_from_slice(v),
                     (StateArray::Velocities, StatePiece::Vectors(v)) => state.velocities.extend_from_slice(v),
                     (StateArray::Ids, StatePiece::Ids(v)) => state.ids.extend_from_slice(v),
                     (StateArray::WarmStart, StatePiece::Pairs(v)) => state.warm_start.extend_from_slice(v),
+                    (StateArray::Densities, StatePiece::Scalars(v)) => state.densities.extend_from_slice(v),
                     _ => unreachable!("each array hands out its own kind of piece"),
                 }
                 Ok(())
@@ -739,6 +749,7 @@ impl Backend for GpuSolver {
             gpu_status: words.to_vec(),
             warm_start: Vec::new(),
             iterations: Default::default(),
+            densities: Vec::new(),
         })
     }
     fn visit_state_array(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
@@ -759,7 +770,15 @@ impl Backend for GpuSolver {
             state.gpu_status.len(),
             status::WORDS
         );
-        self.state[0].upload(&self.ctx, &state.positions, &state.velocities, |i| state.ids[i]);
+        let continuity = self.params.continuity_density;
+        anyhow::ensure!(
+            state.densities.len() == if continuity { state.positions.len() } else { 0 },
+            "the state holds {} carried densities; the scene's density method needs {}",
+            state.densities.len(),
+            if continuity { state.positions.len() } else { 0 }
+        );
+        let carried = |i: usize| if continuity { state.densities[i] as f32 } else { 0.0 };
+        self.state[0].upload(&self.ctx, &state.positions, &state.velocities, |i| state.ids[i], &carried);
         if let Some(d) = &self.dfsph {
             let n = self.fluid_count as usize;
             anyhow::ensure!(state.warm_start.len() == n, "the state holds {} warm-start stiffnesses for DFSPH; the scene has {n} particles", state.warm_start.len());
