@@ -2,7 +2,7 @@
 //! error that names the file, the field, the value and the allowed range.
 
 use super::numbers::{short, short3};
-use super::params::MAX_PLANES;
+use super::params::{MAX_PLANES, MAX_SOLID_BOXES};
 use super::scene::{err, Boundary, BoundaryPressure, BoundaryVolume, DensityMethod, EquationOfState, InitialPressure, PressureSolver, Scene, SceneError, SceneOrigin};
 
 /// Most particles a scene may hold: indices are u32 on the GPU and the CPU.
@@ -228,6 +228,10 @@ impl Scene {
         }
         if self.boundary.iter().filter(|b| matches!(b, Boundary::Plane { .. })).count() > MAX_PLANES {
             return Err(err(origin, "boundary", format!("has more than {MAX_PLANES} planes")));
+        }
+        let boxes = self.boundary.iter().filter(|b| matches!(b, Boundary::Box { .. })).count();
+        if boxes > MAX_SOLID_BOXES {
+            return Err(err(origin, "boundary", format!("has {boxes} boxes; at most {MAX_SOLID_BOXES} are allowed (each is backed by its faces in the GPU's parameter block)")));
         }
         self.validate_overlaps(origin)?;
         self.validate_probes(origin)?;

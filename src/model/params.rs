@@ -12,6 +12,14 @@ pub struct Plane {
     pub restitution: f64,
 }
 
+/// A solid box obstacle's faces, [min, max]: the integration puts a fluid particle that entered
+/// it back on its nearest face, as a plane does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolidBox {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
 /// The physical and numerical constants of a scene, resolved (defaults filled, k derived).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Params {
@@ -36,6 +44,8 @@ pub struct Params {
     pub domain_min: [f64; 3],
     pub domain_max: [f64; 3],
     pub planes: Vec<Plane>,
+    /// The `[[boundary]] type = "box"` obstacles, each backed by its faces.
+    pub solid_boxes: Vec<SolidBox>,
     pub grid: Grid,
     /// DFSPH's settings when the scene uses it (`None`: weakly compressible, pressure from
     /// the equation of state).
@@ -231,6 +241,14 @@ impl Scene {
             domain_min: self.domain.min,
             domain_max: self.domain.max,
             planes,
+            solid_boxes: self
+                .boundary
+                .iter()
+                .filter_map(|b| match b {
+                    Boundary::Box { min, max, .. } => Some(SolidBox { min: *min, max: *max }),
+                    _ => None,
+                })
+                .collect(),
             grid: self.grid(),
             dfsph: (p.solver == PressureSolver::Dfsph).then(|| p.dfsph.clone()),
             boundary_volume: p.boundary_volume,
@@ -245,4 +263,6 @@ impl Scene {
 
 /// Most analytic planes a scene may have (they live in the GPU's parameter block).
 pub const MAX_PLANES: usize = 8;
+/// Most solid boxes a scene may have (their faces live in the GPU's parameter block too).
+pub const MAX_SOLID_BOXES: usize = 8;
 

@@ -323,6 +323,12 @@ impl TestScene {
         self
     }
 
+    /// Adds a solid box obstacle [min, max]: wall particles filling a shell inside it.
+    pub fn solid_box(mut self, min: [f64; 3], max: [f64; 3]) -> TestScene {
+        self.scene.boundary.push(Boundary::Box { min, max, walls: WallParticles::default() });
+        self
+    }
+
     /// Adds a tank of wall particles around [min, max], closed on every side.
     pub fn closed_container(mut self, min: [f64; 3], max: [f64; 3]) -> TestScene {
         self.scene.boundary.push(Boundary::Container { min, max, open_top: false, walls: WallParticles::default() });

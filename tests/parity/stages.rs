@@ -10,7 +10,7 @@ use crate::common::TestScene;
 use wgsph::model::kernels::{exclusive_scan, pressure, KernelCoefficients};
 use wgsph::model::real::V3;
 use wgsph::model::scene::{BoundaryPressure, EquationOfState, Kernel, Scene};
-use wgsph::solver::cpu::integrate::{advance_particle, PlaneR};
+use wgsph::solver::cpu::integrate::{advance_particle, Backstops, PlaneR, SolidBoxR};
 use wgsph::solver::cpu::prefix_sum::{add_block_offsets, prefix_sum, scan_blocks, SCAN_BLOCK};
 use wgsph::solver::gpu::params::GpuParams;
 use wgsph::solver::gpu::readback::read_buffers;
@@ -296,29 +296,71 @@ fn forces_on_a_state_agree_stage_alone() {
     }
 }
 
+/// One GPU step from `state`, and the CPU twin's integration of the same state with the
+/// accelerations that step used: the same positions and velocities to a rounding.
+fn integration_agrees(ctx: &GpuContext, scene: &Scene, state: &wgsph::model::state::BackendState) -> wgsph::model::state::Snapshot {
+    let (mut gpu, _, _) = both(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), scene, state);
+    let before = gpu.snapshot().unwrap();
+    gpu.step(1).unwrap();
+    // The accelerations the GPU's step used, its state after the step.
+    let a = gpu.step_fields().unwrap().accelerations;
+    let after = gpu.snapshot().unwrap();
+    let p = scene.params();
+    let backstops = Backstops {
+        planes: p.planes.iter().map(|q| PlaneR { normal: V3::from64(q.normal), offset: q.offset as f32, restitution: q.restitution as f32 }).collect(),
+        boxes: p.solid_boxes.iter().map(|b| SolidBoxR { min: V3::from64(b.min), max: V3::from64(b.max) }).collect(),
+    };
+    let domain = (V3::from64(p.domain_min), V3::from64(p.domain_max));
+    for i in 0..before.len() {
+        let (mut x, mut v) = (V3::<f32>::from64(before.positions[i]), V3::<f32>::from64(before.velocities[i]));
+        advance_particle(&mut x, &mut v, V3::from64(a[i]), p.dt as f32, &backstops, domain);
+        for k in 0..3 {
+            // One rounding apart at most (a fused multiply-add on the GPU).
+            assert!(close(after.positions[i][k], x.0[k] as f64, 2.0, 1e-12), "particle {i} x[{k}] on {}: gpu {} cpu {}", ctx.describe(), after.positions[i][k], x.0[k]);
+            assert!(close(after.velocities[i][k], v.0[k] as f64, 2.0, 2.0 * f32::EPSILON as f64 * p.dt * a[i][k].abs().max(1.0)), "particle {i} v[{k}] on {}: gpu {} cpu {}", ctx.describe(), after.velocities[i][k], v.0[k]);
+        }
+    }
+    after
+}
+
 #[test]
 fn the_integration_of_a_state_with_given_accelerations_agrees_stage_alone() {
     for ctx in common::contexts() {
         for scene in variants() {
             let state = moved_state(&scene);
-            let (mut gpu, _, _) = both(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene, &state);
-            let before = gpu.snapshot().unwrap();
-            gpu.step(1).unwrap();
-            // The accelerations the GPU's step used, its state after the step.
-            let a = gpu.step_fields().unwrap().accelerations;
-            let after = gpu.snapshot().unwrap();
-            let p = scene.params();
-            let planes: Vec<PlaneR<f32>> = p.planes.iter().map(|q| PlaneR { normal: V3::from64(q.normal), offset: q.offset as f32, restitution: q.restitution as f32 }).collect();
-            let domain = (V3::from64(p.domain_min), V3::from64(p.domain_max));
-            for i in 0..before.len() {
-                let (mut x, mut v) = (V3::<f32>::from64(before.positions[i]), V3::<f32>::from64(before.velocities[i]));
-                advance_particle(&mut x, &mut v, V3::from64(a[i]), p.dt as f32, &planes, domain);
-                for k in 0..3 {
-                    // One rounding apart at most (a fused multiply-add on the GPU).
-                    assert!(close(after.positions[i][k], x.0[k] as f64, 2.0, 1e-12), "particle {i} x[{k}] on {}: gpu {} cpu {}", ctx.describe(), after.positions[i][k], x.0[k]);
-                    assert!(close(after.velocities[i][k], v.0[k] as f64, 2.0, 2.0 * f32::EPSILON as f64 * p.dt * a[i][k].abs().max(1.0)), "particle {i} v[{k}] on {}: gpu {} cpu {}", ctx.describe(), after.velocities[i][k], v.0[k]);
-                }
-            }
+            integration_agrees(&ctx, &scene, &state);
+        }
+    }
+}
+
+#[test]
+fn a_particle_inside_a_solid_box_is_put_back_on_its_nearest_face_as_by_its_twin() {
+    // The small tank with a box obstacle, and particles moved into the box near each of its
+    // six faces, moving inwards: each leaves by its nearest face, with no velocity into the box.
+    let (lo, hi) = ([0.3, 0.05, 0.05], [0.42, 0.2, 0.15]);
+    let scene = TestScene::small_tank().solid_box(lo, hi).build();
+    let mut state = moved_state(&scene);
+    let inside = [
+        ([0.303, 0.12, 0.1], [1.0, 0.0, 0.0], (0, lo[0])),
+        ([0.418, 0.12, 0.1], [-1.0, 0.0, 0.0], (0, hi[0])),
+        ([0.36, 0.052, 0.1], [0.0, 1.0, 0.0], (1, lo[1])),
+        ([0.36, 0.197, 0.1], [0.0, -1.0, 0.0], (1, hi[1])),
+        ([0.36, 0.12, 0.053], [0.2, 0.3, 1.0], (2, lo[2])),
+        ([0.36, 0.12, 0.148], [0.0, 0.0, -1.0], (2, hi[2])),
+    ];
+    for (k, (x, v, _)) in inside.iter().enumerate() {
+        state.positions[k] = *x;
+        state.velocities[k] = *v;
+    }
+    let ids = state.ids.clone();
+    for ctx in common::contexts() {
+        let after = integration_agrees(&ctx, &scene, &state);
+        for (k, (_, _, (axis, face))) in inside.iter().enumerate() {
+            let i = ids[k] as usize;
+            let x = after.positions[i];
+            assert!((x[*axis] - face).abs() < 1e-6, "{}: particle {k} at {x:?}, not on the face {axis} = {face}", ctx.describe());
+            let inward = if (*face - lo[*axis]).abs() < 1e-9 { after.velocities[i][*axis] } else { -after.velocities[i][*axis] };
+            assert!(inward <= 0.0, "{}: particle {k} still moves into the box at {inward} m/s", ctx.describe());
         }
     }
 }

@@ -15,6 +15,7 @@ override ADAMI_WALL_PRESSURE: bool = false;
 override VISCOSITY: bool = true;                // some viscosity of the scene (or its schedule) > 0
 override WALLS: bool = true;                    // the scene has wall particles
 override PLANES: bool = true;                   // the scene has analytic planes
+override SOLID_BOXES: bool = false;             // the scene has box obstacles, backed by their faces
 override GRAVITY: bool = true;                  // gravity is not zero
 override ADAPTIVE_DT: bool = false;             // dt chosen on the GPU every step (integrate.wgsl)
 // Density carried by the continuity equation (in each velocity's w) instead of summed.
@@ -82,9 +83,12 @@ struct Params {
     // delta h c0 of density diffusion, alpha h_s c0 of artificial viscosity (src/model/params.rs).
     diffusion_factor: f32,
     artificial_viscosity_factor: f32,
-    pad3: u32,
+    // The solid boxes backed by their faces (SOLID_BOXES), and their corners (xyz).
+    solid_box_count: u32,
     pad4: u32,
     pad5: u32,
+    solid_box_min: array<vec4<f32>, 8>,
+    solid_box_max: array<vec4<f32>, 8>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -274,4 +278,50 @@ fn stencil_run(c: vec3<u32>, index: u32) -> vec2<u32> {
     let x0 = select(c.x - 1u, 0u, c.x == 0u);
     let x1 = min(c.x + 1u, params.grid_dims.x - 1u);
     return vec2<u32>(row + x0, row + x1 + 1u);
+}
+
+// A particle's position and velocity after the solid boxes' backstop.
+struct Backstopped {
+    x: vec3<f32>,
+    v: vec3<f32>,
+}
+
+// A particle strictly inside a solid box is put back on the box's nearest face and its velocity
+// into the box removed (restitution 0), box after box; ties go to the first face in the order
+// -x, +x, -y, +y, -z, +z. Twin of leave_solid_boxes in src/solver/cpu/integrate.rs.
+fn leave_solid_boxes(x_in: vec3<f32>, v_in: vec3<f32>) -> Backstopped {
+    var x = x_in;
+    var v = v_in;
+    for (var b = 0u; b < params.solid_box_count; b++) {
+        let lo = params.solid_box_min[b].xyz;
+        let hi = params.solid_box_max[b].xyz;
+        if (!(all(x > lo) && all(x < hi))) {
+            continue;
+        }
+        var axis = 0u;
+        var upper = false;
+        var nearest = x.x - lo.x;
+        for (var k = 0u; k < 3u; k++) {
+            let below = x[k] - lo[k];
+            if (below < nearest) {
+                axis = k;
+                upper = false;
+                nearest = below;
+            }
+            let above = hi[k] - x[k];
+            if (above < nearest) {
+                axis = k;
+                upper = true;
+                nearest = above;
+            }
+        }
+        if (upper) {
+            x[axis] = hi[axis];
+            v[axis] = max(v[axis], 0.0);
+        } else {
+            x[axis] = lo[axis];
+            v[axis] = min(v[axis], 0.0);
+        }
+    }
+    return Backstopped(x, v);
 }

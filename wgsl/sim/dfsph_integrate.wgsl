@@ -56,6 +56,11 @@ fn integrate(
                 }
             }
         }
+        if (SOLID_BOXES) {
+            let kept = leave_solid_boxes(x, v);
+            x = kept.x;
+            v = kept.v;
+        }
         positions_out_set(i, vec4<f32>(x, old.w));
         velocities_set(i, vec4<f32>(v, 0.0));
         let id = bitcast<u32>(old.w);

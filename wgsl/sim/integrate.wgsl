@@ -50,6 +50,12 @@ fn advance_particle(i: u32, a4: vec4<f32>, dt: f32) -> f32 {
             }
         }
     }
+    // A solid box's faces do the same for a particle that entered the box.
+    if (SOLID_BOXES) {
+        let kept = leave_solid_boxes(x, v);
+        x = kept.x;
+        v = kept.v;
+    }
     positions_out_set(i, vec4<f32>(x, old.w));
     velocities_out_set(i, vec4<f32>(v, a4.w));
     let finite = is_finite_vec3(x) && is_finite_vec3(v) && (!CONTINUITY || is_finite_f32(a4.w));

@@ -46,16 +46,18 @@ pub enum Case {
     DamBreakMartinMoyce,
     DamBreakKoshizukaOka,
     Conservation,
+    BuchnerP1,
 }
 
 impl Case {
-    pub const ALL: [Case; 4] = [Case::Hydrostatic, Case::DamBreakMartinMoyce, Case::DamBreakKoshizukaOka, Case::Conservation];
+    pub const ALL: [Case; 5] = [Case::Hydrostatic, Case::DamBreakMartinMoyce, Case::DamBreakKoshizukaOka, Case::Conservation, Case::BuchnerP1];
     pub fn name(self) -> &'static str {
         match self {
             Case::Hydrostatic => "hydrostatic",
             Case::DamBreakMartinMoyce => "dam_break_martin_moyce",
             Case::DamBreakKoshizukaOka => "dam_break_koshizuka_oka",
             Case::Conservation => "conservation",
+            Case::BuchnerP1 => "buchner_p1",
         }
     }
     pub fn from_name(name: &str) -> Option<Case> {

@@ -6,6 +6,10 @@ pub const MARTIN_MOYCE_FRONT: &str = include_str!("../../../data/validation/mm19
 pub const MARTIN_MOYCE_HEIGHT: &str = include_str!("../../../data/validation/mm1952_n2eq2_residual_height_ocellaris.csv");
 /// Koshizuka & Oka (1996), 1 m x 2 m column: (t in s, x_front in m).
 pub const KOSHIZUKA_OKA_FRONT: &str = include_str!("../../../data/validation/koshizuka_oka_1996_surge_front_dualsphysics.csv");
+/// Buchner (2002), sensor P1 and P2, TrixiParticles' digitisation: (sensor, t sqrt(g/H), p / (rho g H)).
+pub const BUCHNER_P1_TRIXI: &str = include_str!("../../../data/validation/dambreak2d_buchner2002_pressure_trixiparticles.csv");
+/// Buchner (2002), sensor P1, JAX-SPH's digitisation: (t sqrt(g/H), p / (rho g H)), not sorted by time.
+pub const BUCHNER_P1_JAXSPH: &str = include_str!("../../../data/validation/dambreak2d_buchner2002_P1_jaxsph.csv");
 
 /// The (x, y) rows of a two-column CSV with `#` comment lines and one header line.
 pub fn parse_xy(text: &str) -> Vec<(f64, f64)> {

@@ -6,6 +6,7 @@
 //! figures, each with the tolerance it is judged against. The tolerances are stated in
 //! docs/validation.md; `Resolution::Coarse` (the test suite's) has looser ones.
 
+pub mod buchner;
 pub mod case;
 pub mod conservation;
 pub mod dam_break;
@@ -34,6 +35,7 @@ pub fn run_case(case: Case, resolution: Resolution, out: &Path, make: &mut MakeB
         Case::DamBreakMartinMoyce => dam_break::run_martin_moyce(resolution, out, make)?,
         Case::DamBreakKoshizukaOka => dam_break::run_koshizuka_oka(resolution, out, make)?,
         Case::Conservation => conservation::run(resolution, out, make)?,
+        Case::BuchnerP1 => buchner::run(resolution, out, make)?,
     };
     report.wall_seconds = t0.elapsed().as_secs_f64();
     Ok(report)

@@ -10,7 +10,7 @@ use super::dfsph_integrate::{integrate, keep_warm_start, step_accelerations};
 use super::dfsph_predict::{choose_dt, non_pressure_accelerations, predict_from_accelerations, predict_velocities, PredictInput};
 use super::dfsph_pressure::{predict_density, pressure_apply, pressure_warm_start};
 use super::dfsph_shared::{error_threshold, factor_epsilon, Pairs, SolveInput, WarmStart, WARM_START_SHARE};
-use super::integrate::{PlaneR, StepHealth};
+use super::integrate::{Backstops, StepHealth};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
 use crate::model::real::{Real, V3};
@@ -45,7 +45,7 @@ pub struct StepParts<'a, R: Real> {
     pub params: &'a Params,
     pub kernel: &'a KernelCoefficients<R>,
     pub grid: &'a Grid<R>,
-    pub planes: &'a [PlaneR<R>],
+    pub backstops: &'a Backstops<R>,
     pub positions: &'a mut [V3<R>],
     pub velocities: &'a mut Vec<V3<R>>,
     pub starts: &'a [u32],
@@ -260,7 +260,7 @@ impl<R: Real> DfsphCpu<R> {
         self.pressure_solve(s, dt);
         let p = s.params;
         let domain = (V3::from64(p.domain_min), V3::from64(p.domain_max));
-        let found = integrate(s.positions, s.velocities, R::of(dt), s.planes, domain);
+        let found = integrate(s.positions, s.velocities, R::of(dt), s.backstops, domain);
         keep_warm_start(s.ids, &self.pressure_sum, &self.divergence_sum, &mut self.warm_pressure, &mut self.warm_divergence);
         step_accelerations(s.scratch, s.velocities, R::of(dt), s.accelerations);
         self.last_dt = dt;

@@ -3,17 +3,17 @@
 //! next step's warm start. Twin of wgsl/sim/dfsph_integrate.wgsl (`integrate`,
 //! `step_accelerations`; the step's bookkeeping is wgsl/sim/integrate.wgsl `finish_step`).
 
-use super::integrate::{advance_particle, PlaneR, StepHealth};
+use super::integrate::{advance_particle, Backstops, StepHealth};
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
 
-/// Every particle advanced in place with its velocity (planes may change both); returns what
+/// Every particle advanced in place with its velocity (planes and solid boxes may change both); returns what
 /// went wrong.
-pub fn integrate<R: Real>(positions: &mut [V3<R>], velocities: &mut [V3<R>], dt: R, planes: &[PlaneR<R>], domain: (V3<R>, V3<R>)) -> StepHealth {
+pub fn integrate<R: Real>(positions: &mut [V3<R>], velocities: &mut [V3<R>], dt: R, backstops: &Backstops<R>, domain: (V3<R>, V3<R>)) -> StepHealth {
     positions
         .par_iter_mut()
         .zip(velocities.par_iter_mut())
-        .map(|(x, v)| advance_particle(x, v, V3::zero(), dt, planes, domain))
+        .map(|(x, v)| advance_particle(x, v, V3::zero(), dt, backstops, domain))
         .reduce(StepHealth::default, StepHealth::add)
 }
 

@@ -5,7 +5,7 @@
 //! other particles still read the old one.
 
 use super::forces::{particle_acceleration, ForcesInput};
-use super::integrate::{advance_particle, carry_density, PlaneR, StepHealth};
+use super::integrate::{advance_particle, carry_density, Backstops, StepHealth};
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
 
@@ -15,7 +15,7 @@ use rayon::prelude::*;
 pub fn forces_and_integrate<R: Real>(
     input: &ForcesInput<R>,
     dt: R,
-    planes: &[PlaneR<R>],
+    backstops: &Backstops<R>,
     domain: (V3<R>, V3<R>),
     positions_out: &mut [V3<R>],
     velocities_out: &mut [V3<R>],
@@ -25,7 +25,7 @@ pub fn forces_and_integrate<R: Real>(
         let a = particle_acceleration(input, i);
         *x = input.fluid.positions[i];
         *v = input.velocities[i];
-        advance_particle(x, v, a, dt, planes, domain)
+        advance_particle(x, v, a, dt, backstops, domain)
     };
     if !carried_out.is_empty() {
         return positions_out

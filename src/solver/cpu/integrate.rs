@@ -16,6 +16,21 @@ pub struct PlaneR<R> {
     pub restitution: R,
 }
 
+/// A solid box obstacle [min, max] in the solver's float type: its analytic backstop.
+#[derive(Clone, Copy, Debug)]
+pub struct SolidBoxR<R> {
+    pub min: V3<R>,
+    pub max: V3<R>,
+}
+
+/// What keeps particles in the fluid's space besides the forces: the analytic planes and the
+/// solid boxes' faces.
+#[derive(Clone, Debug, Default)]
+pub struct Backstops<R> {
+    pub planes: Vec<PlaneR<R>>,
+    pub boxes: Vec<SolidBoxR<R>>,
+}
+
 /// What the integration found this step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepHealth {
@@ -38,7 +53,7 @@ impl StepHealth {
 
 pub struct IntegrateInput<'a, R> {
     pub dt: R,
-    pub planes: &'a [PlaneR<R>],
+    pub backstops: &'a Backstops<R>,
     pub domain_min: V3<R>,
     pub domain_max: V3<R>,
     pub accelerations: &'a [V3<R>],
@@ -48,13 +63,14 @@ pub struct IntegrateInput<'a, R> {
 
 /// Advances one particle with acceleration `a` over `dt` (wgsl `advance_particle`): a plane puts
 /// a particle behind it back on it and removes (or reflects, with restitution) the velocity
-/// into it, so that no particle is lost through it.
-pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, planes: &[PlaneR<R>], domain: (V3<R>, V3<R>)) -> StepHealth {
+/// into it, so that no particle is lost through it; so does a solid box's nearest face
+/// ([`leave_solid_boxes`]).
+pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, backstops: &Backstops<R>, domain: (V3<R>, V3<R>)) -> StepHealth {
     *v += a * dt;
     *x += *v * dt;
     // The speed the forces gave the particle, before a plane takes the velocity into it away.
     let speed = v.length().to64();
-    for plane in planes {
+    for plane in &backstops.planes {
         let d = x.dot(plane.normal) - plane.offset;
         if d < R::zero() {
             *x -= plane.normal * d;
@@ -64,11 +80,43 @@ pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, 
             }
         }
     }
+    leave_solid_boxes(x, v, &backstops.boxes);
     let finite = x.is_finite() && v.is_finite();
     let inside = (0..3).all(|k| x.0[k] >= domain.0 .0[k] && x.0[k] <= domain.1 .0[k]);
     // As on the GPU: 0 for a non-finite particle; a finite velocity whose length overflows is
     // infinitely fast.
     StepHealth { non_finite: (!finite) as u32, escaped: (finite && !inside) as u32, max_speed: if finite { speed } else { 0.0 } }
+}
+
+/// A particle strictly inside a solid box is put back on the box's nearest face and the
+/// velocity into the box removed (restitution 0), as a plane does, box after box (wgsl
+/// `leave_solid_boxes`). The wall particles inside the box push the fluid away before it gets
+/// there; this backstop only catches what a hard impact drives through them. Ties between faces
+/// go to the first in the order -x, +x, -y, +y, -z, +z.
+pub fn leave_solid_boxes<R: Real>(x: &mut V3<R>, v: &mut V3<R>, boxes: &[SolidBoxR<R>]) {
+    for b in boxes {
+        if !(0..3).all(|k| x.0[k] > b.min.0[k] && x.0[k] < b.max.0[k]) {
+            continue;
+        }
+        let (mut axis, mut upper, mut nearest) = (0, false, x.0[0] - b.min.0[0]);
+        for k in 0..3 {
+            let below = x.0[k] - b.min.0[k];
+            if below < nearest {
+                (axis, upper, nearest) = (k, false, below);
+            }
+            let above = b.max.0[k] - x.0[k];
+            if above < nearest {
+                (axis, upper, nearest) = (k, true, above);
+            }
+        }
+        if upper {
+            x.0[axis] = b.max.0[axis];
+            v.0[axis] = v.0[axis].max(R::zero());
+        } else {
+            x.0[axis] = b.min.0[axis];
+            v.0[axis] = v.0[axis].min(R::zero());
+        }
+    }
 }
 
 /// Carries the density of this step to the next, with continuity density (the part of wgsl
@@ -94,7 +142,7 @@ pub fn integrate<R: Real>(input: &IntegrateInput<R>, positions: &mut [V3<R>], ve
             .zip(carried.par_iter_mut())
             .enumerate()
             .map(|(i, ((x, v), rho))| {
-                let found = advance_particle(x, v, input.accelerations[i], input.dt, input.planes, domain);
+                let found = advance_particle(x, v, input.accelerations[i], input.dt, input.backstops, domain);
                 carry_density(rho, input.densities[i], found)
             })
             .reduce(StepHealth::default, StepHealth::add);
@@ -103,7 +151,7 @@ pub fn integrate<R: Real>(input: &IntegrateInput<R>, positions: &mut [V3<R>], ve
         .par_iter_mut()
         .zip(velocities.par_iter_mut())
         .zip(input.accelerations.par_iter())
-        .map(|((x, v), a)| advance_particle(x, v, *a, input.dt, input.planes, domain))
+        .map(|((x, v), a)| advance_particle(x, v, *a, input.dt, input.backstops, domain))
         .reduce(StepHealth::default, StepHealth::add)
 }
 

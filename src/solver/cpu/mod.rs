@@ -31,7 +31,7 @@ use crate::model::real::{Real, V3};
 use crate::model::scene::BoundaryPressure;
 use crate::model::state::{BackendState, DfsphFields, DtStats, Health, Snapshot, StepFields};
 use dfsph::{DfsphCpu, StepParts};
-use integrate::PlaneR;
+use integrate::{Backstops, PlaneR, SolidBoxR};
 
 /// The CPU solver (cloned, it continues independently from the same state). Particle arrays
 /// are kept in cell order (like the GPU's); `ids` maps each slot
@@ -41,7 +41,7 @@ pub struct CpuSolver<R: Real> {
     params: Params,
     kernel: KernelCoefficients<R>,
     grid: Grid<R>,
-    planes: Vec<PlaneR<R>>,
+    backstops: Backstops<R>,
     positions: Vec<V3<R>>,
     velocities: Vec<V3<R>>,
     ids: Vec<u32>,
@@ -91,16 +91,15 @@ impl<R: Real> CpuSolver<R> {
         let wall_probe_masks = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
         // Without walls no stage visits them: no per-cell array.
         let wall_starts = if walls.is_empty() { Vec::new() } else { wall_starts };
-        let planes = params
-            .planes
-            .iter()
-            .map(|p| PlaneR { normal: V3::from64(p.normal), offset: R::of(p.offset), restitution: R::of(p.restitution) })
-            .collect();
+        let backstops = Backstops {
+            planes: params.planes.iter().map(|p| PlaneR { normal: V3::from64(p.normal), offset: R::of(p.offset), restitution: R::of(p.restitution) }).collect(),
+            boxes: params.solid_boxes.iter().map(|b| SolidBoxR { min: V3::from64(b.min), max: V3::from64(b.max) }).collect(),
+        };
         CpuSolver {
             params: params.clone(),
             kernel: KernelCoefficients::new(params.kernel, params.h),
             grid,
-            planes,
+            backstops,
             positions: initial.fluid_positions.iter().map(|&p| V3::from64(p)).collect(),
             velocities: initial.fluid_velocities.iter().map(|&p| V3::from64(p)).collect(),
             ids: (0..n as u32).collect(),
@@ -297,7 +296,7 @@ impl<R: Real> CpuSolver<R> {
         let (mut x, mut v) = (vec![V3::zero(); n], vec![V3::zero(); n]);
         let mut rho = vec![R::zero(); self.carried_densities.len()];
         let domain = (V3::from64(self.params.domain_min), V3::from64(self.params.domain_max));
-        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.planes, domain, &mut x, &mut v, &mut rho);
+        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.backstops, domain, &mut x, &mut v, &mut rho);
         (x, v, found)
     }
 
@@ -321,7 +320,7 @@ impl<R: Real> CpuSolver<R> {
     fn integrate_with(&mut self, dt: f64) -> integrate::StepHealth {
         let input = integrate::IntegrateInput {
             dt: R::of(dt),
-            planes: &self.planes,
+            backstops: &self.backstops,
             domain_min: V3::from64(self.params.domain_min),
             domain_max: V3::from64(self.params.domain_max),
             accelerations: &self.accelerations,
@@ -337,7 +336,7 @@ impl<R: Real> CpuSolver<R> {
             params: &self.params,
             kernel: &self.kernel,
             grid: &self.grid,
-            planes: &self.planes,
+            backstops: &self.backstops,
             positions: &mut self.positions,
             velocities: &mut self.velocities,
             starts: &self.starts,

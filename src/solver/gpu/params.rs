@@ -5,7 +5,7 @@
 
 use crate::model::kernels::KernelCoefficients;
 use crate::solver::cpu::dfsph_shared::{error_threshold, factor_epsilon, WARM_START_SHARE};
-use crate::model::params::{Params, MAX_PLANES};
+use crate::model::params::{Params, MAX_PLANES, MAX_SOLID_BOXES};
 use encase::{ShaderType, UniformBuffer};
 
 /// A WGSL `vec4<T>` for encase (which has no glam support of its own).
@@ -128,9 +128,12 @@ uniform_block! {
         /// delta h c0 of density diffusion, alpha h_s c0 of artificial viscosity.
         diffusion_factor: f32 => "f32",
         artificial_viscosity_factor: f32 => "f32",
-        pad3: u32 => "u32",
+        /// The solid boxes backed by their faces, and their corners (xyz).
+        solid_box_count: u32 => "u32",
         pad4: u32 => "u32",
         pad5: u32 => "u32",
+        solid_box_min: [Vec4f; MAX_SOLID_BOXES] => "array<vec4<f32>, 8>",
+        solid_box_max: [Vec4f; MAX_SOLID_BOXES] => "array<vec4<f32>, 8>",
     }
 }
 
@@ -147,6 +150,11 @@ impl GpuParams {
         let g = p.grid.cast::<f32>();
         let mut planes = [Vec4f::default(); MAX_PLANES];
         let mut restitution = [Vec4f::default(); MAX_PLANES];
+        let (mut box_min, mut box_max) = ([Vec4f::default(); MAX_SOLID_BOXES], [Vec4f::default(); MAX_SOLID_BOXES]);
+        for (i, b) in p.solid_boxes.iter().enumerate() {
+            box_min[i] = v4(b.min);
+            box_max[i] = v4(b.max);
+        }
         for (i, pl) in p.planes.iter().enumerate() {
             planes[i] = Vec4([pl.normal[0] as f32, pl.normal[1] as f32, pl.normal[2] as f32, pl.offset as f32]);
             restitution[i] = Vec4([pl.restitution as f32, 0.0, 0.0, 0.0]);
@@ -194,9 +202,11 @@ impl GpuParams {
             divergence_threshold: words(error_threshold(d.divergence_error, n)),
             diffusion_factor: p.diffusion_factor() as f32,
             artificial_viscosity_factor: p.artificial_viscosity_factor() as f32,
-            pad3: 0,
+            solid_box_count: p.solid_boxes.len() as u32,
             pad4: 0,
             pad5: 0,
+            solid_box_min: box_min,
+            solid_box_max: box_max,
         }
     }
 

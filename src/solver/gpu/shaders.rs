@@ -128,6 +128,7 @@ pub fn constants(params: &Params) -> Vec<(&'static str, f64)> {
         ("ADAMI_WALL_PRESSURE", flag(params.boundary_pressure == BoundaryPressure::Adami)),
         ("VISCOSITY", flag(params.uses_viscosity())),
         ("PLANES", flag(!params.planes.is_empty())),
+        ("SOLID_BOXES", flag(!params.solid_boxes.is_empty())),
         ("GRAVITY", flag(params.uses_gravity())),
         ("ADAPTIVE_DT", flag(params.adaptive.is_some())),
         ("CONTINUITY", flag(params.continuity_density)),
