@@ -100,6 +100,20 @@ fn conservation_of_mass_momentum_and_energy() {
     }
 }
 
+/// The wall pressure at Buchner's P1 through a point probe on the wall (Adami wall pressure,
+/// continuity density with diffusion): the coarse run's guard bounds (docs/validation.md).
+#[test]
+fn buchner_p1_wall_pressure() {
+    for (backend, r, _dir) in assert_passed(Case::BuchnerP1) {
+        let csv = std::fs::read_to_string(&r.csv).unwrap();
+        // Every step sampled, from t = 0 past the last measured time, 7.3 sqrt(H/g).
+        let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+        assert!(rows.len() > 1000 && rows.last().unwrap()[1] > 7.3, "{backend}: {} rows", rows.len());
+        // Dry before the surge arrives.
+        assert!(rows.iter().filter(|r| r[1] < 2.0).all(|r| r[2] == 0.0), "{backend}: pressure on the wall before the surge");
+    }
+}
+
 #[test]
 fn the_leak_count_sees_a_particle_inside_a_wall() {
     // The checker itself: a particle inside a container's wall shell is counted, one on the
