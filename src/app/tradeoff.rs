@@ -21,7 +21,7 @@
 use super::args::TradeoffArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
-use crate::model::scene::{Boundary, DensityMethod, DfsphSettings, EquationOfState, InitialPressure, Kernel, PressureSolver, Scene};
+use crate::model::scene::{Boundary, BoundaryPressure, DensityMethod, DfsphSettings, EquationOfState, InitialPressure, Kernel, PressureSolver, Scene};
 use crate::model::state::Snapshot;
 use crate::solver::compare::{diff as distance, rms};
 use crate::solver::{open, Backend, BackendChoice, Device, Precision};
@@ -186,11 +186,23 @@ pub fn configs(base: &Scene) -> Vec<Config> {
             }),
             Engine::Gpu,
         ),
+        c("wall pressure: consistent", "boundary pressure", with(&|s| s.physics.boundary_pressure = BoundaryPressure::Consistent), Engine::Gpu),
+        c("wall pressure: adami", "boundary pressure", with(&|s| s.physics.boundary_pressure = BoundaryPressure::Adami), Engine::Gpu),
+        c(
+            "continuity + diffusion 0.1 + hydrostatic start + adami walls",
+            "boundary pressure",
+            with(&|s| {
+                continuity(s, 0.1);
+                s.physics.initial_pressure = InitialPressure::Hydrostatic;
+                s.physics.boundary_pressure = BoundaryPressure::Adami;
+            }),
+            Engine::Gpu,
+        ),
         ];
     if !weakly_compressible {
         // DFSPH has no equation of state, and carries no density by the continuity equation.
         all.retain(|c| {
-            !matches!(c.knob, "equation of state" | "stiffness" | "density" | "density diffusion" | "initial state" | "viscosity model") && c.name != "no pressure clamp"
+            !matches!(c.knob, "equation of state" | "stiffness" | "density" | "density diffusion" | "initial state" | "viscosity model" | "boundary pressure") && c.name != "no pressure clamp"
         });
     }
     for tolerance in DFSPH_TOLERANCES {
