@@ -196,6 +196,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut warned_unconverged = false;
     let mut started = false;
     let mut stopped_by: Option<StopSignal> = None;
+    // The health at the last check that found nothing wrong: a failed run reports its maxima up
+    // to its first bad step, not those of the steps its batch ran on past it.
+    let mut last_good_health = backend.health()?;
     let outcome = (|| -> anyhow::Result<()> {
     while step < end {
         if started {
@@ -263,6 +266,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             failure = Some(diagnose_failure(backend, scene)?);
             break;
         }
+        last_good_health = health;
         let time_due = match (next_snapshot_time, opts.snapshot_interval) {
             (Some(t), Some(interval)) => time >= t - 1e-9 * interval,
             _ => false,
@@ -313,7 +317,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     };
     let frames_written = frames_written.unwrap_or(0);
     let wall_seconds = t0.elapsed().as_secs_f64();
-    let health = backend.health()?;
+    let health = backend.health()?.until_first_bad_step(&last_good_health);
     let steps = backend.steps_done() - start;
     let dt_stats = backend.dt_stats()?;
     let (status, failure) = match (stopped_by, &error, failure) {
