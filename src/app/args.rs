@@ -345,7 +345,7 @@ pub struct TradeoffArgs {
 /// `wgsph validate`.
 #[derive(Args, Debug, Clone)]
 pub struct ValidateArgs {
-    /// A case (hydrostatic, dam_break_martin_moyce, dam_break_koshizuka_oka, conservation, buchner_p1) or `all`.
+    /// A case (hydrostatic, dam_break_martin_moyce, dam_break_koshizuka_oka, conservation, buchner_p1, hydrostatic_dfsph, dam_break_martin_moyce_dfsph, dam_break_koshizuka_oka_dfsph) or `all`.
     #[arg(default_value = "all")]
     pub case: String,
     /// Output directory: CASE.png, CASE.csv per case and validation.md.

@@ -93,6 +93,7 @@ pub fn tank(resolution: Resolution, end_time: f64) -> Tank {
         planes: true,
         wall_layers: WALL_LAYERS,
         boundary_pressure: BoundaryPressure::Adami,
+        dfsph: false,
     }
 }
 

@@ -47,10 +47,23 @@ pub enum Case {
     DamBreakKoshizukaOka,
     Conservation,
     BuchnerP1,
+    /// The same tank and collapses with DFSPH's pressure instead of the equation of state.
+    HydrostaticDfsph,
+    DamBreakMartinMoyceDfsph,
+    DamBreakKoshizukaOkaDfsph,
 }
 
 impl Case {
-    pub const ALL: [Case; 5] = [Case::Hydrostatic, Case::DamBreakMartinMoyce, Case::DamBreakKoshizukaOka, Case::Conservation, Case::BuchnerP1];
+    pub const ALL: [Case; 8] = [
+        Case::Hydrostatic,
+        Case::DamBreakMartinMoyce,
+        Case::DamBreakKoshizukaOka,
+        Case::Conservation,
+        Case::BuchnerP1,
+        Case::HydrostaticDfsph,
+        Case::DamBreakMartinMoyceDfsph,
+        Case::DamBreakKoshizukaOkaDfsph,
+    ];
     pub fn name(self) -> &'static str {
         match self {
             Case::Hydrostatic => "hydrostatic",
@@ -58,7 +71,14 @@ impl Case {
             Case::DamBreakKoshizukaOka => "dam_break_koshizuka_oka",
             Case::Conservation => "conservation",
             Case::BuchnerP1 => "buchner_p1",
+            Case::HydrostaticDfsph => "hydrostatic_dfsph",
+            Case::DamBreakMartinMoyceDfsph => "dam_break_martin_moyce_dfsph",
+            Case::DamBreakKoshizukaOkaDfsph => "dam_break_koshizuka_oka_dfsph",
         }
+    }
+    /// Whether the case runs DFSPH.
+    pub fn dfsph(self) -> bool {
+        matches!(self, Case::HydrostaticDfsph | Case::DamBreakMartinMoyceDfsph | Case::DamBreakKoshizukaOkaDfsph)
     }
     pub fn from_name(name: &str) -> Option<Case> {
         Case::ALL.into_iter().find(|c| c.name() == name)
