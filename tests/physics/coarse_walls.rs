@@ -101,3 +101,14 @@ fn a_hard_impact_on_a_solid_box_loses_no_particle_into_it() {
         assert_eq!(gpu.health().unwrap().non_finite, 0, "{who}");
     }
 }
+
+#[test]
+fn more_solid_boxes_than_the_parameter_block_holds_are_refused_with_the_count() {
+    let mut scene = common::TestScene::new().fluid([0.0; 3], [0.1, 0.1, 0.1]);
+    for k in 0..9 {
+        let x = 0.2 + 0.05 * k as f64;
+        scene = scene.solid_box([x, 0.0, 0.0], [x + 0.02, 0.1, 0.1]);
+    }
+    let e = scene.validation_error();
+    assert!(e.contains("boundary") && e.contains("9 boxes") && e.contains("at most 8"), "{e}");
+}
