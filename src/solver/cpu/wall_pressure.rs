@@ -3,7 +3,9 @@
 //!
 //! The generalised wall boundary of Adami, Hu & Adams (2012, J. Comput. Phys. 231, Eq. 27):
 //!
-//!     p_w = (sum_f p_f W_wf + (g - a_w) . sum_f rho_f r_wf W_wf) / sum_f W_wf,   r_wf = x_w - x_f
+//! ```text
+//! p_w = (sum_f p_f W_wf + (g - a_w) . sum_f rho_f r_wf W_wf) / sum_f W_wf,   r_wf = x_w - x_f
+//! ```
 //!
 //! over the fluid particles f within h of wall particle w; walls are at rest (a_w = 0). The
 //! first term is the Shepard average of the fluid's pressure, the second carries it from the
