@@ -241,9 +241,20 @@ fn akinci_walls_are_read_and_checked() {
     let walls = "[[boundary]]\ntype = \"container\"\nmin = [0.1, 0.1, 0.1]\nmax = [0.9, 0.8, 0.9]\nlayers = 1\n";
     let akinci = format!("{}\n{walls}", GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_volume = \"akinci\""));
     let s = Scene::from_toml_str(&akinci, &SceneOrigin::Text).unwrap();
-    let masses = s.initial_state().wall_masses;
-    // A single layer stands for more than its lattice cells.
-    assert!(masses.iter().all(|&m| m > 1000.0 * 0.05f64.powi(3)), "{:?}", &masses[..4]);
+    let initial = s.initial_state();
+    let p = &s.physics;
+    let raw = wgsph::model::initial::akinci_volumes(&initial.wall_positions, p.kernel, p.smoothing_length, &s.grid(), p.rest_density);
+    // Akinci's volumes, scaled by one factor for the one wall, below 1: a thin wall's own
+    // volumes give the fluid beside it more than the fluid it stands for.
+    let gamma = initial.wall_masses[0] / raw[0];
+    assert!(gamma > 0.5 && gamma < 1.0, "{gamma}");
+    for (m, r) in initial.wall_masses.iter().zip(&raw) {
+        assert!((m / r - gamma).abs() < 1e-12 * gamma, "{m} {r} {gamma}");
+    }
+    // The volumes follow the sampling: a corner particle of a one-layer container has fewer wall
+    // neighbours than one in a face, and a larger volume.
+    let (lightest, heaviest) = initial.wall_masses.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &m| (lo.min(m), hi.max(m)));
+    assert!(lightest < 0.9 * heaviest, "{lightest} {heaviest}");
     let e = error_of(&akinci.replace("layers = 1", "layers = 1\nrest_density = 2500.0"));
     assert!(e.contains("tank.toml") && e.contains("boundary[0].rest_density") && e.contains("akinci"), "{e}");
     let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_volume = \"psi\""));

@@ -181,13 +181,16 @@ impl CaseReport {
             .collect();
         let mut notes = figs.join("; ");
         notes += &format!(
-            "; fluid particles inside walls: {} over {} checked steps (deepest past a face: {} spacings); largest rho/rho0 {}, Mach {}",
+            "; fluid particles inside walls: {} over {} checked steps (deepest past a face: {} spacings); largest rho/rho0 {}",
             self.wall_leaks,
             self.checked_steps.len(),
             fmt_num(self.deepest_spacings),
             fmt_num(self.regime.max_density_ratio),
-            fmt_num(self.regime.max_mach)
         );
+        // An incompressible run (DFSPH) has no speed of sound, so no Mach number.
+        if self.regime.max_mach.is_finite() {
+            notes += &format!(", Mach {}", fmt_num(self.regime.max_mach));
+        }
         if let Some(f) = &self.failure {
             notes += &format!("; run failed: {f}");
         }
