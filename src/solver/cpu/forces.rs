@@ -1,9 +1,16 @@
 //! Accelerations: symmetric pressure (report Eq. 6), viscosity (Eq. 7), walls and gravity:
 //! twin of wgsl/sim/forces.wgsl.
+//!
+//! [`particle_acceleration`] is the GPU's loop, one particle over its stencil. [`forces`]
+//! computes the same sums from the neighbour lists of the step's density stage, eight particles
+//! of a cell at a time ([`super::cell_batches`]): each particle's neighbours in the same order,
+//! the same operations, so the same bits.
 
+use super::cell_batches::{wide, ListChunk, NeighbourLists, RowMasks};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
+use crate::model::lanes::{Pack, PackV3};
 use crate::model::params::Grid;
-use crate::model::real::{Real, V3};
+use crate::model::real::{as_arrays, Real, V3};
 use crate::model::scene::{BoundaryPressure, Kernel};
 use rayon::prelude::*;
 
@@ -24,6 +31,10 @@ pub struct ForcesInput<'a, R> {
     pub wall_masses: &'a [R],
     /// alpha h_s c0 of artificial viscosity (0: off).
     pub artificial_viscosity_factor: R,
+    /// The neighbour lists of the density stage, for the current positions ([`forces`] only).
+    pub lists: &'a NeighbourLists,
+    /// p / rho^2 of every particle ([`pressure_terms`]; [`forces`] only).
+    pub pressure_terms: &'a [R],
 }
 
 /// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
@@ -40,7 +51,182 @@ pub struct ForcesInput<'a, R> {
 /// do no net work over a cycle of compression and release. A wall particle takes part in
 /// viscosity at rest with the volume m_w/rho_i, scaled by the boundary friction.
 pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
-    accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
+    let lists = input.lists;
+    if lists.chunks().is_empty() {
+        accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
+        return;
+    }
+    lists.chunks().par_iter().zip(lists.split(accelerations)).for_each(|(chunk, acc)| {
+        wide(
+            #[inline(always)]
+            || chunk_accelerations(input, chunk, acc),
+        );
+    });
+}
+
+/// The sums of a particle's neighbour loops, without their constant factors.
+#[derive(Clone, Copy, Debug)]
+pub struct ForceSums<R> {
+    pub fluid_pressure: V3<R>,
+    pub fluid_visc: V3<R>,
+    pub wall_pressure: V3<R>,
+    pub wall_visc: V3<R>,
+    pub fluid_artificial: V3<R>,
+    pub wall_artificial: V3<R>,
+}
+
+/// What the pair terms of a batch's particles need of them.
+#[derive(Clone, Copy)]
+struct Lanes<R: Real> {
+    x: PackV3<R>,
+    u: PackV3<R>,
+    rho: Pack<R>,
+    /// p_i / rho_i^2.
+    p_over: Pack<R>,
+}
+
+/// The terms a scene uses; the others are skipped, as they are compiled out on the GPU.
+#[derive(Clone, Copy)]
+struct Terms {
+    cubic: bool,
+    viscous: bool,
+    artificial: bool,
+}
+
+impl Terms {
+    fn of<R: Real>(input: &ForcesInput<R>) -> Terms {
+        Terms {
+            cubic: input.kernel.kind == Kernel::CubicSpline,
+            viscous: input.viscosity > R::zero(),
+            artificial: input.artificial_viscosity_factor > R::zero(),
+        }
+    }
+}
+
+/// The accelerations of a chunk's particles, eight at a time from the neighbour lists: the
+/// pair terms of [`particle_acceleration`] lane by lane, in the same order.
+#[inline(always)]
+fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accelerations: &mut [V3<R>]) {
+    let first = chunk.particles().start;
+    let terms = Terms::of(input);
+    let kernel = input.kernel;
+    let eps = Pack::splat(R::of(0.01) * kernel.h2);
+    let zero = Pack::zero();
+    let fluid_positions = as_arrays(input.fluid.positions);
+    let wall_positions = as_arrays(input.walls.positions);
+    let velocities = as_arrays(input.velocities);
+    for batch in &chunk.batches {
+        let index = batch.indices();
+        let pi = Lanes {
+            x: PackV3::gather(fluid_positions, &index),
+            u: PackV3::gather(velocities, &index),
+            rho: Pack::gather(input.densities, &index),
+            p_over: Pack::gather(input.pressure_terms, &index),
+        };
+        let mut fluid_pressure = PackV3::zero();
+        let mut fluid_visc = PackV3::zero();
+        let mut fluid_artificial = PackV3::zero();
+        let (rows, counts) = chunk.fluid_rows(batch);
+        let mut live = RowMasks::new(&counts);
+        for index in rows {
+            let valid = live.next_row();
+            let rij = pi.x - PackV3::gather(fluid_positions, index);
+            let r2 = rij.dot(rij);
+            let r = r2.sqrt();
+            let grad = kernel.grad_w_lanes(rij, r);
+            let pj_over = Pack::gather(input.pressure_terms, index);
+            fluid_pressure = PackV3::select(valid, fluid_pressure - grad.scale(pi.p_over + pj_over), fluid_pressure);
+            if terms.viscous || terms.artificial {
+                let rho_j = Pack::gather(input.densities, index);
+                let uij = pi.u - PackV3::gather(velocities, index);
+                if terms.viscous {
+                    let inv_rho = Pack::splat(R::one()) / rho_j;
+                    let visc = if terms.cubic {
+                        fluid_visc + grad.scale(inv_rho * uij.dot(rij) / (r2 + eps))
+                    } else {
+                        fluid_visc - uij.scale(inv_rho * kernel.lap_w_lanes(r))
+                    };
+                    fluid_visc = PackV3::select(valid, visc, fluid_visc);
+                }
+                if terms.artificial {
+                    let approach = uij.dot(rij);
+                    let term = fluid_artificial + grad.scale(approach / ((r2 + eps) * (pi.rho + rho_j)));
+                    fluid_artificial = PackV3::select(valid.and(approach.lt(zero)), term, fluid_artificial);
+                }
+            }
+        }
+        let mut wall_pressure = PackV3::zero();
+        let mut wall_visc = PackV3::zero();
+        let mut wall_artificial = PackV3::zero();
+        let (rows, counts) = chunk.wall_rows(batch);
+        let mut live = RowMasks::new(&counts);
+        for index in rows {
+            let valid = live.next_row();
+            let rij = pi.x - PackV3::gather(wall_positions, index);
+            let r2 = rij.dot(rij);
+            let r = r2.sqrt();
+            let grad = kernel.grad_w_lanes(rij, r);
+            let mw = Pack::gather(input.wall_masses, index);
+            wall_pressure = PackV3::select(valid, wall_pressure - grad.scale(mw), wall_pressure);
+            if terms.viscous {
+                let visc = if terms.cubic {
+                    wall_visc + grad.scale(mw * pi.u.dot(rij) / (r2 + eps))
+                } else {
+                    wall_visc - pi.u.scale(mw * kernel.lap_w_lanes(r))
+                };
+                wall_visc = PackV3::select(valid, visc, wall_visc);
+            }
+            if terms.artificial {
+                let approach = pi.u.dot(rij);
+                let term = wall_artificial + grad.scale(mw * approach / ((r2 + eps) * pi.rho));
+                wall_artificial = PackV3::select(valid.and(approach.lt(zero)), term, wall_artificial);
+            }
+        }
+        let sums = [fluid_pressure, fluid_visc, wall_pressure, wall_visc, fluid_artificial, wall_artificial].map(|s| s.to_arrays());
+        for k in 0..batch.lanes as usize {
+            let i = batch.first as usize + k;
+            let sums = ForceSums {
+                fluid_pressure: V3(sums[0][k]),
+                fluid_visc: V3(sums[1][k]),
+                wall_pressure: V3(sums[2][k]),
+                wall_visc: V3(sums[3][k]),
+                fluid_artificial: V3(sums[4][k]),
+                wall_artificial: V3(sums[5][k]),
+            };
+            accelerations[i - first] = finish(input, i, &sums);
+        }
+    }
+}
+
+/// The acceleration of particle i from its sums: their constant factors, and gravity.
+#[inline(always)]
+fn finish<R: Real>(input: &ForcesInput<R>, i: usize, sums: &ForceSums<R>) -> V3<R> {
+    let terms = Terms::of(input);
+    let rho_i = input.densities[i];
+    let p_i = input.pressures[i];
+    let pi_over = p_i / (rho_i * rho_i);
+    let wall_p_over = match input.boundary_pressure {
+        BoundaryPressure::Mirror => R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i),
+        BoundaryPressure::Consistent => pi_over,
+    };
+    let nu = if terms.cubic { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let visc = sums.fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + sums.wall_visc * (nu * input.boundary_friction / rho_i);
+    let mut a = sums.fluid_pressure * input.fluid_mass + sums.wall_pressure * wall_p_over + visc;
+    if terms.artificial {
+        let av = input.artificial_viscosity_factor;
+        a += sums.fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + sums.wall_artificial * av;
+    }
+    if input.gravity != V3::zero() {
+        a += input.gravity;
+    }
+    a
+}
+
+/// p_i / rho_i^2 of every particle, the pressure term of the forces' pairs
+/// ([`ForcesInput::pressure_terms`]).
+pub fn pressure_terms<R: Real>(densities: &[R], pressures: &[R], out: &mut Vec<R>) {
+    out.resize(densities.len(), R::zero());
+    out.par_iter_mut().zip(densities.par_iter().zip(pressures)).for_each(|(t, (&rho, &p))| *t = p / (rho * rho));
 }
 
 /// The acceleration of fluid particle `i` (wgsl/sim/forces.wgsl `particle_acceleration`, whose
@@ -55,18 +241,12 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
     let viscous = input.viscosity > R::zero();
     // Terms the scene does not use are skipped, as they are compiled out on the GPU.
     let walls = !input.wall_masses.is_empty();
-    let gravity = input.gravity != V3::zero();
     let eps = R::of(0.01) * kernel.h2;
-    let ten = R::of(10.0);
     let xi = input.fluid.positions[i];
     let ui = input.velocities[i];
     let rho_i = input.densities[i];
     let p_i = input.pressures[i];
     let pi_over = p_i / (rho_i * rho_i);
-    let wall_p_over = match input.boundary_pressure {
-        BoundaryPressure::Mirror => R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i),
-        BoundaryPressure::Consistent => pi_over,
-    };
     let c = input.grid.cell_coords(xi);
     // Sums without the constant factors, which are applied once at the end.
     let mut fluid_pressure = V3::zero();
@@ -130,15 +310,6 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
             }
         }
     }
-    let nu = if cubic { ten * input.viscosity } else { input.viscosity };
-    let visc = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
-    let mut a = fluid_pressure * input.fluid_mass + wall_pressure * wall_p_over + visc;
-    if artificial {
-        let av = input.artificial_viscosity_factor;
-        a += fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + wall_artificial * av;
-    }
-    if gravity {
-        a += input.gravity;
-    }
-    a
+    let sums = ForceSums { fluid_pressure, fluid_visc, wall_pressure, wall_visc, fluid_artificial, wall_artificial };
+    finish(input, i, &sums)
 }

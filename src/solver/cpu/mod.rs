@@ -4,6 +4,7 @@
 
 pub mod bin_count;
 pub mod bin_scatter;
+pub mod cell_batches;
 pub mod continuity;
 pub mod density;
 pub mod dfsph;
@@ -22,6 +23,7 @@ pub mod probes;
 pub mod reorder;
 
 use super::backend::Backend;
+use cell_batches::NeighbourLists;
 use crate::model::initial::InitialState;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
@@ -50,6 +52,10 @@ pub struct CpuSolver<R: Real> {
     /// otherwise).
     carried_densities: Vec<R>,
     scratch_r: Vec<R>,
+    /// The neighbour lists of the last density stage, which the forces read.
+    lists: NeighbourLists,
+    /// p / rho^2 of every particle, for the forces.
+    pressure_terms: Vec<R>,
     keys: Vec<u32>,
     counts: Vec<u32>,
     starts: Vec<u32>,
@@ -102,6 +108,8 @@ impl<R: Real> CpuSolver<R> {
             accelerations: vec![V3::zero(); n],
             carried_densities: if params.continuity_density { (0..n).map(|i| R::of(initial.fluid_density(i, params.rest_density))).collect() } else { Vec::new() },
             scratch_r: Vec::new(),
+            lists: NeighbourLists::default(),
+            pressure_terms: Vec::new(),
             keys: vec![0; n],
             counts: vec![0; grid.cell_count()],
             starts: vec![0; grid.cell_count() + 1],
@@ -156,7 +164,8 @@ impl<R: Real> CpuSolver<R> {
             + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
             + self.wall_positions.len() as u64 * (v3 + r)
             + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
-            + (self.carried_densities.len() + self.scratch_r.capacity()) as u64 * r
+            + (self.carried_densities.len() + self.scratch_r.capacity() + self.pressure_terms.capacity()) as u64 * r
+            + self.lists.bytes()
     }
 
     /// Stage 1: counting-sort binning and reordering of the state into cell order.
@@ -199,6 +208,12 @@ impl<R: Real> CpuSolver<R> {
                 wall_masses: &self.wall_masses,
             };
             continuity::continuity_density(&input, &mut self.densities, &mut self.pressures);
+            // The forces read the neighbour lists that the summation builds.
+            if cell_batches::lanes_available() {
+                self.lists.build(&self.grid, input.fluid, input.walls, self.kernel.h2);
+            } else {
+                self.lists.clear();
+            }
             return;
         }
         let input = density::DensityInput {
@@ -213,7 +228,7 @@ impl<R: Real> CpuSolver<R> {
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
         };
-        density::density(&input, &mut self.densities, &mut self.pressures);
+        density::density(&input, &mut self.lists, &mut self.densities, &mut self.pressures);
     }
 
     /// What the forces read: the current state and the fields of the last density stage.
@@ -235,12 +250,15 @@ impl<R: Real> CpuSolver<R> {
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
             artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
+            lists: &self.lists,
+            pressure_terms: &self.pressure_terms,
         }
     }
 
     /// Stage 3: accelerations.
     pub fn compute_forces(&mut self) {
         let mut accelerations = std::mem::take(&mut self.accelerations);
+        forces::pressure_terms(&self.densities, &self.pressures, &mut self.pressure_terms);
         forces::forces(&self.forces_input(), &mut accelerations);
         self.accelerations = accelerations;
     }
