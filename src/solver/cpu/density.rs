@@ -27,11 +27,12 @@ pub struct DensityInput<'a, R> {
 }
 
 /// rho_i = sum_k m_k W(|x_i - x_k|, h) over fluid (itself included) and wall particles, and
-/// p_i, for every particle. Where the processor has AVX2 the sums run eight particles at a time
-/// from neighbour lists built here for the current positions (the forces read them too);
-/// elsewhere each particle walks its stencil ([`particle_density`]). The values are the same.
-pub fn density<R: Real>(input: &DensityInput<R>, lists: &mut NeighbourLists, densities: &mut [R], pressures: &mut [R]) {
-    if !lanes_available() {
+/// p_i, for every particle. With `lanes` (where the processor has AVX2) the sums run eight
+/// particles at a time from neighbour lists built here for the current positions (the forces
+/// read them too); otherwise each particle walks its stencil ([`particle_density`]). The values
+/// are the same.
+pub fn density<R: Real>(input: &DensityInput<R>, lanes: bool, lists: &mut NeighbourLists, densities: &mut [R], pressures: &mut [R]) {
+    if !(lanes && lanes_available()) {
         lists.clear();
         densities.par_iter_mut().zip(pressures.par_iter_mut()).enumerate().for_each(|(i, (rho, p))| (*rho, *p) = particle_density(input, i));
         return;

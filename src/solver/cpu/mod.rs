@@ -52,7 +52,10 @@ pub struct CpuSolver<R: Real> {
     /// otherwise).
     carried_densities: Vec<R>,
     scratch_r: Vec<R>,
-    /// The neighbour lists of the last density stage, which the forces read.
+    /// Whether density and forces run eight particles at a time ([`CpuSolver::use_lanes`]).
+    lanes: bool,
+    /// The neighbour lists of the last density stage, which the forces read (none without
+    /// lanes).
     lists: NeighbourLists,
     /// p / rho^2 of every particle, for the forces.
     pressure_terms: Vec<R>,
@@ -108,6 +111,7 @@ impl<R: Real> CpuSolver<R> {
             accelerations: vec![V3::zero(); n],
             carried_densities: if params.continuity_density { (0..n).map(|i| R::of(initial.fluid_density(i, params.rest_density))).collect() } else { Vec::new() },
             scratch_r: Vec::new(),
+            lanes: true,
             lists: NeighbourLists::default(),
             pressure_terms: Vec::new(),
             keys: vec![0; n],
@@ -168,6 +172,13 @@ impl<R: Real> CpuSolver<R> {
             + self.lists.bytes()
     }
 
+    /// Density and forces eight particles at a time (`true`, the default, where the processor
+    /// has AVX2) or each particle over its stencil as the GPU does (`false`): the same values bit
+    /// for bit, which the parity tests check.
+    pub fn use_lanes(&mut self, on: bool) {
+        self.lanes = on;
+    }
+
     /// Stage 1: counting-sort binning and reordering of the state into cell order.
     pub fn bin(&mut self) {
         self.counts.fill(0);
@@ -209,7 +220,7 @@ impl<R: Real> CpuSolver<R> {
             };
             continuity::continuity_density(&input, &mut self.densities, &mut self.pressures);
             // The forces read the neighbour lists that the summation builds.
-            if cell_batches::lanes_available() {
+            if self.lanes && cell_batches::lanes_available() {
                 self.lists.build(&self.grid, input.fluid, input.walls, self.kernel.h2);
             } else {
                 self.lists.clear();
@@ -228,7 +239,7 @@ impl<R: Real> CpuSolver<R> {
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
         };
-        density::density(&input, &mut self.lists, &mut self.densities, &mut self.pressures);
+        density::density(&input, self.lanes, &mut self.lists, &mut self.densities, &mut self.pressures);
     }
 
     /// What the forces read: the current state and the fields of the last density stage.
@@ -293,6 +304,8 @@ impl<R: Real> CpuSolver<R> {
     }
 
     fn integrate_with(&mut self, dt: f64) -> integrate::StepHealth {
+        // The particles move: the density stage's neighbour lists no longer hold.
+        self.lists.clear();
         let input = integrate::IntegrateInput {
             dt: R::of(dt),
             planes: &self.planes,
@@ -553,6 +566,7 @@ impl<R: Real> CpuSolver<R> {
 
     pub fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         state.check_fits(&Self::state_kind(), self.positions.len())?;
+        self.lists.clear();
         self.positions = state.positions.iter().map(|&p| V3::from64(p)).collect();
         self.velocities = state.velocities.iter().map(|&v| V3::from64(v)).collect();
         self.ids = state.ids.clone();
