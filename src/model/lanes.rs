@@ -242,7 +242,11 @@ mod avx2 {
         /// `values[index[k]]` in lane k (each index checked against the slice).
         #[inline(always)]
         pub fn gather(values: &[R], index: &[u32; LANES]) -> Self {
-            Self::from_array(std::array::from_fn(|k| values[index[k] as usize]))
+            let mut a = [R::default(); LANES];
+            for k in 0..LANES {
+                a[k] = values[index[k] as usize];
+            }
+            Self::from_array(a)
         }
         /// `values[first..first + 8]`.
         #[inline(always)]
@@ -342,18 +346,22 @@ mod avx2 {
         /// `values[index[k]]` in lane k (each index checked against the slice).
         #[inline(always)]
         pub fn gather(values: &[[R; 3]], index: &[u32; LANES]) -> Self {
-            let v: [[R; 3]; LANES] = std::array::from_fn(|k| values[index[k] as usize]);
-            PackV3 {
-                x: Pack::from_array(std::array::from_fn(|k| v[k][0])),
-                y: Pack::from_array(std::array::from_fn(|k| v[k][1])),
-                z: Pack::from_array(std::array::from_fn(|k| v[k][2])),
+            let (mut x, mut y, mut z) = ([R::default(); LANES], [R::default(); LANES], [R::default(); LANES]);
+            for k in 0..LANES {
+                let v = values[index[k] as usize];
+                (x[k], y[k], z[k]) = (v[0], v[1], v[2]);
             }
+            PackV3 { x: Pack::from_array(x), y: Pack::from_array(y), z: Pack::from_array(z) }
         }
         /// The vectors of the lanes.
         #[inline(always)]
         pub fn to_arrays(self) -> [[R; 3]; LANES] {
             let (x, y, z) = (self.x.to_array(), self.y.to_array(), self.z.to_array());
-            std::array::from_fn(|k| [x[k], y[k], z[k]])
+            let mut out = [[R::default(); 3]; LANES];
+            for k in 0..LANES {
+                out[k] = [x[k], y[k], z[k]];
+            }
+            out
         }
         /// As the scalar dot product: x x' + y y' + z z', summed left to right.
         #[inline(always)]

@@ -40,7 +40,11 @@ impl Batch {
     /// masked out wherever they would count).
     #[inline(always)]
     pub fn indices(&self) -> [u32; LANES] {
-        std::array::from_fn(|k| if (k as u32) < self.lanes { self.first + k as u32 } else { self.first })
+        let mut index = [self.first; LANES];
+        for k in 1..self.lanes as usize {
+            index[k] = self.first + k as u32;
+        }
+        index
     }
 }
 
@@ -59,6 +63,7 @@ pub struct ListChunk {
     pub batches: Vec<Batch>,
     fluid_rows: Vec<[u32; LANES]>,
     wall_rows: Vec<[u32; LANES]>,
+    found: Candidates,
 }
 
 impl ListChunk {
@@ -99,7 +104,11 @@ impl<R: Real> RowMasks<R> {
     #[inline(always)]
     pub fn new(counts: &[u32; LANES]) -> Self {
         // Small integers, exact in either float type.
-        RowMasks { row: Pack::zero(), counts: Pack::from_array(counts.map(|c| R::of(c as f64))) }
+        let mut lengths = [R::zero(); LANES];
+        for k in 0..LANES {
+            lengths[k] = R::of(counts[k] as f64);
+        }
+        RowMasks { row: Pack::zero(), counts: Pack::from_array(lengths) }
     }
     /// The mask of the next row.
     #[inline(always)]
@@ -154,16 +163,17 @@ impl NeighbourLists {
             wide(
                 #[inline(always)]
                 || {
-                    let ListChunk { batches, fluid_rows, wall_rows } = chunk;
+                    let ListChunk { batches, fluid_rows, wall_rows, found } = chunk;
                     fluid_rows.clear();
                     wall_rows.clear();
                     for batch in batches.iter_mut() {
                         let live = Mask::first(batch.lanes as usize);
                         let xi = PackV3::gather(as_arrays(fluid.positions), &batch.indices());
                         let runs = Runs::of(grid, batch.cell);
-                        batch.fluid = list(fluid_rows, xi, live, fluid, &runs, h2);
+                        let lanes = batch.lanes as usize;
+                        batch.fluid = list(fluid_rows, found, xi, live, lanes, fluid, &runs, h2);
                         if with_walls {
-                            batch.walls = list(wall_rows, xi, live, walls, &runs, h2);
+                            batch.walls = list(wall_rows, found, xi, live, lanes, walls, &runs, h2);
                         }
                     }
                 },
@@ -227,35 +237,85 @@ impl Runs {
     }
 }
 
+/// A chunk's working arrays for [`list`]: the stencil's particles that are near some lane of
+/// a batch, and those lanes (bit k for lane k).
+#[derive(Clone, Debug, Default)]
+struct Candidates {
+    index: Vec<u32>,
+    lanes: Vec<u8>,
+}
+
 /// Appends the lists of the lanes `live` at `xi` among `others` over the stencil's runs to
 /// `rows`, in the visiting order, and says where they are.
+///
+/// Two passes: every particle of the stencil is tested against the eight lanes at once, and
+/// those near at least one lane are kept with their lanes' bits; then each lane's list is read
+/// off those bits, 32 candidates at a time, and written down its column of the rows. This keeps
+/// each lane's count in a register and its loop short, where writing every candidate to its
+/// lanes at once would step through eight counts in memory.
 #[inline(always)]
-fn list<R: Real>(rows: &mut Vec<[u32; LANES]>, xi: PackV3<R>, live: Mask<R>, others: Neighbours<R>, runs: &Runs, h2: R) -> Lists {
-    let offset = rows.len();
-    let candidates: usize = runs.runs[..runs.len].iter().map(|&(k0, k1)| others.span(k0, k1).len()).sum();
-    // No list is longer than the stencil's particles; the rows past the longest list are cut
-    // off below, and the entries past a shorter list keep index 0, a valid index that the
-    // row's mask leaves out.
-    rows.resize(offset + candidates, [0; LANES]);
-    let block = &mut rows[offset..];
+fn list<R: Real>(rows: &mut Vec<[u32; LANES]>, found: &mut Candidates, xi: PackV3<R>, live: Mask<R>, lane_count: usize, others: Neighbours<R>, runs: &Runs, h2: R) -> Lists {
+    let mut stencil = 0;
+    for &(k0, k1) in &runs.runs[..runs.len] {
+        stencil += others.span(k0, k1).len();
+    }
+    // Room for every particle of the stencil, and zero bits up to a whole block of 32.
+    let room = stencil.div_ceil(32) * 32 + 32;
+    found.index.clear();
+    found.index.resize(room, 0);
+    found.lanes.clear();
+    found.lanes.resize(room, 0);
     let positions = as_arrays(others.positions);
     let h2 = Pack::splat(h2);
-    let mut counts = [0u32; LANES];
+    let mut kept = 0;
     for &(k0, k1) in &runs.runs[..runs.len] {
         for j in others.span(k0, k1) {
             let d = xi - PackV3::splat(positions[j]);
-            let mut near = d.dot(d).ge(h2).and_not(live).bits();
-            while near != 0 {
-                let k = near.trailing_zeros() as usize;
-                block[counts[k] as usize][k] = j as u32;
-                counts[k] += 1;
-                near &= near - 1;
+            let near = d.dot(d).ge(h2).and_not(live).bits();
+            // Written always, kept (the slot advanced) only where some lane is near.
+            found.index[kept] = j as u32;
+            found.lanes[kept] = near as u8;
+            kept += (near != 0) as usize;
+        }
+    }
+    found.lanes[kept..].fill(0);
+    // No list is longer than the candidates kept; the rows past the longest list are cut off
+    // below, and the entries past a shorter list keep index 0, a valid index that the row's
+    // mask leaves out.
+    let offset = rows.len();
+    rows.resize(offset + kept, [0; LANES]);
+    let block = &mut rows[offset..];
+    let mut counts = [0u32; LANES];
+    for (k, count) in counts.iter_mut().enumerate().take(lane_count) {
+        let mut n = 0usize;
+        for first in (0..kept).step_by(32) {
+            let lanes: &[u8; 32] = found.lanes[first..first + 32].try_into().expect("32 candidates");
+            let mut bits = lane_bits(lanes, k);
+            while bits != 0 {
+                let c = first + bits.trailing_zeros() as usize;
+                block[n][k] = found.index[c];
+                n += 1;
+                bits &= bits - 1;
             }
         }
+        *count = n as u32;
     }
     let longest = counts.iter().copied().max().unwrap_or(0) as usize;
     rows.truncate(offset + longest);
     Lists { offset: offset as u32, rows: longest as u32, counts }
+}
+
+/// Bit c set where candidate c of the 32 has lane `k`'s bit.
+#[inline(always)]
+fn lane_bits(lanes: &[u8; 32], k: usize) -> u32 {
+    use std::arch::x86_64::*;
+    // SAFETY: AVX2 integer instructions, run only inside `wide` (the processor has AVX2); the
+    // load reads the 32 bytes of the array.
+    unsafe {
+        let v = _mm256_loadu_si256(lanes.as_ptr().cast());
+        let bit = _mm256_set1_epi8(1i8 << k);
+        _mm256_movemask_epi8(_mm256_cmpeq_epi8(_mm256_and_si256(v, bit), bit)) as u32
+    }
 }
 
 /// Runs `task` compiled for AVX2 (the packs' instructions); the callers check

@@ -182,16 +182,17 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
                 wall_artificial = PackV3::select(valid.and(approach.lt(zero)), term, wall_artificial);
             }
         }
-        let sums = [fluid_pressure, fluid_visc, wall_pressure, wall_visc, fluid_artificial, wall_artificial].map(|s| s.to_arrays());
+        let (fluid_pressure, fluid_visc, wall_pressure) = (fluid_pressure.to_arrays(), fluid_visc.to_arrays(), wall_pressure.to_arrays());
+        let (wall_visc, fluid_artificial, wall_artificial) = (wall_visc.to_arrays(), fluid_artificial.to_arrays(), wall_artificial.to_arrays());
         for k in 0..batch.lanes as usize {
             let i = batch.first as usize + k;
             let sums = ForceSums {
-                fluid_pressure: V3(sums[0][k]),
-                fluid_visc: V3(sums[1][k]),
-                wall_pressure: V3(sums[2][k]),
-                wall_visc: V3(sums[3][k]),
-                fluid_artificial: V3(sums[4][k]),
-                wall_artificial: V3(sums[5][k]),
+                fluid_pressure: V3(fluid_pressure[k]),
+                fluid_visc: V3(fluid_visc[k]),
+                wall_pressure: V3(wall_pressure[k]),
+                wall_visc: V3(wall_visc[k]),
+                fluid_artificial: V3(fluid_artificial[k]),
+                wall_artificial: V3(wall_artificial[k]),
             };
             accelerations[i - first] = finish(input, i, &sums);
         }
