@@ -267,33 +267,37 @@ fn list<R: Real>(rows: &mut Vec<[u32; LANES]>, found: &mut Candidates, xi: PackV
     found.lanes.resize(room, 0);
     let positions = as_arrays(others.positions);
     let h2 = Pack::splat(h2);
+    // Plain slices, so that the stores of lane bits (bytes, which may alias anything) do not
+    // make the compiler load the vectors' pointers again for every candidate.
+    let (index, lane_bytes) = (&mut found.index[..], &mut found.lanes[..]);
     let mut kept = 0;
     for &(k0, k1) in &runs.runs[..runs.len] {
         for j in others.span(k0, k1) {
             let d = xi - PackV3::splat(positions[j]);
             let near = d.dot(d).ge(h2).and_not(live).bits();
             // Written always, kept (the slot advanced) only where some lane is near.
-            found.index[kept] = j as u32;
-            found.lanes[kept] = near as u8;
+            index[kept] = j as u32;
+            lane_bytes[kept] = near as u8;
             kept += (near != 0) as usize;
         }
     }
-    found.lanes[kept..].fill(0);
+    lane_bytes[kept..].fill(0);
     // No list is longer than the candidates kept; the rows past the longest list are cut off
     // below, and the entries past a shorter list keep index 0, a valid index that the row's
     // mask leaves out.
     let offset = rows.len();
     rows.resize(offset + kept, [0; LANES]);
     let block = &mut rows[offset..];
+    let (index, lane_bytes) = (&found.index[..], &found.lanes[..]);
     let mut counts = [0u32; LANES];
     for (k, count) in counts.iter_mut().enumerate().take(lane_count) {
         let mut n = 0usize;
         for first in (0..kept).step_by(32) {
-            let lanes: &[u8; 32] = found.lanes[first..first + 32].try_into().expect("32 candidates");
+            let lanes: &[u8; 32] = lane_bytes[first..first + 32].try_into().expect("32 candidates");
             let mut bits = lane_bits(lanes, k);
             while bits != 0 {
                 let c = first + bits.trailing_zeros() as usize;
-                block[n][k] = found.index[c];
+                block[n][k] = index[c];
                 n += 1;
                 bits &= bits - 1;
             }
