@@ -5,54 +5,47 @@
 //! code writes it (no fused multiply-add, no reassociation; comparisons are ordered, so a NaN
 //! compares false as in Rust), so each lane's result is the scalar result bit for bit.
 //!
-//! The operations are AVX2 instructions: they may only run on a processor that has AVX2. The
-//! CPU path runs them inside `solver::cpu::cell_batches::wide`, which checks the processor
-//! first and otherwise takes the scalar loops; on other architectures this module is empty.
+//! On x86-64 the operations are AVX instructions: they may only run on a processor that has
+//! AVX2, and the CPU path runs them inside `solver::cpu::cell_batches::wide`, which checks the
+//! processor first and otherwise takes the scalar loops. Elsewhere they are loops over arrays.
 
 /// Lanes of a pack.
 pub const LANES: usize = 8;
 
-#[cfg(target_arch = "x86_64")]
-pub use avx2::*;
+use std::ops::{Add, Div, Mul, Sub};
 
-/// Elsewhere no float has an eight-lane form here, and the CPU path takes its scalar loops.
-#[cfg(not(target_arch = "x86_64"))]
-pub trait LaneFloat {}
-#[cfg(not(target_arch = "x86_64"))]
-impl<T> LaneFloat for T {}
+/// A float type with an eight-lane form: f32 in one `__m256`, f64 in two `__m256d`.
+pub trait LaneFloat: Copy + Default + PartialOrd + 'static {
+    /// Eight values (a mask: every bit of a lane set, or none).
+    type V: Copy;
+    fn splat(v: Self) -> Self::V;
+    fn from_array(a: [Self; LANES]) -> Self::V;
+    fn to_array(v: Self::V) -> [Self; LANES];
+    fn add(a: Self::V, b: Self::V) -> Self::V;
+    fn sub(a: Self::V, b: Self::V) -> Self::V;
+    fn mul(a: Self::V, b: Self::V) -> Self::V;
+    fn div(a: Self::V, b: Self::V) -> Self::V;
+    fn sqrt(a: Self::V) -> Self::V;
+    fn lt(a: Self::V, b: Self::V) -> Self::V;
+    fn le(a: Self::V, b: Self::V) -> Self::V;
+    fn ge(a: Self::V, b: Self::V) -> Self::V;
+    fn and(a: Self::V, b: Self::V) -> Self::V;
+    fn or(a: Self::V, b: Self::V) -> Self::V;
+    /// `!a & b`.
+    fn and_not(a: Self::V, b: Self::V) -> Self::V;
+    /// `a` where `m`, `b` elsewhere.
+    fn select(m: Self::V, a: Self::V, b: Self::V) -> Self::V;
+    /// The lanes' sign bits, lane k in bit k.
+    fn bits(m: Self::V) -> u32;
+    /// The lane numbers 0..8.
+    fn iota() -> Self::V;
+}
+
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::LANES;
+    use super::{LaneFloat, LANES};
     use std::arch::x86_64::*;
-    use std::ops::{Add, Div, Mul, Sub};
-
-    /// A float type with an eight-lane form: f32 in one `__m256`, f64 in two `__m256d`.
-    pub trait LaneFloat: Copy + Default + PartialOrd + 'static {
-        /// Eight values (a mask: every bit of a lane set, or none).
-        type V: Copy;
-        fn splat(v: Self) -> Self::V;
-        fn from_array(a: [Self; LANES]) -> Self::V;
-        fn to_array(v: Self::V) -> [Self; LANES];
-        fn add(a: Self::V, b: Self::V) -> Self::V;
-        fn sub(a: Self::V, b: Self::V) -> Self::V;
-        fn mul(a: Self::V, b: Self::V) -> Self::V;
-        fn div(a: Self::V, b: Self::V) -> Self::V;
-        fn sqrt(a: Self::V) -> Self::V;
-        fn lt(a: Self::V, b: Self::V) -> Self::V;
-        fn le(a: Self::V, b: Self::V) -> Self::V;
-        fn ge(a: Self::V, b: Self::V) -> Self::V;
-        fn and(a: Self::V, b: Self::V) -> Self::V;
-        fn or(a: Self::V, b: Self::V) -> Self::V;
-        /// `!a & b`.
-        fn and_not(a: Self::V, b: Self::V) -> Self::V;
-        /// `a` where `m`, `b` elsewhere.
-        fn select(m: Self::V, a: Self::V, b: Self::V) -> Self::V;
-        /// The lanes' sign bits, lane k in bit k.
-        fn bits(m: Self::V) -> u32;
-        /// The lane numbers 0..8.
-        fn iota() -> Self::V;
-    }
 
     // SAFETY (every `unsafe` block below): the intrinsics need AVX (AVX2 for none of these
     // float operations beyond AVX), which the callers check before running them (module docs).
@@ -213,232 +206,318 @@ mod avx2 {
             Self::from_array([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
         }
     }
+}
 
-    /// Eight values of `R`, one per lane.
-    #[derive(Clone, Copy)]
-    pub struct Pack<R: LaneFloat>(pub R::V);
+/// Elsewhere the lanes are plain arrays (the compiler vectorises what it can); a mask lane is
+/// 1 where set and 0 where not.
+#[cfg(not(target_arch = "x86_64"))]
+mod portable {
+    use super::{LaneFloat, LANES};
 
-    /// One flag per lane of a [`Pack`] of `R`.
-    #[derive(Clone, Copy)]
-    pub struct Mask<R: LaneFloat>(R::V);
-
-    impl<R: LaneFloat> Pack<R> {
-        #[inline(always)]
-        pub fn splat(v: R) -> Self {
-            Pack(R::splat(v))
-        }
-        #[inline(always)]
-        pub fn zero() -> Self {
-            Self::splat(R::default())
-        }
-        #[inline(always)]
-        pub fn from_array(a: [R; LANES]) -> Self {
-            Pack(R::from_array(a))
-        }
-        #[inline(always)]
-        pub fn to_array(self) -> [R; LANES] {
-            R::to_array(self.0)
-        }
-        /// `values[index[k]]` in lane k (each index checked against the slice).
-        #[inline(always)]
-        pub fn gather(values: &[R], index: &[u32; LANES]) -> Self {
-            let mut a = [R::default(); LANES];
-            for k in 0..LANES {
-                a[k] = values[index[k] as usize];
-            }
-            Self::from_array(a)
-        }
-        /// `values[first..first + 8]`.
-        #[inline(always)]
-        pub fn load(values: &[R], first: usize) -> Self {
-            let v: &[R; LANES] = values[first..first + LANES].try_into().expect("eight values");
-            Self::from_array(*v)
-        }
-        #[inline(always)]
-        pub fn sqrt(self) -> Self {
-            Pack(R::sqrt(self.0))
-        }
-        #[inline(always)]
-        pub fn lt(self, o: Self) -> Mask<R> {
-            Mask(<R as LaneFloat>::lt(self.0, o.0))
-        }
-        #[inline(always)]
-        pub fn le(self, o: Self) -> Mask<R> {
-            Mask(<R as LaneFloat>::le(self.0, o.0))
-        }
-        #[inline(always)]
-        pub fn ge(self, o: Self) -> Mask<R> {
-            Mask(<R as LaneFloat>::ge(self.0, o.0))
-        }
-        /// `a` in the lanes where `m` is set, `b` elsewhere.
-        #[inline(always)]
-        pub fn select(m: Mask<R>, a: Self, b: Self) -> Self {
-            Pack(R::select(m.0, a.0, b.0))
-        }
-    }
-
-    impl<R: LaneFloat> Mask<R> {
-        /// The lanes below `count`.
-        #[inline(always)]
-        pub fn first(count: usize) -> Self {
-            let limit: [R; LANES] = R::to_array(R::iota());
-            // iota's lane `count` (or 8): a lane is set when its number is below it.
-            let bound = if count >= LANES { R::splat(limit[LANES - 1]) } else { R::splat(limit[count]) };
-            if count >= LANES {
-                Mask(<R as LaneFloat>::le(R::iota(), bound))
-            } else {
-                Mask(<R as LaneFloat>::lt(R::iota(), bound))
-            }
-        }
-        #[inline(always)]
-        pub fn and(self, o: Self) -> Self {
-            Mask(R::and(self.0, o.0))
-        }
-        #[inline(always)]
-        pub fn or(self, o: Self) -> Self {
-            Mask(R::or(self.0, o.0))
-        }
-        /// The lanes not set in `self` but set in `o`.
-        #[inline(always)]
-        pub fn and_not(self, o: Self) -> Self {
-            Mask(R::and_not(self.0, o.0))
-        }
-        /// Lane k in bit k.
-        #[inline(always)]
-        pub fn bits(self) -> u32 {
-            R::bits(self.0)
-        }
-    }
-
-    macro_rules! lane_op {
-        ($trait:ident, $method:ident) => {
-            impl<R: LaneFloat> $trait for Pack<R> {
-                type Output = Self;
+    macro_rules! array_lanes {
+        ($t:ty) => {
+            impl LaneFloat for $t {
+                type V = [$t; LANES];
                 #[inline(always)]
-                fn $method(self, o: Self) -> Self {
-                    Pack(R::$method(self.0, o.0))
+                fn splat(v: $t) -> Self::V {
+                    [v; LANES]
+                }
+                #[inline(always)]
+                fn from_array(a: [$t; LANES]) -> Self::V {
+                    a
+                }
+                #[inline(always)]
+                fn to_array(v: Self::V) -> [$t; LANES] {
+                    v
+                }
+                #[inline(always)]
+                fn add(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| a[k] + b[k])
+                }
+                #[inline(always)]
+                fn sub(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| a[k] - b[k])
+                }
+                #[inline(always)]
+                fn mul(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| a[k] * b[k])
+                }
+                #[inline(always)]
+                fn div(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| a[k] / b[k])
+                }
+                #[inline(always)]
+                fn sqrt(a: Self::V) -> Self::V {
+                    a.map(|v| v.sqrt())
+                }
+                #[inline(always)]
+                fn lt(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| if a[k] < b[k] { 1.0 } else { 0.0 })
+                }
+                #[inline(always)]
+                fn le(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| if a[k] <= b[k] { 1.0 } else { 0.0 })
+                }
+                #[inline(always)]
+                fn ge(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| if a[k] >= b[k] { 1.0 } else { 0.0 })
+                }
+                #[inline(always)]
+                fn and(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| if a[k] != 0.0 && b[k] != 0.0 { 1.0 } else { 0.0 })
+                }
+                #[inline(always)]
+                fn or(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| if a[k] != 0.0 || b[k] != 0.0 { 1.0 } else { 0.0 })
+                }
+                #[inline(always)]
+                fn and_not(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| if a[k] == 0.0 && b[k] != 0.0 { 1.0 } else { 0.0 })
+                }
+                #[inline(always)]
+                fn select(m: Self::V, a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| if m[k] != 0.0 { a[k] } else { b[k] })
+                }
+                #[inline(always)]
+                fn bits(m: Self::V) -> u32 {
+                    (0..LANES).fold(0, |bits, k| bits | (((m[k] != 0.0) as u32) << k))
+                }
+                #[inline(always)]
+                fn iota() -> Self::V {
+                    [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]
                 }
             }
         };
     }
-    lane_op!(Add, add);
-    lane_op!(Sub, sub);
-    lane_op!(Mul, mul);
-    lane_op!(Div, div);
+    array_lanes!(f32);
+    array_lanes!(f64);
+}
 
-    /// Eight 3-vectors, one per lane, as three packs (structure of arrays).
-    #[derive(Clone, Copy)]
-    pub struct PackV3<R: LaneFloat> {
-        pub x: Pack<R>,
-        pub y: Pack<R>,
-        pub z: Pack<R>,
+/// Eight values of `R`, one per lane.
+#[derive(Clone, Copy)]
+pub struct Pack<R: LaneFloat>(pub R::V);
+
+/// One flag per lane of a [`Pack`] of `R`.
+#[derive(Clone, Copy)]
+pub struct Mask<R: LaneFloat>(R::V);
+
+impl<R: LaneFloat> Pack<R> {
+    #[inline(always)]
+    pub fn splat(v: R) -> Self {
+        Pack(R::splat(v))
+    }
+    #[inline(always)]
+    pub fn zero() -> Self {
+        Self::splat(R::default())
+    }
+    #[inline(always)]
+    pub fn from_array(a: [R; LANES]) -> Self {
+        Pack(R::from_array(a))
+    }
+    #[inline(always)]
+    pub fn to_array(self) -> [R; LANES] {
+        R::to_array(self.0)
+    }
+    /// `values[index[k]]` in lane k (each index checked against the slice).
+    #[inline(always)]
+    pub fn gather(values: &[R], index: &[u32; LANES]) -> Self {
+        let mut a = [R::default(); LANES];
+        for k in 0..LANES {
+            a[k] = values[index[k] as usize];
+        }
+        Self::from_array(a)
+    }
+    /// `values[first..first + 8]`.
+    #[inline(always)]
+    pub fn load(values: &[R], first: usize) -> Self {
+        let v: &[R; LANES] = values[first..first + LANES].try_into().expect("eight values");
+        Self::from_array(*v)
+    }
+    #[inline(always)]
+    pub fn sqrt(self) -> Self {
+        Pack(R::sqrt(self.0))
+    }
+    #[inline(always)]
+    pub fn lt(self, o: Self) -> Mask<R> {
+        Mask(<R as LaneFloat>::lt(self.0, o.0))
+    }
+    #[inline(always)]
+    pub fn le(self, o: Self) -> Mask<R> {
+        Mask(<R as LaneFloat>::le(self.0, o.0))
+    }
+    #[inline(always)]
+    pub fn ge(self, o: Self) -> Mask<R> {
+        Mask(<R as LaneFloat>::ge(self.0, o.0))
+    }
+    /// `a` in the lanes where `m` is set, `b` elsewhere.
+    #[inline(always)]
+    pub fn select(m: Mask<R>, a: Self, b: Self) -> Self {
+        Pack(R::select(m.0, a.0, b.0))
+    }
+}
+
+impl<R: LaneFloat> Mask<R> {
+    /// The lanes below `count`.
+    #[inline(always)]
+    pub fn first(count: usize) -> Self {
+        let limit: [R; LANES] = R::to_array(R::iota());
+        // iota's lane `count` (or 8): a lane is set when its number is below it.
+        let bound = if count >= LANES { R::splat(limit[LANES - 1]) } else { R::splat(limit[count]) };
+        if count >= LANES {
+            Mask(<R as LaneFloat>::le(R::iota(), bound))
+        } else {
+            Mask(<R as LaneFloat>::lt(R::iota(), bound))
+        }
+    }
+    #[inline(always)]
+    pub fn and(self, o: Self) -> Self {
+        Mask(R::and(self.0, o.0))
+    }
+    #[inline(always)]
+    pub fn or(self, o: Self) -> Self {
+        Mask(R::or(self.0, o.0))
+    }
+    /// The lanes not set in `self` but set in `o`.
+    #[inline(always)]
+    pub fn and_not(self, o: Self) -> Self {
+        Mask(R::and_not(self.0, o.0))
+    }
+    /// Lane k in bit k.
+    #[inline(always)]
+    pub fn bits(self) -> u32 {
+        R::bits(self.0)
+    }
+}
+
+macro_rules! lane_op {
+    ($trait:ident, $method:ident) => {
+        impl<R: LaneFloat> $trait for Pack<R> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, o: Self) -> Self {
+                Pack(R::$method(self.0, o.0))
+            }
+        }
+    };
+}
+lane_op!(Add, add);
+lane_op!(Sub, sub);
+lane_op!(Mul, mul);
+lane_op!(Div, div);
+
+/// Eight 3-vectors, one per lane, as three packs (structure of arrays).
+#[derive(Clone, Copy)]
+pub struct PackV3<R: LaneFloat> {
+    pub x: Pack<R>,
+    pub y: Pack<R>,
+    pub z: Pack<R>,
+}
+
+impl<R: LaneFloat> PackV3<R> {
+    #[inline(always)]
+    pub fn zero() -> Self {
+        PackV3 { x: Pack::zero(), y: Pack::zero(), z: Pack::zero() }
+    }
+    #[inline(always)]
+    pub fn splat(v: [R; 3]) -> Self {
+        PackV3 { x: Pack::splat(v[0]), y: Pack::splat(v[1]), z: Pack::splat(v[2]) }
+    }
+    /// `values[index[k]]` in lane k (each index checked against the slice).
+    #[inline(always)]
+    pub fn gather(values: &[[R; 3]], index: &[u32; LANES]) -> Self {
+        let (mut x, mut y, mut z) = ([R::default(); LANES], [R::default(); LANES], [R::default(); LANES]);
+        for k in 0..LANES {
+            let v = values[index[k] as usize];
+            (x[k], y[k], z[k]) = (v[0], v[1], v[2]);
+        }
+        PackV3 { x: Pack::from_array(x), y: Pack::from_array(y), z: Pack::from_array(z) }
+    }
+    /// The vectors of the lanes.
+    #[inline(always)]
+    pub fn to_arrays(self) -> [[R; 3]; LANES] {
+        let (x, y, z) = (self.x.to_array(), self.y.to_array(), self.z.to_array());
+        let mut out = [[R::default(); 3]; LANES];
+        for k in 0..LANES {
+            out[k] = [x[k], y[k], z[k]];
+        }
+        out
+    }
+    /// As the scalar dot product: x x' + y y' + z z', summed left to right.
+    #[inline(always)]
+    pub fn dot(self, o: Self) -> Pack<R> {
+        self.x * o.x + self.y * o.y + self.z * o.z
+    }
+    #[inline(always)]
+    pub fn scale(self, s: Pack<R>) -> Self {
+        PackV3 { x: self.x * s, y: self.y * s, z: self.z * s }
+    }
+    #[inline(always)]
+    pub fn select(m: Mask<R>, a: Self, b: Self) -> Self {
+        PackV3 { x: Pack::select(m, a.x, b.x), y: Pack::select(m, a.y, b.y), z: Pack::select(m, a.z, b.z) }
+    }
+}
+
+impl<R: LaneFloat> Add for PackV3<R> {
+    type Output = Self;
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        PackV3 { x: self.x + o.x, y: self.y + o.y, z: self.z + o.z }
+    }
+}
+
+impl<R: LaneFloat> Sub for PackV3<R> {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        PackV3 { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn each_lane_is_the_scalar_operation<R: LaneFloat + num_traits::Float + std::fmt::Debug>(a: [R; 8], b: [R; 8]) {
+        let (pa, pb) = (Pack::from_array(a), Pack::from_array(b));
+        let same = |x: Pack<R>, f: &dyn Fn(R, R) -> R| {
+            let x = x.to_array();
+            for k in 0..LANES {
+                let want = f(a[k], b[k]);
+                assert!(x[k] == want || (x[k].is_nan() && want.is_nan()), "lane {k}: {:?} against {:?}", x[k], want);
+            }
+        };
+        same(pa + pb, &|x, y| x + y);
+        same(pa - pb, &|x, y| x - y);
+        same(pa * pb, &|x, y| x * y);
+        same(pa / pb, &|x, y| x / y);
+        same(pa.sqrt(), &|x, _| x.sqrt());
+        for k in 0..LANES {
+            assert_eq!(pa.lt(pb).bits() >> k & 1 == 1, a[k] < b[k]);
+            assert_eq!(pa.le(pb).bits() >> k & 1 == 1, a[k] <= b[k]);
+            assert_eq!(pa.ge(pb).bits() >> k & 1 == 1, a[k] >= b[k]);
+        }
+        for count in 0..=LANES {
+            assert_eq!(Mask::<R>::first(count).bits(), (1u32 << count) - 1);
+        }
+        let m = Mask::<R>::first(3);
+        assert_eq!(m.and_not(Mask::first(5)).bits(), 0b11000);
+        let chosen = Pack::select(m, pa, pb).to_array();
+        for k in 0..LANES {
+            let want = if k < 3 { a[k] } else { b[k] };
+            assert!(chosen[k] == want || (want.is_nan() && chosen[k].is_nan()));
+        }
     }
 
-    impl<R: LaneFloat> PackV3<R> {
-        #[inline(always)]
-        pub fn zero() -> Self {
-            PackV3 { x: Pack::zero(), y: Pack::zero(), z: Pack::zero() }
+    #[test]
+    fn lanes_match_scalar_operations() {
+        #[cfg(target_arch = "x86_64")]
+        if !is_x86_feature_detected!("avx2") {
+            return;
         }
-        #[inline(always)]
-        pub fn splat(v: [R; 3]) -> Self {
-            PackV3 { x: Pack::splat(v[0]), y: Pack::splat(v[1]), z: Pack::splat(v[2]) }
-        }
-        /// `values[index[k]]` in lane k (each index checked against the slice).
-        #[inline(always)]
-        pub fn gather(values: &[[R; 3]], index: &[u32; LANES]) -> Self {
-            let (mut x, mut y, mut z) = ([R::default(); LANES], [R::default(); LANES], [R::default(); LANES]);
-            for k in 0..LANES {
-                let v = values[index[k] as usize];
-                (x[k], y[k], z[k]) = (v[0], v[1], v[2]);
-            }
-            PackV3 { x: Pack::from_array(x), y: Pack::from_array(y), z: Pack::from_array(z) }
-        }
-        /// The vectors of the lanes.
-        #[inline(always)]
-        pub fn to_arrays(self) -> [[R; 3]; LANES] {
-            let (x, y, z) = (self.x.to_array(), self.y.to_array(), self.z.to_array());
-            let mut out = [[R::default(); 3]; LANES];
-            for k in 0..LANES {
-                out[k] = [x[k], y[k], z[k]];
-            }
-            out
-        }
-        /// As the scalar dot product: x x' + y y' + z z', summed left to right.
-        #[inline(always)]
-        pub fn dot(self, o: Self) -> Pack<R> {
-            self.x * o.x + self.y * o.y + self.z * o.z
-        }
-        #[inline(always)]
-        pub fn scale(self, s: Pack<R>) -> Self {
-            PackV3 { x: self.x * s, y: self.y * s, z: self.z * s }
-        }
-        #[inline(always)]
-        pub fn select(m: Mask<R>, a: Self, b: Self) -> Self {
-            PackV3 { x: Pack::select(m, a.x, b.x), y: Pack::select(m, a.y, b.y), z: Pack::select(m, a.z, b.z) }
-        }
-    }
-
-    impl<R: LaneFloat> Add for PackV3<R> {
-        type Output = Self;
-        #[inline(always)]
-        fn add(self, o: Self) -> Self {
-            PackV3 { x: self.x + o.x, y: self.y + o.y, z: self.z + o.z }
-        }
-    }
-
-    impl<R: LaneFloat> Sub for PackV3<R> {
-        type Output = Self;
-        #[inline(always)]
-        fn sub(self, o: Self) -> Self {
-            PackV3 { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
-        }
-    }
-
-    #[cfg(test)]
-    mod tests {
-        use super::*;
-
-        fn each_lane_is_the_scalar_operation<R: LaneFloat + num_traits::Float + std::fmt::Debug>(a: [R; 8], b: [R; 8]) {
-            let (pa, pb) = (Pack::from_array(a), Pack::from_array(b));
-            let same = |x: Pack<R>, f: &dyn Fn(R, R) -> R| {
-                let x = x.to_array();
-                for k in 0..LANES {
-                    let want = f(a[k], b[k]);
-                    assert!(x[k] == want || (x[k].is_nan() && want.is_nan()), "lane {k}: {:?} against {:?}", x[k], want);
-                }
-            };
-            same(pa + pb, &|x, y| x + y);
-            same(pa - pb, &|x, y| x - y);
-            same(pa * pb, &|x, y| x * y);
-            same(pa / pb, &|x, y| x / y);
-            same(pa.sqrt(), &|x, _| x.sqrt());
-            for k in 0..LANES {
-                assert_eq!(pa.lt(pb).bits() >> k & 1 == 1, a[k] < b[k]);
-                assert_eq!(pa.le(pb).bits() >> k & 1 == 1, a[k] <= b[k]);
-                assert_eq!(pa.ge(pb).bits() >> k & 1 == 1, a[k] >= b[k]);
-            }
-            for count in 0..=LANES {
-                assert_eq!(Mask::<R>::first(count).bits(), (1u32 << count) - 1);
-            }
-            let m = Mask::<R>::first(3);
-            assert_eq!(m.and_not(Mask::first(5)).bits(), 0b11000);
-            let chosen = Pack::select(m, pa, pb).to_array();
-            for k in 0..LANES {
-                let want = if k < 3 { a[k] } else { b[k] };
-                assert!(chosen[k] == want || (want.is_nan() && chosen[k].is_nan()));
-            }
-        }
-
-        #[test]
-        fn lanes_match_scalar_operations() {
-            if !is_x86_feature_detected!("avx2") {
-                return;
-            }
-            let nan = f64::NAN;
-            let a = [1.5, -2.0, 3.25, 0.0, nan, 7.0, 1e-30, -0.0];
-            let b = [0.5, 3.0, -1.0, 2.0, 1.0, f64::INFINITY, 3.0, 0.0];
-            each_lane_is_the_scalar_operation::<f64>(a, b);
-            each_lane_is_the_scalar_operation::<f32>(a.map(|v| v as f32), b.map(|v| v as f32));
-        }
+        let nan = f64::NAN;
+        let a = [1.5, -2.0, 3.25, 0.0, nan, 7.0, 1e-30, -0.0];
+        let b = [0.5, 3.0, -1.0, 2.0, 1.0, f64::INFINITY, 3.0, 0.0];
+        each_lane_is_the_scalar_operation::<f64>(a, b);
+        each_lane_is_the_scalar_operation::<f32>(a.map(|v| v as f32), b.map(|v| v as f32));
     }
 }

@@ -310,6 +310,7 @@ fn list<R: Real>(rows: &mut Vec<[u32; LANES]>, found: &mut Candidates, xi: PackV
 }
 
 /// Bit c set where candidate c of the 32 has lane `k`'s bit.
+#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn lane_bits(lanes: &[u8; 32], k: usize) -> u32 {
     use std::arch::x86_64::*;
@@ -322,21 +323,38 @@ fn lane_bits(lanes: &[u8; 32], k: usize) -> u32 {
     }
 }
 
+/// Bit c set where candidate c of the 32 has lane `k`'s bit.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn lane_bits(lanes: &[u8; 32], k: usize) -> u32 {
+    (0..32).fold(0, |bits, c| bits | ((((lanes[c] >> k) & 1) as u32) << c))
+}
+
 /// Runs `task` compiled for AVX2 (the packs' instructions); the callers check
 /// [`lanes_available`] first. The values are those of the scalar loops (the same IEEE
 /// operations in the same order, no fused multiply-add).
 #[inline]
 pub fn wide<T>(task: impl FnOnce() -> T) -> T {
-    // SAFETY: `with_avx2` requires AVX2, which every caller checked with `lanes_available`.
-    assert!(lanes_available(), "the lane path runs only where the processor has AVX2");
-    unsafe { with_avx2(task) }
+    #[cfg(target_arch = "x86_64")]
+    {
+        assert!(lanes_available(), "the lane path runs only where the processor has AVX2");
+        // SAFETY: `with_avx2` requires AVX2, which the processor was just found to have.
+        unsafe { with_avx2(task) }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    task()
 }
 
-/// Whether the processor runs the packs' instructions (AVX2); elsewhere the scalar loops run.
+/// Whether the processor runs the packs' instructions (AVX2 on x86-64; elsewhere the packs are
+/// arrays, which run anywhere).
 pub fn lanes_available() -> bool {
-    std::arch::is_x86_feature_detected!("avx2")
+    #[cfg(target_arch = "x86_64")]
+    return std::arch::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    true
 }
 
+#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn with_avx2<T>(task: impl FnOnce() -> T) -> T {
     task()
