@@ -22,6 +22,7 @@ use errors::InputError;
 /// 0 success, 1 a run that went bad or a failed check, 2 bad input, 130 / 143 a run stopped
 /// by SIGINT / SIGTERM.
 pub fn main() -> i32 {
+    quiet_wayland_probe();
     let cli = Cli::parse();
     let quiet = matches!(&cli.command, Some(Command::Run(a)) if a.quiet);
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(if quiet { "error" } else { "warn" })).init();
@@ -37,6 +38,31 @@ pub fn main() -> i32 {
         }
     }
 }
+
+/// wgpu's OpenGL backend loads libwayland to look for a Wayland display, and libwayland prints
+/// "error: XDG_RUNTIME_DIR is invalid or not set in the environment" on machines without a
+/// desktop session (servers, containers, CI): on a first run that reads as if wgsph had failed.
+/// Without a runtime directory no Wayland display can be found anyway, so a private empty one
+/// (mode 0700, as libwayland requires) changes nothing but the noise. Runs before any thread.
+#[cfg(unix)]
+fn quiet_wayland_probe() {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some() || std::env::var_os("WAYLAND_DISPLAY").is_some() {
+        return;
+    }
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    let dir = std::env::temp_dir().join(format!("wgsph-runtime-{uid}"));
+    let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+    match std::fs::symlink_metadata(&dir) {
+        // Only a directory of this user's that no one else can reach, as libwayland checks.
+        Ok(m) if m.is_dir() && m.uid() == uid && m.mode() & 0o777 == 0o700 => std::env::set_var("XDG_RUNTIME_DIR", &dir),
+        _ => {}
+    }
+}
+
+#[cfg(not(unix))]
+fn quiet_wayland_probe() {}
 
 fn run_command(command: Command) -> anyhow::Result<i32> {
     match command {

@@ -196,6 +196,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut warned_unconverged = false;
     let mut started = false;
     let mut stopped_by: Option<StopSignal> = None;
+    // The health at the last check that found nothing wrong: a failed run reports its maxima up
+    // to its first bad step, not those of the steps its batch ran on past it.
+    let mut last_good_health = backend.health()?;
     let outcome = (|| -> anyhow::Result<()> {
     while step < end {
         if started {
@@ -263,6 +266,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             failure = Some(diagnose_failure(backend, scene)?);
             break;
         }
+        last_good_health = health;
         let time_due = match (next_snapshot_time, opts.snapshot_interval) {
             (Some(t), Some(interval)) => time >= t - 1e-9 * interval,
             _ => false,
@@ -313,8 +317,14 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     };
     let frames_written = frames_written.unwrap_or(0);
     let wall_seconds = t0.elapsed().as_secs_f64();
-    let health = backend.health()?;
-    let steps = backend.steps_done() - start;
+    let health = backend.health()?.until_first_bad_step(&last_good_health);
+    // The steps computed, for the speed; the steps and time reached, for the record: a failed
+    // run ends at its first bad step, not where the GPU's batch ran on to past it.
+    let steps_computed = backend.steps_done() - start;
+    let (steps, sim_time) = match health.bad_step {
+        Some(bad) => (bad.step.saturating_sub(start), bad.measured.time),
+        None => (steps_computed, backend.time()),
+    };
     let dt_stats = backend.dt_stats()?;
     let (status, failure) = match (stopped_by, &error, failure) {
         (_, Some(e), _) => (RunStatus::Error, Some(format!("{e:#}"))),
@@ -331,13 +341,13 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         fluid_particles: backend.fluid_count(),
         wall_particles: backend.wall_count(),
         steps,
-        sim_time: backend.time(),
+        sim_time,
         dt: params.dt,
         dt_min: dt_stats.min,
         dt_max: dt_stats.max,
         dt_mean: dt_stats.mean,
         wall_seconds,
-        particle_steps_per_second: if wall_seconds > 0.0 { (steps as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
+        particle_steps_per_second: if wall_seconds > 0.0 { (steps_computed as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
         max_density_ratio: health.max_density / params.rest_density,
         nan_count: health.bad_counts().0,
         escaped: health.bad_counts().1,

@@ -178,6 +178,20 @@ impl Health {
     pub fn bad_counts(&self) -> (u64, u64) {
         self.bad_step.map_or((self.non_finite, self.escaped), |b| (b.measured.non_finite, b.measured.escaped))
     }
+    /// The health as it stood at the first bad step: the running maxima of `before` (read at a
+    /// step before it) and of that step, not those of the steps a batch ran on past it, whose
+    /// figures (a density of 300 rho0, a speed of 1e17) describe the wreck, not the event.
+    /// Without a bad step, the health itself.
+    pub fn until_first_bad_step(&self, before: &Health) -> Health {
+        match self.bad_step {
+            Some(bad) => Health {
+                max_density: before.max_density.max(bad.measured.max_density),
+                max_speed: before.max_speed.max(bad.measured.max_speed),
+                ..self.clone()
+            },
+            None => self.clone(),
+        }
+    }
 }
 
 /// The time steps taken so far: smallest, largest, mean and the last one.

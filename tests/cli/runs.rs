@@ -69,9 +69,19 @@ fn all_names(dir: &Path) -> Vec<String> {
 #[test]
 fn the_first_run_shows_water_and_can_be_run_twice() {
     let dir = tempfile::tempdir().unwrap();
-    let o = wgsph(&[], dir.path());
+    // As on a server or in a container: no desktop session, so no runtime directory.
+    let o = Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .current_dir(dir.path())
+        .env_remove("RUST_LOG")
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
     let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
     assert!(o.status.success(), "{stdout}\n{stderr}");
+    // A first run that prints errors or warnings looks broken: libwayland's complaint about
+    // the runtime directory and a fill warning once did.
+    assert!(stderr.trim().is_empty(), "nothing on stderr: {stderr}");
     let run = dir.path().join("out/dam_break-001");
     let s = summary(&run);
     assert_eq!((s.scene.as_str(), s.status, s.failure.as_deref()), ("dam_break", RunStatus::Completed, None));
@@ -269,4 +279,55 @@ fn runs_without_out_get_numbered_directories() {
     let o = wgsph(&["run", "hydrostatic", "--steps", "1", "--overwrite"], dir.path());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--out"), "{}", text(&o.stderr));
+}
+
+/// The number after `label` in a failure message ("|v|max = 54.9337, ...").
+fn figure_after(text: &str, label: &str) -> f64 {
+    let rest = &text[text.find(label).unwrap_or_else(|| panic!("no '{label}' in: {text}")) + label.len()..];
+    let end = rest.find(|c: char| !(c.is_ascii_digit() || matches!(c, '.' | 'e' | '-' | '+'))).unwrap_or(rest.len());
+    rest[..end].parse().unwrap_or_else(|e| panic!("'{}' after '{label}': {e}", &rest[..end]))
+}
+
+/// The GPU runs a batch of steps on past a blow-up before the host reads its health, so the
+/// run's largest density and speed grew to those of the wreck (21 rho0, Mach 4e8) while the
+/// failure named what its first bad step measured (1.15 rho0, Mach 1.4): the summary and its
+/// warnings contradicted the message. They now report the maxima up to the first bad step.
+#[test]
+fn a_failed_run_reports_its_maxima_up_to_its_first_bad_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut runs: Vec<(String, Vec<(&str, String)>)> = vec![("cpu".into(), vec![])];
+    for adapter in wgsph::solver::gpu::device::compute_adapters() {
+        runs.push((format!("gpu-{:?}", adapter.get_info().backend), vec![("WGPU_ADAPTER_NAME", adapter.get_info().name)]));
+    }
+    for (i, (label, env)) in runs.iter().enumerate() {
+        let out = format!("blow-{i}");
+        let backend = if label == "cpu" { "cpu" } else { "gpu" };
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_wgsph"));
+        cmd.args(["run", "dam_break", "--particles", "1000", "--set", "time.dt=0.0025", "--steps", "400", "--backend", backend, "--out", &out]);
+        cmd.current_dir(dir.path()).env_remove("RUST_LOG");
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        let o = cmd.output().unwrap();
+        assert_eq!(o.status.code(), Some(1), "{label}: {}", text(&o.stderr));
+        let s = summary(&dir.path().join(&out));
+        assert_eq!(s.status, RunStatus::Failed, "{label}");
+        let failure = s.failure.clone().unwrap();
+        // The run fails within its first steps: before them the fluid was at rest near rho0.
+        // Where it failed: the summary's steps and time are those of the step the failure names.
+        let failed_step: u64 = failure.strip_prefix("step ").and_then(|r| r.split(' ').next()).and_then(|n| n.parse().ok()).expect(&failure);
+        assert_eq!(s.steps, failed_step, "{label}: {failure}");
+        assert!((s.sim_time - figure_after(&failure, "(t = ")).abs() < 1e-6, "{label}: t = {} against {failure}", s.sim_time);
+        let bad_speed = figure_after(&failure, "|v|max = ");
+        let bad_ratio = figure_after(&failure, "max rho/rho0 = ");
+        let speed = s.max_mach.unwrap() * 40.0;
+        assert!((speed - bad_speed).abs() <= 1e-3 * bad_speed, "{label}: summary speed {speed}, first bad step's {bad_speed}");
+        assert!(s.max_density_ratio <= bad_ratio.max(1.1) * (1.0 + 1e-5), "{label}: summary density {} rho0, first bad step's {bad_ratio}", s.max_density_ratio);
+        for w in s.warnings.iter().filter(|w| w.contains("the speed reached ")) {
+            assert!(figure_after(w, "the speed reached ") <= bad_speed * (1.0 + 1e-3), "{label}: a warning from past the failure: {w}");
+        }
+        for w in s.warnings.iter().filter(|w| w.contains("the density reached ")) {
+            assert!(figure_after(w, "the density reached ") <= bad_ratio.max(1.1) * (1.0 + 1e-3), "{label}: a warning from past the failure: {w}");
+        }
+    }
 }
