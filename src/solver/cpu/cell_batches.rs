@@ -90,7 +90,8 @@ impl ListChunk {
     }
 
     fn bytes(&self) -> u64 {
-        (self.batches.capacity() * std::mem::size_of::<Batch>() + (self.fluid_rows.capacity() + self.wall_rows.capacity()) * 4 * LANES) as u64
+        let rows = (self.fluid_rows.capacity() + self.wall_rows.capacity()) * 4 * LANES;
+        (self.batches.capacity() * std::mem::size_of::<Batch>() + rows + self.found.index.capacity() * 4 + self.found.lanes.capacity()) as u64
     }
 }
 
@@ -125,6 +126,8 @@ pub struct NeighbourLists {
     chunks: Vec<ListChunk>,
     /// Chunks in use (the others keep their arrays for a later step).
     used: usize,
+    /// Each particle's cell, for the batching.
+    cells: Vec<[u32; 3]>,
 }
 
 impl NeighbourLists {
@@ -140,7 +143,7 @@ impl NeighbourLists {
 
     /// Bytes held by the lists.
     pub fn bytes(&self) -> u64 {
-        self.chunks.iter().map(ListChunk::bytes).sum()
+        self.chunks.iter().map(ListChunk::bytes).sum::<u64>() + self.cells.capacity() as u64 * 12
     }
 
     /// `values` cut into the particles of each chunk (the chunks cover every particle in order).
@@ -190,9 +193,12 @@ impl NeighbourLists {
             chunk.batches.clear();
         }
         self.used = 0;
+        // The cells in parallel, the batches (cheap) in order.
+        let mut cells = std::mem::take(&mut self.cells);
+        cells.resize(positions.len(), [0; 3]);
+        cells.par_iter_mut().zip(positions.par_iter()).for_each(|(c, &x)| *c = grid.cell_coords(x));
         let mut open: Option<Batch> = None;
-        for (i, &x) in positions.iter().enumerate() {
-            let cell = grid.cell_coords(x);
+        for (i, &cell) in cells.iter().enumerate() {
             match &mut open {
                 Some(b) if b.cell == cell && (b.lanes as usize) < LANES => b.lanes += 1,
                 _ => {
@@ -206,6 +212,7 @@ impl NeighbourLists {
         if let Some(b) = open {
             self.push(b);
         }
+        self.cells = cells;
     }
 
     fn push(&mut self, batch: Batch) {
@@ -343,6 +350,13 @@ pub fn wide<T>(task: impl FnOnce() -> T) -> T {
     }
     #[cfg(not(target_arch = "x86_64"))]
     task()
+}
+
+/// `out[i]` = (x, y, z, 0) of `positions[i]`: what the density's neighbour loads read (the
+/// forces then put p / rho^2 in the fourth place).
+pub fn points<R: Real>(positions: &[crate::model::real::V3<R>], out: &mut Vec<[R; 4]>) {
+    out.resize(positions.len(), [R::zero(); 4]);
+    out.par_iter_mut().zip(positions.par_iter()).for_each(|(p, x)| *p = [x.0[0], x.0[1], x.0[2], R::zero()]);
 }
 
 /// Whether the processor runs the packs' instructions (AVX2 on x86-64; elsewhere the packs are

@@ -9,7 +9,7 @@ use super::cell_batches::{lanes_available, wide, ListChunk, NeighbourLists, RowM
 use crate::model::kernels::{pressure, KernelCoefficients, Neighbours};
 use crate::model::lanes::{Pack, PackV3};
 use crate::model::params::Grid;
-use crate::model::real::{as_arrays, Real};
+use crate::model::real::Real;
 use crate::model::scene::EquationOfState;
 use rayon::prelude::*;
 
@@ -24,6 +24,11 @@ pub struct DensityInput<'a, R> {
     pub fluid: Neighbours<'a, R>,
     pub walls: Neighbours<'a, R>,
     pub wall_masses: &'a [R],
+    /// Each particle's position in the first three places ([`super::cell_batches::points`];
+    /// the lane path only).
+    pub fluid_points: &'a [[R; 4]],
+    /// Each wall particle's position and mass (the lane path only).
+    pub wall_points: &'a [[R; 4]],
 }
 
 /// rho_i = sum_k m_k W(|x_i - x_k|, h) over fluid (itself included) and wall particles, and
@@ -51,23 +56,22 @@ pub fn density<R: Real>(input: &DensityInput<R>, lanes: bool, lists: &mut Neighb
 #[inline(always)]
 fn chunk_density<R: Real>(input: &DensityInput<R>, chunk: &ListChunk, densities: &mut [R], pressures: &mut [R]) {
     let first = chunk.particles().start;
-    let fluid_positions = as_arrays(input.fluid.positions);
-    let wall_positions = as_arrays(input.walls.positions);
     for batch in &chunk.batches {
-        let xi = PackV3::gather(fluid_positions, &batch.indices());
+        let (xi, _) = PackV3::gather_with_w(input.fluid_points, &batch.indices());
         let mut fluid_sum = Pack::zero();
         let (rows, counts) = chunk.fluid_rows(batch);
         let mut live = RowMasks::new(&counts);
         for index in rows {
-            let d = xi - PackV3::gather(fluid_positions, index);
+            let d = xi - PackV3::gather_with_w(input.fluid_points, index).0;
             fluid_sum = Pack::select(live.next_row(), fluid_sum + input.kernel.w_lanes(d.dot(d)), fluid_sum);
         }
         let mut wall_sum = Pack::zero();
         let (rows, counts) = chunk.wall_rows(batch);
         let mut live = RowMasks::new(&counts);
         for index in rows {
-            let d = xi - PackV3::gather(wall_positions, index);
-            let term = Pack::gather(input.wall_masses, index) * input.kernel.w_lanes(d.dot(d));
+            let (xw, mw) = PackV3::gather_with_w(input.wall_points, index);
+            let d = xi - xw;
+            let term = mw * input.kernel.w_lanes(d.dot(d));
             wall_sum = Pack::select(live.next_row(), wall_sum + term, wall_sum);
         }
         let (fluid_sum, wall_sum) = (fluid_sum.to_array(), wall_sum.to_array());

@@ -33,8 +33,10 @@ pub struct ForcesInput<'a, R> {
     pub artificial_viscosity_factor: R,
     /// The neighbour lists of the density stage, for the current positions ([`forces`] only).
     pub lists: &'a NeighbourLists,
-    /// p / rho^2 of every particle ([`pressure_terms`]; [`forces`] only).
-    pub pressure_terms: &'a [R],
+    /// Each particle's position and p / rho^2 ([`pressure_terms`]; [`forces`] only).
+    pub fluid_points: &'a [[R; 4]],
+    /// Each wall particle's position and mass ([`forces`] only).
+    pub wall_points: &'a [[R; 4]],
 }
 
 /// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
@@ -112,17 +114,11 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
     let kernel = input.kernel;
     let eps = Pack::splat(R::of(0.01) * kernel.h2);
     let zero = Pack::zero();
-    let fluid_positions = as_arrays(input.fluid.positions);
-    let wall_positions = as_arrays(input.walls.positions);
     let velocities = as_arrays(input.velocities);
     for batch in &chunk.batches {
         let index = batch.indices();
-        let pi = Lanes {
-            x: PackV3::gather(fluid_positions, &index),
-            u: PackV3::gather(velocities, &index),
-            rho: Pack::gather(input.densities, &index),
-            p_over: Pack::gather(input.pressure_terms, &index),
-        };
+        let (x, p_over) = PackV3::gather_with_w(input.fluid_points, &index);
+        let pi = Lanes { x, u: PackV3::gather(velocities, &index), rho: Pack::gather(input.densities, &index), p_over };
         let mut fluid_pressure = PackV3::zero();
         let mut fluid_visc = PackV3::zero();
         let mut fluid_artificial = PackV3::zero();
@@ -130,11 +126,11 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
         let mut live = RowMasks::new(&counts);
         for index in rows {
             let valid = live.next_row();
-            let rij = pi.x - PackV3::gather(fluid_positions, index);
+            let (xj, pj_over) = PackV3::gather_with_w(input.fluid_points, index);
+            let rij = pi.x - xj;
             let r2 = rij.dot(rij);
             let r = r2.sqrt();
             let grad = kernel.grad_w_lanes(rij, r);
-            let pj_over = Pack::gather(input.pressure_terms, index);
             fluid_pressure = PackV3::select(valid, fluid_pressure - grad.scale(pi.p_over + pj_over), fluid_pressure);
             if terms.viscous || terms.artificial {
                 let rho_j = Pack::gather(input.densities, index);
@@ -162,11 +158,11 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
         let mut live = RowMasks::new(&counts);
         for index in rows {
             let valid = live.next_row();
-            let rij = pi.x - PackV3::gather(wall_positions, index);
+            let (xw, mw) = PackV3::gather_with_w(input.wall_points, index);
+            let rij = pi.x - xw;
             let r2 = rij.dot(rij);
             let r = r2.sqrt();
             let grad = kernel.grad_w_lanes(rij, r);
-            let mw = Pack::gather(input.wall_masses, index);
             wall_pressure = PackV3::select(valid, wall_pressure - grad.scale(mw), wall_pressure);
             if terms.viscous {
                 let visc = if terms.cubic {
@@ -224,10 +220,9 @@ fn finish<R: Real>(input: &ForcesInput<R>, i: usize, sums: &ForceSums<R>) -> V3<
 }
 
 /// p_i / rho_i^2 of every particle, the pressure term of the forces' pairs
-/// ([`ForcesInput::pressure_terms`]).
-pub fn pressure_terms<R: Real>(densities: &[R], pressures: &[R], out: &mut Vec<R>) {
-    out.resize(densities.len(), R::zero());
-    out.par_iter_mut().zip(densities.par_iter().zip(pressures)).for_each(|(t, (&rho, &p))| *t = p / (rho * rho));
+/// in the fourth place of each of `points` ([`ForcesInput::fluid_points`]).
+pub fn pressure_terms<R: Real>(densities: &[R], pressures: &[R], points: &mut [[R; 4]]) {
+    points.par_iter_mut().zip(densities.par_iter().zip(pressures)).for_each(|(t, (&rho, &p))| t[3] = p / (rho * rho));
 }
 
 /// The acceleration of fluid particle `i` (wgsl/sim/forces.wgsl `particle_acceleration`, whose

@@ -57,8 +57,11 @@ pub struct CpuSolver<R: Real> {
     /// The neighbour lists of the last density stage, which the forces read (none without
     /// lanes).
     lists: NeighbourLists,
-    /// p / rho^2 of every particle, for the forces.
-    pressure_terms: Vec<R>,
+    /// Each particle's position and, once the forces have set it, p / rho^2 (the lane path's
+    /// neighbour loads: one of 16 bytes each).
+    fluid_points: Vec<[R; 4]>,
+    /// Each wall particle's position and mass, for the lane path.
+    wall_points: Vec<[R; 4]>,
     keys: Vec<u32>,
     counts: Vec<u32>,
     starts: Vec<u32>,
@@ -93,6 +96,9 @@ impl<R: Real> CpuSolver<R> {
         let wall_probe_masks = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
         // Without walls no stage visits them: no per-cell array.
         let wall_starts = if walls.is_empty() { Vec::new() } else { wall_starts };
+        let wall_positions: Vec<V3<R>> = wall_order.iter().map(|&i| walls[i as usize]).collect();
+        let wall_masses: Vec<R> = wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect();
+        let wall_points = wall_positions.iter().zip(&wall_masses).map(|(x, &m)| [x.0[0], x.0[1], x.0[2], m]).collect();
         let planes = params
             .planes
             .iter()
@@ -113,15 +119,16 @@ impl<R: Real> CpuSolver<R> {
             scratch_r: Vec::new(),
             lanes: true,
             lists: NeighbourLists::default(),
-            pressure_terms: Vec::new(),
+            fluid_points: Vec::new(),
+            wall_points,
             keys: vec![0; n],
             counts: vec![0; grid.cell_count()],
             starts: vec![0; grid.cell_count() + 1],
             sorted: vec![0; n],
             scratch_v3: Vec::with_capacity(n),
             scratch_ids: Vec::with_capacity(n),
-            wall_positions: wall_order.iter().map(|&i| walls[i as usize]).collect(),
-            wall_masses: wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect(),
+            wall_positions,
+            wall_masses,
             wall_starts,
             step: 0,
             health: Health::default(),
@@ -168,7 +175,7 @@ impl<R: Real> CpuSolver<R> {
             + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
             + self.wall_positions.len() as u64 * (v3 + r)
             + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
-            + (self.carried_densities.len() + self.scratch_r.capacity() + self.pressure_terms.capacity()) as u64 * r
+            + (self.carried_densities.len() + self.scratch_r.capacity() + 4 * (self.fluid_points.capacity() + self.wall_points.capacity())) as u64 * r
             + self.lists.bytes()
     }
 
@@ -199,6 +206,9 @@ impl<R: Real> CpuSolver<R> {
 
     /// Stage 2: density and pressure of every particle.
     pub fn compute_density(&mut self) {
+        if self.lanes && cell_batches::lanes_available() {
+            cell_batches::points(&self.positions, &mut self.fluid_points);
+        }
         let p = &self.params;
         if p.continuity_density {
             let input = continuity::ContinuityInput {
@@ -238,6 +248,8 @@ impl<R: Real> CpuSolver<R> {
             fluid: Neighbours { positions: &self.positions, starts: &self.starts },
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
+            fluid_points: &self.fluid_points,
+            wall_points: &self.wall_points,
         };
         density::density(&input, self.lanes, &mut self.lists, &mut self.densities, &mut self.pressures);
     }
@@ -262,14 +274,17 @@ impl<R: Real> CpuSolver<R> {
             wall_masses: &self.wall_masses,
             artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
             lists: &self.lists,
-            pressure_terms: &self.pressure_terms,
+            fluid_points: &self.fluid_points,
+            wall_points: &self.wall_points,
         }
     }
 
     /// Stage 3: accelerations.
     pub fn compute_forces(&mut self) {
         let mut accelerations = std::mem::take(&mut self.accelerations);
-        forces::pressure_terms(&self.densities, &self.pressures, &mut self.pressure_terms);
+        if !self.lists.chunks().is_empty() {
+            forces::pressure_terms(&self.densities, &self.pressures, &mut self.fluid_points);
+        }
         forces::forces(&self.forces_input(), &mut accelerations);
         self.accelerations = accelerations;
     }
