@@ -19,7 +19,7 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         ("cubic, artificial viscosity, continuity", tank().viscosity(0.0).continuity().density_diffusion(0.1).artificial_viscosity(0.05).build()),
         ("cubic, grid rebuilt every 2nd step", tank().kernel(Kernel::CubicSpline).neighbour_rebuild_every(2).build()),
         ("planes only, no wall particles", tank().without_walls().build()),
-        ("Adami wall pressure (forces in the scalar loops)", tank().boundary_pressure(BoundaryPressure::Adami).build()),
+        ("Adami wall pressure", tank().boundary_pressure(BoundaryPressure::Adami).build()),
     ]
 }
 

@@ -8,7 +8,7 @@
 
 use super::cell_batches::{wide, ListChunk, NeighbourLists, RowMasks};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
-use crate::model::lanes::{Pack, PackV3};
+use crate::model::lanes::{Pack, PackV3, LANES};
 use crate::model::params::Grid;
 use crate::model::real::{as_arrays, Real, V3};
 use crate::model::scene::{BoundaryPressure, Kernel};
@@ -59,9 +59,7 @@ pub struct ForcesInput<'a, R> {
 /// with the volume m_w/rho_i, scaled by the boundary friction.
 pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     let lists = input.lists;
-    // Adami's wall pressure reads each wall particle's own pressure and density, which the lane
-    // loops do not gather: such scenes take the scalar loops (their density still runs in lanes).
-    if lists.chunks().is_empty() || input.boundary_pressure == BoundaryPressure::Adami {
+    if lists.chunks().is_empty() {
         accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
         return;
     }
@@ -100,6 +98,8 @@ struct Terms {
     cubic: bool,
     viscous: bool,
     artificial: bool,
+    /// Adami's wall pressure: each wall particle's own pressure inside the sum.
+    adami: bool,
 }
 
 impl Terms {
@@ -108,6 +108,7 @@ impl Terms {
             cubic: input.kernel.kind == Kernel::CubicSpline,
             viscous: input.viscosity > R::zero(),
             artificial: input.artificial_viscosity_factor > R::zero(),
+            adami: input.boundary_pressure == BoundaryPressure::Adami,
         }
     }
 }
@@ -170,7 +171,13 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
             let r2 = rij.dot(rij);
             let r = r2.sqrt();
             let grad = kernel.grad_w_lanes(rij, r);
-            wall_pressure = PackV3::select(valid, wall_pressure - grad.scale(mw), wall_pressure);
+            let term = if terms.adami {
+                let (p_w, rho_w) = wall_fields(input.wall_fields, index);
+                grad.scale(mw * (pi.p_over + p_w / (rho_w * rho_w)))
+            } else {
+                grad.scale(mw)
+            };
+            wall_pressure = PackV3::select(valid, wall_pressure - term, wall_pressure);
             if terms.viscous {
                 let visc = if terms.cubic {
                     wall_visc + grad.scale(mw * pi.u.dot(rij) / (r2 + eps))
@@ -200,6 +207,16 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
             accelerations[i - first] = finish(input, i, &sums);
         }
     }
+}
+
+/// The pressure and density of the wall particles `index` (Adami's wall pressure).
+#[inline(always)]
+fn wall_fields<R: Real>(fields: &[[R; 2]], index: &[u32; LANES]) -> (Pack<R>, Pack<R>) {
+    let (mut p, mut rho) = ([R::zero(); LANES], [R::zero(); LANES]);
+    for k in 0..LANES {
+        [p[k], rho[k]] = fields[index[k] as usize];
+    }
+    (Pack::from_array(p), Pack::from_array(rho))
 }
 
 /// The acceleration of particle i from its sums: their constant factors, and gravity.
