@@ -108,6 +108,12 @@ pub struct BenchRow {
     pub steps: u64,
     pub seconds: f64,
     pub particle_steps_per_second: f64,
+    /// Processor time of all the process's threads (the solver's, and a software adapter's)
+    /// over the timed steps, where the system says (Linux): on a loaded machine the wall clock
+    /// counts the time other programs ran, this does not.
+    pub cpu_seconds: Option<f64>,
+    /// The 1-minute load average when the steps ended (Linux), to judge the wall clock by.
+    pub load_average: Option<f64>,
     pub bytes_per_fluid_particle: Option<f64>,
     /// Over SPlisHSPlasH's figure for the same method at the same n, where one was measured.
     pub ratio_to_splishsplash: Option<f64>,
@@ -124,10 +130,12 @@ fn measure(path: &str, scene: &Scene, choice: &BackendChoice, steps: u64, n: u32
     let backend = sim.backend();
     backend.step(1)?;
     let before = backend.health()?.iterations;
+    let cpu_before = process_cpu_seconds();
     let t = Instant::now();
     backend.step(steps)?;
     let health = backend.health()?;
     let seconds = t.elapsed().as_secs_f64();
+    let cpu_seconds = cpu_before.zip(process_cpu_seconds()).map(|(a, b)| b - a);
     anyhow::ensure!(health.is_ok(), "{path}: the workload went bad at step {:?}", health.first_bad_step);
     let fluid = backend.fluid_count();
     let rate = steps as f64 * fluid as f64 / seconds;
@@ -144,6 +152,8 @@ fn measure(path: &str, scene: &Scene, choice: &BackendChoice, steps: u64, n: u32
         steps,
         seconds,
         particle_steps_per_second: rate,
+        cpu_seconds,
+        load_average: std::fs::read_to_string("/proc/loadavg").ok().and_then(|s| s.split_whitespace().next()?.parse().ok()),
         bytes_per_fluid_particle: backend.memory_bytes().map(|b| b as f64 / fluid as f64),
         ratio_to_splishsplash: reference.iter().find(|r| r.0 == n).map(|r| rate / r.1),
         pressure_iterations_per_step: per_step(|i| i.pressure.total),
@@ -151,11 +161,23 @@ fn measure(path: &str, scene: &Scene, choice: &BackendChoice, steps: u64, n: u32
     })
 }
 
+/// Processor seconds used so far by the threads of this process that are alive: the sum of
+/// the first field of each `/proc/self/task/*/schedstat` (nanoseconds on a processor); `None`
+/// where there is no such file.
+fn process_cpu_seconds() -> Option<f64> {
+    let mut total = 0u64;
+    for task in std::fs::read_dir("/proc/self/task").ok()? {
+        let stat = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
+        total += stat.split_whitespace().next()?.parse::<u64>().ok()?;
+    }
+    Some(total as f64 * 1e-9)
+}
+
 /// The table `wgsph bench` prints.
 pub fn table(rows: &[BenchRow]) -> String {
     let mut s = format!(
-        "{:<15} {:<48} {:>8} {:>6} {:>9} {:>12} {:>9} {:>8} {:>13}\n",
-        "path", "adapter", "fluid", "steps", "seconds", "p-steps/s", "B/fluid", "x SPH", "iterations"
+        "{:<15} {:<48} {:>8} {:>6} {:>9} {:>12} {:>9} {:>8} {:>13} {:>9} {:>12} {:>6}\n",
+        "path", "adapter", "fluid", "steps", "seconds", "p-steps/s", "B/fluid", "x SPH", "iterations", "CPU s", "p-steps/CPUs", "load"
     );
     for r in rows {
         let bytes = r.bytes_per_fluid_particle.map_or("-".into(), |b| format!("{b:.1}"));
@@ -164,9 +186,12 @@ pub fn table(rows: &[BenchRow]) -> String {
             (Some(p), Some(d)) => format!("{p:.2} + {d:.2}"),
             _ => "-".into(),
         };
+        let cpu = r.cpu_seconds.map_or("-".into(), |c| format!("{c:.3}"));
+        let per_cpu = r.cpu_seconds.map_or("-".into(), |c| format!("{:.3e}", r.steps as f64 * r.fluid_particles as f64 / c));
+        let load = r.load_average.map_or("-".into(), |l| format!("{l:.2}"));
         s += &format!(
-            "{:<15} {:<48} {:>8} {:>6} {:>9.3} {:>12.3e} {:>9} {:>8} {:>13}\n",
-            r.path, r.adapter, r.fluid_particles, r.steps, r.seconds, r.particle_steps_per_second, bytes, ratio, iterations
+            "{:<15} {:<48} {:>8} {:>6} {:>9.3} {:>12.3e} {:>9} {:>8} {:>13} {:>9} {:>12} {:>6}\n",
+            r.path, r.adapter, r.fluid_particles, r.steps, r.seconds, r.particle_steps_per_second, bytes, ratio, iterations, cpu, per_cpu, load
         );
     }
     s

@@ -11,8 +11,10 @@ pub const MAX_PARTICLES: u64 = 1 << 31;
 pub const MAX_CELLS: u64 = 1 << 30;
 /// Most iterations a DFSPH solve may take per step (the GPU records that many per step).
 pub const MAX_SOLVER_ITERATIONS: u32 = 1000;
-/// Host bytes per particle the CPU path needs at most (f64 state, sort buffers, snapshot copy).
-pub const CPU_BYTES_PER_PARTICLE: u64 = 200;
+/// Host bytes per particle the CPU path needs at most (f64 state, sort buffers, snapshot copy,
+/// and the neighbour lists of the lane path: about 550 bytes per fluid particle in all on the
+/// block workload, measured by `wgsph bench`).
+pub const CPU_BYTES_PER_PARTICLE: u64 = 600;
 
 /// The magnitudes a scene's constants may have, in the scene's units. No liquid in SI, cgs or
 /// millimetre units comes near these bounds (water: rho0 = 1000 kg/m^3 or 1e-6 kg/mm^3, c0 =

@@ -4,6 +4,7 @@
 //!
 //! h is the support radius: every kernel is zero for r >= h.
 
+use super::lanes::{Pack, PackV3};
 use super::params::Grid;
 use super::real::{Real, V3};
 use super::scene::{EquationOfState, Kernel};
@@ -88,6 +89,63 @@ impl<R: Real> KernelCoefficients<R> {
         } else {
             self.lap * (self.h - r)
         }
+    }
+}
+
+/// The kernel on eight distances at once ([`Pack`] lanes): each lane is the scalar function's
+/// value bit for bit (both branches computed, one kept), for the CPU path's batches of a cell's
+/// particles.
+impl<R: Real> KernelCoefficients<R> {
+    /// [`KernelCoefficients::w`] lane by lane.
+    #[inline(always)]
+    pub fn w_lanes(&self, r2: Pack<R>) -> Pack<R> {
+        let outside = r2.ge(Pack::splat(self.h2));
+        let w = Pack::splat(self.w);
+        let inside = match self.kind {
+            Kernel::Mueller => {
+                let d = Pack::splat(self.h2) - r2;
+                w * d * d * d
+            }
+            Kernel::CubicSpline => {
+                let q = r2.sqrt() / Pack::splat(self.h);
+                let one = Pack::splat(R::one());
+                let near = w * (Pack::splat(R::of(6.0)) * (q * q * q - q * q) + one);
+                let d = one - q;
+                let far = w * Pack::splat(R::of(2.0)) * d * d * d;
+                Pack::select(q.le(Pack::splat(R::of(0.5))), near, far)
+            }
+        };
+        Pack::select(outside, Pack::zero(), inside)
+    }
+
+    /// [`KernelCoefficients::grad_w`] lane by lane.
+    #[inline(always)]
+    pub fn grad_w_lanes(&self, rij: PackV3<R>, r: Pack<R>) -> PackV3<R> {
+        let h = Pack::splat(self.h);
+        let degenerate = r.ge(h).or(r.le(Pack::splat(R::of(1e-12) * self.h)));
+        let grad = Pack::splat(self.grad);
+        let dwdr = match self.kind {
+            Kernel::Mueller => {
+                let d = h - r;
+                grad * d * d
+            }
+            Kernel::CubicSpline => {
+                let q = r / h;
+                let one = Pack::splat(R::one());
+                let near = grad * q * (Pack::splat(R::of(3.0)) * q - Pack::splat(R::of(2.0)));
+                let d = one - q;
+                let far = Pack::splat(-self.grad) * d * d;
+                Pack::select(q.le(Pack::splat(R::of(0.5))), near, far)
+            }
+        };
+        PackV3::select(degenerate, PackV3::zero(), rij.scale(dwdr / r))
+    }
+
+    /// [`KernelCoefficients::lap_w`] lane by lane.
+    #[inline(always)]
+    pub fn lap_w_lanes(&self, r: Pack<R>) -> Pack<R> {
+        let h = Pack::splat(self.h);
+        Pack::select(r.ge(h), Pack::zero(), Pack::splat(self.lap) * (h - r))
     }
 }
 

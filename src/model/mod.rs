@@ -8,6 +8,7 @@ pub mod diagnosis;
 pub mod import;
 pub mod initial;
 pub mod kernels;
+pub mod lanes;
 pub mod lattice;
 pub mod numbers;
 pub mod overrides;

@@ -1,11 +1,12 @@
 //! The floating-point type the CPU path is generic over (f32 to mirror the GPU, f64 as the judge)
 //! and a minimal 3-vector over it.
 
+use super::lanes::LaneFloat;
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
 /// A float the CPU solver can run in. `f64` is the reference; `f32` mirrors the GPU's arithmetic.
 pub trait Real:
-    num_traits::Float + num_traits::FromPrimitive + Send + Sync + Default + std::fmt::Debug + std::iter::Sum + 'static
+    num_traits::Float + num_traits::FromPrimitive + Send + Sync + Default + std::fmt::Debug + std::iter::Sum + LaneFloat + 'static
 {
     /// Converts a scene constant (always f64) into this type.
     fn of(value: f64) -> Self {
@@ -21,7 +22,14 @@ impl Real for f64 {}
 
 /// A 3-vector of `R`, stored as three consecutive values (the CPU twin of a WGSL `vec3`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(transparent)]
 pub struct V3<R>(pub [R; 3]);
+
+/// The vectors as plain arrays, without a copy.
+pub fn as_arrays<R>(v: &[V3<R>]) -> &[[R; 3]] {
+    // SAFETY: V3<R> is a transparent wrapper of [R; 3]: the same size, alignment and layout.
+    unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<[R; 3]>(), v.len()) }
+}
 
 impl<R: Real> V3<R> {
     pub fn zero() -> Self {

@@ -53,9 +53,10 @@ fn a_scene_without_walls_allocates_no_wall_arrays() {
     let (cw, cwo) = (common::cpu::<f64>(&with), common::cpu::<f64>(&without));
     assert_eq!(cwo.walls().2.len(), 0);
     // The per-cell wall starts (4 bytes a cell) and the wall particles are gone (on the GPU two
-    // 16-byte placeholders stay bound).
+    // 16-byte placeholders stay bound); on the CPU in f64 a wall particle is its position and
+    // mass (32 bytes) and their copy as one element for the lane path's loads (32 bytes).
     let walls = with.initial_state().wall_positions.len() as u64;
-    assert_eq!(cw.memory_bytes() - cwo.memory_bytes(), (cells + 1) * 4 + walls * 32);
+    assert_eq!(cw.memory_bytes() - cwo.memory_bytes(), (cells + 1) * 4 + walls * 64);
     for ctx in common::contexts() {
         let g = common::gpu(wgsph::solver::gpu::GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &with);
         let go = common::gpu(ctx, &without);

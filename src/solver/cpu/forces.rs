@@ -1,9 +1,16 @@
 //! Accelerations: symmetric pressure (report Eq. 6), viscosity (Eq. 7), walls and gravity:
 //! twin of wgsl/sim/forces.wgsl.
+//!
+//! [`particle_acceleration`] is the GPU's loop, one particle over its stencil. [`forces`]
+//! computes the same sums from the neighbour lists of the step's density stage, eight particles
+//! of a cell at a time ([`super::cell_batches`]): each particle's neighbours in the same order,
+//! the same operations, so the same bits.
 
+use super::cell_batches::{wide, ListChunk, NeighbourLists, RowMasks};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
+use crate::model::lanes::{Pack, PackV3, LANES};
 use crate::model::params::Grid;
-use crate::model::real::{Real, V3};
+use crate::model::real::{as_arrays, Real, V3};
 use crate::model::scene::{BoundaryPressure, Kernel};
 use rayon::prelude::*;
 
@@ -27,6 +34,12 @@ pub struct ForcesInput<'a, R> {
     /// With `BoundaryPressure::Adami`, each wall particle's [pressure, density] of this step
     /// (wall_pressure.rs); empty otherwise.
     pub wall_fields: &'a [[R; 2]],
+    /// The neighbour lists of the density stage, for the current positions ([`forces`] only).
+    pub lists: &'a NeighbourLists,
+    /// Each particle's position and p / rho^2 ([`pressure_terms`]; [`forces`] only).
+    pub fluid_points: &'a [[R; 4]],
+    /// Each wall particle's position and mass ([`forces`] only).
+    pub wall_points: &'a [[R; 4]],
 }
 
 /// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
@@ -45,7 +58,197 @@ pub struct ForcesInput<'a, R> {
 /// (wall_pressure.rs; Adami, Hu & Adams 2012). A wall particle takes part in viscosity at rest
 /// with the volume m_w/rho_i, scaled by the boundary friction.
 pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
-    accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
+    let lists = input.lists;
+    if lists.chunks().is_empty() {
+        accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
+        return;
+    }
+    lists.chunks().par_iter().zip(lists.split(accelerations)).for_each(|(chunk, acc)| {
+        wide(
+            #[inline(always)]
+            || chunk_accelerations(input, chunk, acc),
+        );
+    });
+}
+
+/// The sums of a particle's neighbour loops, without their constant factors.
+#[derive(Clone, Copy, Debug)]
+pub struct ForceSums<R> {
+    pub fluid_pressure: V3<R>,
+    pub fluid_visc: V3<R>,
+    pub wall_pressure: V3<R>,
+    pub wall_visc: V3<R>,
+    pub fluid_artificial: V3<R>,
+    pub wall_artificial: V3<R>,
+}
+
+/// What the pair terms of a batch's particles need of them.
+#[derive(Clone, Copy)]
+struct Lanes<R: Real> {
+    x: PackV3<R>,
+    u: PackV3<R>,
+    rho: Pack<R>,
+    /// p_i / rho_i^2.
+    p_over: Pack<R>,
+}
+
+/// The terms a scene uses; the others are skipped, as they are compiled out on the GPU.
+#[derive(Clone, Copy)]
+struct Terms {
+    cubic: bool,
+    viscous: bool,
+    artificial: bool,
+    /// Adami's wall pressure: each wall particle's own pressure inside the sum.
+    adami: bool,
+}
+
+impl Terms {
+    fn of<R: Real>(input: &ForcesInput<R>) -> Terms {
+        Terms {
+            cubic: input.kernel.kind == Kernel::CubicSpline,
+            viscous: input.viscosity > R::zero(),
+            artificial: input.artificial_viscosity_factor > R::zero(),
+            adami: input.boundary_pressure == BoundaryPressure::Adami,
+        }
+    }
+}
+
+/// The accelerations of a chunk's particles, eight at a time from the neighbour lists: the
+/// pair terms of [`particle_acceleration`] lane by lane, in the same order.
+#[inline(always)]
+fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accelerations: &mut [V3<R>]) {
+    let first = chunk.particles().start;
+    let terms = Terms::of(input);
+    let kernel = input.kernel;
+    let eps = Pack::splat(R::of(0.01) * kernel.h2);
+    let zero = Pack::zero();
+    let velocities = as_arrays(input.velocities);
+    for batch in &chunk.batches {
+        let index = batch.indices();
+        let (x, p_over) = PackV3::gather_with_w(input.fluid_points, &index);
+        let pi = Lanes { x, u: PackV3::gather(velocities, &index), rho: Pack::gather(input.densities, &index), p_over };
+        let mut fluid_pressure = PackV3::zero();
+        let mut fluid_visc = PackV3::zero();
+        let mut fluid_artificial = PackV3::zero();
+        let (rows, counts) = chunk.fluid_rows(batch);
+        let mut live = RowMasks::new(&counts);
+        for index in rows {
+            let valid = live.next_row();
+            let (xj, pj_over) = PackV3::gather_with_w(input.fluid_points, index);
+            let rij = pi.x - xj;
+            let r2 = rij.dot(rij);
+            let r = r2.sqrt();
+            let grad = kernel.grad_w_lanes(rij, r);
+            fluid_pressure = PackV3::select(valid, fluid_pressure - grad.scale(pi.p_over + pj_over), fluid_pressure);
+            if terms.viscous || terms.artificial {
+                let rho_j = Pack::gather(input.densities, index);
+                let uij = pi.u - PackV3::gather(velocities, index);
+                if terms.viscous {
+                    let inv_rho = Pack::splat(R::one()) / rho_j;
+                    let visc = if terms.cubic {
+                        fluid_visc + grad.scale(inv_rho * uij.dot(rij) / (r2 + eps))
+                    } else {
+                        fluid_visc - uij.scale(inv_rho * kernel.lap_w_lanes(r))
+                    };
+                    fluid_visc = PackV3::select(valid, visc, fluid_visc);
+                }
+                if terms.artificial {
+                    let approach = uij.dot(rij);
+                    let term = fluid_artificial + grad.scale(approach / ((r2 + eps) * (pi.rho + rho_j)));
+                    fluid_artificial = PackV3::select(valid.and(approach.lt(zero)), term, fluid_artificial);
+                }
+            }
+        }
+        let mut wall_pressure = PackV3::zero();
+        let mut wall_visc = PackV3::zero();
+        let mut wall_artificial = PackV3::zero();
+        let (rows, counts) = chunk.wall_rows(batch);
+        let mut live = RowMasks::new(&counts);
+        for index in rows {
+            let valid = live.next_row();
+            let (xw, mw) = PackV3::gather_with_w(input.wall_points, index);
+            let rij = pi.x - xw;
+            let r2 = rij.dot(rij);
+            let r = r2.sqrt();
+            let grad = kernel.grad_w_lanes(rij, r);
+            let term = if terms.adami {
+                let (p_w, rho_w) = wall_fields(input.wall_fields, index);
+                grad.scale(mw * (pi.p_over + p_w / (rho_w * rho_w)))
+            } else {
+                grad.scale(mw)
+            };
+            wall_pressure = PackV3::select(valid, wall_pressure - term, wall_pressure);
+            if terms.viscous {
+                let visc = if terms.cubic {
+                    wall_visc + grad.scale(mw * pi.u.dot(rij) / (r2 + eps))
+                } else {
+                    wall_visc - pi.u.scale(mw * kernel.lap_w_lanes(r))
+                };
+                wall_visc = PackV3::select(valid, visc, wall_visc);
+            }
+            if terms.artificial {
+                let approach = pi.u.dot(rij);
+                let term = wall_artificial + grad.scale(mw * approach / ((r2 + eps) * pi.rho));
+                wall_artificial = PackV3::select(valid.and(approach.lt(zero)), term, wall_artificial);
+            }
+        }
+        let (fluid_pressure, fluid_visc, wall_pressure) = (fluid_pressure.to_arrays(), fluid_visc.to_arrays(), wall_pressure.to_arrays());
+        let (wall_visc, fluid_artificial, wall_artificial) = (wall_visc.to_arrays(), fluid_artificial.to_arrays(), wall_artificial.to_arrays());
+        for k in 0..batch.lanes as usize {
+            let i = batch.first as usize + k;
+            let sums = ForceSums {
+                fluid_pressure: V3(fluid_pressure[k]),
+                fluid_visc: V3(fluid_visc[k]),
+                wall_pressure: V3(wall_pressure[k]),
+                wall_visc: V3(wall_visc[k]),
+                fluid_artificial: V3(fluid_artificial[k]),
+                wall_artificial: V3(wall_artificial[k]),
+            };
+            accelerations[i - first] = finish(input, i, &sums);
+        }
+    }
+}
+
+/// The pressure and density of the wall particles `index` (Adami's wall pressure).
+#[inline(always)]
+fn wall_fields<R: Real>(fields: &[[R; 2]], index: &[u32; LANES]) -> (Pack<R>, Pack<R>) {
+    let (mut p, mut rho) = ([R::zero(); LANES], [R::zero(); LANES]);
+    for k in 0..LANES {
+        [p[k], rho[k]] = fields[index[k] as usize];
+    }
+    (Pack::from_array(p), Pack::from_array(rho))
+}
+
+/// The acceleration of particle i from its sums: their constant factors, and gravity.
+#[inline(always)]
+fn finish<R: Real>(input: &ForcesInput<R>, i: usize, sums: &ForceSums<R>) -> V3<R> {
+    let terms = Terms::of(input);
+    let rho_i = input.densities[i];
+    let p_i = input.pressures[i];
+    let pi_over = p_i / (rho_i * rho_i);
+    // The wall pressure term's factor outside the sum over wall particles (Adami: inside).
+    let wall_p_over = match input.boundary_pressure {
+        BoundaryPressure::Mirror => R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i),
+        BoundaryPressure::Consistent => pi_over,
+        BoundaryPressure::Adami => R::one(),
+    };
+    let nu = if terms.cubic { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let visc = sums.fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + sums.wall_visc * (nu * input.boundary_friction / rho_i);
+    let mut a = sums.fluid_pressure * input.fluid_mass + sums.wall_pressure * wall_p_over + visc;
+    if terms.artificial {
+        let av = input.artificial_viscosity_factor;
+        a += sums.fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + sums.wall_artificial * av;
+    }
+    if input.gravity != V3::zero() {
+        a += input.gravity;
+    }
+    a
+}
+
+/// p_i / rho_i^2 of every particle, the pressure term of the forces' pairs
+/// in the fourth place of each of `points` ([`ForcesInput::fluid_points`]).
+pub fn pressure_terms<R: Real>(densities: &[R], pressures: &[R], points: &mut [[R; 4]]) {
+    points.par_iter_mut().zip(densities.par_iter().zip(pressures)).for_each(|(t, (&rho, &p))| t[3] = p / (rho * rho));
 }
 
 /// The acceleration of fluid particle `i` (wgsl/sim/forces.wgsl `particle_acceleration`, whose
@@ -60,21 +263,14 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
     let viscous = input.viscosity > R::zero();
     // Terms the scene does not use are skipped, as they are compiled out on the GPU.
     let walls = !input.wall_masses.is_empty();
-    let gravity = input.gravity != V3::zero();
     let eps = R::of(0.01) * kernel.h2;
-    let ten = R::of(10.0);
     let xi = input.fluid.positions[i];
     let ui = input.velocities[i];
     let rho_i = input.densities[i];
     let p_i = input.pressures[i];
     let pi_over = p_i / (rho_i * rho_i);
-    // The wall pressure term's factor outside the sum over wall particles (Adami: inside).
+    // Adami's wall pressure is inside the sum over wall particles (`finish` applies the others').
     let adami = input.boundary_pressure == BoundaryPressure::Adami;
-    let wall_p_over = match input.boundary_pressure {
-        BoundaryPressure::Mirror => R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i),
-        BoundaryPressure::Consistent => pi_over,
-        BoundaryPressure::Adami => R::one(),
-    };
     let c = input.grid.cell_coords(xi);
     // Sums without the constant factors, which are applied once at the end.
     let mut fluid_pressure = V3::zero();
@@ -143,15 +339,6 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
             }
         }
     }
-    let nu = if cubic { ten * input.viscosity } else { input.viscosity };
-    let visc = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
-    let mut a = fluid_pressure * input.fluid_mass + wall_pressure * wall_p_over + visc;
-    if artificial {
-        let av = input.artificial_viscosity_factor;
-        a += fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + wall_artificial * av;
-    }
-    if gravity {
-        a += input.gravity;
-    }
-    a
+    let sums = ForceSums { fluid_pressure, fluid_visc, wall_pressure, wall_visc, fluid_artificial, wall_artificial };
+    finish(input, i, &sums)
 }

@@ -4,6 +4,7 @@
 
 pub mod bin_count;
 pub mod bin_scatter;
+pub mod cell_batches;
 pub mod continuity;
 pub mod density;
 pub mod dfsph;
@@ -23,6 +24,7 @@ pub mod reorder;
 pub mod wall_pressure;
 
 use super::backend::Backend;
+use cell_batches::NeighbourLists;
 use crate::model::initial::InitialState;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
@@ -52,6 +54,16 @@ pub struct CpuSolver<R: Real> {
     /// otherwise).
     carried_densities: Vec<R>,
     scratch_r: Vec<R>,
+    /// Whether density and forces run eight particles at a time ([`CpuSolver::use_lanes`]).
+    lanes: bool,
+    /// The neighbour lists of the last density stage, which the forces read (none without
+    /// lanes).
+    lists: NeighbourLists,
+    /// Each particle's position and, once the forces have set it, p / rho^2 (the lane path's
+    /// neighbour loads: one of 16 bytes each).
+    fluid_points: Vec<[R; 4]>,
+    /// Each wall particle's position and mass, for the lane path.
+    wall_points: Vec<[R; 4]>,
     keys: Vec<u32>,
     counts: Vec<u32>,
     starts: Vec<u32>,
@@ -95,6 +107,9 @@ impl<R: Real> CpuSolver<R> {
             planes: params.planes.iter().map(|p| PlaneR { normal: V3::from64(p.normal), offset: R::of(p.offset), restitution: R::of(p.restitution) }).collect(),
             boxes: params.solid_boxes.iter().map(|b| SolidBoxR { min: V3::from64(b.min), max: V3::from64(b.max) }).collect(),
         };
+        let wall_positions: Vec<V3<R>> = wall_order.iter().map(|&i| walls[i as usize]).collect();
+        let wall_masses: Vec<R> = wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect();
+        let wall_points = wall_positions.iter().zip(&wall_masses).map(|(x, &m)| [x.0[0], x.0[1], x.0[2], m]).collect();
         CpuSolver {
             params: params.clone(),
             kernel: KernelCoefficients::new(params.kernel, params.h),
@@ -108,14 +123,18 @@ impl<R: Real> CpuSolver<R> {
             accelerations: vec![V3::zero(); n],
             carried_densities: if params.continuity_density { (0..n).map(|i| R::of(initial.fluid_density(i, params.rest_density))).collect() } else { Vec::new() },
             scratch_r: Vec::new(),
+            lanes: true,
+            lists: NeighbourLists::default(),
+            fluid_points: Vec::new(),
+            wall_points,
             keys: vec![0; n],
             counts: vec![0; grid.cell_count()],
             starts: vec![0; grid.cell_count() + 1],
             sorted: vec![0; n],
             scratch_v3: Vec::with_capacity(n),
             scratch_ids: Vec::with_capacity(n),
-            wall_positions: wall_order.iter().map(|&i| walls[i as usize]).collect(),
-            wall_masses: wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect(),
+            wall_positions,
+            wall_masses,
             wall_starts,
             wall_fields: if params.boundary_pressure == BoundaryPressure::Adami { vec![[R::zero(), R::of(params.rest_density)]; walls.len()] } else { Vec::new() },
             wall_order,
@@ -165,7 +184,15 @@ impl<R: Real> CpuSolver<R> {
             + self.wall_positions.len() as u64 * (v3 + r)
             + self.wall_fields.len() as u64 * 2 * r
             + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
-            + (self.carried_densities.len() + self.scratch_r.capacity()) as u64 * r
+            + (self.carried_densities.len() + self.scratch_r.capacity() + 4 * (self.fluid_points.capacity() + self.wall_points.capacity())) as u64 * r
+            + self.lists.bytes()
+    }
+
+    /// Density and forces eight particles at a time (`true`, the default, where the processor
+    /// has AVX2) or each particle over its stencil as the GPU does (`false`): the same values bit
+    /// for bit, which the parity tests check.
+    pub fn use_lanes(&mut self, on: bool) {
+        self.lanes = on;
     }
 
     /// Stage 1: counting-sort binning and reordering of the state into cell order.
@@ -188,6 +215,9 @@ impl<R: Real> CpuSolver<R> {
 
     /// Stage 2: density and pressure of every particle.
     pub fn compute_density(&mut self) {
+        if self.lanes && cell_batches::lanes_available() {
+            cell_batches::points(&self.positions, &mut self.fluid_points);
+        }
         let p = &self.params;
         if p.continuity_density {
             let input = continuity::ContinuityInput {
@@ -208,6 +238,12 @@ impl<R: Real> CpuSolver<R> {
                 wall_masses: &self.wall_masses,
             };
             continuity::continuity_density(&input, &mut self.densities, &mut self.pressures);
+            // The forces read the neighbour lists that the summation builds.
+            if self.lanes && cell_batches::lanes_available() {
+                self.lists.build(&self.grid, input.fluid, input.walls, self.kernel.h2);
+            } else {
+                self.lists.clear();
+            }
             return;
         }
         let input = density::DensityInput {
@@ -221,8 +257,10 @@ impl<R: Real> CpuSolver<R> {
             fluid: Neighbours { positions: &self.positions, starts: &self.starts },
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
+            fluid_points: &self.fluid_points,
+            wall_points: &self.wall_points,
         };
-        density::density(&input, &mut self.densities, &mut self.pressures);
+        density::density(&input, self.lanes, &mut self.lists, &mut self.densities, &mut self.pressures);
     }
 
     /// Stage 2': with `boundary_pressure = "adami"`, each wall particle's pressure and density
@@ -278,12 +316,18 @@ impl<R: Real> CpuSolver<R> {
             wall_masses: &self.wall_masses,
             artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
             wall_fields: &self.wall_fields,
+            lists: &self.lists,
+            fluid_points: &self.fluid_points,
+            wall_points: &self.wall_points,
         }
     }
 
     /// Stage 3: accelerations.
     pub fn compute_forces(&mut self) {
         let mut accelerations = std::mem::take(&mut self.accelerations);
+        if !self.lists.chunks().is_empty() {
+            forces::pressure_terms(&self.densities, &self.pressures, &mut self.fluid_points);
+        }
         forces::forces(&self.forces_input(), &mut accelerations);
         self.accelerations = accelerations;
     }
@@ -318,6 +362,8 @@ impl<R: Real> CpuSolver<R> {
     }
 
     fn integrate_with(&mut self, dt: f64) -> integrate::StepHealth {
+        // The particles move: the density stage's neighbour lists no longer hold.
+        self.lists.clear();
         let input = integrate::IntegrateInput {
             dt: R::of(dt),
             backstops: &self.backstops,
@@ -585,6 +631,7 @@ impl<R: Real> CpuSolver<R> {
 
     pub fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         state.check_fits(&Self::state_kind(), self.positions.len())?;
+        self.lists.clear();
         self.positions = state.positions.iter().map(|&p| V3::from64(p)).collect();
         self.velocities = state.velocities.iter().map(|&v| V3::from64(v)).collect();
         self.ids = state.ids.clone();
