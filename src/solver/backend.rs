@@ -1,5 +1,6 @@
 //! The [`Backend`] trait every layer above the solvers drives, and what it hands out.
 
+use super::decomposition::RankReport;
 use super::gpu::buffers::ParticleBuffers;
 use crate::model::diagnosis::{diagnose, SolidIntrusions};
 use crate::model::params::Params;
@@ -147,6 +148,10 @@ pub trait Backend {
     /// array is read back.
     fn take_probe_samples(&mut self) -> anyhow::Result<Vec<ProbeSample>> {
         Ok(Vec::new())
+    }
+    /// This rank's part when the simulation runs across ranks (`None` alone).
+    fn rank_report(&self) -> Option<RankReport> {
+        None
     }
 }
 

@@ -13,3 +13,4 @@ mod scale;
 mod dfsph;
 mod probes;
 mod pressure;
+mod ranks;
