@@ -153,6 +153,15 @@ pub trait Backend {
     fn rank_report(&self) -> Option<RankReport> {
         None
     }
+    /// Every rank's part, gathered (collective across ranks; `None` alone).
+    fn rank_reports(&mut self) -> anyhow::Result<Option<Vec<RankReport>>> {
+        Ok(None)
+    }
+    /// Whether `flag` is set on any rank (collective across ranks; alone, `flag`): decisions
+    /// every rank must take together, such as stopping at a signal one rank saw first.
+    fn any_rank(&mut self, flag: bool) -> anyhow::Result<bool> {
+        Ok(flag)
+    }
 }
 
 /// Why the run of `backend` (a run of `scene`) went bad: the diagnosis of its first bad step

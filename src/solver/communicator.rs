@@ -30,6 +30,13 @@ pub trait Communicator: Send + Sync {
     }
 }
 
+/// How many processes an MPI launcher started, when more than one: Open MPI sets
+/// OMPI_COMM_WORLD_SIZE, MPICH and Intel MPI (Hydra) PMI_SIZE, PMIx launchers PMIX_SIZE.
+pub fn launched_ranks() -> Option<usize> {
+    let var = |name: &str| std::env::var(name).ok().and_then(|v| v.trim().parse::<usize>().ok());
+    var("OMPI_COMM_WORLD_SIZE").or_else(|| var("PMI_SIZE")).or_else(|| var("PMIX_SIZE")).filter(|&n| n > 1)
+}
+
 /// The ranks' largest of each of `values` (the same on every rank).
 pub fn all_max(comm: &dyn Communicator, values: &[f64]) -> anyhow::Result<Vec<f64>> {
     fold_ranks(comm, values, f64::max)

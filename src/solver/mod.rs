@@ -9,6 +9,8 @@ pub mod compare;
 pub mod cpu;
 pub mod decomposition;
 pub mod gpu;
+#[cfg(feature = "mpi")]
+pub mod mpi;
 pub mod simulation;
 
 pub use backend::{Backend, DfsphStage, SnapshotRow, StateArray, StatePiece};

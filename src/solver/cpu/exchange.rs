@@ -37,6 +37,8 @@ pub struct RankPart {
     pub(super) stats: RankStats,
     /// Why this rank could not go on (a collective failed).
     pub(super) failure: Option<String>,
+    /// The state gathered from every rank, until the next step changes it.
+    pub(super) gathered: Option<BackendState>,
 }
 
 /// Words per particle in a message: position, velocity, id, place in the one-process order (two
@@ -144,6 +146,7 @@ impl<R: Real> CpuSolver<R> {
             balance_every,
             stats: RankStats { last_imbalance: start_imbalance, max_imbalance: start_imbalance, ..RankStats::default() },
             failure: None,
+            gathered: None,
         }));
         Ok(solver)
     }
@@ -194,6 +197,9 @@ impl<R: Real> CpuSolver<R> {
             return;
         }
         let t0 = Instant::now();
+        if let Some(part) = &mut self.ranks {
+            part.gathered = None;
+        }
         if let Err(e) = self.exchange_across_ranks(balance) {
             if let Some(part) = &mut self.ranks {
                 part.failure.get_or_insert(format!("{e:#}"));
@@ -397,6 +403,38 @@ impl<R: Real> CpuSolver<R> {
         Ok(out)
     }
 
+    /// The state of every rank, gathered at the first call after a step (collective) and
+    /// kept until the next.
+    pub(super) fn gathered_state(&mut self) -> anyhow::Result<BackendState> {
+        if let Some(state) = self.ranks.as_ref().and_then(|p| p.gathered.clone()) {
+            return Ok(state);
+        }
+        let state = self.save_state_across_ranks()?;
+        if let Some(part) = &mut self.ranks {
+            part.gathered = Some(state.clone());
+        }
+        Ok(state)
+    }
+
+    /// Every rank's [`RankReport`], in rank order (collective).
+    pub(super) fn gather_rank_reports(&mut self) -> anyhow::Result<Option<Vec<RankReport>>> {
+        let Some(mine) = self.rank_report() else { return Ok(None) };
+        let comm = self.ranks.as_ref().expect("across ranks").comm.clone();
+        let s = &mine.stats;
+        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64])?;
+        Ok(Some(
+            all.iter()
+                .enumerate()
+                .map(|(rank, r)| RankReport {
+                    rank,
+                    own_particles: r[0] as usize,
+                    stats: RankStats { exchange_seconds: r[1], migrated: r[2] as u64, ghosts: r[3] as usize, ..s.clone() },
+                    ..mine.clone()
+                })
+                .collect(),
+        ))
+    }
+
     /// [`CpuSolver::save_state`] across ranks: the own particles of every rank in the
     /// one-process (cell) order, so the state is the one one process would save.
     pub(super) fn save_state_across_ranks(&mut self) -> anyhow::Result<BackendState> {
@@ -473,6 +511,7 @@ impl<R: Real> CpuSolver<R> {
         part.slabs = slabs;
         part.first_order = Some(chosen.iter().map(|&i| i as u64).collect());
         part.failure = None;
+        part.gathered = None;
         Ok(())
     }
 

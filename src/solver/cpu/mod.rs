@@ -666,7 +666,9 @@ impl<R: Real> Backend for CpuSolver<R> {
     }
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
         match self.ranks {
-            Some(_) => self.save_state_across_ranks(),
+            // Gathered once per state: a checkpoint asks for the header and each array in turn
+            // (on the rank that writes it), the other ranks for the header only.
+            Some(_) => self.gathered_state(),
             None => Ok(CpuSolver::save_state(self)),
         }
     }
@@ -682,6 +684,13 @@ impl<R: Real> Backend for CpuSolver<R> {
     fn rank_report(&self) -> Option<crate::solver::decomposition::RankReport> {
         CpuSolver::rank_report(self)
     }
+    fn rank_reports(&mut self) -> anyhow::Result<Option<Vec<crate::solver::decomposition::RankReport>>> {
+        self.gather_rank_reports()
+    }
+    fn any_rank(&mut self, flag: bool) -> anyhow::Result<bool> {
+        Ok(self.all_max(&[flag as u8 as f64])[0] > 0.0)
+    }
+
 }
 
 /// Values in slot order put back into original order (`ids[slot]` is the original index).
