@@ -331,7 +331,13 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let frames_written = frames_written.unwrap_or(0);
     let wall_seconds = t0.elapsed().as_secs_f64();
     let health = backend.health()?.until_first_bad_step(&last_good_health);
-    let steps = backend.steps_done() - start;
+    // The steps computed, for the speed; the steps and time reached, for the record: a failed
+    // run ends at its first bad step, not where the GPU's batch ran on to past it.
+    let steps_computed = backend.steps_done() - start;
+    let (steps, sim_time) = match health.bad_step {
+        Some(bad) => (bad.step.saturating_sub(start), bad.measured.time),
+        None => (steps_computed, backend.time()),
+    };
     let dt_stats = backend.dt_stats()?;
     let (status, failure) = match (stopped_by, &error, failure) {
         (_, Some(e), _) => (RunStatus::Error, Some(format!("{e:#}"))),
@@ -348,13 +354,13 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         fluid_particles: backend.fluid_count(),
         wall_particles: backend.wall_count(),
         steps,
-        sim_time: backend.time(),
+        sim_time,
         dt: params.dt,
         dt_min: dt_stats.min,
         dt_max: dt_stats.max,
         dt_mean: dt_stats.mean,
         wall_seconds,
-        particle_steps_per_second: if wall_seconds > 0.0 { (steps as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
+        particle_steps_per_second: if wall_seconds > 0.0 { (steps_computed as f64 * backend.fluid_count() as f64) / wall_seconds } else { 0.0 },
         max_density_ratio: health.max_density / params.rest_density,
         nan_count: health.bad_counts().0,
         escaped: health.bad_counts().1,

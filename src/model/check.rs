@@ -3,7 +3,7 @@
 
 use super::numbers::{short, short3};
 use super::params::MAX_PLANES;
-use super::scene::{err, Boundary, BoundaryVolume, DensityMethod, EquationOfState, InitialPressure, PressureSolver, Scene, SceneError, SceneOrigin};
+use super::scene::{err, Boundary, BoundaryPressure, BoundaryVolume, DensityMethod, EquationOfState, InitialPressure, PressureSolver, Scene, SceneError, SceneOrigin};
 
 /// Most particles a scene may hold: indices are u32 on the GPU and the CPU.
 pub const MAX_PARTICLES: u64 = 1 << 31;
@@ -323,6 +323,9 @@ impl Scene {
         if p.solver == PressureSolver::Dfsph {
             if continuity {
                 return Err(err(origin, "physics.density", "is \"continuity\"; DFSPH keeps its density by its own solve: use density = \"summation\" with solver = \"dfsph\""));
+            }
+            if p.boundary_pressure == BoundaryPressure::Adami {
+                return Err(err(origin, "physics.boundary_pressure", "is \"adami\", which extrapolates the wall particles' pressure from an equation of state's; DFSPH has its own wall terms: use boundary_pressure = \"mirror\" with solver = \"dfsph\", or solver = \"wcsph\""));
             }
             if p.artificial_viscosity != 0.0 {
                 return Err(err(origin, "physics.artificial_viscosity", format!(

@@ -195,6 +195,11 @@ pub enum BoundaryPressure {
     /// p_i / rho_i^2: the gradient of the elastic energy that the density summation over wall
     /// particles defines, so that walls neither create nor destroy energy (Akinci et al. 2012).
     Consistent,
+    /// p_i / rho_i^2 + p_w / rho_w^2 with each wall particle's own pressure p_w extrapolated
+    /// from the fluid around it, hydrostatic term included, and its density rho_w from the
+    /// inverse equation of state (the generalised wall of Adami, Hu & Adams 2012): a pressure
+    /// that a sensor on the wall can read.
+    Adami,
 }
 
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]

@@ -16,11 +16,16 @@ fn the_block_workload_is_the_one_the_peers_were_measured_on() {
     assert!((lowest - 0.02).abs() < 1e-12, "the first fluid particle at (i + 1) dx: {lowest}");
     let p = scene.params();
     assert_eq!((p.h, p.dt, p.stiffness, p.clamp_negative_pressure), (0.04, 0.0004, 50_000.0, true));
-    // DFSPH's: the same particles, steps of 1 ms, lattice wall masses, 0.01 % density error.
+    // DFSPH's: the same particles, steps of 1 ms, one wall layer (on the walls: 61 x 46 x 32
+    // lattice points on the box's faces) with Akinci's volumes, 0.01 % density error.
     let dfsph = dfsph_block_scene(30);
     dfsph.validate(&wgsph::model::scene::SceneOrigin::Text).unwrap();
-    assert_eq!(dfsph.initial_state().fluid_positions, initial.fluid_positions);
-    assert_eq!((dfsph.physics.solver, dfsph.physics.boundary_volume, dfsph.time.dt), (PressureSolver::Dfsph, BoundaryVolume::Lattice, 0.001));
+    let dfsph_initial = dfsph.initial_state();
+    assert_eq!(dfsph_initial.fluid_positions, initial.fluid_positions);
+    assert_eq!(dfsph_initial.wall_positions.len(), 61 * 46 * 32 - 59 * 44 * 30);
+    let lowest_wall = dfsph_initial.wall_positions.iter().map(|x| x[0]).fold(f64::INFINITY, f64::min);
+    assert!(lowest_wall.abs() < 1e-12, "the wall layer on the wall at x = 0: {lowest_wall}");
+    assert_eq!((dfsph.physics.solver, dfsph.physics.boundary_volume, dfsph.time.dt), (PressureSolver::Dfsph, BoundaryVolume::Akinci, 0.001));
     assert_eq!(dfsph.params().dfsph.unwrap().density_error, 1e-4);
 }
 

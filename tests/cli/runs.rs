@@ -314,6 +314,10 @@ fn a_failed_run_reports_its_maxima_up_to_its_first_bad_step() {
         assert_eq!(s.status, RunStatus::Failed, "{label}");
         let failure = s.failure.clone().unwrap();
         // The run fails within its first steps: before them the fluid was at rest near rho0.
+        // Where it failed: the summary's steps and time are those of the step the failure names.
+        let failed_step: u64 = failure.strip_prefix("step ").and_then(|r| r.split(' ').next()).and_then(|n| n.parse().ok()).expect(&failure);
+        assert_eq!(s.steps, failed_step, "{label}: {failure}");
+        assert!((s.sim_time - figure_after(&failure, "(t = ")).abs() < 1e-6, "{label}: t = {} against {failure}", s.sim_time);
         let bad_speed = figure_after(&failure, "|v|max = ");
         let bad_ratio = figure_after(&failure, "max rho/rho0 = ");
         let speed = s.max_mach.unwrap() * 40.0;

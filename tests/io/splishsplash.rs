@@ -70,9 +70,10 @@ fn a_json_scene_runs_from_the_command_line_and_is_recorded_as_toml() {
 
 #[test]
 fn everything_unsupported_is_named_in_one_clear_error() {
-    // A typical DFSPH scene: default solver, adaptive steps, volume maps, a mesh, an emitter.
+    // Another solver (IISPH), the iteration-count step rule, volume maps (the default), a mesh,
+    // an emitter.
     let text = r#"{
-        "Configuration": { "particleRadius": 0.025, "stopAt": 2, "sim2D": true, "fancyOption": 3 },
+        "Configuration": { "particleRadius": 0.025, "stopAt": 2, "sim2D": true, "fancyOption": 3, "simulationMethod": 3, "cflMethod": 2 },
         "Fluid": { "viscosity": 0.01, "viscosityMethod": 6, "surfaceTensionMethod": 2 },
         "RigidBodies": [ { "geometryFile": "../models/bunny.obj", "isDynamic": true, "rotationAngle": 1.5 } ],
         "FluidBlocks": [ { "start": [0,0,0], "end": [1,1,1], "denseMode": 2 } ],
@@ -81,8 +82,8 @@ fn everything_unsupported_is_named_in_one_clear_error() {
     }"#;
     let e = import(text).unwrap_err().to_string();
     for field in [
-        "Configuration.simulationMethod: is 4 (DFSPH, the default)",
-        "Configuration.cflMethod: is 1 (adaptive, the default)",
+        "Configuration.simulationMethod: is 3; wgsph has WCSPH (0) and DFSPH (4)",
+        "Configuration.cflMethod: is 2",
         "Configuration.boundaryHandlingMethod: is 2 (volume maps, the default)",
         "Configuration.sim2D",
         "Configuration.fancyOption",
@@ -102,6 +103,8 @@ fn everything_unsupported_is_named_in_one_clear_error() {
         (r#""exponent": 7"#, r#""exponent": 3"#, "Configuration.exponent"),
         (r#""pause": true"#, r#""kernel": 1"#, "Configuration.kernel"),
         (r#""stopAt": 0.5"#, r#""stopAt": -1"#, "Configuration.stopAt"),
+        (r#""pause": true"#, r#""maxIterations": 0"#, "Configuration.maxIterations"),
+        (r#""pause": true"#, r#""maxIterations": 2.5"#, "Configuration.maxIterations"),
         (r#""isDynamic": false"#, r#""particleFile": "walls.bgeo""#, "RigidBodies[0].particleFile"),
         (r#""translation": [0.7, 0.05, 0.05]"#, r#""translation": [0.15, 0.05, 0.05]"#, "RigidBodies[1]: the box neither contains"),
     ];
@@ -124,4 +127,48 @@ fn everything_unsupported_is_named_in_one_clear_error() {
     let o = wgsph(&["run", "broken.json"], dir.path());
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("not valid JSON"));
+}
+
+const DFSPH_TANK: &str = include_str!("../data/splishsplash_dfsph_tank.json");
+
+/// SPlisHSPlasH's default solver, DFSPH, with its CFL-adaptive step: the tolerances (in per cent
+/// there) and iteration limits become `[physics.dfsph]`, the CFL factor wgsph's CFL number on h.
+#[test]
+fn a_dfsph_scene_with_adaptive_steps_maps_onto_a_scene_and_runs() {
+    use wgsph::model::scene::PressureSolver;
+    let s = import(DFSPH_TANK).unwrap();
+    let d = &s.physics.dfsph;
+    assert_eq!(s.physics.solver, PressureSolver::Dfsph);
+    assert_eq!((d.density_error, d.divergence_error), (0.05 / 100.0, 0.2 / 100.0));
+    assert_eq!((d.max_iterations, d.max_divergence_iterations, d.divergence_solve), (50, 40, true));
+    // dt = cflFactor 0.4 (2r) / |v| there; dt = C h / |v| here with h = 4r: C = 0.2 cflFactor.
+    assert!(s.time.adaptive);
+    assert!((s.time.cfl_number.unwrap() - 0.2).abs() < 1e-12, "{:?}", s.time.cfl_number);
+    assert_eq!((s.time.dt, s.time.dt_min, s.time.dt_max), (0.002, Some(0.0001), Some(0.004)));
+    // SPlisHSPlasH's defaults where the file says nothing: 0.01 % and 0.1 %, 100 iterations,
+    // cflFactor 0.5, the divergence solve on.
+    let bare = DFSPH_TANK
+        .lines()
+        .filter(|l| !["maxIterations", "maxError", "enableDivergence", "cflFactor", "cflMax"].iter().any(|k| l.contains(k)))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let s0 = import(&bare).unwrap();
+    let d0 = &s0.physics.dfsph;
+    assert_eq!((d0.density_error, d0.divergence_error, d0.max_iterations, d0.max_divergence_iterations), (0.0001, 0.001, 100, 100));
+    assert!((s0.time.cfl_number.unwrap() - 0.1).abs() < 1e-12 && s0.time.dt_max == Some(0.005));
+    // The divergence solve off; a weakly compressible scene with adaptive steps keeps wgsph's
+    // own CFL rule (with the speed of sound).
+    let off = import(&DFSPH_TANK.replacen(r#""enableDivergenceSolver": true"#, r#""enableDivergenceSolver": false"#, 1)).unwrap();
+    assert!(!off.physics.dfsph.divergence_solve);
+    let wcsph = import(&DFSPH_TANK.replacen(r#""simulationMethod": 4"#, r#""simulationMethod": 0"#, 1)).unwrap();
+    assert_eq!((wcsph.physics.solver, wcsph.time.adaptive, wcsph.time.cfl_number), (PressureSolver::Wcsph, true, None));
+    // It runs, with DFSPH's iterations in its summary.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("tank.json"), DFSPH_TANK).unwrap();
+    let o = wgsph(&["run", "tank.json", "--steps", "5", "--backend", "cpu", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.path().join("o/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "completed");
+    assert!(summary["dfsph"]["pressure_iterations_mean"].as_f64().unwrap() >= 2.0, "{summary}");
+    assert!(summary["dt_max"].as_f64().unwrap() <= 0.004 + 1e-12, "{summary}");
 }

@@ -5,7 +5,7 @@
 use crate::common;
 use crate::common::TestScene;
 
-use wgsph::model::scene::Scene;
+use wgsph::model::scene::{BoundaryPressure, Scene};
 use wgsph::solver::compare::{step_and_compare, MANY_STEPS, ONE_STEP};
 use wgsph::solver::gpu::{GpuContext, GpuOptions};
 use wgsph::solver::Backend;
@@ -18,6 +18,8 @@ fn variants() -> Vec<(&'static str, Scene)> {
         ("continuity + diffusion", tank().continuity().density_diffusion(0.1).build()),
         ("continuity + diffusion + hydrostatic start", tank().continuity().density_diffusion(0.1).hydrostatic_start().build()),
         ("artificial viscosity (summation)", tank().viscosity(0.0).artificial_viscosity(0.1).build()),
+        ("Adami wall pressure (summation)", tank().boundary_pressure(BoundaryPressure::Adami).build()),
+        ("Adami wall pressure + continuity + diffusion", tank().boundary_pressure(BoundaryPressure::Adami).continuity().density_diffusion(0.1).hydrostatic_start().build()),
         ("everything", tank().continuity().density_diffusion(0.1).artificial_viscosity(0.05).hydrostatic_start().build()),
     ]
 }

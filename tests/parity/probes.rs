@@ -41,7 +41,20 @@ fn samples(backend: &mut dyn Backend, steps: u64) -> Vec<ProbeSample> {
 
 #[test]
 fn every_probe_type_agrees_with_its_cpu_twin() {
-    let scene = probed_tank();
+    every_probe_type_agrees_on(probed_tank());
+}
+
+#[test]
+fn every_probe_type_agrees_with_its_cpu_twin_on_adami_walls() {
+    // A point on a wall reads the walls' extrapolation, and a force probe the wall particles'
+    // own pressures (with artificial viscosity, whose wall term a force probe takes too).
+    let mut scene = probed_tank();
+    scene.physics.boundary_pressure = wgsph::model::scene::BoundaryPressure::Adami;
+    scene.physics.artificial_viscosity = 0.05;
+    every_probe_type_agrees_on(scene);
+}
+
+fn every_probe_type_agrees_on(scene: Scene) {
     let probes = scene.params().probes;
     let mut cpu = common::cpu::<f64>(&scene);
     let expected = samples(&mut cpu, 21);

@@ -172,6 +172,9 @@ fn variants() -> Vec<Scene> {
         scene_with(Kernel::CubicSpline, EquationOfState::Tait, BoundaryPressure::Consistent, 0.005),
         // Continuity density with diffusion, artificial viscosity and a hydrostatic start.
         TestScene::small_tank().viscosity(0.0).continuity().density_diffusion(0.1).artificial_viscosity(0.05).hydrostatic_start().build(),
+        // The Adami wall pressure, with summation and with continuity density.
+        scene_with(Kernel::CubicSpline, EquationOfState::Tait, BoundaryPressure::Adami, 0.005),
+        TestScene::small_tank().boundary_pressure(BoundaryPressure::Adami).continuity().density_diffusion(0.1).hydrostatic_start().build(),
     ]
 }
 
@@ -229,6 +232,37 @@ fn density_and_pressure_of_a_state_agree_stage_alone() {
                 assert!(close(g.densities[i], c64.densities[i], 64.0, 0.0), "{what}: density gpu {} cpu f64 {}", g.densities[i], c64.densities[i]);
                 assert!((g.pressures[i] - c64.pressures[i]).abs() <= 64.0 * f32::EPSILON as f64 * p_scale, "{what}: pressure gpu {} cpu f64 {}", g.pressures[i], c64.pressures[i]);
             }
+        }
+    }
+}
+
+#[test]
+fn the_wall_pressure_of_a_state_agrees_stage_alone() {
+    for ctx in common::contexts() {
+        for scene in variants().into_iter().filter(|s| s.physics.boundary_pressure == BoundaryPressure::Adami) {
+            let state = moved_state(&scene);
+            let (mut gpu, mut f32s, mut f64s) = both(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene, &state);
+            // A snapshot runs the density stage and then the wall stage on its fields.
+            gpu.snapshot().unwrap();
+            f32s.snapshot();
+            f64s.snapshot();
+            let (g, c32, c64) = (gpu.wall_fields().unwrap(), f32s.wall_fields(), f64s.wall_fields());
+            assert_eq!(g.len(), scene.initial_state().wall_positions.len(), "one pressure and density per wall particle");
+            assert_eq!((c32.len(), c64.len()), (g.len(), g.len()));
+            let p_scale = c64.iter().map(|f| f[0].abs()).fold(0.0, f64::max);
+            let wetted = c64.iter().filter(|f| f[0] > 0.0).count();
+            // Walls under water carry a pressure (else the comparison below proves nothing).
+            assert!(p_scale > 10.0 && wetted > 20, "{} wall particles with pressure, largest {p_scale} Pa", wetted);
+            let (mut worst_p, mut worst_rho) = (0.0f64, 0.0f64);
+            for w in 0..g.len() {
+                // The f64 and f32 twins agree with each other; the GPU agrees with both to f32
+                // sums of some 30 terms whose densities differ in their last bits.
+                worst_p = worst_p.max((g[w][0] - c64[w][0]).abs().max((g[w][0] - c32[w][0]).abs()) / p_scale);
+                worst_rho = worst_rho.max((g[w][1] - c64[w][1]).abs() / c64[w][1]);
+            }
+            let what = format!("{:?} {:?} on {}", scene.physics.kernel, scene.physics.density, ctx.describe());
+            assert!(worst_p < 1e-4, "{what}: largest wall pressure difference / largest wall pressure {worst_p:.2e}");
+            assert!(worst_rho < 1e-6, "{what}: largest relative wall density difference {worst_rho:.2e}");
         }
     }
 }

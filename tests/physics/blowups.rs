@@ -78,7 +78,9 @@ fn a_blow_up_read_steps_after_it_happened_reports_the_counts_of_its_first_bad_st
         let health = late.health().unwrap();
         let bad = health.bad_step.unwrap_or_else(|| panic!("{who}: no bad step recorded"));
         assert_eq!(health.first_bad_step, Some(bad.step), "{who}");
-        assert!(bad.step < summary.steps || who.starts_with("cpu"), "{who}: the GPU ran past the bad step ({} steps)", summary.steps);
+        assert!(bad.step < late.steps_done() || who.starts_with("cpu"), "{who}: the GPU ran past the bad step ({} steps)", late.steps_done());
+        // The summary ends where the run failed, not where the batch stopped.
+        assert_eq!((summary.steps, summary.sim_time), (bad.step, bad.measured.time), "{who}");
         assert!(summary.nan_count + summary.escaped > 0, "{who}: the summary shows no bad particle: {summary:?}");
         assert_eq!((summary.nan_count, summary.escaped), (bad.measured.non_finite, bad.measured.escaped), "{who}");
         let failure = summary.failure.unwrap();

@@ -158,6 +158,11 @@ fn the_new_physics_fields_refuse_bad_values_with_the_field_the_value_and_the_ran
     assert!(e.contains("physics.artificial_viscosity") && e.contains("-1") && e.contains("between 0"), "{e}");
     let e = TestScene::small_tank().continuity().dfsph().validation_error();
     assert!(e.contains("physics.density") && e.contains("dfsph"), "{e}");
+    let e = TestScene::small_tank().boundary_pressure(wgsph::model::scene::BoundaryPressure::Adami).dfsph().validation_error();
+    assert!(e.contains("physics.boundary_pressure") && e.contains("adami") && e.contains("mirror"), "{e}");
+    let toml = Scene::builtin("dam_break").unwrap().to_toml().replace("boundary_pressure = \"mirror\"", "boundary_pressure = \"adam\"");
+    let e = Scene::from_toml_str(&toml, &SceneOrigin::Text).unwrap_err().to_string();
+    assert!(e.contains("adam") && e.contains("mirror") && e.contains("consistent") && e.contains("adami"), "{e}");
     // A scene file's spelling of an unknown method names the allowed ones.
     let toml = Scene::builtin("dam_break").unwrap().to_toml().replace("[physics]\n", "[physics]\ndensity = \"sum\"\n");
     let e = Scene::from_toml_str(&toml, &SceneOrigin::Text).unwrap_err().to_string();
@@ -230,4 +235,86 @@ fn pressure_noise_of_the_dam_break_falls_threefold_with_density_diffusion() {
         figures.push(figure);
     }
     assert!(figures[0] >= 3.0 * figures[2], "the noise falls from {} to {} rho0 g H only", figures[0], figures[2]);
+}
+
+#[test]
+fn adami_walls_carry_the_fluids_hydrostatic_pressure_and_a_point_on_a_wall_reads_it() {
+    // The still column with the Adami wall pressure, from 0.1 s to 0.2 s (the column's sound
+    // wave, 4 H / c0 = 0.06 s, averaged out): each wall particle's pressure is extrapolated from
+    // the fluid with the hydrostatic term, so every wall particle under water carries the
+    // fluid's pressure at its own height, the floor's layers below the fluid included (through
+    // the hydrostatic term), and a point probe on a wall's face reads the pressure at its height.
+    use wgsph::model::scene::{BoundaryPressure, ProbeSpec};
+    let heights = [0.05, 0.1, 0.15, 0.2];
+    let mut column = still_column().boundary_pressure(BoundaryPressure::Adami).density_diffusion(0.1).viscosity(0.01);
+    for (k, y) in heights.iter().enumerate() {
+        column = column.probe(ProbeSpec::point(&format!("wall_{k}"), [0.0, *y, 0.1], 25));
+    }
+    let scene = column.build();
+    let settle = (0.1 / scene.time.dt) as u64;
+    let rho0 = scene.physics.rest_density;
+    let scale = rho0 * G * TOP;
+    let walls = scene.initial_state().wall_positions;
+    let spacing = scene.physics.particle_spacing;
+    let h = scene.physics.smoothing_length;
+    // The wall particles checked: the first layer of the -x wall and of the floor (a deeper layer
+    // is within h of the fluid only now and then), away from the corners and the surface.
+    let side = |x: &[f64; 3]| x[0] > -spacing && x[0] < 0.0 && x[1] > 0.05 && x[1] < 0.25 && x[2] > 0.05 && x[2] < 0.15;
+    let floor = |x: &[f64; 3]| x[1] < 0.0 && x[1] > -spacing && x[0] > 0.05 && x[0] < 0.15 && x[2] > 0.05 && x[2] < 0.15;
+    let (side_count, floor_count) = (walls.iter().filter(|x| side(x)).count(), walls.iter().filter(|x| floor(x)).count());
+    assert!(side_count >= 20 && floor_count >= 4, "{side_count} side and {floor_count} floor wall particles");
+    // Per round: the wall particles' pressures, and the fluid's (y, p) away from the surface.
+    let (rounds, every) = (10, (0.01 / scene.time.dt) as u64);
+    let fluid_points = |s: &Snapshot| -> Vec<(f64, f64)> { (0..s.len()).map(|i| (s.positions[i][1], s.pressures[i])).filter(|&(y, _)| y > 0.0 && y < TOP - h).collect() };
+    let check = |who: &str, samples: Vec<wgsph::model::probes::ProbeSample>, fields: Vec<Vec<[f64; 2]>>, points: Vec<(f64, f64)>| {
+        // The fluid's pressure as a line p(y) = a + b y, by least squares over every round.
+        let n = points.len() as f64;
+        let (my, mp) = (points.iter().map(|p| p.0).sum::<f64>() / n, points.iter().map(|p| p.1).sum::<f64>() / n);
+        let b = points.iter().map(|p| (p.0 - my) * (p.1 - mp)).sum::<f64>() / points.iter().map(|p| (p.0 - my) * (p.0 - my)).sum::<f64>();
+        let fluid_at = |y: f64| mp + b * (y - my);
+        // Hydrostatic, to the discrete pressure force's deficit (see the still-tank test above).
+        assert!((-b - rho0 * G).abs() < 0.15 * rho0 * G, "{who}: the fluid's pressure gradient is {} Pa/m, rho0 g = {} Pa/m", -b, rho0 * G);
+        for (which, keep) in [("side wall", &side as &dyn Fn(&[f64; 3]) -> bool), ("floor", &floor)] {
+            let (mut worst, mut bias, mut count) = (0.0f64, 0.0, 0.0);
+            for (w, x) in walls.iter().enumerate().filter(|(_, x)| keep(x)) {
+                let mean = fields.iter().map(|f| f[w][0]).sum::<f64>() / fields.len() as f64;
+                worst = worst.max((mean - fluid_at(x[1])).abs());
+                bias += mean - fluid_at(x[1]);
+                count += 1.0;
+            }
+            bias /= count;
+            // Each particle to the noise left in a mean of ten states (measured 3.4e-2 rho0 g H at
+            // most), and all of them on average closer: without the hydrostatic term a floor
+            // particle half a spacing below the face would read rho0 g dx (0.067 rho0 g H) less.
+            assert!(worst < 0.05 * scale, "{who}: a {which} particle's mean pressure is {worst} Pa from the fluid's at its height (rho0 g H = {scale} Pa)");
+            assert!(bias.abs() < 0.02 * scale, "{who}: the {which}'s particles are {bias} Pa from the fluid's pressure at their height on average (rho0 g H = {scale} Pa)");
+        }
+        let later: Vec<_> = samples.iter().filter(|s| s.time >= 0.1).collect();
+        for (k, y) in heights.iter().enumerate() {
+            let p = later.iter().map(|s| s.values[6 * k]).sum::<f64>() / later.len() as f64;
+            let expected = fluid_at(*y);
+            assert!((p - expected).abs() < 0.03 * scale, "{who}: the probe on the wall at y = {y} reads {p} Pa on average, the fluid {expected} Pa");
+        }
+    };
+    let mut cpu = common::cpu::<f64>(&scene);
+    cpu.step(settle);
+    let (mut fields, mut points) = (vec![], vec![]);
+    for _ in 0..rounds {
+        cpu.step(every);
+        points.extend(fluid_points(&cpu.snapshot()));
+        fields.push(cpu.wall_fields());
+    }
+    check("cpu f64", cpu.take_probe_samples(), fields, points);
+    for ctx in common::contexts() {
+        let who = ctx.describe();
+        let mut gpu = common::gpu(ctx, &scene);
+        gpu.step(settle).unwrap();
+        let (mut fields, mut points) = (vec![], vec![]);
+        for _ in 0..rounds {
+            gpu.step(every).unwrap();
+            points.extend(fluid_points(&gpu.snapshot().unwrap()));
+            fields.push(gpu.wall_fields().unwrap());
+        }
+        check(&who, gpu.take_probe_samples().unwrap(), fields, points);
+    }
 }

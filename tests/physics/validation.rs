@@ -100,6 +100,27 @@ fn conservation_of_mass_momentum_and_energy() {
     }
 }
 
+/// DFSPH in the still tank: the pressure against depth, and the density error within the set
+/// tolerance (the figures of the case, docs/validation.md).
+#[test]
+fn hydrostatic_pressure_with_dfsph() {
+    for (backend, r, _dir) in assert_passed(Case::HydrostaticDfsph) {
+        for name in ["last constant-density solve's average error / set density_error", "largest mean compression over the window / set density_error"] {
+            assert!(r.figure(name).is_some_and(|f| f.tolerance.is_finite()), "{backend}: no bounded figure {name}");
+        }
+    }
+}
+
+#[test]
+fn martin_moyce_front_and_height_with_dfsph() {
+    assert_passed(Case::DamBreakMartinMoyceDfsph);
+}
+
+#[test]
+fn koshizuka_oka_front_with_dfsph() {
+    assert_passed(Case::DamBreakKoshizukaOkaDfsph);
+}
+
 #[test]
 fn the_leak_count_sees_a_particle_inside_a_wall() {
     // The checker itself: a particle inside a container's wall shell is counted, one on the

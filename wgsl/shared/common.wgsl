@@ -9,6 +9,8 @@ override KERNEL: u32 = 0u;                      // 0: Mueller et al. 2003, 1: cu
 override EOS: u32 = 0u;                         // 0: linear (report Eq. 8), 1: Tait (Eq. 9)
 override CLAMP_NEGATIVE_PRESSURE: bool = false;
 override CONSISTENT_WALL_PRESSURE: bool = false; // walls push with p_i/rho_i^2, not 2 max(p_i,0)/rho_i^2
+// Walls push with p_i/rho_i^2 + p_w/rho_w^2, p_w extrapolated from the fluid (wall_pressure.wgsl).
+override ADAMI_WALL_PRESSURE: bool = false;
 // The terms a scene uses: a term that is off is compiled out of every stage.
 override VISCOSITY: bool = true;                // some viscosity of the scene (or its schedule) > 0
 override WALLS: bool = true;                    // the scene has wall particles

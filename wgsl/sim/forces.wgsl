@@ -11,6 +11,9 @@
 //! array starts: u32, read
 //! array wall_positions: vec4<f32>, read
 //! array wall_starts: u32, read
+// With ADAMI_WALL_PRESSURE, each wall particle's pressure (x) and density (y) of this step
+// (wall_pressure.wgsl); not bound otherwise.
+//! array wall_fields: vec2<f32>, read, optional
 //! array accelerations: vec4<f32>, read_write
 
 // The acceleration of fluid particle i (xyz) and, with CONTINUITY, its density (w, which the
@@ -24,7 +27,11 @@ fn particle_acceleration(i: u32) -> vec4<f32> {
     let rho_i = densities_at(i);
     let p_i = pressures_at(i);
     let pi_over = p_i / (rho_i * rho_i);
-    let wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), pi_over, CONSISTENT_WALL_PRESSURE);
+    // The wall pressure term's factor outside the sum over wall particles (Adami: inside).
+    var wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), pi_over, CONSISTENT_WALL_PRESSURE);
+    if (ADAMI_WALL_PRESSURE) {
+        wall_p_over = 1.0;
+    }
     let c = cell_coords(xi);
     // Sums without their constant factors, applied once at the end.
     var fluid_pressure = vec3<f32>(0.0);
@@ -73,7 +80,12 @@ fn particle_acceleration(i: u32) -> vec4<f32> {
                 }
                 let r = sqrt(r2);
                 let grad = kernel_grad(rij, r);
-                wall_pressure -= grad * w.w;
+                if (ADAMI_WALL_PRESSURE) {
+                    let own = wall_fields_at(j);
+                    wall_pressure -= grad * (w.w * (pi_over + own.x / (own.y * own.y)));
+                } else {
+                    wall_pressure -= grad * w.w;
+                }
                 if (viscous) {
                     if (cubic) {
                         wall_visc += grad * (w.w * dot(ui, rij) / (r2 + eps));

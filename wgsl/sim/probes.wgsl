@@ -15,6 +15,8 @@
 //! array wall_starts: u32, read
 // Bit k: the wall particle belongs to the k-th force probe.
 //! array wall_probe_masks: u32, read
+// With ADAMI_WALL_PRESSURE, each wall particle's pressure (x) and density (y); not bound otherwise.
+//! array wall_fields: vec2<f32>, read, optional
 // The probe table written by the host (src/solver/gpu/probes.rs): floats as their bits, so that
 // every word reaches the shader unchanged (no float move may flush a small integer's bits).
 //! array probe_table: vec4<u32>, read
@@ -57,16 +59,20 @@ fn set_data_float(i: u32, v: f32) {
 }
 
 // Shepard sums at x over the fluid within h: sum V_j W, and sum V_j W f_j of pressure,
-// density and velocity (V_j = m / rho_j).
+// density and velocity (V_j = m / rho_j); with ADAMI_WALL_PRESSURE also sum W, sum p_j W and
+// sum rho_j (x - x_j) W, the wall particles' extrapolation (wall_pressure.wgsl) at x.
 struct ShepardSums {
     fraction: f32,
     pressure: f32,
     density: f32,
     velocity: vec3<f32>,
+    weights: f32,
+    weighted_pressure: f32,
+    hydrostatic: vec3<f32>,
 }
 
 fn shepard_sums(x: vec3<f32>) -> ShepardSums {
-    var s = ShepardSums(0.0, 0.0, 0.0, vec3<f32>(0.0));
+    var s = ShepardSums(0.0, 0.0, 0.0, vec3<f32>(0.0), 0.0, 0.0, vec3<f32>(0.0));
     let c = cell_coords(x);
     for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);
@@ -79,9 +85,31 @@ fn shepard_sums(x: vec3<f32>) -> ShepardSums {
             s.pressure += vw * pressures_at(j);
             s.density += vw * rho_j;
             s.velocity += velocities_at(j).xyz * vw;
+            if (ADAMI_WALL_PRESSURE) {
+                s.weights += w;
+                s.weighted_pressure += w * pressures_at(j);
+                s.hydrostatic += d * (rho_j * w);
+            }
         }
     }
     return s;
+}
+
+// A point probe's pressure: the Shepard average (r = 1 / fraction, 0 without fluid), or with
+// ADAMI_WALL_PRESSURE the walls' extrapolation taken at the point (src/solver/cpu/probes.rs
+// point_pressure); 0 without fluid.
+fn point_pressure(s: ShepardSums, r: f32) -> f32 {
+    if (!ADAMI_WALL_PRESSURE) {
+        return s.pressure * r;
+    }
+    if (s.weights <= 0.0) {
+        return 0.0;
+    }
+    var p = s.weighted_pressure;
+    if (GRAVITY) {
+        p += dot(params.gravity.xyz, s.hydrostatic);
+    }
+    return p / s.weights;
 }
 
 // The highest point of the line where the fluid fraction reaches GAUGE_FRACTION: levels from
@@ -124,7 +152,7 @@ fn probe_points(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
         if (s.fraction > 0.0) {
             r = 1.0 / s.fraction;
         }
-        set_data_float(at, s.pressure * r);
+        set_data_float(at, point_pressure(s, r));
         set_data_float(at + 1u, s.density * r);
         set_data_float(at + 2u, s.velocity.x * r);
         set_data_float(at + 3u, s.velocity.y * r);
@@ -143,7 +171,7 @@ var<workgroup> group_values: array<vec4<f32>, PROBE_WORKGROUP>;
 
 // Adds the force fluid particle i exerts on the force probes' wall particles (and its moments)
 // to slot_sums: the reaction to the wall terms of its acceleration in forces.wgsl, m_i times
-// minus what wall particle w adds to a_i.
+// minus what wall particle w adds to a_i (pressure, viscosity, artificial viscosity).
 fn add_wall_forces(i: u32, forces: u32) {
     let cubic = KERNEL == 1u;
     let viscous = VISCOSITY && params.viscosity > 0.0;
@@ -152,9 +180,11 @@ fn add_wall_forces(i: u32, forces: u32) {
     let ui = velocities_at(i).xyz;
     let rho_i = densities_at(i);
     let p_i = pressures_at(i);
-    let wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), p_i / (rho_i * rho_i), CONSISTENT_WALL_PRESSURE);
+    let pi_over = p_i / (rho_i * rho_i);
+    let wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), pi_over, CONSISTENT_WALL_PRESSURE);
     let nu = select(params.viscosity, 10.0 * params.viscosity, cubic);
     let visc_factor = nu * params.boundary_friction / rho_i;
+    let artificial_factor = params.artificial_viscosity_factor / rho_i;
     let c = cell_coords(xi);
     for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);
@@ -172,11 +202,21 @@ fn add_wall_forces(i: u32, forces: u32) {
             let r = sqrt(r2);
             let grad = kernel_grad(rij, r);
             var a = grad * (-w.w * wall_p_over);
+            if (ADAMI_WALL_PRESSURE) {
+                let own = wall_fields_at(j);
+                a = grad * (-w.w * (pi_over + own.x / (own.y * own.y)));
+            }
             if (viscous) {
                 if (cubic) {
                     a += grad * (visc_factor * w.w * dot(ui, rij) / (r2 + eps));
                 } else {
                     a += ui * (-visc_factor * w.w * kernel_laplacian(r));
+                }
+            }
+            if (ARTIFICIAL_VISCOSITY) {
+                let approach = dot(ui, rij);
+                if (approach < 0.0) {
+                    a += grad * (artificial_factor * w.w * approach / (r2 + eps));
                 }
             }
             let f = a * (-params.fluid_mass);

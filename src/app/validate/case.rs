@@ -46,17 +46,36 @@ pub enum Case {
     DamBreakMartinMoyce,
     DamBreakKoshizukaOka,
     Conservation,
+    /// The same tank and collapses with DFSPH's pressure instead of the equation of state.
+    HydrostaticDfsph,
+    DamBreakMartinMoyceDfsph,
+    DamBreakKoshizukaOkaDfsph,
 }
 
 impl Case {
-    pub const ALL: [Case; 4] = [Case::Hydrostatic, Case::DamBreakMartinMoyce, Case::DamBreakKoshizukaOka, Case::Conservation];
+    pub const ALL: [Case; 7] = [
+        Case::Hydrostatic,
+        Case::DamBreakMartinMoyce,
+        Case::DamBreakKoshizukaOka,
+        Case::Conservation,
+        Case::HydrostaticDfsph,
+        Case::DamBreakMartinMoyceDfsph,
+        Case::DamBreakKoshizukaOkaDfsph,
+    ];
     pub fn name(self) -> &'static str {
         match self {
             Case::Hydrostatic => "hydrostatic",
             Case::DamBreakMartinMoyce => "dam_break_martin_moyce",
             Case::DamBreakKoshizukaOka => "dam_break_koshizuka_oka",
             Case::Conservation => "conservation",
+            Case::HydrostaticDfsph => "hydrostatic_dfsph",
+            Case::DamBreakMartinMoyceDfsph => "dam_break_martin_moyce_dfsph",
+            Case::DamBreakKoshizukaOkaDfsph => "dam_break_koshizuka_oka_dfsph",
         }
+    }
+    /// Whether the case runs DFSPH.
+    pub fn dfsph(self) -> bool {
+        matches!(self, Case::HydrostaticDfsph | Case::DamBreakMartinMoyceDfsph | Case::DamBreakKoshizukaOkaDfsph)
     }
     pub fn from_name(name: &str) -> Option<Case> {
         Case::ALL.into_iter().find(|c| c.name() == name)

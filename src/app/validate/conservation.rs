@@ -67,6 +67,7 @@ pub fn collision_tank(resolution: Resolution) -> Tank {
         planes: true,
         wall_layers: WALL_LAYERS,
         boundary_pressure: BoundaryPressure::Mirror,
+        dfsph: false,
     }
 }
 

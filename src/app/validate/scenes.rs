@@ -5,7 +5,7 @@
 //! particle spacings, and dt = 0.25 h / c0 (CFL number 0.25 on the speed of sound).
 //! A 3D run of a 2D experiment is a slab four particle spacings deep between walls in z.
 
-use crate::model::scene::{Boundary, BoundaryPressure, Domain, EquationOfState, FluidBlock, Kernel, Physics, Scene, SceneOrigin, Time, WallParticles};
+use crate::model::scene::{Boundary, BoundaryPressure, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, SceneOrigin, Time, WallParticles};
 
 pub const GRAVITY: f64 = 9.81;
 /// Support radius in particle spacings.
@@ -14,6 +14,12 @@ pub const H_OVER_SPACING: f64 = 2.0;
 pub const CFL: f64 = 0.25;
 /// Depth of the slab of a 2D experiment, in particle spacings.
 pub const SLAB_SPACINGS: f64 = 4.0;
+/// CFL number of a DFSPH case on its largest flow speed (c0 / 10), DFSPH's default (docs/dfsph.md).
+pub const DFSPH_CFL: f64 = 0.4;
+/// The explicit viscosity's bound on a step, dt <= 0.125 h^2 / nu (the adaptive step's viscous
+/// number; Monaghan 1992 for diffusion).
+pub const VISCOUS_NUMBER: f64 = 0.125;
+
 /// Layers of wall particles: one more than a kernel support (h = 2 spacings), so that a
 /// particle pressed into the wall at an impact still has wall particles behind it.
 pub const WALL_LAYERS: u32 = 3;
@@ -46,17 +52,39 @@ pub struct Tank {
     pub wall_layers: u32,
     /// The wall particles' pressure term.
     pub boundary_pressure: BoundaryPressure,
+    /// The pressure from DFSPH (default tolerances) instead of the equation of state; the speed
+    /// of sound then only sets the viscosity (the same nu as the weakly compressible case) and
+    /// the reference flow speed c0 / 10.
+    pub dfsph: bool,
 }
 
 impl Tank {
     pub fn h(&self) -> f64 {
         self.h_over_spacing * self.spacing
     }
+    /// WCSPH: CFL 0.25 on c0. DFSPH: CFL 0.4 on the largest flow speed, c0 / 10, bounded by the
+    /// explicit viscosity's condition.
     pub fn dt(&self) -> f64 {
-        CFL * self.h() / self.speed_of_sound
+        if self.dfsph {
+            let flow = DFSPH_CFL * self.h() / (0.1 * self.speed_of_sound);
+            let nu = self.viscosity();
+            if nu > 0.0 { flow.min(VISCOUS_NUMBER * self.h() * self.h() / nu) } else { flow }
+        } else {
+            CFL * self.h() / self.speed_of_sound
+        }
+    }
+    /// The speed in the viscosity nu = alpha h c / 8: c0 with WCSPH; with DFSPH, which has no
+    /// speed of sound, the largest flow speed c0 / 10 (with c0 the explicit viscosity would bound
+    /// DFSPH's step below its CFL step, and made the still tank diverge at 13 times WCSPH's dt).
+    pub fn viscosity_speed(&self) -> f64 {
+        if self.dfsph {
+            0.1 * self.speed_of_sound
+        } else {
+            self.speed_of_sound
+        }
     }
     pub fn viscosity(&self) -> f64 {
-        self.alpha * self.h() * self.speed_of_sound / 8.0
+        self.alpha * self.h() * self.viscosity_speed() / 8.0
     }
 
     pub fn scene(&self) -> anyhow::Result<Scene> {
@@ -83,6 +111,7 @@ impl Tank {
                 boundary.push(Boundary::Plane { point: p, normal: n, restitution: 0.0 });
             }
         }
+        let (solver, speed_of_sound) = if self.dfsph { (PressureSolver::Dfsph, None) } else { (PressureSolver::Wcsph, Some(self.speed_of_sound)) };
         let scene = Scene {
             name: self.name.clone(),
             description: format!("validation scene {}", self.name),
@@ -99,14 +128,14 @@ impl Tank {
                 kernel: self.kernel,
                 equation_of_state: EquationOfState::Tait,
                 stiffness: None,
-                speed_of_sound: Some(self.speed_of_sound),
+                speed_of_sound,
                 clamp_negative_pressure: true,
                 viscosity: self.viscosity(),
                 viscosity_schedule: Vec::new(),
                 boundary_friction: 0.0,
                 boundary_pressure: self.boundary_pressure,
                 gravity: self.gravity,
-                solver: Default::default(),
+                solver,
                 boundary_volume: Default::default(),
                 density: Default::default(),
                 density_diffusion: 0.0,

@@ -43,6 +43,7 @@ pub fn sloshing_tank(resolution: Resolution, alpha: f64, boundary_pressure: Boun
         planes: true,
         wall_layers: WALL_LAYERS,
         boundary_pressure,
+        dfsph: false,
     }
 }
 

@@ -1,12 +1,13 @@
 //! Import of SPlisHSPlasH JSON scenes: the subset that maps onto a wgsph scene.
 //!
-//! Mapped: `Configuration` (particle radius, time step, gravity, stop time, the WCSPH stiffness
-//! and exponent, the kernel), `FluidBlocks` (axis-aligned boxes with translation, scale and
+//! Mapped: `Configuration` (particle radius, time step, gravity, stop time, the pressure solver:
+//! WCSPH with its stiffness and exponent or DFSPH with its tolerances and iteration limits, the
+//! CFL-adaptive time step, the kernel), `FluidBlocks` (axis-aligned boxes with translation, scale and
 //! initial velocity), the fluid parameter block (rest density and the standard viscosity), and
 //! static `RigidBodies` that are scaled and translated unit boxes (walls: a tank around the
 //! fluid, or an obstacle). Settings of the viewer and of SPlisHSPlasH's own exports are
-//! skipped. Everything else (another pressure solver, adaptive time steps, density or volume
-//! map boundaries, meshes other than the unit box, rotations, dynamic bodies, particle files,
+//! skipped. Everything else (another pressure solver, the iteration-count time step rule,
+//! density or volume map boundaries, meshes other than the unit box, rotations, dynamic bodies, particle files,
 //! emitters, animation fields, surface tension, vorticity, drag, elasticity, 2D) is refused
 //! with a message naming each such field, so that no setting is silently dropped.
 //!
@@ -14,12 +15,13 @@
 //! (doc/file_format.md of its repository).
 
 use crate::model::scene::{
-    Boundary, Domain, EquationOfState, FluidBlock, Kernel, Physics, Scene, SceneError, SceneOrigin, Time, WallParticles,
+    Boundary, DfsphSettings, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, SceneError, SceneOrigin, Time,
+    WallParticles,
 };
 use serde_json::{Map, Value};
 
 /// Keys of the viewer and of SPlisHSPlasH's exports, and solver settings that only apply to
-/// features refused elsewhere (other pressure solvers, adaptive steps, maps): skipped.
+/// features refused elsewhere (other pressure solvers): skipped.
 const SKIPPED_CONFIGURATION: &[&str] = &[
     "pause",
     "pauseAt",
@@ -35,14 +37,7 @@ const SKIPPED_CONFIGURATION: &[&str] = &[
     "enableStateExport",
     "stateExportFPS",
     "enableZSort",
-    "maxIterations",
-    "maxError",
-    "maxIterationsV",
-    "maxErrorV",
-    "enableDivergenceSolver",
     "velocityUpdateMethod",
-    "cflFactor",
-    "cflMaxTimeStepSize",
 ];
 const SKIPPED_FLUID: &[&str] = &[
     "colorField",
@@ -91,6 +86,17 @@ fn boolean(v: &Value, field: &str, p: &mut Problems) -> Option<bool> {
         Value::Number(n) => Some(n.as_f64() != Some(0.0)),
         _ => {
             p.add(field, format!("is {v}; must be true or false"));
+            None
+        }
+    }
+}
+
+/// A whole number of at least 1 (an iteration limit).
+fn count(v: &Value, field: &str, p: &mut Problems) -> Option<u32> {
+    match v.as_u64() {
+        Some(n) if n >= 1 && n <= u32::MAX as u64 => Some(n as u32),
+        _ => {
+            p.add(field, format!("is {v}; must be a whole number of at least 1"));
             None
         }
     }
@@ -175,6 +181,11 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     };
     let (mut radius, mut dt, mut gravity, mut stop_at) = (0.025, 0.001, [0.0, -9.81, 0.0], None);
     let (mut stiffness, mut exponent) = (50000.0, 7.0);
+    // DFSPH's settings and the CFL rule's, SPlisHSPlasH's defaults where absent (its errors are
+    // in per cent).
+    let (mut max_error, mut max_error_v, mut enable_divergence) = (0.01, 0.1, true);
+    let (mut max_iterations, mut max_iterations_v) = (100, 100);
+    let (mut cfl_factor, mut cfl_min_dt, mut cfl_max_dt) = (0.5, 0.0001, 0.005);
     for (key, v) in config {
         let field = format!("Configuration.{key}");
         match key.as_str() {
@@ -184,6 +195,14 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             "stopAt" => stop_at = number(v, &field, &mut p),
             "stiffness" => stiffness = number(v, &field, &mut p).unwrap_or(stiffness),
             "exponent" => exponent = number(v, &field, &mut p).unwrap_or(exponent),
+            "maxError" => max_error = number(v, &field, &mut p).unwrap_or(max_error),
+            "maxErrorV" => max_error_v = number(v, &field, &mut p).unwrap_or(max_error_v),
+            "maxIterations" => max_iterations = count(v, &field, &mut p).unwrap_or(max_iterations),
+            "maxIterationsV" => max_iterations_v = count(v, &field, &mut p).unwrap_or(max_iterations_v),
+            "enableDivergenceSolver" => enable_divergence = boolean(v, &field, &mut p).unwrap_or(enable_divergence),
+            "cflFactor" => cfl_factor = number(v, &field, &mut p).unwrap_or(cfl_factor),
+            "cflMinTimeStepSize" => cfl_min_dt = number(v, &field, &mut p).unwrap_or(cfl_min_dt),
+            "cflMaxTimeStepSize" => cfl_max_dt = number(v, &field, &mut p).unwrap_or(cfl_max_dt),
             "sim2D" => {
                 if boolean(v, &field, &mut p) == Some(true) {
                     p.add(&field, "is true; wgsph simulates in 3D only");
@@ -194,20 +213,25 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             _ => p.add(&field, "is not a SPlisHSPlasH configuration parameter that wgsph can import"),
         }
     }
-    let sim_method = method(config, "simulationMethod", 4, "Configuration", &mut p);
-    if sim_method != 0 {
-        p.add(
-            "Configuration.simulationMethod",
-            format!("is {sim_method}{}; wgsph is weakly compressible SPH: set it to 0 (WCSPH)", if config.contains_key("simulationMethod") { "" } else { " (DFSPH, the default)" }),
-        );
-    }
-    let cfl = method(config, "cflMethod", 1, "Configuration", &mut p);
-    if cfl != 0 {
-        p.add(
-            "Configuration.cflMethod",
-            format!("is {cfl}{}; wgsph steps with the fixed timeStepSize: set it to 0", if config.contains_key("cflMethod") { "" } else { " (adaptive, the default)" }),
-        );
-    }
+    let solver = match method(config, "simulationMethod", 4, "Configuration", &mut p) {
+        0 => PressureSolver::Wcsph,
+        4 => PressureSolver::Dfsph,
+        other => {
+            p.add("Configuration.simulationMethod", format!("is {other}; wgsph has WCSPH (0) and DFSPH (4)"));
+            PressureSolver::Wcsph
+        }
+    };
+    let adaptive = match method(config, "cflMethod", 1, "Configuration", &mut p) {
+        0 => false,
+        1 => true,
+        other => {
+            p.add(
+                "Configuration.cflMethod",
+                format!("is {other}; wgsph's adaptive step follows the CFL condition alone: set it to 1 (CFL) or 0 (the fixed timeStepSize)"),
+            );
+            false
+        }
+    };
     let boundary_method = method(config, "boundaryHandlingMethod", 2, "Configuration", &mut p);
     if boundary_method != 0 {
         p.add(
@@ -236,7 +260,10 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     } else if exponent == 1.0 {
         EquationOfState::Linear
     } else {
-        p.add("Configuration.exponent", format!("is {exponent}; wgsph's equations of state have the exponent 7 (Tait) or 1 (linear)"));
+        // DFSPH has no equation of state: its stiffness and exponent are not read there.
+        if solver == PressureSolver::Wcsph {
+            p.add("Configuration.exponent", format!("is {exponent}; wgsph's equations of state have the exponent 7 (Tait) or 1 (linear)"));
+        }
         EquationOfState::Tait
     };
     let end_time = match stop_at {
@@ -451,7 +478,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             particle_mass: None,
             kernel,
             equation_of_state: eos,
-            stiffness: Some(stiffness),
+            stiffness: (solver == PressureSolver::Wcsph).then_some(stiffness),
             speed_of_sound: None,
             clamp_negative_pressure: false,
             viscosity: fluid.viscosity,
@@ -461,15 +488,40 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             boundary_friction: if fluid.viscosity > 0.0 { fluid.viscosity_boundary / fluid.viscosity } else { 0.0 },
             boundary_pressure: Default::default(),
             gravity,
-            solver: Default::default(),
+            solver,
             boundary_volume: Default::default(),
             density: Default::default(),
             density_diffusion: 0.0,
             artificial_viscosity: 0.0,
             initial_pressure: Default::default(),
-            dfsph: Default::default(),
+            // The DFSPH keys of a WCSPH scene are not read (as there).
+            dfsph: match solver {
+                PressureSolver::Dfsph => DfsphSettings {
+                    density_error: max_error / 100.0,
+                    divergence_error: max_error_v / 100.0,
+                    max_iterations,
+                    max_divergence_iterations: max_iterations_v,
+                    divergence_solve: enable_divergence,
+                    ..Default::default()
+                },
+                PressureSolver::Wcsph => Default::default(),
+            },
         },
-        time: Time::fixed(dt, end_time),
+        time: if adaptive {
+            Time {
+                adaptive: true,
+                // SPlisHSPlasH's rule, dt = cflFactor 0.4 (2r) / |v|max, is wgsph's
+                // dt = C h / |v|max with C = 0.2 cflFactor (h = 4r). A weakly compressible
+                // fluid keeps wgsph's own rule, which adds the speed of sound to |v|: without it
+                // the step of a fluid at rest grows until the equation of state blows up.
+                cfl_number: (solver == PressureSolver::Dfsph).then_some(cfl_factor * 0.4 * 2.0 * radius / h),
+                dt_min: Some(cfl_min_dt),
+                dt_max: Some(cfl_max_dt),
+                ..Time::fixed(dt, end_time)
+            }
+        } else {
+            Time::fixed(dt, end_time)
+        },
         fluid: blocks,
         boundary,
         camera: None,
@@ -517,6 +569,13 @@ fn json_key(field: &str, fluid: &str, boundaries: &[String]) -> String {
         "physics.stiffness" | "physics.speed_of_sound" => "Configuration.stiffness".into(),
         "physics.gravity" => "Configuration.gravitation".into(),
         "time.dt" => "Configuration.timeStepSize".into(),
+        "time.cfl_number" => "Configuration.cflFactor".into(),
+        "time.dt_min" => "Configuration.cflMinTimeStepSize".into(),
+        "time.dt_max" => "Configuration.cflMaxTimeStepSize".into(),
+        "physics.dfsph.density_error" => "Configuration.maxError".into(),
+        "physics.dfsph.divergence_error" => "Configuration.maxErrorV".into(),
+        "physics.dfsph.max_iterations" | "physics.dfsph.min_iterations" => "Configuration.maxIterations".into(),
+        "physics.dfsph.max_divergence_iterations" | "physics.dfsph.min_divergence_iterations" => "Configuration.maxIterationsV".into(),
         "time.end_time" => "Configuration.stopAt".into(),
         "physics.rest_density" => format!("{fluid}.density0"),
         "physics.viscosity" => format!("{fluid}.viscosity"),

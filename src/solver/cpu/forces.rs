@@ -24,6 +24,9 @@ pub struct ForcesInput<'a, R> {
     pub wall_masses: &'a [R],
     /// alpha h_s c0 of artificial viscosity (0: off).
     pub artificial_viscosity_factor: R,
+    /// With `BoundaryPressure::Adami`, each wall particle's [pressure, density] of this step
+    /// (wall_pressure.rs); empty otherwise.
+    pub wall_fields: &'a [[R; 2]],
 }
 
 /// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
@@ -37,8 +40,10 @@ pub struct ForcesInput<'a, R> {
 /// pressure (p_w = max(p_i, 0), rho_w = rho_i, giving 2 max(p_i, 0)/rho_i^2), so walls only push;
 /// `Consistent` uses p_i/rho_i^2 (Akinci et al. 2012, Eq. 10 with volumes m_w/rho0), the
 /// gradient of sum_i m_i e(rho_i) through the wall particles' share of rho_i, so that the walls
-/// do no net work over a cycle of compression and release. A wall particle takes part in
-/// viscosity at rest with the volume m_w/rho_i, scaled by the boundary friction.
+/// do no net work over a cycle of compression and release; `Adami` uses the wall particle's own
+/// pressure and density, p_i/rho_i^2 + p_w/rho_w^2, extrapolated from the fluid
+/// (wall_pressure.rs; Adami, Hu & Adams 2012). A wall particle takes part in viscosity at rest
+/// with the volume m_w/rho_i, scaled by the boundary friction.
 pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
 }
@@ -63,9 +68,12 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
     let rho_i = input.densities[i];
     let p_i = input.pressures[i];
     let pi_over = p_i / (rho_i * rho_i);
+    // The wall pressure term's factor outside the sum over wall particles (Adami: inside).
+    let adami = input.boundary_pressure == BoundaryPressure::Adami;
     let wall_p_over = match input.boundary_pressure {
         BoundaryPressure::Mirror => R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i),
         BoundaryPressure::Consistent => pi_over,
+        BoundaryPressure::Adami => R::one(),
     };
     let c = input.grid.cell_coords(xi);
     // Sums without the constant factors, which are applied once at the end.
@@ -114,7 +122,12 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
             let r = r2.sqrt();
             let grad = kernel.grad_w(rij, r);
             let mw = input.wall_masses[j];
-            wall_pressure -= grad * mw;
+            if adami {
+                let [p_w, rho_w] = input.wall_fields[j];
+                wall_pressure -= grad * (mw * (pi_over + p_w / (rho_w * rho_w)));
+            } else {
+                wall_pressure -= grad * mw;
+            }
             if viscous {
                 if cubic {
                     wall_visc += grad * (mw * ui.dot(rij) / (r2 + eps));

@@ -21,6 +21,7 @@ pub mod integrate;
 pub mod prefix_sum;
 pub mod probes;
 pub mod reorder;
+pub mod wall_pressure;
 
 use super::backend::Backend;
 use crate::model::initial::InitialState;
@@ -28,6 +29,7 @@ use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
 use crate::model::probes::ProbeSample;
 use crate::model::real::{Real, V3};
+use crate::model::scene::BoundaryPressure;
 use crate::model::state::{BackendState, DfsphFields, DtStats, Health, Snapshot, StepFields};
 use dfsph::{DfsphCpu, StepParts};
 use integrate::PlaneR;
@@ -60,6 +62,11 @@ pub struct CpuSolver<R: Real> {
     wall_positions: Vec<V3<R>>,
     wall_masses: Vec<R>,
     wall_starts: Vec<u32>,
+    /// With `boundary_pressure = "adami"`: each sorted wall particle's [pressure, density] of
+    /// the last density stage (empty otherwise).
+    wall_fields: Vec<[R; 2]>,
+    /// The original index of each sorted wall particle.
+    wall_order: Vec<u32>,
     step: u64,
     health: Health,
     /// Simulated time and the steps' dt (adaptive dt makes them differ from step x dt).
@@ -114,6 +121,8 @@ impl<R: Real> CpuSolver<R> {
             wall_positions: wall_order.iter().map(|&i| walls[i as usize]).collect(),
             wall_masses: wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect(),
             wall_starts,
+            wall_fields: if params.boundary_pressure == BoundaryPressure::Adami { vec![[R::zero(), R::of(params.rest_density)]; walls.len()] } else { Vec::new() },
+            wall_order,
             step: 0,
             health: Health::default(),
             time: 0.0,
@@ -159,6 +168,7 @@ impl<R: Real> CpuSolver<R> {
         n * (4 * v3 + 2 * r + 4 * 4) // positions, velocities, accelerations, scratch; densities, pressures; ids, keys, sorted, scratch ids
             + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
             + self.wall_positions.len() as u64 * (v3 + r)
+            + self.wall_fields.len() as u64 * 2 * r
             + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
             + (self.carried_densities.len() + self.scratch_r.capacity()) as u64 * r
     }
@@ -220,6 +230,39 @@ impl<R: Real> CpuSolver<R> {
         density::density(&input, &mut self.densities, &mut self.pressures);
     }
 
+    /// Stage 2': with `boundary_pressure = "adami"`, each wall particle's pressure and density
+    /// extrapolated from the fluid's fields of this step (nothing otherwise).
+    pub fn compute_wall_pressure(&mut self) {
+        if self.wall_fields.is_empty() {
+            return;
+        }
+        let p = &self.params;
+        let input = wall_pressure::WallPressureInput {
+            kernel: &self.kernel,
+            grid: &self.grid,
+            rest_density: R::of(p.rest_density),
+            stiffness: R::of(p.stiffness),
+            eos: p.eos,
+            clamp_negative_pressure: p.clamp_negative_pressure,
+            gravity: V3::from64(p.gravity),
+            fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+            densities: &self.densities,
+            pressures: &self.pressures,
+            wall_positions: &self.wall_positions,
+        };
+        wall_pressure::wall_pressure(&input, &mut self.wall_fields);
+    }
+
+    /// Each wall particle's [pressure, density] of the last density stage, in the walls'
+    /// original order (`boundary_pressure = "adami"`; empty otherwise).
+    pub fn wall_fields(&self) -> Vec<[f64; 2]> {
+        let mut out = vec![[0.0; 2]; self.wall_fields.len()];
+        for (slot, f) in self.wall_fields.iter().enumerate() {
+            out[self.wall_order[slot] as usize] = [f[0].to64(), f[1].to64()];
+        }
+        out
+    }
+
     /// What the forces read: the current state and the fields of the last density stage.
     fn forces_input(&self) -> forces::ForcesInput<'_, R> {
         let p = &self.params;
@@ -239,6 +282,7 @@ impl<R: Real> CpuSolver<R> {
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
             artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
+            wall_fields: &self.wall_fields,
         }
     }
 
@@ -417,6 +461,7 @@ impl<R: Real> CpuSolver<R> {
             return;
         }
         self.compute_density();
+        self.compute_wall_pressure();
         if !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some()) {
             self.sample_probes();
         }
@@ -461,6 +506,9 @@ impl<R: Real> CpuSolver<R> {
             walls: Neighbours { positions: &self.wall_positions, starts: &self.wall_starts },
             wall_masses: &self.wall_masses,
             wall_masks: &self.wall_probe_masks,
+            wall_fields: &self.wall_fields,
+            gravity: V3::from64(p.gravity),
+            artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
         };
         let list = &p.probes.probes;
         let offsets = p.probes.offsets();
@@ -515,7 +563,10 @@ impl<R: Real> CpuSolver<R> {
         match self.dfsph_parts() {
             // Density, and the pressure of the last constant-density solve.
             Some((dfsph, mut parts)) => dfsph.factors_stage(&mut parts),
-            None => self.compute_density(),
+            None => {
+                self.compute_density();
+                self.compute_wall_pressure();
+            }
         }
         let n = self.positions.len();
         let mut s = Snapshot::with_len(n, self.step, self.time());

@@ -35,28 +35,80 @@ pub struct ProbeInput<'a, R> {
     pub wall_masses: &'a [R],
     /// Bit k: the wall particle belongs to the k-th force probe.
     pub wall_masks: &'a [u32],
+    /// With `BoundaryPressure::Adami`, each wall particle's [pressure, density] (empty otherwise).
+    pub wall_fields: &'a [[R; 2]],
+    pub gravity: V3<R>,
+    /// alpha h_s c0 of artificial viscosity (0: off).
+    pub artificial_viscosity_factor: R,
 }
 
-/// Shepard sums at a point over the fluid particles within h: sum V_j W, and sum V_j W f_j for
-/// pressure, density and velocity, with V_j = m / rho_j.
-fn shepard_sums<R: Real>(input: &ProbeInput<R>, x: V3<R>) -> (R, R, R, V3<R>) {
-    let (mut fraction, mut p, mut rho, mut v) = (R::zero(), R::zero(), R::zero(), V3::zero());
+/// Sums at a point over the fluid particles within h (wgsl `ShepardSums`).
+struct ShepardSums<R> {
+    /// sum V_j W, with V_j = m / rho_j: the fluid fraction.
+    fraction: R,
+    /// sum V_j W f_j for pressure, density and velocity.
+    pressure: R,
+    density: R,
+    velocity: V3<R>,
+    /// With the Adami wall pressure: sum W, sum p_j W and sum rho_j (x - x_j) W, the sums of the
+    /// wall particles' extrapolation (wall_pressure.rs) taken at the point.
+    weights: R,
+    weighted_pressure: R,
+    hydrostatic: V3<R>,
+}
+
+fn shepard_sums<R: Real>(input: &ProbeInput<R>, x: V3<R>) -> ShepardSums<R> {
+    let adami = input.boundary_pressure == BoundaryPressure::Adami;
+    let mut s = ShepardSums {
+        fraction: R::zero(),
+        pressure: R::zero(),
+        density: R::zero(),
+        velocity: V3::zero(),
+        weights: R::zero(),
+        weighted_pressure: R::zero(),
+        hydrostatic: V3::zero(),
+    };
     for (k0, k1) in input.grid.stencil_runs(input.grid.cell_coords(x)) {
         for j in input.fluid.span(k0, k1) {
-            let w = input.kernel.w((x - input.fluid.positions[j]).length_squared());
+            let d = x - input.fluid.positions[j];
+            let w = input.kernel.w(d.length_squared());
             let vw = input.fluid_mass / input.densities[j] * w;
-            fraction = fraction + vw;
-            p = p + vw * input.pressures[j];
-            rho = rho + vw * input.densities[j];
-            v += input.velocities[j] * vw;
+            s.fraction = s.fraction + vw;
+            s.pressure = s.pressure + vw * input.pressures[j];
+            s.density = s.density + vw * input.densities[j];
+            s.velocity += input.velocities[j] * vw;
+            if adami {
+                s.weights = s.weights + w;
+                s.weighted_pressure = s.weighted_pressure + w * input.pressures[j];
+                s.hydrostatic += d * (input.densities[j] * w);
+            }
         }
     }
-    (fraction, p, rho, v)
+    s
 }
 
 /// The fluid fraction sum_j V_j W at a point.
 fn fluid_fraction<R: Real>(input: &ProbeInput<R>, x: V3<R>) -> R {
-    shepard_sums(input, x).0
+    shepard_sums(input, x).fraction
+}
+
+/// The pressure a point probe reads from its sums: the Shepard average, or with the Adami wall
+/// pressure the wall's own extrapolation evaluated at the point, (sum p_j W + g . sum rho_j
+/// (x - x_j) W) / sum W (Adami et al. 2012, Eq. 27), so that a point on a wall reads what a wall
+/// particle there would carry (see docs/probes.md). Both are 0 with no fluid within h.
+/// `r` is 1 / fraction (0 without fluid).
+fn point_pressure<R: Real>(input: &ProbeInput<R>, s: &ShepardSums<R>, r: R) -> R {
+    if input.boundary_pressure != BoundaryPressure::Adami {
+        return s.pressure * r;
+    }
+    if s.weights <= R::zero() {
+        return R::zero();
+    }
+    let mut p = s.weighted_pressure;
+    if input.gravity != V3::zero() {
+        p = p + input.gravity.dot(s.hydrostatic);
+    }
+    p / s.weights
 }
 
 /// Point probes and gauges: each writes its columns at its offset of `values`.
@@ -66,10 +118,11 @@ pub fn probe_points<R: Real>(input: &ProbeInput<R>, probes: &[Probe], offsets: &
         .zip(offsets)
         .filter_map(|(probe, &at)| match &probe.geometry {
             ProbeGeometry::Point { position } => {
-                let (fraction, p, rho, v) = shepard_sums(input, V3::from64(*position));
+                let s = shepard_sums(input, V3::from64(*position));
                 // No fluid within h: zeros (the fraction column says so).
-                let r = if fraction > R::zero() { R::one() / fraction } else { R::zero() };
-                Some((at, vec![p * r, rho * r, v.x() * r, v.y() * r, v.z() * r, fraction]))
+                let r = if s.fraction > R::zero() { R::one() / s.fraction } else { R::zero() };
+                let v = s.velocity;
+                Some((at, vec![point_pressure(input, &s, r), s.density * r, v.x() * r, v.y() * r, v.z() * r, s.fraction]))
             }
             ProbeGeometry::Gauge { x, z, bottom, top, step } => {
                 let surface = gauge_surface(input, R::of(*x), R::of(*z), R::of(*bottom), R::of(*top), R::of(*step));
@@ -165,7 +218,8 @@ pub fn probe_particles<R: Real>(input: &ProbeInput<R>, probes: &[Probe], partial
 
 /// The force (and its moment about `centres[k]`) fluid particle `i` exerts on the wall
 /// particles of each force probe k: the reaction to the wall terms of its acceleration in
-/// forces.rs (pressure and viscosity), m_i times minus what wall particle w adds to a_i.
+/// forces.rs (pressure, viscosity and artificial viscosity), m_i times minus what wall particle w
+/// adds to a_i.
 pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &[V3<R>]) -> Vec<R> {
     let kernel = input.kernel;
     let cubic = kernel.kind == Kernel::CubicSpline;
@@ -175,12 +229,18 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
     let ui = input.velocities[i];
     let rho_i = input.densities[i];
     let p_i = input.pressures[i];
+    let pi_over = p_i / (rho_i * rho_i);
     let wall_p_over = match input.boundary_pressure {
         BoundaryPressure::Mirror => R::of(2.0) * p_i.max(R::zero()) / (rho_i * rho_i),
-        BoundaryPressure::Consistent => p_i / (rho_i * rho_i),
+        BoundaryPressure::Consistent => pi_over,
+        // Per wall particle, below.
+        BoundaryPressure::Adami => R::zero(),
     };
+    let adami = input.boundary_pressure == BoundaryPressure::Adami;
     let nu = if cubic { R::of(10.0) * input.viscosity } else { input.viscosity };
     let visc_factor = nu * input.boundary_friction / rho_i;
+    let artificial = input.artificial_viscosity_factor > R::zero();
+    let artificial_factor = input.artificial_viscosity_factor / rho_i;
     let mut out = vec![R::zero(); FORCE_SLOTS * centres.len()];
     if input.wall_masses.is_empty() {
         return out;
@@ -201,9 +261,20 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
             let grad = kernel.grad_w(rij, r);
             let mw = input.wall_masses[j];
             // What wall particle w adds to a_i, and the opposite force on the wall.
-            let mut a = grad * (-mw * wall_p_over);
+            let mut a = if adami {
+                let [p_w, rho_w] = input.wall_fields[j];
+                grad * (-mw * (pi_over + p_w / (rho_w * rho_w)))
+            } else {
+                grad * (-mw * wall_p_over)
+            };
             if viscous {
                 a += if cubic { grad * (visc_factor * mw * ui.dot(rij) / (r2 + eps)) } else { ui * (-visc_factor * mw * kernel.lap_w(r)) };
+            }
+            if artificial {
+                let approach = ui.dot(rij);
+                if approach < R::zero() {
+                    a += grad * (artificial_factor * mw * approach / (r2 + eps));
+                }
             }
             let f = a * (-input.fluid_mass);
             for (k, c) in centres.iter().enumerate() {

@@ -95,6 +95,15 @@ impl MemoryPlan {
         MemoryPlan { fluid, walls, cells, buffers }
     }
 
+    /// The plan with the Adami wall pressure's array (a pressure and a density per wall
+    /// particle) for `walls` wall particles; nothing for 0.
+    pub fn with_wall_fields(mut self, walls: u64) -> MemoryPlan {
+        if walls > 0 {
+            self.buffers.push(PlannedBuffer { label: "wall fields", bytes: padded(walls * 8), bytes_per_fluid_particle: 0, single_binding: false });
+        }
+        self
+    }
+
     /// The plan with DFSPH's own arrays added (for `fluid` particles).
     pub fn with_dfsph(mut self, fluid: u64) -> MemoryPlan {
         for (label, bytes) in super::dfsph::buffer_bytes(fluid) {

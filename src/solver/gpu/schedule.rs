@@ -204,6 +204,9 @@ impl GpuSolver {
         if work == Work::Fields {
             rec.begin(ProfiledStage::Density);
             self.dispatch_particles(rec, &w.density, &g.density);
+            if let (Some(stage), Some(group)) = (&w.wall_pressure, &g.wall_pressure) {
+                self.dispatch_walls(rec, stage, group);
+            }
             self.fields_state = read;
             self.accelerations_valid = false;
             return;
@@ -212,6 +215,11 @@ impl GpuSolver {
         rec.clear(&self.status, status::NON_FINITE as u64 * 4, Some(8));
         rec.begin(ProfiledStage::Density);
         self.dispatch_particles(rec, &w.density, &g.density);
+        // With the Adami wall pressure, the wall particles' pressure from this step's fluid
+        // fields (profiled with the density).
+        if let (Some(stage), Some(group)) = (&w.wall_pressure, &g.wall_pressure) {
+            self.dispatch_walls(rec, stage, group);
+        }
         // The probes sample the state the step starts from, with its density stage's fields;
         // only in a scene with probes, only on the steps where one is due (profiled with the
         // density).
@@ -247,10 +255,19 @@ impl GpuSolver {
     }
 
     pub(super) fn dispatch_particles(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup) {
+        self.dispatch_threads(rec, stage, group, self.fluid_count as u64);
+    }
+
+    /// A stage with one invocation per wall particle.
+    fn dispatch_walls(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup) {
+        self.dispatch_threads(rec, stage, group, self.wall_count as u64);
+    }
+
+    fn dispatch_threads(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup, threads: u64) {
         let pass = rec.pass();
         pass.set_pipeline(&stage.pipeline);
         pass.set_bind_group(0, group, &[]);
-        let (x, y) = dispatch_size(self.fluid_count as u64, stage.threads_per_group, self.max_groups_per_dim);
+        let (x, y) = dispatch_size(threads, stage.threads_per_group, self.max_groups_per_dim);
         pass.dispatch_workgroups(x, y, 1);
     }
 

@@ -31,6 +31,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/dfsph_convergence.wgsl", include_str!("../../../wgsl/sim/dfsph_convergence.wgsl")),
     ("sim/dfsph_integrate.wgsl", include_str!("../../../wgsl/sim/dfsph_integrate.wgsl")),
     ("sim/probes.wgsl", include_str!("../../../wgsl/sim/probes.wgsl")),
+    ("sim/wall_pressure.wgsl", include_str!("../../../wgsl/sim/wall_pressure.wgsl")),
 ];
 
 /// The text of a simulation file (`sim/density.wgsl`, `shared/common.wgsl`, ...).
@@ -124,6 +125,7 @@ pub fn constants(params: &Params) -> Vec<(&'static str, f64)> {
         ("EOS", match params.eos { EquationOfState::Linear => 0.0, EquationOfState::Tait => 1.0 }),
         ("CLAMP_NEGATIVE_PRESSURE", flag(params.clamp_negative_pressure)),
         ("CONSISTENT_WALL_PRESSURE", flag(params.boundary_pressure == BoundaryPressure::Consistent)),
+        ("ADAMI_WALL_PRESSURE", flag(params.boundary_pressure == BoundaryPressure::Adami)),
         ("VISCOSITY", flag(params.uses_viscosity())),
         ("PLANES", flag(!params.planes.is_empty())),
         ("GRAVITY", flag(params.uses_gravity())),
@@ -143,27 +145,32 @@ pub enum Access {
     Atomic,
 }
 
-/// A storage array a stage declares with a line `//! array NAME: TYPE, ACCESS[, whole]`.
+/// A storage array a stage declares with a line `//! array NAME: TYPE, ACCESS[, whole|optional]`.
 ///
 /// The host turns each declaration into one binding per segment of at most
 /// [`GpuContext::storage_segment_bytes`] bytes (so no binding exceeds the adapter's
 /// `max_storage_buffer_binding_size`, however many particles there are) and into accessor
 /// functions `NAME_at(i)`, `NAME_set(i, v)` (read_write) and `NAME_add(i, v)` (atomic) that pick
 /// the segment of element `i`. A `whole` array is bound as one binding under its own name and is
-/// indexed directly (small arrays such as the status words).
+/// indexed directly (small arrays such as the status words). An `optional` array of length 0
+/// (a feature the scene does not use) has no binding at all: its accessors are stubs (`_at`
+/// returns zero), which the feature's specialisation constant keeps from ever being called, so
+/// the stage binds exactly what it bound before the feature existed.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ArrayDecl {
     pub name: String,
-    /// The element type as written (`vec4<f32>`, `f32` or `u32`).
+    /// The element type as written (`vec4<f32>`, `vec2<f32>`, `f32` or `u32`).
     pub ty: String,
     pub access: Access,
     pub whole: bool,
+    pub optional: bool,
 }
 
 impl ArrayDecl {
     pub fn element_bytes(&self) -> u64 {
         match self.ty.as_str() {
             "vec4<f32>" | "vec4<u32>" => 16,
+            "vec2<f32>" | "vec2<u32>" => 8,
             "f32" | "u32" | "i32" => 4,
             other => panic!("array '{}' has element type '{other}', which the segmenting does not know", self.name),
         }
@@ -176,7 +183,9 @@ impl ArrayDecl {
 
     /// Bindings of this array for `len` elements.
     pub fn segments(&self, len: u64, segment_bytes: u64) -> u64 {
-        if self.whole {
+        if self.optional && len == 0 {
+            0
+        } else if self.whole {
             1
         } else {
             len.div_ceil(self.segment_len(segment_bytes)).max(1)
@@ -198,10 +207,14 @@ pub fn array_decls(source: &str) -> Vec<ArrayDecl> {
             Some("atomic") => Access::Atomic,
             other => panic!("array '{name}' has access {other:?}; allowed: read, read_write, atomic"),
         };
-        let d = ArrayDecl { name: name.trim().into(), ty: parts[0].into(), access, whole: parts.get(2) == Some(&"whole") };
+        let d = ArrayDecl { name: name.trim().into(), ty: parts[0].into(), access, whole: parts.get(2) == Some(&"whole"), optional: parts.get(2) == Some(&"optional") };
         match decls.iter_mut().find(|e| e.name == d.name) {
             Some(e) => {
-                assert!(e.ty == d.ty && e.whole == d.whole && (e.access == Access::Atomic) == (d.access == Access::Atomic), "array '{}' declared twice differently", d.name);
+                assert!(
+                    e.ty == d.ty && e.whole == d.whole && e.optional == d.optional && (e.access == Access::Atomic) == (d.access == Access::Atomic),
+                    "array '{}' declared twice differently",
+                    d.name
+                );
                 if d.access == Access::ReadWrite {
                     e.access = Access::ReadWrite;
                 }
@@ -226,6 +239,15 @@ pub fn array_bindings_wgsl(arrays: &[ArrayDecl], segments: &[u64], segment_bytes
         if a.whole {
             writeln!(out, "@group(0) @binding({binding}) var<storage, {access}> {}: array<{ty}>;", a.name).unwrap();
             binding += 1;
+            continue;
+        }
+        if count == 0 {
+            // An optional array the scene does not use: no binding, stub accessors.
+            let n = &a.name;
+            writeln!(out, "fn {n}_at(i: u32) -> {ty} {{ return {ty}(); }}").unwrap();
+            if a.access == Access::ReadWrite {
+                writeln!(out, "fn {n}_set(i: u32, v: {ty}) {{}}").unwrap();
+            }
             continue;
         }
         for s in 0..count {
@@ -362,9 +384,11 @@ impl Stage {
     /// A bind group of `uniform` and the buffer `buffers` names for each declared array, each
     /// split into the ranges of its segments.
     pub fn bind_group(&self, device: &wgpu::Device, label: &str, uniform: &wgpu::Buffer, buffers: ArrayBuffers) -> wgpu::BindGroup {
-        let held: Vec<wgpu::Buffer> = self.arrays.iter().map(|(decl, _)| buffers(&decl.name)).collect();
+        // An optional array of length 0 has no binding (and no buffer to ask for).
+        let bound: Vec<&(ArrayDecl, u64)> = self.arrays.iter().filter(|(decl, len)| !(decl.optional && *len == 0)).collect();
+        let held: Vec<wgpu::Buffer> = bound.iter().map(|(decl, _)| buffers(&decl.name)).collect();
         let mut resources = vec![uniform.as_entire_binding()];
-        for ((decl, len), buffer) in self.arrays.iter().zip(&held) {
+        for ((decl, len), buffer) in bound.into_iter().zip(&held) {
             let bytes = decl.element_bytes();
             // A whole array, or an empty one (its buffer is a 16-byte stand-in), is bound as its
             // buffer; the others exactly as long as the array, in segments: a buffer may be

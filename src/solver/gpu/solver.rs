@@ -16,6 +16,7 @@ use super::workgroups::{GpuOptions, SolverLoop};
 use crate::model::initial::InitialState;
 use crate::model::kernels::sort_by_cell;
 use crate::model::params::Params;
+use crate::model::scene::BoundaryPressure;
 use crate::model::real::V3;
 use crate::model::probes::ProbeSample;
 use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
@@ -37,6 +38,8 @@ pub(super) struct ParityBindGroups {
 /// The weakly compressible step's bind groups of one parity.
 pub(super) struct WcsphBindGroups {
     pub density: wgpu::BindGroup,
+    /// With the Adami wall pressure: the wall stage's.
+    pub wall_pressure: Option<wgpu::BindGroup>,
     /// The integration (after `forces`, adaptive dt) or the fused forces and integration.
     pub advance: wgpu::BindGroup,
 }
@@ -56,6 +59,9 @@ pub(super) struct Pipelines {
 /// The weakly compressible step's own stages.
 pub(super) struct WcsphStages {
     pub density: Stage,
+    /// With `boundary_pressure = "adami"`: the wall particles' pressure (wall_pressure.wgsl),
+    /// after the density stage, one invocation per wall particle.
+    pub wall_pressure: Option<Stage>,
     /// The forces alone: every step with adaptive dt; otherwise only when the accelerations are
     /// asked for (`step_fields`).
     pub forces: Stage,
@@ -100,6 +106,11 @@ pub struct GpuSolver {
     pub(super) status: wgpu::Buffer,
     pub(super) wall_positions: wgpu::Buffer,
     pub(super) wall_starts: wgpu::Buffer,
+    /// With the Adami wall pressure: each sorted wall particle's pressure and density
+    /// (`vec2<f32>`).
+    pub(super) wall_fields: Option<wgpu::Buffer>,
+    /// The original index of each sorted wall particle.
+    pub(super) wall_order: Vec<u32>,
     pub(super) scan: Scan,
     pub(super) pipelines: Pipelines,
     pub(super) groups: [ParityBindGroups; 2],
@@ -132,6 +143,8 @@ struct ArrayCounts {
     cells_plus_one: u64,
     walls: u64,
     wall_cells_plus_one: u64,
+    /// The wall particles with the Adami wall pressure, else 0 (the array is then not bound).
+    wall_fields: u64,
 }
 
 impl ArrayCounts {
@@ -140,6 +153,7 @@ impl ArrayCounts {
             "starts" | "counts" => self.cells_plus_one,
             "wall_positions" => self.walls,
             "wall_starts" => self.wall_cells_plus_one,
+            "wall_fields" => self.wall_fields,
             "status" | "solve_dispatch" => 0,
             _ => self.fluid,
         }
@@ -158,7 +172,14 @@ impl GpuSolver {
         let w = initial.wall_positions.len() as u64;
         // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
         let has_walls = w > 0;
-        let counts = ArrayCounts { fluid: n, cells_plus_one: cells + 1, walls: w, wall_cells_plus_one: if has_walls { cells + 1 } else { 0 } };
+        let adami = params.boundary_pressure == BoundaryPressure::Adami && has_walls && params.dfsph.is_none();
+        let counts = ArrayCounts {
+            fluid: n,
+            cells_plus_one: cells + 1,
+            walls: w,
+            wall_cells_plus_one: if has_walls { cells + 1 } else { 0 },
+            wall_fields: if adami { w } else { 0 },
+        };
         // The fused stage binds a placeholder for the accelerations it declares but never uses,
         // as does the one-thread finish_step.
         let without_accelerations = |name: &str| if name == "accelerations" { 0 } else { counts.len(name) };
@@ -178,7 +199,7 @@ impl GpuSolver {
         let plan = if dfsph {
             MemoryPlan::new(n, Some(w), cells, uniform_bytes, params.adaptive.is_some()).with_dfsph(n)
         } else {
-            MemoryPlan::new(n, Some(w), cells, uniform_bytes, !fused)
+            MemoryPlan::new(n, Some(w), cells, uniform_bytes, !fused).with_wall_fields(counts.wall_fields)
         };
         plan.check(&ctx)?;
 
@@ -209,6 +230,8 @@ impl GpuSolver {
                     } else {
                         stage(&ctx, "density", "density", &len, &sized(ws.density))?
                     },
+                    // One invocation per wall particle, at the density stage's workgroup size.
+                    wall_pressure: if adami { Some(stage(&ctx, "wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
                     forces: stage(&ctx, "forces", "forces", &len, &sized(ws.forces))?,
                     advance: if fused {
                         stage(&ctx, "forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
@@ -250,6 +273,11 @@ impl GpuSolver {
         let wall_positions = storage_init(device, "wall positions", bytemuck::cast_slice(&vec4s(&walls_sorted, |i| wall_masses[i])));
         let wall_starts = if has_walls { wall_starts } else { Vec::new() };
         let wall_starts = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
+        // Before the first step (a snapshot at t = 0 evaluates them too): no pressure, rest density.
+        let wall_fields = adami.then(|| {
+            let rest: Vec<[f32; 2]> = vec![[0.0, params.rest_density as f32]; w as usize];
+            storage_init(device, "wall fields", bytemuck::cast_slice(&rest))
+        });
 
         let state = [StateBuffers::new(device, 0, n), StateBuffers::new(device, 1, n)];
         // With continuity density the w of each velocity carries the particle's density.
@@ -273,7 +301,8 @@ impl GpuSolver {
         let buffers = |c: usize| {
             let (src, dst) = (&state[c], &state[1 - c]);
             let acc = accelerations.as_ref().unwrap_or(&placeholder);
-            let (starts, densities, pressures, status, wall_positions, wall_starts) = (&starts, &densities, &pressures, &status, &wall_positions, &wall_starts);
+            let (starts, densities, pressures, status, wall_positions, wall_starts, wall_fields) =
+                (&starts, &densities, &pressures, &status, &wall_positions, &wall_starts, &wall_fields);
             move |name: &str| -> wgpu::Buffer {
                 match name {
                     "positions" | "positions_in" => src.positions.clone(),
@@ -285,6 +314,7 @@ impl GpuSolver {
                     "starts" | "counts" => starts.clone(),
                     "wall_positions" => wall_positions.clone(),
                     "wall_starts" => wall_starts.clone(),
+                    "wall_fields" => wall_fields.clone().expect("bound only with the Adami wall pressure"),
                     "status" => status.clone(),
                     "accelerations" => acc.clone(),
                     other => panic!("no buffer holds the array '{other}'"),
@@ -305,6 +335,7 @@ impl GpuSolver {
                 reorder: p.reorder.bind_group(device, "reorder", u, &b),
                 wcsph: p.wcsph.as_ref().map(|w| WcsphBindGroups {
                     density: w.density.bind_group(device, "density", u, &b),
+                    wall_pressure: w.wall_pressure.as_ref().map(|stage| stage.bind_group(device, "wall_pressure", u, &b)),
                     advance: if fused {
                         w.advance.bind_group(device, "forces_and_integrate", u, &without_accelerations(c))
                     } else {
@@ -357,6 +388,8 @@ impl GpuSolver {
             status,
             wall_positions,
             wall_starts,
+            wall_fields,
+            wall_order,
             scan,
             groups,
             pipelines,
@@ -394,6 +427,7 @@ impl GpuSolver {
                     "starts" => &self.starts,
                     "wall_positions" => &self.wall_positions,
                     "wall_starts" => &self.wall_starts,
+                    "wall_fields" => self.wall_fields.as_ref().expect("bound only with the Adami wall pressure"),
                     "accelerations" => &buffer,
                     other => panic!("no buffer holds the array '{other}'"),
                 }
@@ -484,6 +518,21 @@ impl GpuSolver {
         }
     }
 
+    /// Each wall particle's [pressure, density] of the last density stage, in the walls'
+    /// original order (`boundary_pressure = "adami"`; empty otherwise).
+    pub fn wall_fields(&self) -> anyhow::Result<Vec<[f64; 2]>> {
+        let Some(buffer) = &self.wall_fields else {
+            return Ok(Vec::new());
+        };
+        let data = read_buffers(&self.ctx, &[(buffer, self.wall_count as u64 * 8)])?;
+        let sorted: Vec<[f32; 2]> = bytemuck::pod_collect_to_vec(&data[0]);
+        let mut out = vec![[0.0; 2]; sorted.len()];
+        for (slot, f) in sorted.iter().enumerate() {
+            out[self.wall_order[slot] as usize] = [f[0] as f64, f[1] as f64];
+        }
+        Ok(out)
+    }
+
     /// Whether forces and integration run as one pass.
     pub fn fused(&self) -> bool {
         self.pipelines.fused
@@ -567,6 +616,7 @@ impl GpuSolver {
         [&s.uniform, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
             .into_iter()
             .chain(planned_accelerations)
+            .chain(s.wall_fields.as_ref())
             .map(|b| b.size())
             .chain(s.state.iter().flat_map(|st| [st.positions.size(), st.velocities.size()]))
             .sum::<u64>()
