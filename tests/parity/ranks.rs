@@ -5,7 +5,7 @@
 
 use super::common::TestScene;
 use std::sync::Arc;
-use wgsph::model::scene::Scene;
+use wgsph::model::scene::{BoundaryPressure, Scene};
 use wgsph::model::state::{BackendState, Snapshot};
 use wgsph::solver::{open, Backend, BackendChoice, LocalGroup, Precision, Ranks};
 
@@ -94,10 +94,11 @@ fn two_hundred_steps_of_the_dam_break_on_one_two_and_four_ranks_agree() {
 }
 
 #[test]
-fn continuity_density_in_f32_and_adaptive_dt_agree_bit_for_bit() {
+fn continuity_density_in_f32_adaptive_dt_and_adami_walls_agree_bit_for_bit() {
     let continuity = TestScene::small_tank().continuity().density_diffusion(0.1).build();
     let adaptive = TestScene::small_tank().adaptive().build();
-    for (scene, precision) in [(continuity, Precision::F32), (adaptive, Precision::F64)] {
+    let adami = TestScene::small_tank().boundary_pressure(BoundaryPressure::Adami).build();
+    for (scene, precision) in [(continuity, Precision::F32), (adaptive, Precision::F64), (adami, Precision::F64)] {
         let mut single = open(&scene, &BackendChoice::cpu(precision)).expect("opens");
         single.step(30).expect("steps");
         let one = single.snapshot().expect("snapshot");
@@ -106,7 +107,7 @@ fn continuity_density_in_f32_and_adaptive_dt_agree_bit_for_bit() {
             b.step(30)?;
             Ok((b.snapshot()?, b.dt_stats()?.last))
         });
-        assert!(all[0].0 == one, "2 ranks against 1, {precision:?}, {:?}", scene.physics.density);
+        assert!(all[0].0 == one, "2 ranks against 1, {precision:?}, {:?}, {:?}", scene.physics.density, scene.physics.boundary_pressure);
         assert_eq!(all[0].1, dt);
     }
 }

@@ -367,6 +367,7 @@ impl<R: Real> CpuSolver<R> {
         self.exchange(false);
         self.bin();
         self.compute_density();
+        self.compute_wall_pressure();
         if let Some(e) = self.rank_failure() {
             anyhow::bail!("{e}");
         }
