@@ -84,7 +84,10 @@ pub trait Backend {
     /// Reads the health counters (a few bytes on the GPU).
     fn health(&mut self) -> anyhow::Result<Health>;
     /// The particles in original order, with density and pressure evaluated for the current
-    /// positions. Taking a snapshot never changes the trajectory.
+    /// positions. Taking a snapshot never changes the trajectory. Across ranks every rank
+    /// calls it (it is collective) and rank 0 receives every particle; the other ranks get the
+    /// step and time with no particle. [`Backend::step_fields`] and [`Backend::save_state`]
+    /// do the same.
     fn snapshot(&mut self) -> anyhow::Result<Snapshot>;
     /// Whether [`Backend::visit_snapshot_rows`] hands the snapshot over in pieces (the GPU,
     /// which then never needs one host copy of every array).

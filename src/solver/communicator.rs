@@ -18,6 +18,8 @@ pub trait Communicator: Send + Sync {
     fn exchange(&self, to_lower: &[f64], to_upper: &[f64]) -> anyhow::Result<(Vec<f64>, Vec<f64>)>;
     /// Every rank's `values`, in rank order: the same result on every rank.
     fn all_gather(&self, values: &[f64]) -> anyhow::Result<Vec<Vec<f64>>>;
+    /// Every rank's `values`, in rank order, on rank 0 (`None` on the others).
+    fn gather(&self, values: &[f64]) -> anyhow::Result<Option<Vec<Vec<f64>>>>;
     /// Stops every rank of the simulation with `message` (said by this rank): what a rank that
     /// cannot go on does, so that no other rank waits forever in the next collective.
     fn abort(&self, message: &str) -> !;
@@ -157,6 +159,13 @@ impl Communicator for LocalCommunicator {
             self.send(to, values)?;
         }
         (0..self.size).map(|from| if from == self.rank { Ok(values.to_vec()) } else { self.receive(from) }).collect()
+    }
+    fn gather(&self, values: &[f64]) -> anyhow::Result<Option<Vec<Vec<f64>>>> {
+        if self.rank != 0 {
+            self.send(0, values)?;
+            return Ok(None);
+        }
+        (0..self.size).map(|from| if from == 0 { Ok(values.to_vec()) } else { self.receive(from) }).collect::<anyhow::Result<Vec<_>>>().map(Some)
     }
     fn abort(&self, message: &str) -> ! {
         // Threads of one process: the process ends, and with it every rank.

@@ -78,18 +78,31 @@ impl RankCommunicator for MpiCommunicator {
         let size = self.world.size() as usize;
         let mut counts: Vec<Count> = vec![0; size];
         self.world.all_gather_into(&(values.len() as Count), &mut counts[..]);
-        let displs: Vec<Count> = counts.iter().scan(0, |acc, &c| {
-            let start = *acc;
-            *acc += c;
-            Some(start)
-        }).collect();
-        let total: usize = counts.iter().map(|&c| c as usize).sum();
-        let mut all = vec![0.0f64; total];
+        let displs = displacements(&counts);
+        let mut all = vec![0.0f64; counts.iter().map(|&c| c as usize).sum()];
         {
             let mut partition = PartitionMut::new(&mut all[..], &counts[..], &displs[..]);
             self.world.all_gather_varcount_into(values, &mut partition);
         }
-        Ok(counts.iter().zip(&displs).map(|(&c, &d)| all[d as usize..(d + c) as usize].to_vec()).collect())
+        Ok(split(&all, &counts, &displs))
+    }
+    fn gather(&self, values: &[f64]) -> anyhow::Result<Option<Vec<Vec<f64>>>> {
+        let root = self.world.process_at_rank(0);
+        let count = values.len() as Count;
+        if self.world.rank() != 0 {
+            root.gather_into(&count);
+            root.gather_varcount_into(values);
+            return Ok(None);
+        }
+        let mut counts: Vec<Count> = vec![0; self.world.size() as usize];
+        root.gather_into_root(&count, &mut counts[..]);
+        let displs = displacements(&counts);
+        let mut all = vec![0.0f64; counts.iter().map(|&c| c as usize).sum()];
+        {
+            let mut partition = PartitionMut::new(&mut all[..], &counts[..], &displs[..]);
+            root.gather_varcount_into_root(values, &mut partition);
+        }
+        Ok(Some(split(&all, &counts, &displs)))
     }
     fn abort(&self, message: &str) -> ! {
         eprintln!("error: rank {} of {} stops every rank: {message}", self.world.rank(), self.world.size());
@@ -101,4 +114,21 @@ impl RankCommunicator for MpiCommunicator {
     fn node_rank(&self) -> (usize, usize) {
         self.node
     }
+}
+
+/// Where each rank's part starts in a gathered buffer.
+fn displacements(counts: &[Count]) -> Vec<Count> {
+    counts
+        .iter()
+        .scan(0, |acc, &c| {
+            let start = *acc;
+            *acc += c;
+            Some(start)
+        })
+        .collect()
+}
+
+/// A gathered buffer cut into the ranks' parts.
+fn split(all: &[f64], counts: &[Count], displs: &[Count]) -> Vec<Vec<f64>> {
+    counts.iter().zip(displs).map(|(&c, &d)| all[d as usize..(d + c) as usize].to_vec()).collect()
 }

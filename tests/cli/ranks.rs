@@ -1,7 +1,8 @@
 //! `mpirun -np N wgsph run ...` as a user launches it: 1, 2 and 4 ranks on the dam break and the
 //! hydrostatic tank give the same snapshots byte for byte, particles migrate, a rank may hold
 //! no particle, a checkpoint of 2 ranks continues on 4 or 1, a killed rank stops the run within
-//! seconds with a resumable checkpoint, and a build without MPI refuses a multi-rank launch.
+//! seconds with a resumable checkpoint, an error on one rank stops all of them naming it, and a
+//! build without MPI refuses a multi-rank launch.
 //!
 //! MPI starts once per process, so these run `mpirun` on a wgsph built with `--features mpi`,
 //! found through WGSPH_MPI_BIN (.ci/run builds it). Without mpirun or that binary the tests say
@@ -202,4 +203,21 @@ fn a_build_without_mpi_refuses_a_multi_rank_launch() {
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("built without MPI") && err.contains("--features mpi"), "{err}");
     assert!(!tmp.path().join("o").exists(), "nothing written");
+}
+
+#[test]
+fn an_error_on_one_rank_stops_every_rank_naming_it() {
+    let Some(m) = mpi() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    // Rank 0 alone checks the output directory, and refuses one a run did not write; the
+    // other rank is already waiting for it.
+    std::fs::create_dir(tmp.path().join("taken")).unwrap();
+    std::fs::write(tmp.path().join("taken/notes.txt"), "mine").unwrap();
+    let start = Instant::now();
+    let out = mpirun(&m, 2, &["run", "dam_break", "--particles", "500", "--backend", "cpu", "--steps", "10", "--out", "taken"], tmp.path()).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(start.elapsed() < Duration::from_secs(60), "every rank ended");
+    assert!(err.contains("rank 0 of 2 stops every rank") && err.contains("taken"), "{err}");
+    assert_eq!(std::fs::read_to_string(tmp.path().join("taken/notes.txt")).unwrap(), "mine");
 }

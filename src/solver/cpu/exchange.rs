@@ -343,8 +343,8 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// Across ranks: every rank's rows `f(slot)` of its own particles, each after its place in
-    /// the one-process order (two words), in rank order.
-    fn gather_own(&mut self, width: usize, row: impl Fn(&Self, usize) -> Vec<f64>) -> anyhow::Result<Vec<f64>> {
+    /// the one-process order (two words), in rank order, on rank 0 (`None` on the others).
+    fn gather_own(&mut self, width: usize, row: impl Fn(&Self, usize) -> Vec<f64>) -> anyhow::Result<Option<Vec<f64>>> {
         let own = self.own_order();
         let mut mine = Vec::with_capacity((width + 2) * own.len());
         for (slot, order) in own {
@@ -354,15 +354,16 @@ impl<R: Real> CpuSolver<R> {
         }
         let comm = self.ranks.as_ref().expect("only across ranks").comm.clone();
         let t0 = Instant::now();
-        let all = comm.all_gather(&mine)?;
+        let all = comm.gather(&mine)?;
         if let Some(part) = &mut self.ranks {
             part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
         }
-        Ok(all.concat())
+        Ok(all.map(|parts| parts.concat()))
     }
 
     /// [`CpuSolver::snapshot`] across ranks: each rank bins its particles with fresh ghosts
-    /// and evaluates density; the rows are gathered on every rank.
+    /// and evaluates density; the rows are gathered on rank 0, which writes the files (the
+    /// other ranks get a snapshot of no particle, at the same step and time).
     pub(super) fn snapshot_across_ranks(&mut self) -> anyhow::Result<Snapshot> {
         self.exchange(false);
         self.bin();
@@ -375,6 +376,7 @@ impl<R: Real> CpuSolver<R> {
             let (x, v) = (s.positions[i].to64(), s.velocities[i].to64());
             vec![s.ids[i] as f64, x[0], x[1], x[2], v[0], v[1], v[2], s.densities[i].to64(), s.pressures[i].to64()]
         })?;
+        let Some(rows) = rows else { return Ok(Snapshot::with_len(0, self.step, self.time())) };
         let n = self.ranks.as_ref().map_or(0, |p| p.total_fluid);
         let mut s = Snapshot::with_len(n, self.step, self.time());
         for r in rows.chunks_exact(11).map(|r| &r[2..]) {
@@ -387,13 +389,14 @@ impl<R: Real> CpuSolver<R> {
         Ok(s)
     }
 
-    /// [`CpuSolver::step_fields`] across ranks, gathered on every rank.
+    /// [`CpuSolver::step_fields`] across ranks, gathered on rank 0 (empty on the others).
     pub(super) fn step_fields_across_ranks(&mut self) -> anyhow::Result<StepFields> {
         let rows = self.gather_own(6, |s, i| {
             let a = s.accelerations[i].to64();
             vec![s.ids[i] as f64, s.densities[i].to64(), s.pressures[i].to64(), a[0], a[1], a[2]]
         })?;
-        let n = self.ranks.as_ref().map_or(0, |p| p.total_fluid);
+        let n = if rows.is_some() { self.ranks.as_ref().map_or(0, |p| p.total_fluid) } else { 0 };
+        let rows = rows.unwrap_or_default();
         let mut out = StepFields { densities: vec![0.0; n], pressures: vec![0.0; n], accelerations: vec![[0.0; 3]; n] };
         for r in rows.chunks_exact(8).map(|r| &r[2..]) {
             let id = r[0] as usize;
@@ -437,7 +440,8 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// [`CpuSolver::save_state`] across ranks: the own particles of every rank in the
-    /// one-process (cell) order, so the state is the one one process would save.
+    /// one-process (cell) order, on rank 0, so the state is the one one process would save
+    /// (the other ranks' holds the step, time and health, and no particle).
     pub(super) fn save_state_across_ranks(&mut self) -> anyhow::Result<BackendState> {
         let continuity = !self.carried_densities.is_empty();
         let w = 7 + continuity as usize;
@@ -449,7 +453,9 @@ impl<R: Real> CpuSolver<R> {
             }
             r
         })?;
-        // In the one-process order: by the place each row carries.
+        // In the one-process order: by the place each row carries (on rank 0; the other
+        // ranks' state holds no particle).
+        let rows = rows.unwrap_or_default();
         let mut rows: Vec<&[f64]> = rows.chunks_exact(w + 2).collect();
         rows.sort_unstable_by_key(|r| ((r[0] as u64) << 32) | r[1] as u64);
         let rows: Vec<f64> = rows.iter().flat_map(|r| r[2..].iter().copied()).collect();
