@@ -538,7 +538,7 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
         snapshot_every,
         snapshot_interval,
         check_every: args.check_every,
-        progress: !args.quiet,
+        progress: !quiet,
         formats: args.formats.clone(),
         checkpoint_every: args.checkpoint_every,
         resumed: None,
