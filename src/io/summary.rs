@@ -107,6 +107,11 @@ pub struct RankSummary {
     /// Seconds in the exchange and the collectives, and their share of the run's wall time.
     pub exchange_seconds: f64,
     pub exchange_share: f64,
+    /// Where it ran: its place among the ranks of its machine, how many ran there, and the
+    /// CPU threads it computed with (every rank runs the CPU path for now).
+    pub node_rank: usize,
+    pub node_ranks: usize,
+    pub threads: usize,
 }
 
 impl RanksSummary {
@@ -130,6 +135,9 @@ impl RanksSummary {
                     migrated: r.stats.migrated,
                     exchange_seconds: r.stats.exchange_seconds,
                     exchange_share: if wall_seconds > 0.0 { r.stats.exchange_seconds / wall_seconds } else { 0.0 },
+                    node_rank: r.node_rank,
+                    node_ranks: r.node_ranks,
+                    threads: r.threads,
                 })
                 .collect(),
         }

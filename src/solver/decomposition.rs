@@ -145,6 +145,11 @@ pub struct RankReport {
     pub bounds: Vec<u32>,
     /// The particles this rank owns now (ghosts left out).
     pub own_particles: usize,
+    /// Its place among the ranks of its machine, and how many run there.
+    pub node_rank: usize,
+    pub node_ranks: usize,
+    /// The CPU threads it computes with.
+    pub threads: usize,
     pub stats: RankStats,
 }
 

@@ -181,6 +181,9 @@ impl<R: Real> CpuSolver<R> {
             axis: p.axis,
             bounds: p.slabs.bounds.clone(),
             own_particles: self.own_slots().iter().map(|r| r.len()).sum(),
+            node_rank: p.comm.node_rank().0,
+            node_ranks: p.comm.node_rank().1,
+            threads: rayon::current_num_threads(),
             stats: p.stats.clone(),
         })
     }
@@ -425,13 +428,16 @@ impl<R: Real> CpuSolver<R> {
         let Some(mine) = self.rank_report() else { return Ok(None) };
         let comm = self.ranks.as_ref().expect("across ranks").comm.clone();
         let s = &mine.stats;
-        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64])?;
+        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64])?;
         Ok(Some(
             all.iter()
                 .enumerate()
                 .map(|(rank, r)| RankReport {
                     rank,
                     own_particles: r[0] as usize,
+                    node_rank: r[4] as usize,
+                    node_ranks: r[5] as usize,
+                    threads: r[6] as usize,
                     stats: RankStats { exchange_seconds: r[1], migrated: r[2] as u64, ghosts: r[3] as usize, ..s.clone() },
                     ..mine.clone()
                 })
