@@ -254,7 +254,7 @@ pub struct CompareArgs {
 impl RunArgs {
     /// The backend these flags ask for.
     pub fn backend_choice(&self) -> BackendChoice {
-        BackendChoice { device: self.backend.device(), precision: self.precision.precision(), gpu_options: self.gpu.options(), context: None }
+        BackendChoice { device: self.backend.device(), precision: self.precision.precision(), gpu_options: self.gpu.options(), context: None, ranks: None }
     }
 }
 

@@ -45,5 +45,5 @@ pub fn cmd_first_run() -> anyhow::Result<i32> {
     if !pictures {
         println!("  no GPU adapter (not even a software one such as llvmpipe) to draw pictures with: the run writes none");
     }
-    cmd_run(&RunArgs::parse_from(args.iter().map(String::as_str)))
+    cmd_run(&RunArgs::parse_from(args.iter().map(String::as_str)), None)
 }

@@ -7,6 +7,7 @@ pub mod compare;
 pub mod errors;
 pub mod first_run;
 pub mod profile;
+pub mod ranks;
 pub mod resume;
 pub mod run;
 pub mod signals;
@@ -65,11 +66,23 @@ fn quiet_wayland_probe() {
 fn quiet_wayland_probe() {}
 
 fn run_command(command: Command) -> anyhow::Result<i32> {
+    let name = match &command {
+        Command::Run(_) => "run",
+        Command::Compare(_) => "compare",
+        Command::View(_) => "view",
+        Command::Tradeoff(_) => "tradeoff",
+        Command::Validate(_) => "validate",
+        Command::Profile(_) => "profile",
+        Command::Bench(_) => "bench",
+        Command::Adapters => "adapters",
+        Command::Scenes => "scenes",
+    };
+    let ranks = ranks::start(name)?;
     match command {
-        Command::Run(args) => match &args.resume {
-            Some(dir) => resume::resume_run(dir, &args),
-            None => run::cmd_run(&args),
-        },
+        Command::Run(args) => ranks::run_as_rank(ranks, |ranks| match &args.resume {
+            Some(dir) => resume::resume_run(dir, &args, ranks),
+            None => run::cmd_run(&args, ranks),
+        }),
         Command::Compare(args) => compare::cmd_compare(&args),
         Command::View(args) => cmd_view(&args),
         Command::Tradeoff(args) => tradeoff::cmd_tradeoff(&args),

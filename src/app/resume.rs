@@ -2,19 +2,20 @@
 
 use super::args::RunArgs;
 use super::errors::InputError;
-use super::run::{report_run, run, steps_for_time, ResumedRun, RunOptions};
+use super::run::{exit_code_of, report_run, run, steps_for_time, ResumedRun, RunOptions};
 use super::signals;
 use crate::io::checkpoint::{read, Checkpoint, CHECKPOINT_FILE};
 use crate::io::rundir::remove_partial_files;
 use crate::io::summary::Summary;
 use crate::model::scene::{Scene, SceneOrigin};
-use crate::solver::{open, Backend, BackendChoice, Precision};
+use crate::solver::{open, Backend, BackendChoice, Precision, Ranks};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 
 /// Continues the run in `dir` from its checkpoint, to the end it was heading to, or for
 /// `--steps N` / `--time T` more.
-pub fn resume_run(dir: &Path, args: &RunArgs) -> anyhow::Result<i32> {
+pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
+    let writes_files = super::ranks::writes_files(ranks);
     let path = dir.join(CHECKPOINT_FILE);
     if !path.exists() {
         return Err(InputError(format!(
@@ -41,13 +42,15 @@ pub fn resume_run(dir: &Path, args: &RunArgs) -> anyhow::Result<i32> {
         .into());
     }
     // A run killed while writing left partial files of the atomic writer: they go first.
-    let removed = remove_partial_files(dir)?;
+    let removed = if writes_files { remove_partial_files(dir)? } else { Vec::new() };
     if !removed.is_empty() && !args.quiet {
         let names: Vec<String> = removed.iter().map(|p| p.display().to_string()).collect();
         println!("removed {} partial file(s) the interrupted run left: {}", removed.len(), names.join(", "));
     }
     signals::install();
-    let mut sim = open(&scene, &choice_of_kind(&c.state.kind)?)?;
+    let mut choice = choice_of_kind(&c.state.kind)?;
+    choice.ranks = ranks.cloned();
+    let mut sim = open(&scene, &choice)?;
     let backend = sim.backend();
     // The CPU path gives the same bits with any number of threads; a GPU may not on another adapter.
     if c.state.kind == "gpu" && backend.adapter() != c.run.adapter {
@@ -57,13 +60,16 @@ pub fn resume_run(dir: &Path, args: &RunArgs) -> anyhow::Result<i32> {
             backend.adapter()
         );
     }
-    let summary = resume_with(backend, dir, &c, end, !args.quiet)?;
+    let summary = resume_with(backend, dir, &c, end, !args.quiet && writes_files, writes_files)?;
+    if !writes_files {
+        return Ok(exit_code_of(&summary));
+    }
     report_run(&summary, dir, args.quiet)
 }
 
 /// Restores `c` into `backend` (a fresh one of the kind that saved it) and runs on to step
 /// `end`, writing into `dir` with the settings of the interrupted run.
-pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u64, progress: bool) -> anyhow::Result<Summary> {
+pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u64, progress: bool, writes_files: bool) -> anyhow::Result<Summary> {
     let step = c.state.step;
     backend.restore_state(&c.state).with_context(|| format!("cannot restore the checkpoint in {}", dir.display()))?;
     log::info!("resuming {} at step {step} towards step {end}", dir.display());
@@ -82,6 +88,7 @@ pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u
         surface_mesh_every: c.run.surface_mesh_every,
         surface_mesh_format: c.run.surface_mesh_format,
         start: None,
+        writes_files,
     };
     let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::Text)?;
     run(backend, &scene, &opts)

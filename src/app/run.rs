@@ -9,14 +9,14 @@ use crate::io::probes::ProbeWriter;
 use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, StartGuard};
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::snapshot::SnapshotWriter;
-use crate::io::summary::{write_summary, DfsphSummary, RunStatus, Summary, SUMMARY_FILE};
+use crate::io::summary::{write_summary, DfsphSummary, RanksSummary, RunStatus, Summary, SUMMARY_FILE};
 use crate::io::surface::{write_snapshot_surface, MeshFormat, SurfaceParameters};
 use crate::model::params::Params;
 use crate::model::scene::{Scene, SceneOrigin};
 use crate::model::state::Snapshot;
 use crate::model::diagnosis::regime_warnings;
 use crate::solver::backend::diagnose_failure;
-use crate::solver::{open, Backend};
+use crate::solver::{open, Backend, Ranks};
 use crate::viz::probe_plots::plot_probes;
 use crate::viz::render::frames::FrameRecorder;
 use crate::viz::render::RenderOptions;
@@ -61,6 +61,10 @@ pub struct RunOptions {
     /// The start of a new run, committed once the run took its first step; an error before
     /// then returns with the start still uncommitted (dropping it undoes the start).
     pub start: Option<StartGuard>,
+    /// Whether this process writes the files: alone it does; across ranks rank 0 does, and the
+    /// other ranks take part in the same collective reads (snapshots, checkpoints) without
+    /// writing.
+    pub writes_files: bool,
 }
 
 /// What a resumed run takes over from the run that wrote its checkpoint.
@@ -87,6 +91,7 @@ impl Default for RunOptions {
             surface_mesh_every: 0,
             surface_mesh_format: MeshFormat::Obj,
             start: None,
+            writes_files: true,
         }
     }
 }
@@ -110,7 +115,9 @@ pub fn default_snapshot_every(steps: u64) -> u64 {
 /// an error, without a summary (the caller undoes the start).
 pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summary> {
     let snapshots_dir = opts.out.join("snapshots");
-    std::fs::create_dir_all(&snapshots_dir).with_context(|| format!("cannot create {}", snapshots_dir.display()))?;
+    if opts.writes_files {
+        std::fs::create_dir_all(&snapshots_dir).with_context(|| format!("cannot create {}", snapshots_dir.display()))?;
+    }
     let params = backend.params().clone();
     let start = backend.steps_done();
     let end = start + opts.steps;
@@ -158,7 +165,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             }
             let s = backend.snapshot()?;
             *max_speed = s.max_speed();
-            *last = Some(writer.write(&s)?);
+            if opts.writes_files {
+                *last = Some(writer.write(&s)?);
+            }
             Ok(Some(s))
         })()
         .with_context(|| format!("step {step}: writing the snapshot"))?;
@@ -172,7 +181,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             Some(s) => s,
             None => backend.snapshot()?,
         };
-        write_snapshot_surface(&opts.out, &s, &surface, opts.surface_mesh_format).with_context(|| format!("step {step}: writing the surface mesh"))?;
+        if opts.writes_files {
+            write_snapshot_surface(&opts.out, &s, &surface, opts.surface_mesh_format).with_context(|| format!("step {step}: writing the surface mesh"))?;
+        }
         Ok(())
     };
     if opts.resumed.is_none() {
@@ -202,8 +213,10 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let outcome = (|| -> anyhow::Result<()> {
     while step < end {
         if started {
-            if let Some(signal) = signals::requested() {
-                stopped_by = Some(signal);
+            // Across ranks every rank stops at the same batch, whichever saw the signal first.
+            let signal = signals::requested();
+            if backend.any_rank(signal.is_some())? {
+                stopped_by = Some(signal.unwrap_or(StopSignal::Interrupt));
                 break;
             }
         }
@@ -362,7 +375,11 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         max_mach: (params.speed_of_sound() > 0.0).then(|| health.max_speed / params.speed_of_sound()),
         warnings: regime_warnings(&params, &health),
         probes: params.probes.probes.iter().map(|p| p.name.clone()).collect(),
+        ranks: backend.rank_reports()?.map(|reports| RanksSummary::of(&reports, wall_seconds)),
     };
+    if !opts.writes_files {
+        return Ok(summary);
+    }
     // The run stands (a run of no steps too): its start is no longer undone.
     if let Some(guard) = &opts.start {
         if let Err(e) = guard.commit() {
@@ -379,6 +396,11 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
 
 /// Writes the run's checkpoint (`DIR/checkpoint.wgsph`) at the backend's step.
 fn write_checkpoint(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions, end: u64, last_snapshot: Option<&Path>, max_speed: f64) -> anyhow::Result<()> {
+    if !opts.writes_files {
+        // The state is gathered from every rank; the rank that writes it asks for the rest.
+        backend.save_state_header()?;
+        return Ok(());
+    }
     let path = opts.out.join(CHECKPOINT_FILE);
     let step = backend.steps_done();
     let record = run_record(backend, opts, end, last_snapshot, max_speed);
@@ -447,14 +469,25 @@ fn scene_note(name: &str) -> Option<&'static str> {
 }
 
 /// `wgsph run` (without `--resume`): a new run.
-pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
+pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     if let Some(t) = args.time {
         if !(t.is_finite() && t >= 0.0) {
             return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
         }
     }
+    let writes_files = super::ranks::writes_files(ranks);
+    let quiet = args.quiet || !writes_files;
+    if let Some(r) = ranks.filter(|r| r.comm.size() > 1) {
+        if args.frames.is_some() || args.surface_mesh_every > 0 {
+            return Err(InputError(format!(
+                "--frames and --surface-mesh-every are not supported across ranks yet ({} ranks): run them on one rank (from a checkpoint: `wgsph run --resume DIR` without mpirun)",
+                r.comm.size()
+            ))
+            .into());
+        }
+    }
     let scene = run_scene(args)?;
-    super::args::warn_lattice(&scene, args.quiet);
+    super::args::warn_lattice(&scene, quiet);
     let params = scene.params();
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
     if args.checkpoint_every > 0 && params.rebuild_every > 1 {
@@ -468,21 +501,30 @@ pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
     let out = args.out.clone().unwrap_or_else(|| numbered_run_dir(Path::new("out"), &scene.name));
     let scene_file = Scene::builtin(&args.scene).is_none().then(|| PathBuf::from(&args.scene));
     let inputs: Vec<&Path> = scene_file.iter().map(PathBuf::as_path).collect();
-    let outputs = RunOutputs::check(&out, args.frames.as_deref(), args.overwrite, args.out.is_none(), &inputs)?;
-    for (dir, names) in outputs.kept() {
+    // Across ranks rank 0 alone checks and prepares the outputs.
+    let outputs = if writes_files { Some(RunOutputs::check(&out, args.frames.as_deref(), args.overwrite, args.out.is_none(), &inputs)?) } else { None };
+    for (dir, names) in outputs.iter().flat_map(|o| o.kept()) {
         eprintln!("note: --overwrite keeps {} in {}: no wgsph run wrote it", names.join(", "), dir.display());
     }
-    if let (Some(note), false) = (scene_note(&args.scene), args.quiet) {
+    if let (Some(note), false) = (scene_note(&args.scene), quiet) {
         println!("{note}");
     }
     signals::install();
-    let mut sim = open(&scene, &args.backend_choice())?;
-    if !args.quiet {
+    let mut choice = args.backend_choice();
+    choice.ranks = ranks.cloned();
+    let mut sim = open(&scene, &choice)?;
+    if !quiet {
         println!("backend: {}", sim.backend_reason());
     }
     // From here on the directories are changed; a failure before the first step undoes it.
-    let start = outputs.prepare()?;
-    write_scene_copy(&out, &scene)?;
+    let start = match outputs {
+        Some(outputs) => {
+            let start = outputs.prepare()?;
+            write_scene_copy(&out, &scene)?;
+            Some(start)
+        }
+        None => None,
+    };
     // With adaptive dt a run to a time has no step count known in advance.
     let end_time = (params.adaptive.is_some() && args.steps.is_none()).then(|| args.time.unwrap_or(params.end_time));
     let (snapshot_every, snapshot_interval) = match args.snapshot_every {
@@ -496,7 +538,7 @@ pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
         snapshot_every,
         snapshot_interval,
         check_every: args.check_every,
-        progress: !args.quiet,
+        progress: !quiet,
         formats: args.formats.clone(),
         checkpoint_every: args.checkpoint_every,
         resumed: None,
@@ -508,9 +550,13 @@ pub fn cmd_run(args: &RunArgs) -> anyhow::Result<i32> {
         end_time,
         surface_mesh_every: args.surface_mesh_every,
         surface_mesh_format: args.surface_mesh_format,
-        start: Some(start),
+        start,
+        writes_files,
     };
     let summary = run(sim.backend(), &scene, &opts)?;
+    if !writes_files {
+        return Ok(exit_code_of(&summary));
+    }
     let code = report_run(&summary, &out, args.quiet)?;
     if !args.quiet {
         print_outputs(&summary, &out, args.frames.as_deref(), &args.formats);
@@ -544,6 +590,15 @@ pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[
     }
     println!("  summary.json   what the run did and how it ended");
     println!("  scene.toml     the scene as run (`wgsph run {}` runs it again)", out.join("scene.toml").display());
+}
+
+/// The exit code of a run that ended as `summary` says (see [`report_run`]).
+pub fn exit_code_of(summary: &Summary) -> i32 {
+    match summary.status {
+        RunStatus::Completed => 0,
+        RunStatus::Interrupted => signals::requested().unwrap_or(StopSignal::Interrupt).exit_code(),
+        RunStatus::Failed | RunStatus::Error => 1,
+    }
 }
 
 /// Prints the end of a run (the summary line unless quiet; how it stopped, if it did) and

@@ -73,6 +73,75 @@ pub struct Summary {
     /// The names of the scene's probes, whose time series are in `probes/NAME.csv`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub probes: Vec<String>,
+    /// A run across ranks: each rank's share (absent for a run in one process).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ranks: Option<RanksSummary>,
+}
+
+/// A run across ranks, for summary.json.
+#[derive(Clone, Debug, Serialize, serde::Deserialize, PartialEq)]
+pub struct RanksSummary {
+    pub count: usize,
+    /// The transport (the MPI library) in words.
+    pub transport: String,
+    /// The axis the slabs cut ("x", "y" or "z") and the slab bounds in cell layers at the end.
+    pub slab_axis: String,
+    pub slab_bounds: Vec<u32>,
+    /// The largest rank's particle count over the mean, at the last balance check and the
+    /// largest seen; how often the bounds moved.
+    pub imbalance_last: f64,
+    pub imbalance_max: f64,
+    pub rebalances: u64,
+    pub per_rank: Vec<RankSummary>,
+}
+
+/// One rank of a run across ranks.
+#[derive(Clone, Debug, Serialize, serde::Deserialize, PartialEq)]
+pub struct RankSummary {
+    pub rank: usize,
+    /// Fluid particles it owns at the end (ghosts left out), and the ghosts it holds.
+    pub particles: usize,
+    pub ghosts: usize,
+    /// Particles it sent to a neighbour over the run.
+    pub migrated: u64,
+    /// Seconds in the exchange and the collectives, and their share of the run's wall time.
+    pub exchange_seconds: f64,
+    pub exchange_share: f64,
+    /// Where it ran: its place among the ranks of its machine, how many ran there, and the
+    /// CPU threads it computed with (every rank runs the CPU path for now).
+    pub node_rank: usize,
+    pub node_ranks: usize,
+    pub threads: usize,
+}
+
+impl RanksSummary {
+    /// The summary of every rank's report, over a run of `wall_seconds`.
+    pub fn of(reports: &[crate::solver::decomposition::RankReport], wall_seconds: f64) -> Self {
+        let first = &reports[0];
+        RanksSummary {
+            count: first.ranks,
+            transport: first.transport.clone(),
+            slab_axis: ["x", "y", "z"][first.axis].to_string(),
+            slab_bounds: first.bounds.clone(),
+            imbalance_last: first.stats.last_imbalance,
+            imbalance_max: first.stats.max_imbalance,
+            rebalances: first.stats.rebalances,
+            per_rank: reports
+                .iter()
+                .map(|r| RankSummary {
+                    rank: r.rank,
+                    particles: r.own_particles,
+                    ghosts: r.stats.ghosts,
+                    migrated: r.stats.migrated,
+                    exchange_seconds: r.stats.exchange_seconds,
+                    exchange_share: if wall_seconds > 0.0 { r.stats.exchange_seconds / wall_seconds } else { 0.0 },
+                    node_rank: r.node_rank,
+                    node_ranks: r.node_ranks,
+                    threads: r.threads,
+                })
+                .collect(),
+        }
+    }
 }
 
 /// DFSPH's solves over a run: iterations per step and how the last step ended.

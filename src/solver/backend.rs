@@ -1,5 +1,6 @@
 //! The [`Backend`] trait every layer above the solvers drives, and what it hands out.
 
+use super::decomposition::RankReport;
 use super::gpu::buffers::ParticleBuffers;
 use crate::model::diagnosis::{diagnose, SolidIntrusions};
 use crate::model::params::Params;
@@ -83,7 +84,10 @@ pub trait Backend {
     /// Reads the health counters (a few bytes on the GPU).
     fn health(&mut self) -> anyhow::Result<Health>;
     /// The particles in original order, with density and pressure evaluated for the current
-    /// positions. Taking a snapshot never changes the trajectory.
+    /// positions. Taking a snapshot never changes the trajectory. Across ranks every rank
+    /// calls it (it is collective) and rank 0 receives every particle; the other ranks get the
+    /// step and time with no particle. [`Backend::step_fields`] and [`Backend::save_state`]
+    /// do the same.
     fn snapshot(&mut self) -> anyhow::Result<Snapshot>;
     /// Whether [`Backend::visit_snapshot_rows`] hands the snapshot over in pieces (the GPU,
     /// which then never needs one host copy of every array).
@@ -147,6 +151,19 @@ pub trait Backend {
     /// array is read back.
     fn take_probe_samples(&mut self) -> anyhow::Result<Vec<ProbeSample>> {
         Ok(Vec::new())
+    }
+    /// This rank's part when the simulation runs across ranks (`None` alone).
+    fn rank_report(&self) -> Option<RankReport> {
+        None
+    }
+    /// Every rank's part, gathered (collective across ranks; `None` alone).
+    fn rank_reports(&mut self) -> anyhow::Result<Option<Vec<RankReport>>> {
+        Ok(None)
+    }
+    /// Whether `flag` is set on any rank (collective across ranks; alone, `flag`): decisions
+    /// every rank must take together, such as stopping at a signal one rank saw first.
+    fn any_rank(&mut self, flag: bool) -> anyhow::Result<bool> {
+        Ok(flag)
     }
 }
 

@@ -4,10 +4,15 @@
 //! place in the step order: `gpu/schedule.rs` records the GPU's, `cpu/mod.rs` runs the CPU's.
 
 pub mod backend;
+pub mod communicator;
 pub mod compare;
 pub mod cpu;
+pub mod decomposition;
 pub mod gpu;
+#[cfg(feature = "mpi")]
+pub mod mpi;
 pub mod simulation;
 
 pub use backend::{Backend, DfsphStage, SnapshotRow, StateArray, StatePiece};
+pub use communicator::{Communicator, LocalGroup, Ranks};
 pub use simulation::{open, open_with, BackendChoice, Device, Precision, Simulation, Solver};

@@ -23,6 +23,7 @@
 use super::cpu::CpuSolver;
 use super::gpu::{GpuContext, GpuOptions, GpuSolver, ParticleBuffers};
 use super::backend::Backend;
+use super::communicator::Ranks;
 use crate::model::check::{available_memory_bytes, CPU_BYTES_PER_PARTICLE};
 use crate::model::initial::InitialState;
 use crate::model::params::Params;
@@ -59,6 +60,9 @@ pub struct BackendChoice {
     pub gpu_options: GpuOptions,
     /// Run on this GPU device instead of choosing an adapter (`Device::Gpu` or `Auto`).
     pub context: Option<GpuContext>,
+    /// This process's rank when one simulation runs across several (`None`, or one rank:
+    /// the whole scene here). See docs/scale-out.md.
+    pub ranks: Option<Ranks>,
 }
 
 impl BackendChoice {
@@ -73,6 +77,11 @@ impl BackendChoice {
     /// The GPU, on a device the caller opened.
     pub fn gpu_on(context: GpuContext) -> Self {
         BackendChoice { device: Device::Gpu, context: Some(context), ..Default::default() }
+    }
+    /// The same choice, as one rank of a simulation across ranks.
+    pub fn on_ranks(mut self, ranks: Ranks) -> Self {
+        self.ranks = Some(ranks);
+        self
     }
     /// The same choice with the GPU step's tuning options.
     pub fn with_gpu_options(mut self, options: GpuOptions) -> Self {
@@ -163,6 +172,9 @@ pub fn open(scene: &Scene, choice: &BackendChoice) -> anyhow::Result<Simulation>
 pub fn open_with(scene: &Scene, initial: Option<InitialState>, choice: &BackendChoice) -> anyhow::Result<Simulation> {
     scene.validate(&SceneOrigin::Text)?;
     let params = scene.params();
+    if let Some(ranks) = choice.ranks.as_ref().filter(|r| r.comm.size() > 1) {
+        return open_part(scene, &params, initial, choice, ranks);
+    }
     let initial_of = |initial: Option<InitialState>| initial.unwrap_or_else(|| scene.initial_state());
     let gpu = |ctx: GpuContext, initial: Option<InitialState>| -> anyhow::Result<Solver> {
         super::gpu::memory::MemoryPlan::for_scene(scene).check(&ctx)?;
@@ -201,6 +213,40 @@ pub fn open_with(scene: &Scene, initial: Option<InitialState>, choice: &BackendC
                 AutoChoice::Cpu(why) => (cpu(initial)?, format!("{cpu_name}: {why}")),
             },
         },
+    };
+    Ok(Simulation { scene: scene.clone(), solver, reason })
+}
+
+/// One rank's part of a simulation across several: the CPU path on the particles of its slab
+/// (docs/scale-out.md). What the exchange does not carry yet is refused here, by name.
+fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choice: &BackendChoice, ranks: &Ranks) -> anyhow::Result<Simulation> {
+    let size = ranks.comm.size();
+    let refuse = |field: &str, message: String| -> anyhow::Result<Simulation> {
+        Err(SceneError { origin: scene.name.clone(), field: field.into(), message }.into())
+    };
+    if params.dfsph.is_some() {
+        return refuse("physics.solver", format!("is dfsph, which is not supported across ranks yet ({size} ranks): its solver iterations would need an exchange each; run it on one rank, or use physics.solver = \"wcsph\""));
+    }
+    if !params.probes.is_empty() {
+        return refuse("probe", format!("the scene has {} probe(s), which are not sampled across ranks yet ({size} ranks): run it on one rank, or remove the [[probe]] tables", params.probes.probes.len()));
+    }
+    if params.rebuild_every != 1 {
+        return refuse("time.neighbour_rebuild_every", format!("is {}; across ranks ({size}) the exchange runs with every rebuild of the grid, so it must be 1", params.rebuild_every));
+    }
+    let cpu_name = match choice.precision {
+        Precision::F64 => "the CPU path in f64",
+        Precision::F32 => "the CPU path in f32",
+    };
+    let reason = match choice.device {
+        Device::Gpu => anyhow::bail!("--backend gpu does not run across ranks yet ({size} ranks): use --backend cpu (or auto) under mpirun"),
+        Device::Cpu => format!("{cpu_name}, as asked, on rank {} of {size}", ranks.comm.rank()),
+        Device::Auto => format!("{cpu_name} on rank {} of {size}: across ranks only the CPU path runs yet", ranks.comm.rank()),
+    };
+    check_host_memory(scene)?;
+    let initial = initial.unwrap_or_else(|| scene.initial_state());
+    let solver = match choice.precision {
+        Precision::F64 => Solver::Cpu64(CpuSolver::new_part(params, &initial, ranks.comm.clone(), ranks.balance_every)?),
+        Precision::F32 => Solver::Cpu32(CpuSolver::new_part(params, &initial, ranks.comm.clone(), ranks.balance_every)?),
     };
     Ok(Simulation { scene: scene.clone(), solver, reason })
 }

@@ -9,3 +9,4 @@ mod profile;
 mod tradeoff;
 mod architecture;
 mod bench;
+mod ranks;

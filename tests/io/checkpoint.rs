@@ -138,7 +138,7 @@ fn resumed_run_is_bitwise_the_uninterrupted_one(make: &mut dyn FnMut() -> Box<dy
     assert_eq!((c.state.step, c.run.end_step), (20, 40), "{what}");
     let names = |d: &Path| files(d).into_iter().map(|f| f.0).collect::<Vec<_>>();
     assert_eq!(names(&b).len(), 3 * 2 + 2, "{what}: snapshots 0, 10, 20, the series and the index before the resume");
-    let resumed = resume_with(make().as_mut(), &b, &c, c.run.end_step, false).unwrap();
+    let resumed = resume_with(make().as_mut(), &b, &c, c.run.end_step, false, true).unwrap();
     assert_eq!((resumed.steps, resumed.failure.clone()), (20, None));
     assert_eq!(names(&a), names(&b), "{what}");
     for ((name, x), (_, y)) in files(&a).iter().zip(files(&b).iter()) {

@@ -130,7 +130,7 @@ fn series_continue_across_a_resume(make: &mut dyn FnMut() -> Box<dyn Backend>, s
     run(make().as_mut(), scene, &opts(&b, 27, 20)).unwrap();
     let c = read(&b.join(CHECKPOINT_FILE)).unwrap();
     assert_eq!(c.state.step, 20, "{what}");
-    let resumed = resume_with(make().as_mut(), &b, &c, 40, false).unwrap();
+    let resumed = resume_with(make().as_mut(), &b, &c, 40, false, true).unwrap();
     assert!(resumed.failure.is_none(), "{what}");
     let (x, y) = (probe_files(&a), probe_files(&b));
     assert_eq!(x.len(), scene.probe.len(), "{what}");

@@ -14,3 +14,4 @@ mod dfsph;
 mod probes;
 mod pressure;
 mod lanes;
+mod ranks;

@@ -15,6 +15,7 @@ pub mod dfsph_integrate;
 pub mod dfsph_predict;
 pub mod dfsph_pressure;
 pub mod dfsph_shared;
+pub mod exchange;
 pub mod forces;
 pub mod forces_integrate;
 pub mod integrate;
@@ -89,6 +90,8 @@ pub struct CpuSolver<R: Real> {
     wall_probe_masks: Vec<u32>,
     /// The probe samples taken since they were last handed out.
     probe_samples: Vec<ProbeSample>,
+    /// This rank's share when the simulation runs across ranks (`None`: one process).
+    ranks: Option<Box<exchange::RankPart>>,
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -145,6 +148,7 @@ impl<R: Real> CpuSolver<R> {
             dfsph: params.dfsph.as_ref().map(|settings| DfsphCpu::new(settings, n)),
             wall_probe_masks,
             probe_samples: Vec::new(),
+            ranks: None,
         }
     }
 
@@ -352,7 +356,7 @@ impl<R: Real> CpuSolver<R> {
             return self.params.dt;
         };
         let p = &self.params;
-        let maxima = integrate::reduce_maxima(&self.velocities, &self.accelerations);
+        let maxima = self.own_maxima();
         integrate::choose_dt(&adaptive, p.h, p.speed_of_sound(), maxima, p.viscosity_at_step(self.step))
     }
 
@@ -361,18 +365,34 @@ impl<R: Real> CpuSolver<R> {
         self.integrate_with(self.params.dt)
     }
 
+    /// The integration of the own particles (all of them alone; across ranks the ghosts are
+    /// left as they are, and replaced by the next exchange).
     fn integrate_with(&mut self, dt: f64) -> integrate::StepHealth {
         // The particles move: the density stage's neighbour lists no longer hold.
         self.lists.clear();
-        let input = integrate::IntegrateInput {
-            dt: R::of(dt),
-            backstops: &self.backstops,
-            domain_min: V3::from64(self.params.domain_min),
-            domain_max: V3::from64(self.params.domain_max),
-            accelerations: &self.accelerations,
-            densities: if self.carried_densities.is_empty() { &[] } else { &self.densities },
-        };
-        integrate::integrate(&input, &mut self.positions, &mut self.velocities, &mut self.carried_densities)
+        let mut found: Option<integrate::StepHealth> = None;
+        for own in self.own_slots() {
+            let carried = if self.carried_densities.is_empty() { 0..0 } else { own.clone() };
+            let input = integrate::IntegrateInput {
+                dt: R::of(dt),
+                backstops: &self.backstops,
+                domain_min: V3::from64(self.params.domain_min),
+                domain_max: V3::from64(self.params.domain_max),
+                accelerations: &self.accelerations[own.clone()],
+                densities: &self.densities[carried.clone()],
+            };
+            let part = integrate::integrate(&input, &mut self.positions[own.clone()], &mut self.velocities[own], &mut self.carried_densities[carried]);
+            found = Some(found.map_or(part, |f| f.add(part)));
+        }
+        found.unwrap_or_default()
+    }
+
+    /// The largest speed (at the start of the step) and acceleration of the own particles.
+    fn own_maxima(&self) -> (f64, f64) {
+        self.own_slots()
+            .into_iter()
+            .map(|own| integrate::reduce_maxima(&self.velocities[own.clone()], &self.accelerations[own]))
+            .fold((0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)))
     }
 
     /// The parts of the solver a DFSPH stage reads and writes, and DFSPH's own arrays.
@@ -469,8 +489,13 @@ impl<R: Real> CpuSolver<R> {
 
     /// One full time step; records the first step that produced a non-finite or escaped particle.
     /// The neighbour grid is rebuilt every `rebuild_every` steps, as on the GPU.
+    /// Across ranks the exchange stage comes first; alone it does nothing.
     pub fn step_once(&mut self) {
         if self.step % self.params.rebuild_every.max(1) as u64 == 0 {
+            self.exchange(true);
+            if self.rank_failure().is_some() {
+                return;
+            }
             self.bin();
         }
         if let Some((dfsph, mut parts)) = self.dfsph_parts() {
@@ -486,11 +511,26 @@ impl<R: Real> CpuSolver<R> {
             self.sample_probes();
         }
         self.compute_forces();
+        let dt = self.choose_dt_across_ranks();
         let max_density = self.largest_density();
-        self.health.max_density = self.health.max_density.max(max_density);
-        let dt = self.choose_dt();
         let h = self.integrate_with(dt);
+        let (h, max_density) = self.all_step_health(h, max_density);
+        self.health.max_density = self.health.max_density.max(max_density);
         self.record_step(dt, h, max_density);
+    }
+
+    /// [`CpuSolver::choose_dt`] with the maxima of every rank (the same dt everywhere).
+    fn choose_dt_across_ranks(&mut self) -> f64 {
+        let Some(adaptive) = self.params.adaptive else {
+            return self.params.dt;
+        };
+        if self.ranks.is_none() {
+            return self.choose_dt();
+        }
+        let (speed, accel) = self.own_maxima();
+        let maxima = self.all_max(&[speed, accel]);
+        let p = &self.params;
+        integrate::choose_dt(&adaptive, p.h, p.speed_of_sound(), (maxima[0], maxima[1]), p.viscosity_at_step(self.step))
     }
 
     /// Samples every probe on the state the step starts from and the fields of its density
@@ -537,7 +577,7 @@ impl<R: Real> CpuSolver<R> {
     /// The largest density of the last density stage; non-finite densities are left out, as
     /// on the GPU (the integration counts the particles).
     fn largest_density(&self) -> f64 {
-        self.densities.iter().map(|d| d.to64()).filter(|d| d.is_finite()).fold(0.0, f64::max)
+        self.own_slots().into_iter().flat_map(|own| self.densities[own].iter()).map(|d| d.to64()).filter(|d| d.is_finite()).fold(0.0, f64::max)
     }
 
     /// The bookkeeping after a step of `dt` whose density stage's largest density was
@@ -555,7 +595,7 @@ impl<R: Real> CpuSolver<R> {
     pub fn step(&mut self, n: u64) {
         for _ in 0..n {
             self.step_once();
-            if !self.health.is_ok() {
+            if !self.health.is_ok() || self.rank_failure().is_some() {
                 break;
             }
         }
@@ -682,14 +722,17 @@ impl<R: Real> Backend for CpuSolver<R> {
         CpuSolver::params(self)
     }
     fn fluid_count(&self) -> usize {
-        self.fluid_len()
+        self.ranks.as_ref().map_or(self.fluid_len(), |p| p.total_fluid)
     }
     fn wall_count(&self) -> usize {
         self.walls().0.len()
     }
     fn step(&mut self, n: u64) -> anyhow::Result<()> {
         CpuSolver::step(self, n);
-        Ok(())
+        match self.rank_failure() {
+            Some(e) => anyhow::bail!("{e}"),
+            None => Ok(()),
+        }
     }
     fn steps_done(&self) -> u64 {
         CpuSolver::steps_done(self)
@@ -707,20 +750,44 @@ impl<R: Real> Backend for CpuSolver<R> {
         Ok(CpuSolver::health(self))
     }
     fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
-        Ok(CpuSolver::snapshot(self))
+        match self.ranks {
+            Some(_) => self.snapshot_across_ranks(),
+            None => Ok(CpuSolver::snapshot(self)),
+        }
     }
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {
-        Ok(CpuSolver::step_fields(self))
+        match self.ranks {
+            Some(_) => self.step_fields_across_ranks(),
+            None => Ok(CpuSolver::step_fields(self)),
+        }
     }
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
-        Ok(CpuSolver::save_state(self))
+        match self.ranks {
+            // Gathered once per state: a checkpoint asks for the header and each array in turn
+            // (on the rank that writes it), the other ranks for the header only.
+            Some(_) => self.gathered_state(),
+            None => Ok(CpuSolver::save_state(self)),
+        }
     }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
-        CpuSolver::restore_state(self, state)
+        match self.ranks {
+            Some(_) => self.restore_state_across_ranks(state),
+            None => CpuSolver::restore_state(self, state),
+        }
     }
     fn take_probe_samples(&mut self) -> anyhow::Result<Vec<ProbeSample>> {
         Ok(CpuSolver::take_probe_samples(self))
     }
+    fn rank_report(&self) -> Option<crate::solver::decomposition::RankReport> {
+        CpuSolver::rank_report(self)
+    }
+    fn rank_reports(&mut self) -> anyhow::Result<Option<Vec<crate::solver::decomposition::RankReport>>> {
+        self.gather_rank_reports()
+    }
+    fn any_rank(&mut self, flag: bool) -> anyhow::Result<bool> {
+        Ok(self.all_max(&[flag as u8 as f64])[0] > 0.0)
+    }
+
 }
 
 /// Values in slot order put back into original order (`ids[slot]` is the original index).

@@ -1,0 +1,571 @@
+//! The exchange stage on the CPU, the first stage of a step across ranks (before the binning):
+//! particles that left the rank's slab migrate to the rank that owns their cell layer now, and
+//! the particles in the [`HALO_LAYERS`] layers next to each face travel to the neighbour as
+//! ghosts, which take part in its neighbour sums but are not integrated, counted or written.
+//! Alone (one process) the stage does nothing. See docs/scale-out.md.
+//!
+//! The particles a rank holds are put in the order one process would have them in (by the
+//! cell and the place in the cell of the last binning, or by the place in the initial or
+//! restored state before the first), so that the stable counting sort gives every cell the
+//! same particles in the same order as one process: the neighbour sums add the same terms in
+//! the same order, and N ranks compute bit for bit what one computes.
+
+use super::CpuSolver;
+use crate::model::real::{Real, V3};
+use crate::model::state::{BackendState, Snapshot, StepFields};
+use crate::solver::communicator::{all_sum, Communicator};
+use crate::solver::decomposition::{cell_runs, imbalance, slab_axis, RankReport, RankStats, Slabs, HALO_LAYERS};
+use std::ops::Range;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// A rank's share of a simulation across ranks: its communicator and slabs, and what the
+/// exchange measured.
+#[derive(Clone)]
+pub struct RankPart {
+    pub(super) comm: Arc<dyn Communicator>,
+    pub(super) slabs: Slabs,
+    /// The axis the slabs cut.
+    pub(super) axis: usize,
+    /// Until the first binning: each slot's place in the one-process order (initial index, or
+    /// index in a restored state).
+    pub(super) first_order: Option<Vec<u64>>,
+    /// Fluid particles of the whole simulation.
+    pub(super) total_fluid: usize,
+    /// Move the slab bounds towards equal counts every this many steps (0: never).
+    pub(super) balance_every: u64,
+    pub(super) stats: RankStats,
+    /// Why this rank could not go on (a collective failed).
+    pub(super) failure: Option<String>,
+    /// The state gathered from every rank, until the next step changes it.
+    pub(super) gathered: Option<BackendState>,
+}
+
+/// Words per particle in a message: position, velocity, id, place in the one-process order (two
+/// words of 32 bits), and with continuity density the carried density.
+fn words(continuity: bool) -> usize {
+    9 + continuity as usize
+}
+
+/// Particles on their way through the exchange, as a structure of arrays.
+#[derive(Default)]
+struct Held<R: Real> {
+    x: Vec<V3<R>>,
+    v: Vec<V3<R>>,
+    id: Vec<u32>,
+    rho: Vec<R>,
+    order: Vec<u64>,
+}
+
+impl<R: Real> Held<R> {
+    fn len(&self) -> usize {
+        self.x.len()
+    }
+    fn push_from(&mut self, o: &Held<R>, i: usize) {
+        self.x.push(o.x[i]);
+        self.v.push(o.v[i]);
+        self.id.push(o.id[i]);
+        if !o.rho.is_empty() {
+            self.rho.push(o.rho[i]);
+        }
+        self.order.push(o.order[i]);
+    }
+    fn encode(&self, which: &[usize], continuity: bool) -> Vec<f64> {
+        let mut out = Vec::with_capacity(which.len() * words(continuity));
+        for &i in which {
+            out.extend_from_slice(&self.x[i].to64());
+            out.extend_from_slice(&self.v[i].to64());
+            out.push(self.id[i] as f64);
+            out.push((self.order[i] >> 32) as f64);
+            out.push((self.order[i] & 0xffff_ffff) as f64);
+            if continuity {
+                out.push(self.rho[i].to64());
+            }
+        }
+        out
+    }
+    fn decode(&mut self, words_in: &[f64], continuity: bool) -> anyhow::Result<()> {
+        let w = words(continuity);
+        anyhow::ensure!(words_in.len() % w == 0, "a neighbour sent {} words, not a whole number of particles of {w} words", words_in.len());
+        for p in words_in.chunks_exact(w) {
+            self.x.push(V3::from64([p[0], p[1], p[2]]));
+            self.v.push(V3::from64([p[3], p[4], p[5]]));
+            self.id.push(p[6] as u32);
+            self.order.push(((p[7] as u64) << 32) | p[8] as u64);
+            if continuity {
+                self.rho.push(R::of(p[9]));
+            }
+        }
+        Ok(())
+    }
+    /// Sorted by the one-process order (the places are unique).
+    fn sorted(self) -> Held<R> {
+        let mut idx: Vec<usize> = (0..self.len()).collect();
+        idx.sort_unstable_by_key(|&i| self.order[i]);
+        let mut out = Held::default();
+        for i in idx {
+            out.push_from(&self, i);
+        }
+        out
+    }
+}
+
+impl<R: Real> CpuSolver<R> {
+    /// The solver of one rank's part of a simulation across the ranks of `comm`: the particles
+    /// of `initial` whose cell layer lies in this rank's slab (slabs of equal counts), and
+    /// every wall particle. `balance_every`: steps between moves of the slab bounds (0: never).
+    pub(crate) fn new_part(params: &crate::model::params::Params, initial: &crate::model::initial::InitialState, comm: Arc<dyn Communicator>, balance_every: u64) -> anyhow::Result<Self> {
+        let grid = params.grid.cast::<R>();
+        let axis = slab_axis(grid.dims);
+        let layer_of = |p: [f64; 3]| grid.cell_coords(V3::from64(p))[axis];
+        let mut counts = vec![0u64; grid.dims[axis] as usize];
+        for &p in &initial.fluid_positions {
+            counts[layer_of(p) as usize] += 1;
+        }
+        let slabs = Slabs::balanced(&counts, comm.size())?;
+        let mine = slabs.layers_of(comm.rank());
+        let chosen: Vec<usize> = (0..initial.fluid_positions.len()).filter(|&i| mine.contains(&layer_of(initial.fluid_positions[i]))).collect();
+        let part = crate::model::initial::InitialState {
+            fluid_positions: chosen.iter().map(|&i| initial.fluid_positions[i]).collect(),
+            fluid_velocities: chosen.iter().map(|&i| initial.fluid_velocities[i]).collect(),
+            fluid_densities: if initial.fluid_densities.is_empty() { Vec::new() } else { chosen.iter().map(|&i| initial.fluid_densities[i]).collect() },
+            wall_positions: initial.wall_positions.clone(),
+            wall_masses: initial.wall_masses.clone(),
+            wall_boundaries: initial.wall_boundaries.clone(),
+        };
+        let mut solver = Self::new(params, &part);
+        solver.ids = chosen.iter().map(|&i| i as u32).collect();
+        let counts_per_rank: Vec<u64> = (0..comm.size()).map(|r| slabs.layers_of(r).map(|l| counts[l as usize]).sum()).collect();
+        let start_imbalance = imbalance(&counts_per_rank);
+        solver.ranks = Some(Box::new(RankPart {
+            comm,
+            slabs,
+            axis,
+            first_order: Some(chosen.iter().map(|&i| i as u64).collect()),
+            total_fluid: initial.fluid_positions.len(),
+            balance_every,
+            stats: RankStats { last_imbalance: start_imbalance, max_imbalance: start_imbalance, ..RankStats::default() },
+            failure: None,
+            gathered: None,
+        }));
+        Ok(solver)
+    }
+
+    /// The slots of this rank's own particles, as ranges of the cell-sorted arrays: all of
+    /// them alone, and across ranks those of its slab's cells (one range for slabs across z,
+    /// one per row of cells otherwise; the ghosts lie outside them).
+    pub(super) fn own_slots(&self) -> Vec<Range<usize>> {
+        match &self.ranks {
+            Some(part) if part.first_order.is_none() => self
+                .own_cells(part)
+                .into_iter()
+                .map(|cells| self.starts[cells.start] as usize..self.starts[cells.end] as usize)
+                .filter(|slots| !slots.is_empty())
+                .collect(),
+            _ => vec![0..self.positions.len()],
+        }
+    }
+
+    /// The runs of cell keys of this rank's slab.
+    fn own_cells(&self, part: &RankPart) -> Vec<Range<usize>> {
+        cell_runs(self.grid.dims, part.axis, part.slabs.layers_of(part.comm.rank()))
+    }
+
+    /// This rank's part, when the simulation runs across ranks.
+    pub fn rank_report(&self) -> Option<RankReport> {
+        let p = self.ranks.as_ref()?;
+        Some(RankReport {
+            rank: p.comm.rank(),
+            ranks: p.comm.size(),
+            transport: p.comm.describe(),
+            axis: p.axis,
+            bounds: p.slabs.bounds.clone(),
+            own_particles: self.own_slots().iter().map(|r| r.len()).sum(),
+            node_rank: p.comm.node_rank().0,
+            node_ranks: p.comm.node_rank().1,
+            threads: rayon::current_num_threads(),
+            stats: p.stats.clone(),
+        })
+    }
+
+    /// Why this rank stopped, when a collective failed.
+    pub(super) fn rank_failure(&self) -> Option<&str> {
+        self.ranks.as_ref().and_then(|p| p.failure.as_deref())
+    }
+
+    /// The exchange stage: migration, then ghosts (nothing alone). `balance`: whether the
+    /// slab bounds may move at this step (the steps' exchanges, not a snapshot's).
+    pub(super) fn exchange(&mut self, balance: bool) {
+        if self.ranks.is_none() {
+            return;
+        }
+        let t0 = Instant::now();
+        if let Some(part) = &mut self.ranks {
+            part.gathered = None;
+        }
+        if let Err(e) = self.exchange_across_ranks(balance) {
+            if let Some(part) = &mut self.ranks {
+                part.failure.get_or_insert(format!("{e:#}"));
+            }
+        }
+        if let Some(part) = &mut self.ranks {
+            part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+        }
+    }
+
+    /// The own particles with their places in the one-process order (ghosts dropped).
+    fn own_particles(&mut self) -> Held<R> {
+        let own = self.own_slots();
+        let part = self.ranks.as_mut().expect("only across ranks");
+        let order: Vec<u64> = match part.first_order.take() {
+            Some(order) => order,
+            None => {
+                // Cell key and place in the cell, from the cell starts of the last binning.
+                let part = self.ranks.as_ref().expect("only across ranks");
+                let mut order = Vec::new();
+                for cells in self.own_cells(part) {
+                    for cell in cells {
+                        let (a, b) = (self.starts[cell], self.starts[cell + 1]);
+                        order.extend((0..b - a).map(|k| ((cell as u64) << 32) | k as u64));
+                    }
+                }
+                order
+            }
+        };
+        let mut held = Held { order, ..Held::default() };
+        for slots in own {
+            held.x.extend_from_slice(&self.positions[slots.clone()]);
+            held.v.extend_from_slice(&self.velocities[slots.clone()]);
+            held.id.extend_from_slice(&self.ids[slots.clone()]);
+            if !self.carried_densities.is_empty() {
+                held.rho.extend_from_slice(&self.carried_densities[slots]);
+            }
+        }
+        held
+    }
+
+    fn exchange_across_ranks(&mut self, balance: bool) -> anyhow::Result<()> {
+        let continuity = self.params.continuity_density;
+        let mut held = self.own_particles();
+        let grid = self.grid;
+        let step = self.step;
+        let part = self.ranks.as_mut().expect("only across ranks");
+        let axis = part.axis;
+        let layer_of = |grid: &crate::model::params::Grid<R>, p: V3<R>| grid.cell_coords(p)[axis];
+        let comm = part.comm.clone();
+        let rank = comm.rank();
+        if balance && part.balance_every > 0 && step > 0 && step % part.balance_every == 0 {
+            let mut layers = vec![0.0; grid.dims[axis] as usize];
+            for &p in &held.x {
+                layers[layer_of(&grid, p) as usize] += 1.0;
+            }
+            let counts: Vec<u64> = all_sum(&*comm, &layers)?.iter().map(|&c| c as u64).collect();
+            let per_rank = |s: &Slabs| -> Vec<u64> { (0..s.ranks()).map(|r| s.layers_of(r).map(|l| counts[l as usize]).sum()).collect() };
+            let before = imbalance(&per_rank(&part.slabs));
+            let moved = part.slabs.rebalanced(&counts);
+            part.stats.last_imbalance = before;
+            part.stats.max_imbalance = part.stats.max_imbalance.max(before);
+            if moved != part.slabs {
+                part.slabs = moved;
+                part.stats.rebalances += 1;
+            }
+        }
+        // Migration: towards the owner's side, one neighbour per round, until no rank holds a
+        // particle of another's slab (one round unless a particle crossed a whole slab).
+        for round in 0.. {
+            let (mut stay, mut down, mut up) = (Vec::new(), Vec::new(), Vec::new());
+            for i in 0..held.len() {
+                let owner = part.slabs.owner(layer_of(&grid, held.x[i]));
+                match owner.cmp(&rank) {
+                    std::cmp::Ordering::Equal => stay.push(i),
+                    std::cmp::Ordering::Less => down.push(i),
+                    std::cmp::Ordering::Greater => up.push(i),
+                }
+            }
+            let moving = (down.len() + up.len()) as f64;
+            if all_sum(&*comm, &[moving])?[0] == 0.0 {
+                break;
+            }
+            anyhow::ensure!(round < comm.size(), "particles still lie outside their rank's slab after {round} rounds of migration");
+            part.stats.migrated += moving as u64;
+            let (from_lower, from_upper) = comm.exchange(&held.encode(&down, continuity), &held.encode(&up, continuity))?;
+            let mut next = Held::default();
+            for &i in &stay {
+                next.push_from(&held, i);
+            }
+            next.decode(&from_lower, continuity)?;
+            next.decode(&from_upper, continuity)?;
+            held = next;
+        }
+        let held = held.sorted();
+        // Ghosts: the own particles of the layers next to each face.
+        let mine = part.slabs.layers_of(rank);
+        let (mut down, mut up) = (Vec::new(), Vec::new());
+        for i in 0..held.len() {
+            let l = layer_of(&grid, held.x[i]);
+            if rank > 0 && l < mine.start + HALO_LAYERS {
+                down.push(i);
+            }
+            if rank + 1 < comm.size() && l + HALO_LAYERS >= mine.end {
+                up.push(i);
+            }
+        }
+        let (from_lower, from_upper) = comm.exchange(&held.encode(&down, continuity), &held.encode(&up, continuity))?;
+        let own_count = held.len();
+        let mut all = held;
+        all.decode(&from_lower, continuity)?;
+        all.decode(&from_upper, continuity)?;
+        part.stats.ghosts = all.len() - own_count;
+        let all = all.sorted();
+        let n = all.len();
+        self.positions = all.x;
+        self.velocities = all.v;
+        self.ids = all.id;
+        self.carried_densities = all.rho;
+        for v in [&mut self.densities, &mut self.pressures] {
+            v.resize(n, R::zero());
+        }
+        self.accelerations.resize(n, V3::zero());
+        self.keys.resize(n, 0);
+        self.sorted.resize(n, 0);
+        Ok(())
+    }
+
+    /// The own slots with their places in the one-process order.
+    fn own_order(&self) -> Vec<(usize, u64)> {
+        let part = self.ranks.as_ref().expect("only across ranks");
+        if let Some(first) = &part.first_order {
+            return first.iter().enumerate().map(|(slot, &o)| (slot, o)).collect();
+        }
+        let mut out = Vec::new();
+        for cell in self.own_cells(part).into_iter().flatten() {
+            let (a, b) = (self.starts[cell] as usize, self.starts[cell + 1] as usize);
+            out.extend((a..b).map(|slot| (slot, ((cell as u64) << 32) | (slot - a) as u64)));
+        }
+        out
+    }
+
+    /// Across ranks: every rank's rows `f(slot)` of its own particles, each after its place in
+    /// the one-process order (two words), in rank order, on rank 0 (`None` on the others).
+    fn gather_own(&mut self, width: usize, row: impl Fn(&Self, usize) -> Vec<f64>) -> anyhow::Result<Option<Vec<f64>>> {
+        let own = self.own_order();
+        let mut mine = Vec::with_capacity((width + 2) * own.len());
+        for (slot, order) in own {
+            mine.push((order >> 32) as f64);
+            mine.push((order & 0xffff_ffff) as f64);
+            mine.extend(row(self, slot));
+        }
+        let comm = self.ranks.as_ref().expect("only across ranks").comm.clone();
+        let t0 = Instant::now();
+        let all = comm.gather(&mine)?;
+        if let Some(part) = &mut self.ranks {
+            part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+        }
+        Ok(all.map(|parts| parts.concat()))
+    }
+
+    /// [`CpuSolver::snapshot`] across ranks: each rank bins its particles with fresh ghosts
+    /// and evaluates density; the rows are gathered on rank 0, which writes the files (the
+    /// other ranks get a snapshot of no particle, at the same step and time).
+    pub(super) fn snapshot_across_ranks(&mut self) -> anyhow::Result<Snapshot> {
+        self.exchange(false);
+        self.bin();
+        self.compute_density();
+        self.compute_wall_pressure();
+        if let Some(e) = self.rank_failure() {
+            anyhow::bail!("{e}");
+        }
+        let rows = self.gather_own(9, |s, i| {
+            let (x, v) = (s.positions[i].to64(), s.velocities[i].to64());
+            vec![s.ids[i] as f64, x[0], x[1], x[2], v[0], v[1], v[2], s.densities[i].to64(), s.pressures[i].to64()]
+        })?;
+        let Some(rows) = rows else { return Ok(Snapshot::with_len(0, self.step, self.time())) };
+        let n = self.ranks.as_ref().map_or(0, |p| p.total_fluid);
+        let mut s = Snapshot::with_len(n, self.step, self.time());
+        for r in rows.chunks_exact(11).map(|r| &r[2..]) {
+            let id = r[0] as usize;
+            s.positions[id] = [r[1], r[2], r[3]];
+            s.velocities[id] = [r[4], r[5], r[6]];
+            s.densities[id] = r[7];
+            s.pressures[id] = r[8];
+        }
+        Ok(s)
+    }
+
+    /// [`CpuSolver::step_fields`] across ranks, gathered on rank 0 (empty on the others).
+    pub(super) fn step_fields_across_ranks(&mut self) -> anyhow::Result<StepFields> {
+        let rows = self.gather_own(6, |s, i| {
+            let a = s.accelerations[i].to64();
+            vec![s.ids[i] as f64, s.densities[i].to64(), s.pressures[i].to64(), a[0], a[1], a[2]]
+        })?;
+        let n = if rows.is_some() { self.ranks.as_ref().map_or(0, |p| p.total_fluid) } else { 0 };
+        let rows = rows.unwrap_or_default();
+        let mut out = StepFields { densities: vec![0.0; n], pressures: vec![0.0; n], accelerations: vec![[0.0; 3]; n] };
+        for r in rows.chunks_exact(8).map(|r| &r[2..]) {
+            let id = r[0] as usize;
+            out.densities[id] = r[1];
+            out.pressures[id] = r[2];
+            out.accelerations[id] = [r[3], r[4], r[5]];
+        }
+        Ok(out)
+    }
+
+    /// The state of every rank, gathered at the first call after a step (collective) and
+    /// kept until the next.
+    pub(super) fn gathered_state(&mut self) -> anyhow::Result<BackendState> {
+        if let Some(state) = self.ranks.as_ref().and_then(|p| p.gathered.clone()) {
+            return Ok(state);
+        }
+        let state = self.save_state_across_ranks()?;
+        if let Some(part) = &mut self.ranks {
+            part.gathered = Some(state.clone());
+        }
+        Ok(state)
+    }
+
+    /// Every rank's [`RankReport`], in rank order (collective).
+    pub(super) fn gather_rank_reports(&mut self) -> anyhow::Result<Option<Vec<RankReport>>> {
+        let Some(mine) = self.rank_report() else { return Ok(None) };
+        let comm = self.ranks.as_ref().expect("across ranks").comm.clone();
+        let s = &mine.stats;
+        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64])?;
+        Ok(Some(
+            all.iter()
+                .enumerate()
+                .map(|(rank, r)| RankReport {
+                    rank,
+                    own_particles: r[0] as usize,
+                    node_rank: r[4] as usize,
+                    node_ranks: r[5] as usize,
+                    threads: r[6] as usize,
+                    stats: RankStats { exchange_seconds: r[1], migrated: r[2] as u64, ghosts: r[3] as usize, ..s.clone() },
+                    ..mine.clone()
+                })
+                .collect(),
+        ))
+    }
+
+    /// [`CpuSolver::save_state`] across ranks: the own particles of every rank in the
+    /// one-process (cell) order, on rank 0, so the state is the one one process would save
+    /// (the other ranks' holds the step, time and health, and no particle).
+    pub(super) fn save_state_across_ranks(&mut self) -> anyhow::Result<BackendState> {
+        let continuity = !self.carried_densities.is_empty();
+        let w = 7 + continuity as usize;
+        let rows = self.gather_own(w, |s, i| {
+            let (x, v) = (s.positions[i].to64(), s.velocities[i].to64());
+            let mut r = vec![x[0], x[1], x[2], v[0], v[1], v[2], s.ids[i] as f64];
+            if continuity {
+                r.push(s.carried_densities[i].to64());
+            }
+            r
+        })?;
+        // In the one-process order: by the place each row carries (on rank 0; the other
+        // ranks' state holds no particle).
+        let rows = rows.unwrap_or_default();
+        let mut rows: Vec<&[f64]> = rows.chunks_exact(w + 2).collect();
+        rows.sort_unstable_by_key(|r| ((r[0] as u64) << 32) | r[1] as u64);
+        let rows: Vec<f64> = rows.iter().flat_map(|r| r[2..].iter().copied()).collect();
+        let mut state = self.save_state();
+        state.positions = rows.chunks_exact(w).map(|r| [r[0], r[1], r[2]]).collect();
+        state.velocities = rows.chunks_exact(w).map(|r| [r[3], r[4], r[5]]).collect();
+        state.ids = rows.chunks_exact(w).map(|r| r[6] as u32).collect();
+        state.densities = if continuity { rows.chunks_exact(w).map(|r| r[7]).collect() } else { Vec::new() };
+        Ok(state)
+    }
+
+    /// [`CpuSolver::restore_state`] across ranks (any rank count saved it): slabs of equal
+    /// counts for the state's particles, and this rank takes those in its slab, in the state's
+    /// order.
+    pub(super) fn restore_state_across_ranks(&mut self, state: &BackendState) -> anyhow::Result<()> {
+        let part = self.ranks.as_ref().expect("only across ranks");
+        state.check_fits(&Self::state_kind(), part.total_fluid)?;
+        let grid = self.grid;
+        let axis = part.axis;
+        let layer_of = |p: [f64; 3]| grid.cell_coords(V3::<R>::from64(p))[axis];
+        let mut counts = vec![0u64; grid.dims[axis] as usize];
+        for &p in &state.positions {
+            counts[layer_of(p) as usize] += 1;
+        }
+        let slabs = Slabs::balanced(&counts, part.comm.size())?;
+        let mine = slabs.layers_of(part.comm.rank());
+        let chosen: Vec<usize> = (0..state.positions.len()).filter(|&i| mine.contains(&layer_of(state.positions[i]))).collect();
+        let pick = |v: &Vec<[f64; 3]>| chosen.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let local = BackendState {
+            positions: pick(&state.positions),
+            velocities: pick(&state.velocities),
+            ids: chosen.iter().map(|&i| state.ids[i]).collect(),
+            densities: if state.densities.is_empty() { Vec::new() } else { chosen.iter().map(|&i| state.densities[i]).collect() },
+            ..state.clone()
+        };
+        let n = chosen.len();
+        self.positions = local.positions.iter().map(|&p| V3::from64(p)).collect();
+        self.velocities = local.velocities.iter().map(|&v| V3::from64(v)).collect();
+        self.ids = local.ids.clone();
+        anyhow::ensure!(
+            local.densities.is_empty() == !self.params.continuity_density,
+            "the state holds {} carried densities; the scene's density method needs {}",
+            state.densities.len(),
+            if self.params.continuity_density { state.positions.len() } else { 0 }
+        );
+        self.carried_densities = local.densities.iter().map(|&d| R::of(d)).collect();
+        for v in [&mut self.densities, &mut self.pressures] {
+            v.resize(n, R::zero());
+        }
+        self.accelerations.resize(n, V3::zero());
+        self.keys.resize(n, 0);
+        self.sorted.resize(n, 0);
+        self.step = state.step;
+        self.probe_samples.clear();
+        self.health = state.health();
+        self.time = state.time;
+        let [min, max, last] = state.dt_min_max_last;
+        self.dt_stats = crate::model::state::DtStats { min, max, last, ..Default::default() };
+        let part = self.ranks.as_mut().expect("only across ranks");
+        part.slabs = slabs;
+        part.first_order = Some(chosen.iter().map(|&i| i as u64).collect());
+        part.failure = None;
+        part.gathered = None;
+        Ok(())
+    }
+
+    /// Across ranks: the step's maxima (largest speed, acceleration) over every rank; alone
+    /// they are returned as they are.
+    pub(super) fn all_max(&mut self, values: &[f64]) -> Vec<f64> {
+        let Some(part) = &mut self.ranks else { return values.to_vec() };
+        let t0 = Instant::now();
+        let out = match crate::solver::communicator::all_max(&*part.comm, values) {
+            Ok(v) => v,
+            Err(e) => {
+                part.failure.get_or_insert(format!("{e:#}"));
+                // NaN makes the step count as bad on this rank, which then stops.
+                vec![f64::NAN; values.len()]
+            }
+        };
+        part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+        out
+    }
+
+    /// Across ranks: the step's health found on every rank (counts added, speeds and the
+    /// largest density the largest); alone returned as it is.
+    pub(super) fn all_step_health(&mut self, found: super::integrate::StepHealth, max_density: f64) -> (super::integrate::StepHealth, f64) {
+        let Some(part) = &mut self.ranks else { return (found, max_density) };
+        let t0 = Instant::now();
+        let reduced = part.comm.all_gather(&[found.non_finite as f64, found.escaped as f64, found.max_speed, max_density]);
+        part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+        match reduced {
+            Ok(all) => {
+                let mut out = super::integrate::StepHealth::default();
+                let mut density = 0.0f64;
+                for r in &all {
+                    out = out.add(super::integrate::StepHealth { non_finite: r[0] as u32, escaped: r[1] as u32, max_speed: r[2] });
+                    density = density.max(r[3]);
+                }
+                (out, density)
+            }
+            Err(e) => {
+                part.failure.get_or_insert(format!("{e:#}"));
+                (super::integrate::StepHealth { non_finite: 1, ..found }, max_density)
+            }
+        }
+    }
+}

@@ -1,0 +1,227 @@
+//! `mpirun -np N wgsph run ...` as a user launches it: 1, 2 and 4 ranks on the dam break and the
+//! hydrostatic tank give the same snapshots byte for byte, particles migrate, a rank may hold
+//! no particle, a checkpoint of 2 ranks continues on 4 or 1, a killed rank stops the run within
+//! seconds with a resumable checkpoint, an error on one rank stops all of them naming it, and a
+//! build without MPI refuses a multi-rank launch.
+//!
+//! MPI starts once per process, so these run `mpirun` on a wgsph built with `--features mpi`,
+//! found through WGSPH_MPI_BIN (.ci/run builds it). Without mpirun or that binary the tests say
+//! SKIPPED, unless WGSPH_REQUIRE_MPI is set (CI sets it): then they fail.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+use wgsph::io::summary::{RunStatus, Summary};
+
+/// mpirun and the MPI-enabled wgsph, or `None` (SKIPPED) where either is missing.
+fn mpi() -> Option<(PathBuf, PathBuf)> {
+    let required = std::env::var_os("WGSPH_REQUIRE_MPI").is_some();
+    let missing = |what: String| {
+        if required {
+            panic!("WGSPH_REQUIRE_MPI is set but {what}");
+        }
+        eprintln!("SKIPPED: {what}");
+        None
+    };
+    let mpirun = match std::env::var_os("PATH").and_then(|p| std::env::split_paths(&p).map(|d| d.join("mpirun")).find(|f| f.is_file())) {
+        Some(m) => m,
+        None => return missing("there is no mpirun (apt-get install openmpi-bin)".into()),
+    };
+    match std::env::var_os("WGSPH_MPI_BIN").map(PathBuf::from) {
+        Some(bin) if bin.is_file() => Some((mpirun, bin)),
+        Some(bin) => missing(format!("WGSPH_MPI_BIN names {}, which is not a file", bin.display())),
+        None => missing("WGSPH_MPI_BIN does not name a wgsph built with --features mpi".into()),
+    }
+}
+
+/// `mpirun -np N BIN ARGS` (as root where CI runs as root; more ranks than cores allowed).
+fn mpirun(mpi: &(PathBuf, PathBuf), ranks: usize, args: &[&str], dir: &Path) -> Command {
+    let mut c = Command::new(&mpi.0);
+    if is_root() {
+        c.arg("--allow-run-as-root");
+    }
+    c.args(["--oversubscribe", "-np", &ranks.to_string()]).arg(&mpi.1).args(args).current_dir(dir).env_remove("RUST_LOG");
+    c
+}
+
+fn is_root() -> bool {
+    Command::new("id").arg("-u").output().is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
+}
+
+fn run_ok(mut c: Command) -> Output {
+    let out = c.output().unwrap();
+    assert!(out.status.success(), "{c:?} failed: {}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    out
+}
+
+fn summary(dir: &Path) -> Summary {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+/// The bytes of the run's last snapshot (its path in the summary is relative to where the run
+/// was started: the run directory's parent here).
+fn last_snapshot(dir: &Path) -> Vec<u8> {
+    let path = PathBuf::from(summary(dir).last_snapshot.expect("a last snapshot"));
+    std::fs::read(dir.parent().expect("a parent").join(path)).unwrap()
+}
+
+/// The same run on 1, 2 and 4 ranks: the last snapshots are byte for byte the same.
+fn same_on_every_rank_count(scene: &str, extra: &[&str]) -> Vec<Summary> {
+    let Some(m) = mpi() else { return Vec::new() };
+    let tmp = tempfile::tempdir().unwrap();
+    let mut summaries = Vec::new();
+    let mut first: Option<Vec<u8>> = None;
+    for ranks in [1, 2, 4] {
+        let out = format!("r{ranks}");
+        let mut args = vec!["run", scene, "--backend", "cpu", "--quiet", "--out", &out];
+        args.extend_from_slice(extra);
+        run_ok(mpirun(&m, ranks, &args, tmp.path()));
+        let dir = tmp.path().join(&out);
+        let s = summary(&dir);
+        assert_eq!(s.status, RunStatus::Completed);
+        let snapshot = last_snapshot(&dir);
+        match &first {
+            None => first = Some(snapshot),
+            Some(f) => assert!(f == &snapshot, "{scene}: the last snapshot on {ranks} ranks differs from one rank's"),
+        }
+        assert_eq!(s.ranks.as_ref().map_or(1, |r| r.count), ranks);
+        summaries.push(s);
+    }
+    summaries
+}
+
+#[test]
+fn the_dam_break_on_one_two_and_four_ranks_writes_the_same_snapshots() {
+    let s = same_on_every_rank_count("dam_break", &["--particles", "1000", "--steps", "200", "--snapshot-every", "100"]);
+    if let Some(four) = s.get(2).and_then(|s| s.ranks.clone()) {
+        assert_eq!(four.slab_axis, "x");
+        assert_eq!(four.per_rank.iter().map(|r| r.particles).sum::<usize>(), s[2].fluid_particles);
+        assert!(four.per_rank.iter().map(|r| r.migrated).sum::<u64>() > 0, "the collapsing column crosses slab faces: {four:?}");
+        assert!(four.per_rank.iter().all(|r| (0.0..=1.0).contains(&r.exchange_share)));
+        // One machine: its 4 ranks, each in its own place.
+        let mut places: Vec<usize> = four.per_rank.iter().map(|r| r.node_rank).collect();
+        places.sort();
+        assert!(places == [0, 1, 2, 3] && four.per_rank.iter().all(|r| r.node_ranks == 4 && r.threads >= 1), "{four:?}");
+    }
+}
+
+#[test]
+fn the_hydrostatic_tank_on_one_two_and_four_ranks_writes_the_same_snapshots() {
+    same_on_every_rank_count("hydrostatic", &["--particles", "800", "--steps", "100", "--snapshot-every", "50"]);
+}
+
+#[test]
+fn a_rank_without_particles_takes_part() {
+    let Some(m) = mpi() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    // A puddle at one end of a long tank: of 4 slabs along the tank, the far ones hold nothing.
+    let scene = r#"
+        name = "puddle"
+        domain = { min = [-0.1, -0.1, -0.1], max = [1.3, 0.3, 0.3] }
+        physics = { smoothing_length = 0.04, particle_spacing = 0.02, speed_of_sound = 20, clamp_negative_pressure = true, viscosity = 0.01 }
+        time = { dt = 0.0004, end_time = 0.1 }
+        [[fluid]]
+        min = [0.0, 0.0, 0.0]
+        max = [0.12, 0.1, 0.2]
+        [[boundary]]
+        type = "container"
+        min = [0.0, 0.0, 0.0]
+        max = [1.2, 0.2, 0.2]
+    "#;
+    std::fs::write(tmp.path().join("puddle.toml"), scene).unwrap();
+    let args = ["run", "puddle.toml", "--backend", "cpu", "--quiet", "--steps", "40"];
+    run_ok(mpirun(&m, 1, &[&args[..], &["--out", "one"]].concat(), tmp.path()));
+    run_ok(mpirun(&m, 4, &[&args[..], &["--out", "four"]].concat(), tmp.path()));
+    let four = summary(&tmp.path().join("four"));
+    let ranks = four.ranks.clone().expect("across ranks");
+    assert!(ranks.per_rank.iter().any(|r| r.particles == 0), "an empty rank: {ranks:?}");
+    assert!(last_snapshot(&tmp.path().join("one")) == last_snapshot(&tmp.path().join("four")), "4 ranks, some empty, against one");
+}
+
+#[test]
+fn a_checkpoint_of_two_ranks_continues_on_four_and_on_one() {
+    let Some(m) = mpi() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let common = ["run", "dam_break", "--particles", "800", "--backend", "cpu", "--quiet"];
+    run_ok(mpirun(&m, 1, &[&common[..], &["--steps", "60", "--out", "straight"]].concat(), tmp.path()));
+    let straight = last_snapshot(&tmp.path().join("straight"));
+    for (name, ranks) in [("four", 4), ("one", 1)] {
+        run_ok(mpirun(&m, 2, &[&common[..], &["--steps", "30", "--checkpoint-every", "30", "--out", name]].concat(), tmp.path()));
+        run_ok(mpirun(&m, ranks, &["run", "--resume", name, "--steps", "30", "--quiet"], tmp.path()));
+        let s = summary(&tmp.path().join(name));
+        assert_eq!(s.status, RunStatus::Completed);
+        assert!(last_snapshot(&tmp.path().join(name)) == straight, "saved on 2 ranks, continued on {ranks}: not the uninterrupted run");
+    }
+}
+
+#[test]
+fn a_killed_rank_stops_every_rank_and_the_checkpoint_resumes() {
+    let Some(m) = mpi() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let mut run = mpirun(&m, 2, &["run", "dam_break", "--particles", "2000", "--backend", "cpu", "--quiet", "--steps", "100000", "--checkpoint-every", "20", "--out", "killed"], tmp.path());
+    let mut child = run.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let checkpoint = tmp.path().join("killed/checkpoint.wgsph");
+    let start = Instant::now();
+    while !checkpoint.exists() {
+        assert!(start.elapsed() < Duration::from_secs(120), "no checkpoint after two minutes");
+        assert!(child.try_wait().unwrap().is_none(), "the run ended before its first checkpoint");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // The ranks are mpirun's children; rank 1 is killed as a crash would end it.
+    let ranks = Command::new("pgrep").args(["-P", &child.id().to_string()]).output().unwrap();
+    let pids: Vec<String> = String::from_utf8_lossy(&ranks.stdout).split_whitespace().map(String::from).collect();
+    assert_eq!(pids.len(), 2, "two rank processes under mpirun: {pids:?}");
+    let killed_at = Instant::now();
+    Command::new("kill").args(["-9", &pids[1]]).status().unwrap();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(killed_at.elapsed() < Duration::from_secs(30), "the other rank still runs 30 s after one was killed");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let out = child.wait_with_output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(!status.success(), "a run with a killed rank failed");
+    assert!(said.contains("signal 9") || said.contains("Killed"), "mpirun names the killed rank's end: {said}");
+    // The last checkpoint continues the run on one rank.
+    run_ok(mpirun(&m, 1, &["run", "--resume", "killed", "--steps", "10", "--quiet"], tmp.path()));
+    assert_eq!(summary(&tmp.path().join("killed")).status, RunStatus::Completed);
+}
+
+#[test]
+fn a_build_without_mpi_refuses_a_multi_rank_launch() {
+    // As mpirun would start it: the launcher's variables set, this test's wgsph built without
+    // the feature.
+    if cfg!(feature = "mpi") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .args(["run", "dam_break", "--steps", "1", "--out", "o"])
+        .current_dir(tmp.path())
+        .env("OMPI_COMM_WORLD_SIZE", "2")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("built without MPI") && err.contains("--features mpi"), "{err}");
+    assert!(!tmp.path().join("o").exists(), "nothing written");
+}
+
+#[test]
+fn an_error_on_one_rank_stops_every_rank_naming_it() {
+    let Some(m) = mpi() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    // Rank 0 alone checks the output directory, and refuses one a run did not write; the
+    // other rank is already waiting for it.
+    std::fs::create_dir(tmp.path().join("taken")).unwrap();
+    std::fs::write(tmp.path().join("taken/notes.txt"), "mine").unwrap();
+    let start = Instant::now();
+    let out = mpirun(&m, 2, &["run", "dam_break", "--particles", "500", "--backend", "cpu", "--steps", "10", "--out", "taken"], tmp.path()).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(start.elapsed() < Duration::from_secs(60), "every rank ended");
+    assert!(err.contains("rank 0 of 2 stops every rank") && err.contains("taken"), "{err}");
+    assert_eq!(std::fs::read_to_string(tmp.path().join("taken/notes.txt")).unwrap(), "mine");
+}

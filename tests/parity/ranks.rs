@@ -1,0 +1,194 @@
+//! One simulation across several ranks (threads of one process here, connected by channels)
+//! against the same scene on one rank: bit for bit, through migration, ghosts, load balance,
+//! empty ranks and restarts on another rank count. The runs over MPI processes are in
+//! tests/cli/ranks.rs.
+
+use super::common::TestScene;
+use std::sync::Arc;
+use wgsph::model::scene::{BoundaryPressure, Scene};
+use wgsph::model::state::{BackendState, Snapshot};
+use wgsph::solver::{open, Backend, BackendChoice, LocalGroup, Precision, Ranks};
+
+/// What a test does with each rank's backend; every rank runs it, rank 0's result is returned
+/// (with every rank's, for the checks that they agree).
+type Work<'a, T> = dyn Fn(&mut dyn Backend) -> anyhow::Result<T> + Sync + 'a;
+
+fn on_ranks<T: Send>(scene: &Scene, ranks: usize, balance_every: u64, precision: Precision, work: &Work<'_, T>) -> Vec<T> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = LocalGroup::new(ranks)
+            .into_iter()
+            .map(|comm| {
+                scope.spawn(move || {
+                    let rank = Ranks { comm: Arc::new(comm), balance_every };
+                    let mut sim = open(scene, &BackendChoice::cpu(precision).on_ranks(rank)).expect("opens");
+                    work(sim.backend()).expect("runs")
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().expect("rank thread")).collect()
+    })
+}
+
+fn snapshot_after(scene: &Scene, ranks: usize, steps: u64, balance_every: u64) -> Snapshot {
+    let all = on_ranks(scene, ranks, balance_every, Precision::F64, &|b: &mut dyn Backend| {
+        b.step(steps)?;
+        b.snapshot()
+    });
+    for s in &all[1..] {
+        assert!(s.len() == 0 && s.step == all[0].step && s.time == all[0].time, "rank 0 gathers the snapshot, the others get its step and time");
+    }
+    all.into_iter().next().expect("one rank at least")
+}
+
+fn one_rank(scene: &Scene, steps: u64) -> Snapshot {
+    let mut sim = open(scene, &BackendChoice::cpu(Precision::F64)).expect("opens");
+    sim.step(steps).expect("steps");
+    let health = sim.health().expect("health");
+    assert!(health.is_ok() && sim.steps_done() == steps, "the run of {} stays healthy: {health:?} at step {}", scene.name, sim.steps_done());
+    sim.snapshot().expect("snapshot")
+}
+
+fn dam_break(particles: u64) -> Scene {
+    Scene::builtin("dam_break").expect("built in").with_fluid_particles(particles)
+}
+
+/// The largest relative difference of positions and densities.
+fn largest_difference(a: &Snapshot, b: &Snapshot) -> (f64, f64) {
+    assert_eq!(a.len(), b.len());
+    let mut position: f64 = 0.0;
+    let mut density: f64 = 0.0;
+    for i in 0..a.len() {
+        for k in 0..3 {
+            position = position.max((a.positions[i][k] - b.positions[i][k]).abs() / a.positions[i][k].abs().max(1e-3));
+        }
+        density = density.max((a.densities[i] - b.densities[i]).abs() / a.densities[i].abs());
+    }
+    (position, density)
+}
+
+#[test]
+fn several_ranks_compute_bit_for_bit_what_one_rank_computes() {
+    let scene = dam_break(1500);
+    assert!(scene.grid().dims[0] >= 8, "the dam break's long axis has room for 4 slabs");
+    let one = one_rank(&scene, 1);
+    for ranks in [2, 3, 4] {
+        let many = snapshot_after(&scene, ranks, 1, 0);
+        let (dx, drho) = largest_difference(&one, &many);
+        assert!(dx <= 1e-6 && drho <= 1e-6, "{ranks} ranks after one step: position {dx:e}, density {drho:e}");
+        assert!(one == many, "{ranks} ranks after one step, bit for bit");
+    }
+}
+
+#[test]
+fn two_hundred_steps_of_the_dam_break_on_one_two_and_four_ranks_agree() {
+    let scene = dam_break(1000);
+    let one = one_rank(&scene, 200);
+    for ranks in [2, 4] {
+        // Slabs move every 20 steps; migration and ghosts change every step.
+        let many = snapshot_after(&scene, ranks, 200, 20);
+        let tolerances = wgsph::solver::compare::many_steps(&scene.params());
+        let (dx, drho) = largest_difference(&one, &many);
+        assert!(dx <= tolerances.position && drho <= tolerances.density, "{ranks} ranks: position {dx:e}, density {drho:e}");
+        assert!(one == many, "{ranks} ranks after 200 steps, bit for bit");
+    }
+}
+
+#[test]
+fn continuity_density_in_f32_adaptive_dt_and_adami_walls_agree_bit_for_bit() {
+    let continuity = TestScene::small_tank().continuity().density_diffusion(0.1).build();
+    let adaptive = TestScene::small_tank().adaptive().build();
+    let adami = TestScene::small_tank().boundary_pressure(BoundaryPressure::Adami).build();
+    for (scene, precision) in [(continuity, Precision::F32), (adaptive, Precision::F64), (adami, Precision::F64)] {
+        let mut single = open(&scene, &BackendChoice::cpu(precision)).expect("opens");
+        single.step(30).expect("steps");
+        let one = single.snapshot().expect("snapshot");
+        let dt = single.backend().dt_stats().expect("dt").last;
+        let all = on_ranks(&scene, 2, 10, precision, &|b: &mut dyn Backend| {
+            b.step(30)?;
+            Ok((b.snapshot()?, b.dt_stats()?.last))
+        });
+        assert!(all[0].0 == one, "2 ranks against 1, {precision:?}, {:?}, {:?}", scene.physics.density, scene.physics.boundary_pressure);
+        assert_eq!(all[0].1, dt);
+    }
+}
+
+/// A block at the low end of a long closed box (along z), moving up it at 0.5 m/s without
+/// gravity.
+fn moving_block() -> Scene {
+    TestScene::new()
+        .named("block")
+        .domain([-0.1, -0.1, -0.1], [0.3, 0.3, 1.3])
+        .container([0.0; 3], [0.2, 0.2, 1.2])
+        .gravity([0.0; 3])
+        .fluid([0.0; 3], [0.2, 0.2, 0.16])
+        .moving_at([0.0, 0.0, 0.5])
+        .clamp_negative_pressure(true)
+        .build()
+}
+
+#[test]
+fn particles_migrate_across_faces_and_slabs_follow_the_counts() {
+    let scene = moving_block();
+    let one = one_rank(&scene, 100);
+    let reports = on_ranks(&scene, 3, 10, Precision::F64, &|b: &mut dyn Backend| {
+        b.step(100)?;
+        Ok((b.rank_report().expect("across ranks"), b.snapshot()?))
+    });
+    let first = &reports[0].0;
+    assert_eq!(first.axis, 2, "the box is cut along its length");
+    let migrated: u64 = reports.iter().map(|r| r.0.stats.migrated).sum();
+    assert!(migrated > 0, "the moving block crosses the slab faces: {:?}", reports.iter().map(|r| &r.0).collect::<Vec<_>>());
+    assert!(reports.iter().any(|r| r.0.stats.ghosts > 0), "ranks hold ghosts of their neighbours");
+    assert!(first.stats.rebalances > 0, "the bounds followed the block: {:?}", first.bounds);
+    assert!(first.stats.max_imbalance >= 1.0);
+    assert_eq!(reports.iter().map(|r| r.0.own_particles).sum::<usize>(), scene.fluid_particle_count() as usize);
+    assert!(reports[0].1 == one, "3 ranks with migration and moving slabs against one rank");
+}
+
+#[test]
+fn a_rank_without_particles_takes_part_in_every_step() {
+    // 4 ranks on the moving block: the upper ones start empty.
+    let scene = moving_block();
+    let one = one_rank(&scene, 60);
+    let runs = on_ranks(&scene, 4, 0, Precision::F64, &|b: &mut dyn Backend| {
+        let before = b.rank_report().expect("across ranks").own_particles;
+        b.step(60)?;
+        Ok((before, b.snapshot()?))
+    });
+    assert!(runs.iter().any(|r| r.0 == 0), "a rank starts empty: {:?}", runs.iter().map(|r| r.0).collect::<Vec<_>>());
+    assert!(runs[0].1 == one, "4 ranks, some empty, against one rank");
+}
+
+#[test]
+fn a_state_saved_on_some_ranks_continues_on_another_count() {
+    let scene = dam_break(800);
+    let uninterrupted = one_rank(&scene, 60);
+    // Saved at step 30 on 3 ranks: the state is the one one rank saves.
+    let saved: Vec<BackendState> = on_ranks(&scene, 3, 10, Precision::F64, &|b: &mut dyn Backend| {
+        b.step(30)?;
+        b.save_state()
+    });
+    let mut single = open(&scene, &BackendChoice::cpu(Precision::F64)).expect("opens");
+    single.step(30).expect("steps");
+    assert!(saved[0] == single.backend().save_state().expect("state"), "the state saved on 3 ranks is the one one rank saves");
+    for ranks in [1, 2, 4] {
+        let state = saved[0].clone();
+        let resumed = on_ranks(&scene, ranks, 10, Precision::F64, &move |b: &mut dyn Backend| {
+            b.restore_state(&state)?;
+            b.step(30)?;
+            b.snapshot()
+        });
+        assert!(resumed[0] == uninterrupted, "saved on 3 ranks, continued on {ranks}");
+    }
+}
+
+#[test]
+fn what_does_not_run_across_ranks_yet_is_refused_by_name() {
+    let dfsph = TestScene::small_tank().dfsph().build();
+    let [comm, _other]: [_; 2] = LocalGroup::new(2).try_into().ok().expect("two ranks");
+    let ranks = Ranks::new(Arc::new(comm));
+    let e = open(&dfsph, &BackendChoice::cpu(Precision::F64).on_ranks(ranks.clone())).err().expect("refused").to_string();
+    assert!(e.contains("physics.solver") && e.contains("not supported across ranks yet"), "{e}");
+    let e = open(&dam_break(500), &BackendChoice::gpu().on_ranks(ranks)).err().expect("refused").to_string();
+    assert!(e.contains("--backend gpu does not run across ranks yet"), "{e}");
+}
