@@ -716,7 +716,9 @@ impl<R: Real> Backend for CpuSolver<R> {
         "cpu"
     }
     fn adapter(&self) -> String {
-        format!("cpu ({}, {} threads)", std::any::type_name::<R>(), rayon::current_num_threads())
+        let threads = rayon::current_num_threads();
+        let noun = if threads == 1 { "thread" } else { "threads" };
+        format!("cpu ({}, {threads} {noun})", std::any::type_name::<R>())
     }
     fn params(&self) -> &Params {
         CpuSolver::params(self)
