@@ -237,8 +237,11 @@ fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choi
         Precision::F64 => "the CPU path in f64",
         Precision::F32 => "the CPU path in f32",
     };
+    if choice.device == Device::Gpu {
+        return open_part_on_gpu(scene, params, initial, choice, ranks);
+    }
     let reason = match choice.device {
-        Device::Gpu => anyhow::bail!("--backend gpu does not run across ranks yet ({size} ranks): use --backend cpu (or auto) under mpirun"),
+        Device::Gpu => unreachable!("opened above"),
         Device::Cpu => format!("{cpu_name}, as asked, on rank {} of {size}", ranks.comm.rank()),
         Device::Auto => format!("{cpu_name} on rank {} of {size}: across ranks only the CPU path runs yet", ranks.comm.rank()),
     };
@@ -249,6 +252,41 @@ fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choi
         Precision::F32 => Solver::Cpu32(CpuSolver::new_part(params, &initial, ranks.comm.clone(), ranks.balance_every)?),
     };
     Ok(Simulation { scene: scene.clone(), solver, reason })
+}
+
+/// One rank's part on the GPU: the host runs the exchange of the CPU path, the GPU the rest of
+/// the step on the rank's particles and ghosts (src/solver/gpu/ranks.rs). The adapter is the
+/// rank's by its place on its machine ([`super::gpu::device::rank_adapter`]).
+fn open_part_on_gpu(scene: &Scene, params: &Params, initial: Option<InitialState>, choice: &BackendChoice, ranks: &Ranks) -> anyhow::Result<Simulation> {
+    let (rank, size) = (ranks.comm.rank(), ranks.comm.size());
+    if params.adaptive.is_some() {
+        return Err(SceneError {
+            origin: scene.name.clone(),
+            field: "time.adaptive".into(),
+            message: format!("is set, which the GPU path does not run across ranks yet ({size} ranks): its dt would be chosen from each rank's particles apart; use a fixed time.dt, or --backend cpu"),
+        }
+        .into());
+    }
+    let (ctx, why) = match &choice.context {
+        Some(c) => (c.clone(), "the device given".to_string()),
+        None => {
+            let candidates = super::gpu::device::candidate_adapters();
+            let kinds: Vec<wgpu::DeviceType> = candidates.iter().map(|a| a.get_info().device_type).collect();
+            let (node_rank, node_ranks) = ranks.comm.node_rank();
+            let Some((index, why)) = super::gpu::device::rank_adapter(&kinds, node_rank, node_ranks) else {
+                super::gpu::device::choose_adapter()?;
+                anyhow::bail!("rank {rank} of {size}: no GPU adapter with compute shaders");
+            };
+            let adapter = candidates.into_iter().nth(index).expect("rank_adapter picks an index of the list");
+            (GpuContext::from_adapter(adapter)?, why)
+        }
+    };
+    let name = ctx.describe();
+    let initial = initial.unwrap_or_else(|| scene.initial_state());
+    let stages = super::gpu::ranks::GpuRankStages::new(ctx, params, &initial, choice.gpu_options, why);
+    let solver = CpuSolver::<f32>::new_part_on(params, &initial, ranks.comm.clone(), ranks.balance_every, Box::new(stages))?;
+    let reason = format!("the GPU on {name}, as asked, on rank {rank} of {size} (the exchange on the host)");
+    Ok(Simulation { scene: scene.clone(), solver: Solver::Cpu32(solver), reason })
 }
 
 /// The CPU path's host memory against what the machine has (where the platform tells).

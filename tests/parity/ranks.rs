@@ -3,10 +3,11 @@
 //! empty ranks and restarts on another rank count. The runs over MPI processes are in
 //! tests/cli/ranks.rs.
 
-use super::common::TestScene;
+use super::common::{self, TestScene};
 use std::sync::Arc;
 use wgsph::model::scene::{BoundaryPressure, Scene};
 use wgsph::model::state::{BackendState, Snapshot};
+use wgsph::solver::gpu::GpuContext;
 use wgsph::solver::{open, Backend, BackendChoice, LocalGroup, Precision, Ranks};
 
 /// What a test does with each rank's backend; every rank runs it, rank 0's result is returned
@@ -189,6 +190,74 @@ fn what_does_not_run_across_ranks_yet_is_refused_by_name() {
     let ranks = Ranks::new(Arc::new(comm));
     let e = open(&dfsph, &BackendChoice::cpu(Precision::F64).on_ranks(ranks.clone())).err().expect("refused").to_string();
     assert!(e.contains("physics.solver") && e.contains("not supported across ranks yet"), "{e}");
-    let e = open(&dam_break(500), &BackendChoice::gpu().on_ranks(ranks)).err().expect("refused").to_string();
-    assert!(e.contains("--backend gpu does not run across ranks yet"), "{e}");
+    let adaptive = TestScene::small_tank().adaptive().build();
+    let e = open(&adaptive, &BackendChoice::gpu().on_ranks(ranks)).err().expect("refused").to_string();
+    assert!(e.contains("time.adaptive") && e.contains("GPU path does not run across ranks yet"), "{e}");
+}
+
+/// Each rank on its own device of `ctx`'s adapter, like the ranks of one machine sharing a
+/// software adapter.
+fn gpu_on_ranks<T: Send>(ctx: &GpuContext, scene: &Scene, ranks: usize, balance_every: u64, work: &Work<'_, T>) -> Vec<T> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = LocalGroup::new(ranks)
+            .into_iter()
+            .map(|comm| {
+                let device = GpuContext::from_adapter(ctx.adapter.clone()).expect("a device per rank");
+                scope.spawn(move || {
+                    let rank = Ranks { comm: Arc::new(comm), balance_every };
+                    let mut sim = open(scene, &BackendChoice::gpu_on(device).on_ranks(rank)).expect("opens");
+                    work(sim.backend()).expect("runs")
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().expect("rank thread")).collect()
+    })
+}
+
+fn gpu_snapshot_after(ctx: &GpuContext, scene: &Scene, ranks: usize, steps: u64, balance_every: u64) -> Snapshot {
+    let all = gpu_on_ranks(ctx, scene, ranks, balance_every, &|b: &mut dyn Backend| {
+        b.step(steps)?;
+        assert!(b.health()?.is_ok(), "rank healthy after {steps} steps: {:?}", b.health()?);
+        b.snapshot()
+    });
+    all.into_iter().next().expect("one rank at least")
+}
+
+fn one_gpu(ctx: &GpuContext, scene: &Scene, steps: u64) -> Snapshot {
+    let device = GpuContext::from_adapter(ctx.adapter.clone()).expect("device");
+    let mut sim = open(scene, &BackendChoice::gpu_on(device)).expect("opens");
+    sim.step(steps).expect("steps");
+    sim.snapshot().expect("snapshot")
+}
+
+#[test]
+fn several_gpu_ranks_agree_with_one_gpu_after_one_step_and_over_200_steps() {
+    let Some(ctx) = common::contexts().into_iter().next() else { return };
+    let scene = dam_break(1000);
+    let one = one_gpu(&ctx, &scene, 1);
+    for ranks in [2, 3] {
+        let many = gpu_snapshot_after(&ctx, &scene, ranks, 1, 0);
+        let (dx, drho) = largest_difference(&one, &many);
+        assert!(dx <= 1e-6 && drho <= 1e-6, "{ranks} GPU ranks after one step: position {dx:e}, density {drho:e}");
+    }
+    let one = one_gpu(&ctx, &scene, 200);
+    let tolerances = wgsph::solver::compare::many_steps(&scene.params());
+    let many = gpu_snapshot_after(&ctx, &scene, 2, 200, 20);
+    let (dx, drho) = largest_difference(&one, &many);
+    assert!(dx <= tolerances.position && drho <= tolerances.density, "2 GPU ranks over 200 steps: position {dx:e}, density {drho:e}");
+}
+
+#[test]
+fn gpu_ranks_are_bitwise_reproducible_through_migration() {
+    let Some(ctx) = common::contexts().into_iter().next() else { return };
+    let scene = moving_block();
+    let run = || {
+        gpu_on_ranks(&ctx, &scene, 3, 10, &|b: &mut dyn Backend| {
+            b.step(40)?;
+            Ok((b.rank_report().expect("across ranks"), b.snapshot()?))
+        })
+    };
+    let (first, second) = (run(), run());
+    assert!(first.iter().map(|r| r.0.stats.migrated).sum::<u64>() > 0, "particles crossed faces");
+    assert!(first[0].1 == second[0].1, "3 GPU ranks, twice: the same bits");
 }

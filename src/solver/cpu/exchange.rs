@@ -16,7 +16,7 @@ use crate::model::state::{BackendState, Snapshot, StepFields};
 use crate::solver::communicator::{all_sum, Communicator};
 use crate::solver::decomposition::{cell_runs, imbalance, slab_axis, RankReport, RankStats, Slabs, HALO_LAYERS};
 use std::ops::Range;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 /// A rank's share of a simulation across ranks: its communicator and slabs, and what the
@@ -110,7 +110,110 @@ impl<R: Real> Held<R> {
     }
 }
 
+/// The stages of a step that run on a device across ranks: after the host's exchange, the
+/// binning, density, forces and integration of the held particles (own and ghosts, in the
+/// one-process order), which come back in cell order with the cell starts of that binning and
+/// the density stage's densities and pressures. The host keeps the exchange, the health and
+/// the bookkeeping, so both paths share them.
+pub trait DeviceStages<R: Real>: Send {
+    /// The device in words (the summary's adapter).
+    fn describe(&self) -> String;
+    /// Runs step `step` on `held` and writes the result back into it.
+    fn run_step(&mut self, step: u64, held: HeldArrays<'_, R>) -> anyhow::Result<()>;
+    /// The binning and density stage of `held` at step `step`, without advancing it (for a
+    /// snapshot), written back the same way.
+    fn run_fields(&mut self, step: u64, held: HeldArrays<'_, R>) -> anyhow::Result<()>;
+}
+
+/// Shared so that a cloned solver stays cloneable; a rank's solver is never cloned mid-run.
+pub type SharedDeviceStages<R> = Arc<Mutex<Box<dyn DeviceStages<R>>>>;
+
+/// The device stages, also after a panic elsewhere poisoned the lock (their state is whole
+/// between calls).
+pub fn lock<R: Real>(device: &SharedDeviceStages<R>) -> MutexGuard<'_, Box<dyn DeviceStages<R>>> {
+    device.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The particles a rank holds, handed to the device stages (see [`DeviceStages`]).
+pub struct HeldArrays<'a, R: Real> {
+    pub positions: &'a mut Vec<V3<R>>,
+    pub velocities: &'a mut Vec<V3<R>>,
+    pub ids: &'a mut Vec<u32>,
+    /// Empty without continuity density.
+    pub carried_densities: &'a mut Vec<R>,
+    pub densities: &'a mut Vec<R>,
+    pub pressures: &'a mut Vec<R>,
+    /// Cells + 1 values, written by the device.
+    pub starts: &'a mut Vec<u32>,
+}
+
 impl<R: Real> CpuSolver<R> {
+    /// One rank's part on a device: like [`CpuSolver::new_part`], with the step's stages after
+    /// the exchange run by `device`.
+    pub(crate) fn new_part_on(params: &crate::model::params::Params, initial: &crate::model::initial::InitialState, comm: Arc<dyn Communicator>, balance_every: u64, device: Box<dyn DeviceStages<R>>) -> anyhow::Result<Self> {
+        let mut solver = Self::new_part(params, initial, comm, balance_every)?;
+        solver.device = Some(Arc::new(Mutex::new(device)));
+        Ok(solver)
+    }
+
+    /// The held arrays, lent to the device stages.
+    fn held_arrays(&mut self) -> HeldArrays<'_, R> {
+        HeldArrays {
+            positions: &mut self.positions,
+            velocities: &mut self.velocities,
+            ids: &mut self.ids,
+            carried_densities: &mut self.carried_densities,
+            densities: &mut self.densities,
+            pressures: &mut self.pressures,
+            starts: &mut self.starts,
+        }
+    }
+
+    /// The device's binning and density of the held particles (a snapshot's fields).
+    fn fields_on_device(&mut self) {
+        let device = self.device.clone().expect("only with device stages");
+        self.lists.clear();
+        let step = self.step;
+        let ran = lock(&device).run_fields(step, self.held_arrays());
+        if let Err(e) = ran {
+            if let Some(part) = &mut self.ranks {
+                part.failure.get_or_insert(format!("rank {} of {}: the device's density stage failed: {e:#}", part.comm.rank(), part.comm.size()));
+            }
+        }
+    }
+
+    /// A step whose stages after the exchange run on the device; the health is taken from the
+    /// own particles the device gave back, and reduced over the ranks as on the host.
+    pub(super) fn step_on_device(&mut self) {
+        let device = self.device.clone().expect("only with device stages");
+        self.lists.clear();
+        let step = self.step;
+        let ran = lock(&device).run_step(step, self.held_arrays());
+        if let Err(e) = ran {
+            if let Some(part) = &mut self.ranks {
+                part.failure.get_or_insert(format!("rank {} of {}: the device step failed: {e:#}", part.comm.rank(), part.comm.size()));
+            }
+            return;
+        }
+        let n = self.positions.len();
+        self.accelerations.resize(n, V3::zero());
+        let domain = (V3::<R>::from64(self.params.domain_min), V3::<R>::from64(self.params.domain_max));
+        let mut found = super::integrate::StepHealth::default();
+        for own in self.own_slots() {
+            for i in own {
+                let (x, v) = (self.positions[i], self.velocities[i]);
+                let finite = x.is_finite() && v.is_finite();
+                let inside = (0..3).all(|k| x.0[k] >= domain.0 .0[k] && x.0[k] <= domain.1 .0[k]);
+                let speed = if finite { v.length().to64() } else { 0.0 };
+                found = found.add(super::integrate::StepHealth { non_finite: (!finite) as u32, escaped: (finite && !inside) as u32, max_speed: speed });
+            }
+        }
+        let max_density = self.largest_density();
+        let (found, max_density) = self.all_step_health(found, max_density);
+        self.health.max_density = self.health.max_density.max(max_density);
+        self.record_step(self.params.dt, found, max_density);
+    }
+
     /// The solver of one rank's part of a simulation across the ranks of `comm`: the particles
     /// of `initial` whose cell layer lies in this rank's slab (slabs of equal counts), and
     /// every wall particle. `balance_every`: steps between moves of the slab bounds (0: never).
@@ -369,9 +472,13 @@ impl<R: Real> CpuSolver<R> {
     /// other ranks get a snapshot of no particle, at the same step and time).
     pub(super) fn snapshot_across_ranks(&mut self) -> anyhow::Result<Snapshot> {
         self.exchange(false);
-        self.bin();
-        self.compute_density();
-        self.compute_wall_pressure();
+        if self.rank_failure().is_none() && self.device.is_some() {
+            self.fields_on_device();
+        } else {
+            self.bin();
+            self.compute_density();
+            self.compute_wall_pressure();
+        }
         if let Some(e) = self.rank_failure() {
             anyhow::bail!("{e}");
         }

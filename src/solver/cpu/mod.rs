@@ -92,6 +92,8 @@ pub struct CpuSolver<R: Real> {
     probe_samples: Vec<ProbeSample>,
     /// This rank's share when the simulation runs across ranks (`None`: one process).
     ranks: Option<Box<exchange::RankPart>>,
+    /// Across ranks on a device: the stages between the exchange and the step's bookkeeping.
+    device: Option<exchange::SharedDeviceStages<R>>,
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -149,6 +151,7 @@ impl<R: Real> CpuSolver<R> {
             wall_probe_masks,
             probe_samples: Vec::new(),
             ranks: None,
+            device: None,
         }
     }
 
@@ -496,6 +499,10 @@ impl<R: Real> CpuSolver<R> {
             if self.rank_failure().is_some() {
                 return;
             }
+            if self.device.is_some() {
+                self.step_on_device();
+                return;
+            }
             self.bin();
         }
         if let Some((dfsph, mut parts)) = self.dfsph_parts() {
@@ -713,9 +720,16 @@ impl<R: Real> CpuSolver<R> {
 
 impl<R: Real> Backend for CpuSolver<R> {
     fn kind(&self) -> &'static str {
-        "cpu"
+        if self.device.is_some() {
+            "gpu"
+        } else {
+            "cpu"
+        }
     }
     fn adapter(&self) -> String {
+        if let Some(device) = &self.device {
+            return exchange::lock(device).describe();
+        }
         let threads = rayon::current_num_threads();
         let noun = if threads == 1 { "thread" } else { "threads" };
         format!("cpu ({}, {threads} {noun})", std::any::type_name::<R>())
@@ -759,6 +773,7 @@ impl<R: Real> Backend for CpuSolver<R> {
     }
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {
         match self.ranks {
+            Some(_) if self.device.is_some() => anyhow::bail!("the accelerations of a GPU step across ranks are not read back: compare the step's fields on one rank"),
             Some(_) => self.step_fields_across_ranks(),
             None => Ok(CpuSolver::step_fields(self)),
         }

@@ -131,6 +131,22 @@ pub fn choose_from(all: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter, GpuError> {
         })
 }
 
+/// The adapter a rank takes among `kinds`, the device types of the adapters it may use (best
+/// first), by `node_rank`, its place among the `node_ranks` ranks of its machine: the
+/// `node_rank`-th hardware adapter (round robin when the ranks outnumber them), or with no
+/// hardware adapter the first, shared. Returns the index in `kinds` and why, in words.
+pub fn rank_adapter(kinds: &[wgpu::DeviceType], node_rank: usize, node_ranks: usize) -> Option<(usize, String)> {
+    let hardware: Vec<usize> = (0..kinds.len()).filter(|&i| matches!(kinds[i], wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu | wgpu::DeviceType::VirtualGpu)).collect();
+    if hardware.is_empty() {
+        let shared = if node_ranks > 1 { format!(", shared by the {node_ranks} ranks of this machine") } else { String::new() };
+        return (!kinds.is_empty()).then(|| (0, format!("no hardware adapter: the first one{shared}")));
+    }
+    let k = node_rank % hardware.len();
+    let sharing = node_ranks.div_ceil(hardware.len());
+    let shared = if sharing > 1 { format!(", shared by up to {sharing} of the {node_ranks} ranks of this machine") } else { String::new() };
+    Some((hardware[k], format!("hardware adapter {} of {} for node rank {node_rank}{shared}", k + 1, hardware.len())))
+}
+
 /// The first of `candidates` (best first) that `open` opens, or every failure in words.
 pub fn first_that_opens<A, C>(candidates: Vec<A>, mut open: impl FnMut(A) -> anyhow::Result<C>) -> Result<C, Vec<String>> {
     let mut failures = Vec::new();

@@ -8,6 +8,7 @@ pub mod memory;
 pub mod params;
 pub mod prefix_sum;
 pub mod probes;
+pub mod ranks;
 pub mod readback;
 pub mod schedule;
 pub mod shaders;

@@ -1,0 +1,144 @@
+//! The GPU step of one rank across ranks (docs/scale-out.md): the host runs the exchange
+//! (src/solver/cpu/exchange.rs, shared with the CPU path), then the rank's particles (own and
+//! ghosts) go up, the ordinary GPU step runs once on them, and the cell-sorted result comes
+//! back for the next exchange. The buffers are made for a capacity above the held count and
+//! the stages bound to `fluid_count`, so a changing count costs no new pipelines unless it
+//! outgrows the capacity.
+
+use super::buffers::ids_of;
+use super::device::GpuContext;
+use super::readback::read_buffers;
+use super::{GpuOptions, GpuSolver};
+use crate::model::initial::InitialState;
+use crate::model::params::Params;
+use crate::model::real::V3;
+use crate::solver::cpu::exchange::{DeviceStages, HeldArrays};
+
+/// Room made above the held count when the buffers are (re)made: migration and moving bounds
+/// change the count a little from step to step.
+const CAPACITY_MARGIN: f64 = 1.25;
+
+/// The device stages of a rank on the GPU.
+pub struct GpuRankStages {
+    ctx: GpuContext,
+    params: Params,
+    options: GpuOptions,
+    /// The scene's walls (every rank holds all of them), in the initial state's form.
+    walls: InitialState,
+    /// Made on the first step, with room for `capacity` particles.
+    solver: Option<GpuSolver>,
+    capacity: usize,
+    /// Why this adapter, for the summary.
+    why: String,
+}
+
+impl GpuRankStages {
+    /// The stages on `ctx` for the scene's `params`, with the walls of `initial`. `why`: how the
+    /// adapter was chosen.
+    pub fn new(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions, why: String) -> Self {
+        let walls = InitialState {
+            fluid_positions: Vec::new(),
+            fluid_velocities: Vec::new(),
+            fluid_densities: Vec::new(),
+            wall_positions: initial.wall_positions.clone(),
+            wall_masses: initial.wall_masses.clone(),
+            wall_boundaries: initial.wall_boundaries.clone(),
+        };
+        GpuRankStages { ctx, params: params.clone(), options, walls, solver: None, capacity: 0, why }
+    }
+
+    /// A solver with buffers for `capacity` particles (placeholders at the domain's lower
+    /// corner, never bound past the held count).
+    fn make_solver(&self, capacity: usize) -> anyhow::Result<GpuSolver> {
+        let corner = self.params.domain_min;
+        let mut initial = self.walls.clone();
+        initial.fluid_positions = vec![corner; capacity];
+        initial.fluid_velocities = vec![[0.0; 3]; capacity];
+        if self.params.continuity_density {
+            initial.fluid_densities = vec![self.params.rest_density; capacity];
+        }
+        GpuSolver::with_options(self.ctx.clone(), &self.params, &initial, self.options)
+    }
+}
+
+impl DeviceStages<f32> for GpuRankStages {
+    fn describe(&self) -> String {
+        format!("{} ({})", self.ctx.describe(), self.why)
+    }
+
+    fn run_step(&mut self, step: u64, held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
+        self.run(step, held, true)
+    }
+
+    fn run_fields(&mut self, step: u64, held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
+        self.run(step, held, false)
+    }
+}
+
+impl GpuRankStages {
+    /// Uploads `held`, runs one step (`advance`) or only the binning and density stage, and
+    /// reads the cell-sorted result back into `held`.
+    fn run(&mut self, step: u64, held: HeldArrays<'_, f32>, advance: bool) -> anyhow::Result<()> {
+        let n = held.positions.len();
+        if self.solver.is_none() || n > self.capacity {
+            let capacity = ((n.max(1) as f64) * CAPACITY_MARGIN).ceil() as usize;
+            self.solver = Some(self.make_solver(capacity)?);
+            self.capacity = capacity;
+        }
+        let solver = self.solver.as_mut().expect("made above");
+        let wide = |v: &V3<f32>| [v.0[0] as f64, v.0[1] as f64, v.0[2] as f64];
+        let positions: Vec<[f64; 3]> = held.positions.iter().map(wide).collect();
+        let velocities: Vec<[f64; 3]> = held.velocities.iter().map(wide).collect();
+        solver.load_held(&positions, &velocities, held.carried_densities, step);
+        if advance {
+            solver.advance(1);
+        } else {
+            solver.refresh_fields();
+        }
+        let cells = self.params.grid.cell_count() as u64;
+        let st = &solver.state[solver.current];
+        let bytes = n as u64;
+        let data = read_buffers(&self.ctx, &[
+            (&st.positions, bytes * 16),
+            (&st.velocities, bytes * 16),
+            (&solver.densities, bytes * 4),
+            (&solver.pressures, bytes * 4),
+            (&solver.starts, (cells + 1) * 4),
+        ])?;
+        let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
+        let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
+        // The w of a position is the particle's place in the upload: its id comes from there.
+        let uploaded = std::mem::take(held.ids);
+        *held.ids = ids_of(&pos).iter().map(|&slot| uploaded[slot as usize]).collect();
+        *held.positions = pos.iter().map(|p| V3([p[0], p[1], p[2]])).collect();
+        *held.velocities = vel.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
+        if !held.carried_densities.is_empty() {
+            *held.carried_densities = vel.iter().map(|v| v[3]).collect();
+        }
+        *held.densities = bytemuck::pod_collect_to_vec(&data[2]);
+        *held.pressures = bytemuck::pod_collect_to_vec(&data[3]);
+        *held.starts = bytemuck::pod_collect_to_vec(&data[4]);
+        Ok(())
+    }
+}
+
+impl GpuSolver {
+    /// Puts `positions`, `velocities` (and with continuity density `carried` densities) in the
+    /// buffers as the current state of step `step`, each particle's id its index, and binds the
+    /// stages to that many particles (at most the buffers' capacity).
+    pub(super) fn load_held(&mut self, positions: &[[f64; 3]], velocities: &[[f64; 3]], carried: &[f32], step: u64) {
+        let n = positions.len() as u32;
+        if n != self.fluid_count {
+            self.fluid_count = n;
+            // Every stage reads the count from the uniform block: rewrite it.
+            let p = super::params::GpuParams::new(&self.params, n, self.wall_count, self.uniform_viscosity);
+            self.ctx.queue.write_buffer(&self.uniform, 0, &p.bytes());
+        }
+        let carried_of = |i: usize| carried.get(i).copied().unwrap_or(0.0);
+        self.state[0].upload(&self.ctx, positions, velocities, |i| i as u32, &carried_of);
+        self.current = 0;
+        self.fields_state = 0;
+        self.accelerations_valid = false;
+        self.steps = step;
+    }
+}
