@@ -108,10 +108,14 @@ pub struct RankSummary {
     pub exchange_seconds: f64,
     pub exchange_share: f64,
     /// Where it ran: its place among the ranks of its machine, how many ran there, and the
-    /// CPU threads it computed with (every rank runs the CPU path for now).
+    /// CPU threads it computed with.
     pub node_rank: usize,
     pub node_ranks: usize,
     pub threads: usize,
+    /// The device it computed on: the CPU path's threads, or the GPU adapter and why this
+    /// rank took it (by its place on its machine).
+    #[serde(default)]
+    pub adapter: String,
 }
 
 impl RanksSummary {
@@ -138,6 +142,7 @@ impl RanksSummary {
                     node_rank: r.node_rank,
                     node_ranks: r.node_ranks,
                     threads: r.threads,
+                    adapter: r.adapter.clone(),
                 })
                 .collect(),
         }

@@ -150,6 +150,9 @@ pub struct RankReport {
     pub node_ranks: usize,
     /// The CPU threads it computes with.
     pub threads: usize,
+    /// The device it computes on, in words (the CPU path's threads, or a GPU adapter and why
+    /// this rank took it).
+    pub adapter: String,
     pub stats: RankStats,
 }
 

@@ -13,7 +13,7 @@
 use super::CpuSolver;
 use crate::model::real::{Real, V3};
 use crate::model::state::{BackendState, Snapshot, StepFields};
-use crate::solver::communicator::{all_sum, Communicator};
+use crate::solver::communicator::{all_max, all_sum, Communicator};
 use crate::solver::decomposition::{cell_runs, imbalance, slab_axis, RankReport, RankStats, Slabs, HALO_LAYERS};
 use std::ops::Range;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -287,6 +287,7 @@ impl<R: Real> CpuSolver<R> {
             node_rank: p.comm.node_rank().0,
             node_ranks: p.comm.node_rank().1,
             threads: rayon::current_num_threads(),
+            adapter: crate::solver::Backend::adapter(self),
             stats: p.stats.clone(),
         })
     }
@@ -536,6 +537,11 @@ impl<R: Real> CpuSolver<R> {
         let comm = self.ranks.as_ref().expect("across ranks").comm.clone();
         let s = &mine.stats;
         let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64])?;
+        // The adapters' names travel as bytes, padded to the longest.
+        let longest = all_max(comm.as_ref(), &[mine.adapter.len() as f64])?[0] as usize;
+        let mut name: Vec<f64> = mine.adapter.bytes().map(f64::from).collect();
+        name.resize(longest, 0.0);
+        let names: Vec<String> = comm.all_gather(&name)?.iter().map(|b| String::from_utf8_lossy(&b.iter().take_while(|&&c| c != 0.0).map(|&c| c as u8).collect::<Vec<u8>>()).into_owned()).collect();
         Ok(Some(
             all.iter()
                 .enumerate()
@@ -545,6 +551,7 @@ impl<R: Real> CpuSolver<R> {
                     node_rank: r[4] as usize,
                     node_ranks: r[5] as usize,
                     threads: r[6] as usize,
+                    adapter: names[rank].clone(),
                     stats: RankStats { exchange_seconds: r[1], migrated: r[2] as u64, ghosts: r[3] as usize, ..s.clone() },
                     ..mine.clone()
                 })

@@ -275,7 +275,31 @@ pub fn describe_adapters() -> Vec<String> {
 
 #[cfg(test)]
 mod tests {
-    use super::first_that_opens;
+    use super::{first_that_opens, rank_adapter};
+    use wgpu::DeviceType::{Cpu, DiscreteGpu, IntegratedGpu};
+
+    #[test]
+    fn a_rank_takes_the_hardware_adapter_of_its_place_on_its_machine() {
+        // Two GPUs listed after a software adapter: node ranks 0..4 go round the two GPUs.
+        let kinds = [Cpu, DiscreteGpu, IntegratedGpu];
+        let picked: Vec<usize> = (0..4).map(|r| rank_adapter(&kinds, r, 4).expect("an adapter").0).collect();
+        assert_eq!(picked, [1, 2, 1, 2]);
+        let (_, why) = rank_adapter(&kinds, 3, 4).expect("an adapter");
+        assert!(why.contains("hardware adapter 2 of 2") && why.contains("shared by up to 2 of the 4 ranks"), "{why}");
+        // One GPU per rank: no sharing said.
+        let (index, why) = rank_adapter(&kinds, 1, 2).expect("an adapter");
+        assert!(index == 2 && !why.contains("shared"), "{index} {why}");
+    }
+
+    #[test]
+    fn with_only_software_adapters_every_rank_shares_the_first() {
+        let kinds = [Cpu, Cpu];
+        for rank in 0..3 {
+            let (index, why) = rank_adapter(&kinds, rank, 3).expect("an adapter");
+            assert!(index == 0 && why.contains("no hardware adapter") && why.contains("shared by the 3 ranks"), "{why}");
+        }
+        assert!(rank_adapter(&[], 0, 1).is_none(), "no adapter at all: none chosen");
+    }
 
     #[test]
     fn an_adapter_that_cannot_open_a_device_is_passed_over() {
