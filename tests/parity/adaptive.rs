@@ -155,3 +155,56 @@ fn time_options_are_checked() {
     let e = tank().adaptive().viscosity_change(0.5, 0.001).validation_error();
     assert!(e.contains("physics.viscosity_schedule") && e.contains("adaptive"), "{e}");
 }
+
+#[test]
+fn a_continuity_density_advances_by_the_last_steps_dt_and_before_any_by_the_cfl_step_at_rest() {
+    let a = AdaptiveDt { cfl_number: 0.25, force_number: 0.25, viscous_number: 0.125, dt_min: 1e-6, dt_max: 1.0 };
+    let (h, c0) = (0.04, 20.0);
+    assert_eq!(a.continuity_dt(h, c0, 0.0), 0.25 * h / c0);
+    assert_eq!(a.continuity_dt(h, c0, 3e-4), 3e-4);
+    let tight = AdaptiveDt { dt_min: 1e-4, dt_max: 2e-4, ..a };
+    assert_eq!(tight.continuity_dt(h, c0, 0.0), 2e-4);
+}
+
+/// With dt_max far below every condition, each adaptive step is dt_max, so continuity density
+/// with adaptive dt must give the fixed-dt run's bits, on the CPU and on every adapter: the
+/// density stage advances by the step's dt from the first step on.
+#[test]
+fn continuity_density_with_adaptive_dt_held_at_dt_max_is_the_fixed_dt_run() {
+    let dt = 1e-4;
+    let fixed = TestScene::small_tank().continuity().density_diffusion(0.1).dt(dt).build();
+    let adaptive = TestScene::small_tank().continuity().density_diffusion(0.1).dt(dt).adaptive().build();
+    assert!(dt < 0.25 * fixed.params().h / fixed.params().speed_of_sound() / 2.0, "dt_max must bind");
+    let mut pairs: Vec<(Box<dyn Backend>, Box<dyn Backend>)> = vec![(Box::new(common::cpu::<f32>(&fixed)), Box::new(common::cpu::<f32>(&adaptive)))];
+    for ctx in common::contexts() {
+        pairs.push((Box::new(common::gpu(ctx.clone(), &fixed)), Box::new(common::gpu(ctx, &adaptive))));
+    }
+    for (mut f, mut a) in pairs {
+        f.step(40).unwrap();
+        a.step(40).unwrap();
+        let stats = a.dt_stats().unwrap();
+        // dt_max as the GPU's f32 holds it.
+        assert!((stats.min - dt).abs() <= 1e-7 * dt && (stats.max - dt).abs() <= 1e-7 * dt, "{}: {stats:?}", a.adapter());
+        let (sf, sa) = (f.snapshot().unwrap(), a.snapshot().unwrap());
+        assert!(sf.densities.iter().any(|d| (d - 1000.0).abs() > 1e-3), "{}: the density never moved", f.adapter());
+        assert_eq!(sf.positions, sa.positions, "{}", f.adapter());
+        assert_eq!(sf.velocities, sa.velocities, "{}", f.adapter());
+        assert_eq!(sf.densities, sa.densities, "{}", f.adapter());
+    }
+}
+
+#[test]
+fn continuity_density_with_adaptive_dt_agrees_between_gpu_and_the_f64_cpu_path() {
+    let s = TestScene::small_tank().continuity().density_diffusion(0.1).adaptive().dt_max(0.002).build();
+    for ctx in common::contexts() {
+        let who = ctx.describe();
+        let mut gpu = common::gpu(ctx, &s);
+        let mut cpu = common::cpu::<f64>(&s);
+        let c = step_and_compare(&mut gpu, &mut cpu, 1, &ONE_STEP).unwrap();
+        assert!(c.passed(), "{who}\n{}", c.table());
+        let c = step_and_compare(&mut gpu, &mut cpu, 99, &MANY_STEPS).unwrap();
+        assert!(c.passed(), "{who}\n{}", c.table());
+        let (sg, sc) = (gpu.dt_stats().unwrap(), cpu.dt_stats());
+        assert!((sg.mean - sc.mean).abs() < 1e-3 * sc.mean && sc.min < sc.max, "{who}: {sg:?} against {sc:?}");
+    }
+}
