@@ -12,6 +12,15 @@ use wgsph::app::run::RunOptions;
 use wgsph::model::params::AdaptiveDt;
 use wgsph::solver::Backend;
 
+/// The GPU against the CPU after one step (to the one-step bounds), then after 99 more (to the
+/// many-step bounds).
+fn one_step_then_a_hundred_agree(gpu: &mut dyn Backend, cpu: &mut dyn Backend, who: &str) {
+    let c = step_and_compare(gpu, cpu, 1, &ONE_STEP).unwrap();
+    assert!(c.passed(), "{who}\n{}", c.table());
+    let c = step_and_compare(gpu, cpu, 99, &MANY_STEPS).unwrap();
+    assert!(c.passed(), "{who}\n{}", c.table());
+}
+
 #[test]
 fn each_condition_of_the_adaptive_step_governs_in_its_regime_and_dt_is_clamped() {
     let a = AdaptiveDt { cfl_number: 0.25, force_number: 0.25, viscous_number: 0.125, dt_min: 1e-6, dt_max: 1.0 };
@@ -60,10 +69,7 @@ fn gpu_with_adaptive_dt_agrees_with_the_f64_cpu_path() {
             let who = format!("{} rebuild every {rebuild}", ctx.describe());
             let mut gpu = common::gpu(ctx, &s);
             let mut cpu = common::cpu::<f64>(&s);
-            let c = step_and_compare(&mut gpu, &mut cpu, 1, &ONE_STEP).unwrap();
-            assert!(c.passed(), "{who}\n{}", c.table());
-            let c = step_and_compare(&mut gpu, &mut cpu, 99, &MANY_STEPS).unwrap();
-            assert!(c.passed(), "{who}\n{}", c.table());
+            one_step_then_a_hundred_agree(&mut gpu, &mut cpu, &who);
             // The time and the steps taken, read back from the GPU in a few bytes.
             let (tg, tc) = (gpu.time(), Backend::time(&cpu));
             assert!((tg - tc).abs() < 1e-5 * tc, "{who}: time {tg} against {tc}");
@@ -200,10 +206,7 @@ fn continuity_density_with_adaptive_dt_agrees_between_gpu_and_the_f64_cpu_path()
         let who = ctx.describe();
         let mut gpu = common::gpu(ctx, &s);
         let mut cpu = common::cpu::<f64>(&s);
-        let c = step_and_compare(&mut gpu, &mut cpu, 1, &ONE_STEP).unwrap();
-        assert!(c.passed(), "{who}\n{}", c.table());
-        let c = step_and_compare(&mut gpu, &mut cpu, 99, &MANY_STEPS).unwrap();
-        assert!(c.passed(), "{who}\n{}", c.table());
+        one_step_then_a_hundred_agree(&mut gpu, &mut cpu, &who);
         let (sg, sc) = (gpu.dt_stats().unwrap(), cpu.dt_stats());
         assert!((sg.mean - sc.mean).abs() < 1e-3 * sc.mean && sc.min < sc.max, "{who}: {sg:?} against {sc:?}");
     }
