@@ -289,7 +289,7 @@ impl<R: Real> CpuSolver<R> {
             node_rank: p.comm.node_rank().0,
             node_ranks: p.comm.node_rank().1,
             threads: rayon::current_num_threads(),
-            adapter: crate::solver::Backend::adapter(self),
+            adapter: crate::solver::backend::Backend::adapter(self),
             stats: p.stats.clone(),
         })
     }
