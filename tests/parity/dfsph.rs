@@ -316,6 +316,7 @@ fn a_first_dfsph_step_meets_the_tolerance_derived_from_the_density_rounding() {
         let mut gpu = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene);
         let mut cpu = common::cpu::<f64>(&scene);
         let derived = step_and_compare(&mut gpu, &mut cpu, 1, &compare::one_step(&params)).unwrap();
+        eprintln!("{}:\n{}", ctx.describe(), derived.table());
         assert!(derived.passed(), "{}:\n{}", ctx.describe(), derived.table());
         // The weakly compressible tolerance does not hold here: the widening is needed.
         let v = derived.field("velocity").max;
