@@ -355,9 +355,6 @@ impl Scene {
                 "is {}; must be between {} (off) and {} (alpha of Monaghan's artificial viscosity; 0.01 to 0.1 is usual)",
                 short(p.artificial_viscosity), short(lo), short(hi))));
         }
-        if continuity && self.time.adaptive {
-            return Err(err(origin, "physics.density", "is \"continuity\", which advances each density by the step's dt before the forces, where adaptive time steps have not chosen it yet: use a fixed dt (time.adaptive = false), or density = \"summation\""));
-        }
         if p.initial_pressure == InitialPressure::Hydrostatic && !continuity {
             return Err(err(origin, "physics.initial_pressure", "is \"hydrostatic\", which sets each particle's density, and only the continuity equation keeps a density that was set: add physics.density = \"continuity\", or use initial_pressure = \"zero\""));
         }

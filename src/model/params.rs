@@ -176,6 +176,15 @@ impl AdaptiveDt {
         // NaN (a blown-up state) falls to dt_min; the health check reports it.
         if dt.is_nan() { self.dt_min } else { dt.clamp(self.dt_min, self.dt_max) }
     }
+
+    /// The dt a continuity density advances by at the start of a step: the last step's, the
+    /// one that moved the particles to the positions the rate is taken at (the density and
+    /// the positions then advance alternately by the same dt, as with a fixed dt); before any
+    /// step, the CFL condition of a fluid at rest, which bounds every dt the first step can
+    /// choose. The same in wgsl/sim/continuity.wgsl `continuity_dt`.
+    pub fn continuity_dt(&self, h: f64, c0: f64, last_dt: f64) -> f64 {
+        if last_dt > 0.0 { last_dt } else { (self.cfl_number * h / c0).clamp(self.dt_min, self.dt_max) }
+    }
 }
 
 impl Scene {

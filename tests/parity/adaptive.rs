@@ -12,6 +12,15 @@ use wgsph::app::run::RunOptions;
 use wgsph::model::params::AdaptiveDt;
 use wgsph::solver::Backend;
 
+/// The GPU against the CPU after one step (to the one-step bounds), then after 99 more (to the
+/// many-step bounds).
+fn one_step_then_a_hundred_agree(gpu: &mut dyn Backend, cpu: &mut dyn Backend, who: &str) {
+    let c = step_and_compare(gpu, cpu, 1, &ONE_STEP).unwrap();
+    assert!(c.passed(), "{who}\n{}", c.table());
+    let c = step_and_compare(gpu, cpu, 99, &MANY_STEPS).unwrap();
+    assert!(c.passed(), "{who}\n{}", c.table());
+}
+
 #[test]
 fn each_condition_of_the_adaptive_step_governs_in_its_regime_and_dt_is_clamped() {
     let a = AdaptiveDt { cfl_number: 0.25, force_number: 0.25, viscous_number: 0.125, dt_min: 1e-6, dt_max: 1.0 };
@@ -60,10 +69,7 @@ fn gpu_with_adaptive_dt_agrees_with_the_f64_cpu_path() {
             let who = format!("{} rebuild every {rebuild}", ctx.describe());
             let mut gpu = common::gpu(ctx, &s);
             let mut cpu = common::cpu::<f64>(&s);
-            let c = step_and_compare(&mut gpu, &mut cpu, 1, &ONE_STEP).unwrap();
-            assert!(c.passed(), "{who}\n{}", c.table());
-            let c = step_and_compare(&mut gpu, &mut cpu, 99, &MANY_STEPS).unwrap();
-            assert!(c.passed(), "{who}\n{}", c.table());
+            one_step_then_a_hundred_agree(&mut gpu, &mut cpu, &who);
             // The time and the steps taken, read back from the GPU in a few bytes.
             let (tg, tc) = (gpu.time(), Backend::time(&cpu));
             assert!((tg - tc).abs() < 1e-5 * tc, "{who}: time {tg} against {tc}");
@@ -154,4 +160,54 @@ fn time_options_are_checked() {
     }
     let e = tank().adaptive().viscosity_change(0.5, 0.001).validation_error();
     assert!(e.contains("physics.viscosity_schedule") && e.contains("adaptive"), "{e}");
+}
+
+#[test]
+fn a_continuity_density_advances_by_the_last_steps_dt_and_before_any_by_the_cfl_step_at_rest() {
+    let a = AdaptiveDt { cfl_number: 0.25, force_number: 0.25, viscous_number: 0.125, dt_min: 1e-6, dt_max: 1.0 };
+    let (h, c0) = (0.04, 20.0);
+    assert_eq!(a.continuity_dt(h, c0, 0.0), 0.25 * h / c0);
+    assert_eq!(a.continuity_dt(h, c0, 3e-4), 3e-4);
+    let tight = AdaptiveDt { dt_min: 1e-4, dt_max: 2e-4, ..a };
+    assert_eq!(tight.continuity_dt(h, c0, 0.0), 2e-4);
+}
+
+/// With dt_max far below every condition, each adaptive step is dt_max, so continuity density
+/// with adaptive dt must give the fixed-dt run's bits, on the CPU and on every adapter: the
+/// density stage advances by the step's dt from the first step on.
+#[test]
+fn continuity_density_with_adaptive_dt_held_at_dt_max_is_the_fixed_dt_run() {
+    let dt = 1e-4;
+    let fixed = TestScene::small_tank().continuity().density_diffusion(0.1).dt(dt).build();
+    let adaptive = TestScene::small_tank().continuity().density_diffusion(0.1).dt(dt).adaptive().build();
+    assert!(dt < 0.25 * fixed.params().h / fixed.params().speed_of_sound() / 2.0, "dt_max must bind");
+    let mut pairs: Vec<(Box<dyn Backend>, Box<dyn Backend>)> = vec![(Box::new(common::cpu::<f32>(&fixed)), Box::new(common::cpu::<f32>(&adaptive)))];
+    for ctx in common::contexts() {
+        pairs.push((Box::new(common::gpu(ctx.clone(), &fixed)), Box::new(common::gpu(ctx, &adaptive))));
+    }
+    for (mut f, mut a) in pairs {
+        f.step(40).unwrap();
+        a.step(40).unwrap();
+        let stats = a.dt_stats().unwrap();
+        // dt_max as the GPU's f32 holds it.
+        assert!((stats.min - dt).abs() <= 1e-7 * dt && (stats.max - dt).abs() <= 1e-7 * dt, "{}: {stats:?}", a.adapter());
+        let (sf, sa) = (f.snapshot().unwrap(), a.snapshot().unwrap());
+        assert!(sf.densities.iter().any(|d| (d - 1000.0).abs() > 1e-3), "{}: the density never moved", f.adapter());
+        assert_eq!(sf.positions, sa.positions, "{}", f.adapter());
+        assert_eq!(sf.velocities, sa.velocities, "{}", f.adapter());
+        assert_eq!(sf.densities, sa.densities, "{}", f.adapter());
+    }
+}
+
+#[test]
+fn continuity_density_with_adaptive_dt_agrees_between_gpu_and_the_f64_cpu_path() {
+    let s = TestScene::small_tank().continuity().density_diffusion(0.1).adaptive().dt_max(0.002).build();
+    for ctx in common::contexts() {
+        let who = ctx.describe();
+        let mut gpu = common::gpu(ctx, &s);
+        let mut cpu = common::cpu::<f64>(&s);
+        one_step_then_a_hundred_agree(&mut gpu, &mut cpu, &who);
+        let (sg, sc) = (gpu.dt_stats().unwrap(), cpu.dt_stats());
+        assert!((sg.mean - sc.mean).abs() < 1e-3 * sc.mean && sc.min < sc.max, "{who}: {sg:?} against {sc:?}");
+    }
 }

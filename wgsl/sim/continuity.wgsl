@@ -68,6 +68,18 @@ fn density_rate(i: u32) -> f32 {
     return (fluid_rate - params.diffusion_factor * diffusive) * params.fluid_mass + wall_rate;
 }
 
+// The dt the density advances by: the fixed dt, or with adaptive dt the last step's (the one
+// that moved the particles to where the rate is taken; this step's is chosen after the
+// forces), before any step the CFL condition of a fluid at rest. Twin: AdaptiveDt::continuity_dt.
+fn continuity_dt() -> f32 {
+    if (ADAPTIVE_DT) {
+        let last = bitcast<f32>(atomicLoad(&status[STATUS_DT]));
+        let at_rest = clamp(params.cfl_number * params.h / params.speed_of_sound, params.dt_min, params.dt_max);
+        return select(at_rest, last, last > 0.0);
+    }
+    return params.dt;
+}
+
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn continuity_density(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -77,7 +89,7 @@ fn continuity_density(
     reduce_begin(lid);
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let rho = velocities_at(i).w + params.dt * density_rate(i);
+        let rho = velocities_at(i).w + continuity_dt() * density_rate(i);
         densities_set(i, rho);
         pressures_set(i, eos_pressure(rho));
         if (is_finite_f32(rho) && rho > 0.0) {

@@ -227,7 +227,10 @@ impl<R: Real> CpuSolver<R> {
             let input = continuity::ContinuityInput {
                 kernel: &self.kernel,
                 grid: &self.grid,
-                dt: R::of(p.dt),
+                dt: R::of(match p.adaptive {
+                    Some(a) => a.continuity_dt(p.h, p.speed_of_sound(), self.dt_stats.last),
+                    None => p.dt,
+                }),
                 fluid_mass: R::of(p.fluid_mass),
                 rest_density: R::of(p.rest_density),
                 stiffness: R::of(p.stiffness),
