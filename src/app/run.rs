@@ -142,15 +142,23 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut last_checkpoint = (opts.resumed.is_some() && checkpoint_path.exists()).then(|| checkpoint_path.clone());
     let mut writer = snapshot_writer(opts, start)?;
     // The probes' time series: a resumed run keeps the lines before its first step.
-    let mut probe_writer = match (params.probes.is_empty(), opts.resumed.is_some()) {
+    // Across ranks every rank holds the same samples and the first alone writes them.
+    let mut probe_writer = match (params.probes.is_empty() || !opts.writes_files, opts.resumed.is_some()) {
         (true, _) => None,
         (false, false) => Some(ProbeWriter::new(&opts.out, &params.probes)),
         (false, true) => Some(ProbeWriter::resume(&opts.out, &params.probes, start)?),
     };
+    let has_probes = !params.probes.is_empty();
     // The samples the backend took since the last call, added to the series and written.
     let write_probes = |backend: &mut dyn Backend, w: &mut Option<ProbeWriter>| -> anyhow::Result<()> {
-        let Some(w) = w else { return Ok(()) };
         let step = backend.steps_done();
+        let Some(w) = w else {
+            // A rank that writes nothing still lets go of its copy.
+            if has_probes {
+                backend.take_probe_samples().with_context(|| format!("step {step}: reading the probes"))?;
+            }
+            return Ok(());
+        };
         let samples = backend.take_probe_samples().with_context(|| format!("step {step}: reading the probes"))?;
         w.add(&samples);
         w.write().with_context(|| format!("step {step}: writing the probes' time series"))

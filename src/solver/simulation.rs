@@ -227,9 +227,6 @@ fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choi
     if params.dfsph.is_some() {
         return refuse("physics.solver", format!("is dfsph, which is not supported across ranks yet ({size} ranks): its solver iterations would need an exchange each; run it on one rank, or use physics.solver = \"wcsph\""));
     }
-    if !params.probes.is_empty() {
-        return refuse("probe", format!("the scene has {} probe(s), which are not sampled across ranks yet ({size} ranks): run it on one rank, or remove the [[probe]] tables", params.probes.probes.len()));
-    }
     if params.rebuild_every != 1 {
         return refuse("time.neighbour_rebuild_every", format!("is {}; across ranks ({size}) the exchange runs with every rebuild of the grid, so it must be 1", params.rebuild_every));
     }

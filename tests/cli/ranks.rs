@@ -225,3 +225,43 @@ fn an_error_on_one_rank_stops_every_rank_naming_it() {
     assert!(err.contains("rank 0 of 2 stops every rank") && err.contains("taken"), "{err}");
     assert_eq!(std::fs::read_to_string(tmp.path().join("taken/notes.txt")).unwrap(), "mine");
 }
+
+/// Probes across MPI ranks: the first rank alone writes the series, and those of a point, a gauge
+/// and a front are byte for byte those of one rank (each point and gauge level is evaluated by
+/// the rank whose slab holds it; the tank's slabs cut the vertical, so the gauge crosses them).
+#[test]
+fn probes_on_two_ranks_write_the_series_of_one_rank() {
+    let Some(m) = mpi() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/hydrostatic.toml")).unwrap();
+    let probes = r#"
+[[probe]]
+name = "sensor"
+type = "point"
+position = [0.2, 0.05, 0.05]
+every_steps = 10
+
+[[probe]]
+name = "level"
+type = "gauge"
+position = [0.2, 0.0, 0.05]
+every_steps = 10
+
+[[probe]]
+name = "front"
+type = "front"
+every_steps = 10
+"#;
+    std::fs::write(tmp.path().join("tank.toml"), base + probes).unwrap();
+    let mut series = Vec::new();
+    for ranks in [1, 2] {
+        let out = format!("r{ranks}");
+        run_ok(mpirun(&m, ranks, &["run", "tank.toml", "--backend", "cpu", "--quiet", "--particles", "800", "--steps", "100", "--out", &out], tmp.path()));
+        let read = |name: &str| std::fs::read_to_string(tmp.path().join(&out).join("probes").join(format!("{name}.csv"))).unwrap();
+        let files = ["sensor", "level", "front"].map(read);
+        assert_eq!(files[0].lines().count(), 11, "a header and the steps 0, 10, ..., 90: {}", files[0]);
+        assert!(tmp.path().join(&out).join("probes").join("sensor.png").exists(), "the plot");
+        series.push(files);
+    }
+    assert!(series[0] == series[1], "one rank:\n{:?}\ntwo ranks:\n{:?}", series[0], series[1]);
+}

@@ -192,3 +192,60 @@ fn what_does_not_run_across_ranks_yet_is_refused_by_name() {
     let e = open(&dam_break(500), &BackendChoice::gpu().on_ranks(ranks)).err().expect("refused").to_string();
     assert!(e.contains("--backend gpu does not run across ranks yet"), "{e}");
 }
+
+/// Probes across ranks: every rank holds the one-rank run's sample; points, gauges and fronts
+/// bit for bit (each point and gauge level is evaluated by one rank), the force probe's sums to
+/// rounding (the ranks add their own particles' shares). In the still tank the slabs cut the
+/// vertical, so the gauges' lines cross ranks; in the dam break they cut the length.
+#[test]
+fn probes_across_ranks_read_what_one_rank_reads() {
+    use wgsph::model::scene::{ProbeSpec, ProbeType};
+    let every = 20;
+    let with_probes = |mut scene: Scene, points: [[f64; 3]; 2], gauges: [[f64; 3]; 2]| -> Scene {
+        scene.probe.push(ProbeSpec::point("point_a", points[0], every));
+        scene.probe.push(ProbeSpec::point("point_b", points[1], every));
+        for (name, at) in [("gauge_a", gauges[0]), ("gauge_b", gauges[1])] {
+            scene.probe.push(ProbeSpec { position: Some(at), every_steps: Some(every), ..ProbeSpec::of(name, ProbeType::Gauge) });
+        }
+        scene.probe.push(ProbeSpec { boundary: Some(0), every_steps: Some(every), ..ProbeSpec::of("tank", ProbeType::Force) });
+        scene.probe.push(ProbeSpec { every_steps: Some(every), ..ProbeSpec::of("front", ProbeType::Front) });
+        scene.validate(&wgsph::model::scene::SceneOrigin::Text).expect("a valid scene");
+        scene
+    };
+    let tank = with_probes(Scene::builtin("hydrostatic").expect("built in").with_fluid_particles(2000), [[0.2, 0.2, 0.05], [0.1, 0.05, 0.05]], [[0.1, 0.0, 0.05], [0.3, 0.0, 0.05]]);
+    let dam = with_probes(dam_break(1500), [[0.2, 0.2, 0.05], [0.38, 0.1, 0.05]], [[0.1, 0.0, 0.05], [0.3, 0.0, 0.05]]);
+    assert_eq!(tank.grid().dims.iter().enumerate().max_by_key(|(_, d)| **d).unwrap().0, 1, "the tank's slabs cut the vertical");
+    let steps = 120;
+    for scene in [tank, dam] {
+        let mut sim = open(&scene, &BackendChoice::cpu(Precision::F64)).expect("opens");
+        sim.step(steps).expect("steps");
+        let one = sim.backend().take_probe_samples().expect("samples");
+        assert_eq!(one.len(), 6, "the states of steps 0, 20, ..., 100");
+        let columns: Vec<&str> = scene.params().probes.probes.iter().flat_map(|p| p.geometry.columns().iter().map(move |c| if p.name == "tank" { "force" } else { c })).collect();
+        if scene.name == "hydrostatic" {
+            let last = &one.last().unwrap().values;
+            assert!(last[6] > 100.0 && last[6] > last[0], "{}: the deeper point reads the higher pressure: {last:?}", scene.name);
+            assert!(last.iter().zip(&columns).any(|(v, c)| *c == "force" && v.abs() > 1.0), "{}: the tank carries the fluid: {last:?}", scene.name);
+        }
+        for ranks in [2, 3] {
+            let all = on_ranks(&scene, ranks, 0, Precision::F64, &|b: &mut dyn Backend| {
+                b.step(steps)?;
+                b.take_probe_samples()
+            });
+            for (rank, samples) in all.iter().enumerate() {
+                assert_eq!(samples.len(), one.len(), "{ranks} ranks, rank {rank}");
+                for (a, b) in one.iter().zip(samples) {
+                    assert_eq!((a.step, a.time), (b.step, b.time));
+                    for ((x, y), c) in a.values.iter().zip(&b.values).zip(&columns) {
+                        let who = format!("{}, {ranks} ranks, rank {rank}, step {}, {c}: {x} against {y}", scene.name, a.step);
+                        if *c == "force" {
+                            assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{who}");
+                        } else {
+                            assert!(x == y, "{who}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

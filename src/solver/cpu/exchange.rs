@@ -13,7 +13,9 @@
 use super::CpuSolver;
 use crate::model::real::{Real, V3};
 use crate::model::state::{BackendState, Snapshot, StepFields};
-use crate::solver::communicator::{all_sum, Communicator};
+use super::probes::{self, ProbeInput};
+use crate::model::probes::{Probe, ProbeGeometry};
+use crate::solver::communicator::{all_max, all_sum, Communicator};
 use crate::solver::decomposition::{cell_runs, imbalance, slab_axis, RankReport, RankStats, Slabs, HALO_LAYERS};
 use std::ops::Range;
 use std::sync::Arc;
@@ -568,4 +570,76 @@ impl<R: Real> CpuSolver<R> {
             }
         }
     }
+}
+
+/// The probes' sample across ranks, the same on every rank: each point probe and each level of
+/// a gauge evaluated by the rank whose slab holds it (its neighbourhood is whole there: the
+/// rank's own particles and two ghost layers), the force probes and fronts over each rank's own
+/// particles (`own`, not its ghosts); then added over the ranks in rank order (the values of
+/// points and gauge levels come from one rank and zeros, so they are the one-process run's bits;
+/// force sums are added in another grouping) and the fronts' farthest taken over the ranks that
+/// saw fluid in their band. Returns the values and the error of a failed collective.
+pub(super) fn probes_across_ranks<R: Real>(input: &ProbeInput<R>, part: &RankPart, own: &[Range<usize>], list: &[Probe], offsets: &[usize]) -> (Vec<f64>, Option<String>) {
+    let rank = part.comm.rank();
+    let evaluates = |x: V3<R>| part.slabs.owner(input.grid.cell_coords(x)[part.axis]) == rank;
+    let count = offsets.last().zip(list.last()).map_or(0, |(&at, p)| at + p.geometry.columns().len());
+    let mut local = vec![R::zero(); count];
+    // Forces and fronts over the own particles.
+    let mut counted = vec![false; input.fluid.positions.len()];
+    for slots in own {
+        counted[slots.clone()].fill(true);
+    }
+    let mut partials = Vec::new();
+    probes::probe_particles(input, list, Some(&counted), &mut partials);
+    probes::probe_finish(list, offsets, &partials, &mut local);
+    // The point probes of this slab.
+    let (mine, mine_at): (Vec<Probe>, Vec<usize>) = list
+        .iter()
+        .zip(offsets)
+        .filter(|(p, _)| matches!(p.geometry, ProbeGeometry::Point { position } if evaluates(V3::from64(position))))
+        .map(|(p, &at)| (p.clone(), at))
+        .unzip();
+    probes::probe_points(input, &mine, &mine_at, &mut local);
+    // Summed: every column, then each gauge's level fractions; the fronts' farthest apart.
+    let mut sums: Vec<f64> = local.iter().map(|v| v.to64()).collect();
+    let mut farthest = Vec::new();
+    for (probe, &at) in list.iter().zip(offsets) {
+        match probe.geometry {
+            ProbeGeometry::Gauge { x, z, bottom, top, step } => {
+                let f = probes::gauge_fractions(input, R::of(x), R::of(z), R::of(bottom), R::of(top), R::of(step), evaluates);
+                sums.extend(f.iter().map(|v| v.to64()));
+            }
+            ProbeGeometry::Front { .. } => {
+                farthest.push(if sums[at + 1] > 0.0 { sums[at] } else { f64::NEG_INFINITY });
+                sums[at] = 0.0;
+            }
+            _ => {}
+        }
+    }
+    let reduced = all_sum(&*part.comm, &sums).and_then(|s| Ok((s, all_max(&*part.comm, &farthest)?)));
+    let (sums, farthest) = match reduced {
+        Ok(r) => r,
+        Err(e) => return (vec![f64::NAN; count], Some(format!("{e:#}"))),
+    };
+    let mut values = sums[..count].to_vec();
+    let (mut level, mut front) = (count, 0);
+    for (probe, &at) in list.iter().zip(offsets) {
+        match probe.geometry {
+            ProbeGeometry::Gauge { bottom, top, step, .. } => {
+                let (bottom, top, step) = (R::of(bottom), R::of(top), R::of(step));
+                let levels = probes::gauge_levels(bottom, top, step).len();
+                let fractions = &sums[level..level + levels];
+                let surface = probes::surface_from_fractions(bottom, top, step, |k, _| R::of(fractions[k]));
+                values[at] = surface.to64();
+                values[at + 1] = (surface - bottom).to64();
+                level += levels;
+            }
+            ProbeGeometry::Front { .. } => {
+                values[at] = if values[at + 1] > 0.0 { farthest[front] } else { 0.0 };
+                front += 1;
+            }
+            _ => {}
+        }
+    }
+    (values, None)
 }

@@ -561,15 +561,29 @@ impl<R: Real> CpuSolver<R> {
         let list = &p.probes.probes;
         let offsets = p.probes.offsets();
         let mut values = vec![R::zero(); p.probes.value_count()];
-        probes::probe_points(&input, list, &offsets, &mut values);
-        let mut partials = Vec::new();
-        probes::probe_particles(&input, list, &mut partials);
-        probes::probe_finish(list, &offsets, &partials, &mut values);
+        let values: Vec<f64> = match &self.ranks {
+            None => {
+                probes::probe_points(&input, list, &offsets, &mut values);
+                let mut partials = Vec::new();
+                probes::probe_particles(&input, list, None, &mut partials);
+                probes::probe_finish(list, &offsets, &partials, &mut values);
+                values.iter().map(|v| v.to64()).collect()
+            }
+            Some(part) => {
+                let own = self.own_slots();
+                let (values, failure) = exchange::probes_across_ranks(&input, part, &own, list, &offsets);
+                if let (Some(e), Some(part)) = (failure, self.ranks.as_mut()) {
+                    part.failure.get_or_insert(e);
+                }
+                values
+            }
+        };
+        let p = &self.params;
         let (time, previous_time) = match p.adaptive {
             Some(_) => (self.time, if self.step == 0 { 0.0 } else { self.time - self.dt_stats.last }),
             None => (self.step as f64 * p.dt, self.step.saturating_sub(1) as f64 * p.dt),
         };
-        self.probe_samples.push(ProbeSample { step: self.step, time, previous_time, values: values.iter().map(|v| v.to64()).collect() });
+        self.probe_samples.push(ProbeSample { step: self.step, time, previous_time, values });
     }
 
     /// The probe samples taken since the last call, in step order.

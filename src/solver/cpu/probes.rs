@@ -140,12 +140,41 @@ pub fn probe_points<R: Real>(input: &ProbeInput<R>, probes: &[Probe], offsets: &
 /// from the top down, `step` apart (the last one at the bottom), interpolated linearly between
 /// the first level that reaches it and the one above; the bottom when none does.
 pub fn gauge_surface<R: Real>(input: &ProbeInput<R>, x: R, z: R, bottom: R, top: R, step: R) -> R {
+    surface_from_fractions(bottom, top, step, |_, y| fluid_fraction(input, V3::new(x, y, z)))
+}
+
+/// The heights of a gauge's levels, from the top down, as [`gauge_surface`] visits them.
+pub fn gauge_levels<R: Real>(bottom: R, top: R, step: R) -> Vec<R> {
+    let mut levels = Vec::new();
+    surface_from_fractions(bottom, top, step, |_, y| {
+        levels.push(y);
+        R::zero()
+    });
+    levels
+}
+
+/// The fluid fraction at each of a gauge's levels that `evaluates` (0 at the others): across
+/// ranks, each rank evaluates the levels in its slab, and the ranks' sums give the whole line.
+pub fn gauge_fractions<R: Real>(input: &ProbeInput<R>, x: R, z: R, bottom: R, top: R, step: R, evaluates: impl Fn(V3<R>) -> bool) -> Vec<R> {
+    gauge_levels(bottom, top, step)
+        .into_iter()
+        .map(|y| {
+            let at = V3::new(x, y, z);
+            if evaluates(at) { fluid_fraction(input, at) } else { R::zero() }
+        })
+        .collect()
+}
+
+/// A gauge's surface from the fluid fraction at its levels (`fraction(k, y)` for the k-th level
+/// from the top, at height y), visited from the top down until one reaches the level of the
+/// surface.
+pub fn surface_from_fractions<R: Real>(bottom: R, top: R, step: R, mut fraction: impl FnMut(usize, R) -> R) -> R {
     let half = R::of(GAUGE_FRACTION);
     let levels = ((top - bottom) / step).to64().floor() as u32 + 1;
     let (mut above, mut above_y) = (R::zero(), top);
     for k in 0..=levels {
         let y = (top - step * R::of(k as f64)).max(bottom);
-        let f = fluid_fraction(input, V3::new(x, y, z));
+        let f = fraction(k as usize, y);
         if f >= half {
             if k == 0 {
                 return y;
@@ -163,8 +192,9 @@ pub fn gauge_surface<R: Real>(input: &ProbeInput<R>, x: R, z: R, bottom: R, top:
 /// The force and moment on the force probes' walls and the fronts, per particle, reduced per
 /// workgroup of [`PROBE_WORKGROUP`] particles into `partials` (slot-major: slot s of workgroup
 /// g at s * groups + g; force probe k holds slots 6k..6k+6, front probe q slots 6F + 2q and
-/// 6F + 2q + 1).
-pub fn probe_particles<R: Real>(input: &ProbeInput<R>, probes: &[Probe], partials: &mut Vec<R>) {
+/// 6F + 2q + 1). `counted`: the particles that count (across ranks, a rank's own particles,
+/// not its ghosts); all of them when `None`.
+pub fn probe_particles<R: Real>(input: &ProbeInput<R>, probes: &[Probe], counted: Option<&[bool]>, partials: &mut Vec<R>) {
     let forces: Vec<[f64; 3]> = probes
         .iter()
         .filter_map(|p| match &p.geometry {
@@ -188,6 +218,9 @@ pub fn probe_particles<R: Real>(input: &ProbeInput<R>, probes: &[Probe], partial
         .map(|g| {
             let mut sums = vec![R::zero(); slots];
             for i in g * PROBE_WORKGROUP..((g + 1) * PROBE_WORKGROUP).min(n) {
+                if counted.is_some_and(|c| !c[i]) {
+                    continue;
+                }
                 let xi = input.fluid.positions[i];
                 if !centres.is_empty() {
                     let f = particle_wall_forces(input, i, &centres);
