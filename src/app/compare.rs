@@ -1,7 +1,7 @@
 //! `wgsph compare`: the GPU against the f64 CPU reference from the same state, every field.
 
 use super::args::CompareArgs;
-use crate::solver::compare::{many_steps, step_and_compare, ONE_STEP};
+use crate::solver::compare::{many_steps, one_step, step_and_compare};
 use crate::solver::{open, BackendChoice, Precision};
 
 pub fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
@@ -11,8 +11,8 @@ pub fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
     println!("{}: {} fluid + {} wall particles; gpu {} against cpu f64", scene.name, gpu.fluid_count(), gpu.wall_count(), gpu.adapter());
     let mut ok = true;
     let mut done = 0;
-    let many = many_steps(&scene.params());
-    for (target, tol) in [(1, &ONE_STEP), (args.steps.max(1), &many)] {
+    let (one, many) = (one_step(&scene.params()), many_steps(&scene.params()));
+    for (target, tol) in [(1, &one), (args.steps.max(1), &many)] {
         if target <= done {
             continue;
         }

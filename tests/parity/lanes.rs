@@ -2,12 +2,13 @@
 //! has AVX2) against its scalar loops, each particle over its stencil as the GPU walks it: the
 //! same state after many steps, bit for bit, in f32 and f64, for every term and kernel, with
 //! and without walls, and with the grid rebuilt every second step (particles then sit outside
-//! the cell they were sorted into).
+//! the cell they were sorted into). DFSPH's factors pass lists and sums eight particles at a
+//! time the same way.
 
 use crate::common;
 use crate::common::TestScene;
 use wgsph::model::real::Real;
-use wgsph::model::scene::{BoundaryPressure, EquationOfState, Kernel, Scene};
+use wgsph::model::scene::{BoundaryPressure, BoundaryVolume, EquationOfState, Kernel, Scene};
 use wgsph::model::state::BackendState;
 
 fn scenes() -> Vec<(&'static str, Scene)> {
@@ -20,6 +21,9 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         ("cubic, grid rebuilt every 2nd step", tank().kernel(Kernel::CubicSpline).neighbour_rebuild_every(2).build()),
         ("planes only, no wall particles", tank().without_walls().build()),
         ("Adami wall pressure", tank().boundary_pressure(BoundaryPressure::Adami).build()),
+        ("DFSPH (the factors pass), cubic, viscosity", tank().kernel(Kernel::CubicSpline).viscosity(0.005).dfsph().build()),
+        ("DFSPH, Akinci walls, grid rebuilt every 2nd step", tank().dfsph().boundary_volume(BoundaryVolume::Akinci).neighbour_rebuild_every(2).build()),
+        ("DFSPH, planes only", tank().without_walls().dfsph().build()),
     ]
 }
 

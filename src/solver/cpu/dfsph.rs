@@ -63,6 +63,8 @@ pub struct StepParts<'a, R: Real> {
     pub wall_masses: &'a [R],
     /// The step about to run (for the viscosity schedule).
     pub step: u64,
+    /// Whether the factors pass runs eight particles at a time ([`super::CpuSolver::use_lanes`]).
+    pub lanes: bool,
 }
 
 impl<R: Real> DfsphCpu<R> {
@@ -132,6 +134,7 @@ impl<R: Real> DfsphCpu<R> {
             warm_pressure: &self.warm_pressure,
             pressure_scale: self.pressure_scale(p),
             factor_epsilon: R::of(factor_epsilon(p.h)),
+            lanes: s.lanes,
         };
         let out = FactorsOutput {
             densities: s.densities,

@@ -3,10 +3,12 @@
 //! wgsl/sim/dfsph_factors.wgsl (`density_and_factor`); the CPU also lists each particle's
 //! neighbours with their kernel gradients here, for the passes that follow.
 
-use super::dfsph_shared::{PairChunk, Pairs, CHUNK};
+use super::cell_batches::{lane_lists, lanes_available, wide, RowMasks};
+use super::dfsph_shared::{LaneWork, PairChunk, Pairs, CHUNK};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
+use crate::model::lanes::{Pack, PackV3, LANES};
 use crate::model::params::Grid;
-use crate::model::real::{Real, V3};
+use crate::model::real::{as_arrays, Real, V3};
 use rayon::prelude::*;
 
 pub struct FactorsInput<'a, R> {
@@ -28,6 +30,9 @@ pub struct FactorsInput<'a, R> {
     pub pressure_scale: R,
     /// Below this, alpha's denominator counts as zero (too few neighbours to push).
     pub factor_epsilon: R,
+    /// Whether to list and sum eight particles at a time where the processor can (the same
+    /// bits as the scalar loop).
+    pub lanes: bool,
 }
 
 /// The arrays the stage writes, each one value per fluid particle in slot order.
@@ -85,13 +90,95 @@ fn particle_factors<R: Real>(input: &FactorsInput<R>, i: usize, chunk: &mut Pair
             wall_gradient += kernel.grad_w(rij, r2.sqrt()) * mw;
         }
     }
+    finish(input, Sums { fluid_sum, wall_sum, fluid_gradient, gradient_squares, wall_gradient })
+}
+
+/// One particle's sums over its neighbours: sum_j W_ij, sum_b m_b W_ib, sum_j grad W_ij,
+/// sum_j |grad W_ij|^2 and sum_b m_b grad W_ib.
+struct Sums<R> {
+    fluid_sum: R,
+    wall_sum: R,
+    fluid_gradient: V3<R>,
+    gradient_squares: R,
+    wall_gradient: V3<R>,
+}
+
+#[inline(always)]
+fn finish<R: Real>(input: &FactorsInput<R>, sums: Sums<R>) -> Factors<R> {
     let volume = input.volume;
     // V_b grad W = (m_b / rho0) grad W.
-    let wall_gradient = wall_gradient / input.rest_density;
-    let total = fluid_gradient * volume + wall_gradient;
-    let denominator = total.dot(total) + volume * volume * gradient_squares;
+    let wall_gradient = sums.wall_gradient / input.rest_density;
+    let total = sums.fluid_gradient * volume + wall_gradient;
+    let denominator = total.dot(total) + volume * volume * sums.gradient_squares;
     let factor = if denominator > input.factor_epsilon { R::one() / denominator } else { R::zero() };
-    Factors { density: input.fluid_mass * fluid_sum + wall_sum, factor, wall_gradient }
+    Factors { density: input.fluid_mass * sums.fluid_sum + sums.wall_sum, factor, wall_gradient }
+}
+
+/// The particles `first..first + lanes` (one cell's, `lanes` <= 8) eight at a time: their
+/// neighbours listed by the two-pass lane build, the kernel and its gradient on eight pairs at
+/// once, each lane's sums in the scalar loop's order (the same bits), the lists appended to
+/// `chunk` particle by particle as `particle_factors` appends them.
+#[inline(always)]
+fn batch_factors<R: Real>(input: &FactorsInput<R>, first: usize, lanes: usize, cell: [u32; 3], chunk: &mut PairChunk<R>) -> [Factors<R>; LANES] {
+    let kernel = input.kernel;
+    let mut index = [first as u32; LANES];
+    for (k, slot) in index.iter_mut().enumerate().take(lanes) {
+        *slot = (first + k) as u32;
+    }
+    let fluid_positions = as_arrays(input.fluid.positions);
+    let xi = PackV3::gather(fluid_positions, &index);
+    let PairChunk { starts, index: pair_index, grad: pair_grad, work } = chunk;
+    let LaneWork { rows, gradients, scratch } = work;
+
+    let counts = lane_lists(rows, scratch, xi, lanes, input.fluid, input.grid, cell, kernel.h2);
+    let (mut fluid_sum, mut gradient_squares, mut fluid_gradient) = (Pack::zero(), Pack::zero(), PackV3::zero());
+    let mut live = RowMasks::new(&counts);
+    gradients.clear();
+    for row in rows.iter() {
+        let d = xi - PackV3::gather(fluid_positions, row);
+        let r2 = d.dot(d);
+        let grad = kernel.grad_w_lanes(d, r2.sqrt());
+        let m = live.next_row();
+        fluid_sum = Pack::select(m, fluid_sum + kernel.w_lanes(r2), fluid_sum);
+        fluid_gradient = PackV3::select(m, fluid_gradient + grad, fluid_gradient);
+        gradient_squares = Pack::select(m, gradient_squares + grad.dot(grad), gradient_squares);
+        gradients.push(grad.to_arrays());
+    }
+    // Each lane's list in turn, as `particle_factors` writes it (zero gradients left out).
+    for k in 0..lanes {
+        for (row, grad) in rows.iter().zip(gradients.iter()).take(counts[k] as usize) {
+            let g = V3(grad[k]);
+            if g != V3::zero() {
+                pair_index.push(row[k]);
+                pair_grad.push(g);
+            }
+        }
+        starts.push(pair_index.len() as u32);
+    }
+
+    let (mut wall_sum, mut wall_gradient) = (Pack::zero(), PackV3::zero());
+    if !input.wall_masses.is_empty() {
+        let wall_positions = as_arrays(input.walls.positions);
+        let counts = lane_lists(rows, scratch, xi, lanes, input.walls, input.grid, cell, kernel.h2);
+        let mut live = RowMasks::new(&counts);
+        for row in rows.iter() {
+            let d = xi - PackV3::gather(wall_positions, row);
+            let r2 = d.dot(d);
+            let mw = Pack::gather(input.wall_masses, row);
+            let m = live.next_row();
+            wall_sum = Pack::select(m, wall_sum + mw * kernel.w_lanes(r2), wall_sum);
+            wall_gradient = PackV3::select(m, wall_gradient + kernel.grad_w_lanes(d, r2.sqrt()).scale(mw), wall_gradient);
+        }
+    }
+
+    let (fluid_sum, gradient_squares, wall_sum) = (fluid_sum.to_array(), gradient_squares.to_array(), wall_sum.to_array());
+    let (fluid_gradient, wall_gradient) = (fluid_gradient.to_arrays(), wall_gradient.to_arrays());
+    std::array::from_fn(|k| {
+        finish(
+            input,
+            Sums { fluid_sum: fluid_sum[k], wall_sum: wall_sum[k], fluid_gradient: V3(fluid_gradient[k]), gradient_squares: gradient_squares[k], wall_gradient: V3(wall_gradient[k]) },
+        )
+    })
 }
 
 /// Density, factor, wall gradient and output pressure of every particle, and its neighbour
@@ -108,21 +195,49 @@ pub fn density_and_factor<R: Real>(input: &FactorsInput<R>, out: FactorsOutput<R
         .zip(out.wall_gradients.chunks_mut(CHUNK))
         .zip(out.divergence_sum.chunks_mut(CHUNK))
         .collect();
+    let lanes = input.lanes && lanes_available();
     jobs.into_par_iter().enumerate().for_each(|(c, (((((chunk, rho), p), alpha), gw), ksum))| {
         chunk.starts.clear();
         chunk.index.clear();
         chunk.grad.clear();
         chunk.starts.push(0);
-        for local in 0..rho.len() {
+        let count = rho.len();
+        let mut store = |local: usize, f: &Factors<R>| {
             let i = c * CHUNK + local;
-            let f = particle_factors(input, i, chunk);
-            chunk.starts.push(chunk.index.len() as u32);
             rho[local] = f.density;
             alpha[local] = f.factor;
             gw[local] = f.wall_gradient;
             let id = input.ids[i] as usize;
             p[local] = f.density * f.density * input.warm_pressure[id] * input.pressure_scale;
             ksum[local] = R::zero();
+        };
+        if lanes {
+            wide(
+                #[inline(always)]
+                || {
+                    // Batches: up to eight consecutive particles in one cell (by their current
+                    // positions, as the scalar loop finds each particle's stencil).
+                    let mut local = 0;
+                    while local < count {
+                        let cell = input.grid.cell_coords(input.fluid.positions[c * CHUNK + local]);
+                        let mut lanes = 1;
+                        while lanes < LANES && local + lanes < count && input.grid.cell_coords(input.fluid.positions[c * CHUNK + local + lanes]) == cell {
+                            lanes += 1;
+                        }
+                        let batch = batch_factors(input, c * CHUNK + local, lanes, cell, chunk);
+                        for (k, f) in batch.iter().enumerate().take(lanes) {
+                            store(local + k, f);
+                        }
+                        local += lanes;
+                    }
+                },
+            );
+        } else {
+            for local in 0..count {
+                let f = particle_factors(input, c * CHUNK + local, chunk);
+                chunk.starts.push(chunk.index.len() as u32);
+                store(local, &f);
+            }
         }
     });
 }

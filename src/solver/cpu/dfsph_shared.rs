@@ -17,6 +17,8 @@
 //! (`dfsph_factors`), and every later pass of the step reads the list: the same neighbours, in
 //! the same order, with the same gradients as the GPU recomputes them from the grid.
 
+use super::cell_batches::LaneScratch;
+use crate::model::lanes::LANES;
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
 
@@ -58,6 +60,23 @@ pub struct PairChunk<R> {
     pub starts: Vec<u32>,
     pub index: Vec<u32>,
     pub grad: Vec<V3<R>>,
+    /// The factors pass's working arrays for eight particles at a time (kept between steps).
+    pub work: LaneWork<R>,
+}
+
+/// What the factors pass builds a batch of up to eight particles' lists in: the rows of their
+/// fluid and wall neighbours (`cell_batches::lane_lists`) and the fluid rows' kernel gradients.
+#[derive(Clone, Debug, Default)]
+pub struct LaneWork<R> {
+    pub rows: Vec<[u32; LANES]>,
+    pub gradients: Vec<[[R; 3]; LANES]>,
+    pub scratch: LaneScratch,
+}
+
+impl<R> LaneWork<R> {
+    fn bytes(&self) -> u64 {
+        (self.rows.capacity() * 4 * LANES + self.gradients.capacity() * std::mem::size_of::<[[R; 3]; LANES]>()) as u64 + self.scratch.bytes()
+    }
 }
 
 /// The neighbour lists of every fluid particle, by chunks of [`CHUNK`] particles.
@@ -75,7 +94,7 @@ impl<R: Real> Pairs<R> {
         self.len() == 0
     }
     pub fn bytes(&self) -> u64 {
-        self.chunks.iter().map(|c| (c.index.capacity() * 4 + c.grad.capacity() * std::mem::size_of::<V3<R>>() + c.starts.capacity() * 4) as u64).sum()
+        self.chunks.iter().map(|c| (c.index.capacity() * 4 + c.grad.capacity() * std::mem::size_of::<V3<R>>() + c.starts.capacity() * 4) as u64 + c.work.bytes()).sum()
     }
 }
 

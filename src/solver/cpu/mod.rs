@@ -418,6 +418,7 @@ impl<R: Real> CpuSolver<R> {
             wall_starts: &self.wall_starts,
             wall_masses: &self.wall_masses,
             step: self.step,
+            lanes: self.lanes,
         };
         Some((dfsph, parts))
     }
