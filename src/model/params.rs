@@ -188,14 +188,47 @@ impl AdaptiveDt {
 }
 
 impl Scene {
+    /// The cells of the domain's lattice (origin `domain.min`, size h) that a particle can
+    /// reach: all of them, or in a closed container holding every fluid block only those over
+    /// the container and its walls (and any other boundary's walls). A dam break's domain is
+    /// sized for its coarsest walls, so at a million particles most of its cells would lie
+    /// outside the tank (8 bytes of GPU memory each: about 9 bytes per fluid particle). A
+    /// particle that leaks out of the grid is binned into the nearest border cell: clamping
+    /// moves cells by at most as much as it moves the particle, so its neighbours within h are
+    /// still in its stencil (Grid::cell_coords), and it escapes only where it leaves the domain.
     pub fn grid(&self) -> Grid {
         let h = self.physics.smoothing_length;
+        let (lo, hi) = self.reachable_bounds();
+        let mut origin = self.domain.min;
         let mut dims = [1u32; 3];
         for a in 0..3 {
-            let n = ((self.domain.max[a] - self.domain.min[a]) / h).ceil().max(1.0);
+            let skipped = ((lo[a] - self.domain.min[a]) / h).floor().max(0.0);
+            origin[a] = self.domain.min[a] + skipped * h;
+            let n = ((hi[a] - origin[a]) / h).ceil().max(1.0);
             dims[a] = n.min(u32::MAX as f64) as u32;
         }
-        Grid { origin: V3(self.domain.min), cell_size: h, inv_cell: 1.0 / h, dims }
+        Grid { origin: V3(origin), cell_size: h, inv_cell: 1.0 / h, dims }
+    }
+
+    /// The box a particle can reach: the domain, or within it the walls of a closed container
+    /// whose box holds every fluid block, together with every other boundary's walls.
+    pub fn reachable_bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let holds_the_fluid = |min: &[f64; 3], max: &[f64; 3]| {
+            !self.fluid.is_empty() && self.fluid.iter().all(|f| (0..3).all(|a| f.min[a] >= min[a] && f.max[a] <= max[a]))
+        };
+        let closed = self.boundary.iter().any(|b| matches!(b, Boundary::Container { min, max, open_top: false, .. } if holds_the_fluid(min, max)));
+        if !closed {
+            return (self.domain.min, self.domain.max);
+        }
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for (a, b) in self.boundary.iter().filter_map(|b| self.wall_span(b)) {
+            for k in 0..3 {
+                lo[k] = lo[k].min(a[k]).max(self.domain.min[k]);
+                hi[k] = hi[k].max(b[k]).min(self.domain.max[k]);
+            }
+        }
+        (lo, hi)
     }
 
     /// The resolved constants of the scene.

@@ -406,3 +406,37 @@ fn a_long_run_of_100_000_steps_keeps_every_particle_and_bounded_energy() {
         assert!(last < 0.5 * e0, "{who}: energy {e0} -> {last}: not dissipated");
     }
 }
+
+#[test]
+fn a_closed_tank_s_grid_covers_only_the_tank_and_its_walls() {
+    // The dam break's domain has room for the walls of its coarsest resolution; refined, the
+    // grid keeps only the domain's cells over the tank and its walls, and holds every particle.
+    let scene = Scene::builtin("dam_break").unwrap().with_fluid_particles(100_000);
+    let grid = scene.grid();
+    let h = scene.physics.smoothing_length;
+    let whole: u64 = (0..3).map(|a| ((scene.domain.max[a] - scene.domain.min[a]) / h).ceil() as u64).product();
+    let (lo, hi) = scene.boundary.iter().find_map(|b| scene.wall_span(b)).expect("a container");
+    for a in 0..3 {
+        let skipped = (grid.origin.0[a] - scene.domain.min[a]) / h;
+        assert!((skipped - skipped.round()).abs() < 1e-9, "axis {a}: the cells lie on the domain's lattice ({skipped} cells in)");
+        assert!(grid.origin.0[a] <= lo[a] && grid.origin.0[a] > lo[a] - h, "axis {a}: origin {} for walls from {}", grid.origin.0[a], lo[a]);
+        let end = grid.origin.0[a] + grid.dims[a] as f64 * h;
+        assert!(end >= hi[a] && end < hi[a] + h, "axis {a}: grid ends at {end} for walls up to {}", hi[a]);
+    }
+    assert!((grid.cell_count() as u64) * 2 < whole, "{} cells of the domain's {whole}", grid.cell_count());
+    let initial = scene.initial_state();
+    for p in initial.fluid_positions.iter().chain(&initial.wall_positions) {
+        for a in 0..3 {
+            let f = (p[a] - grid.origin.0[a]) / h;
+            assert!(f >= 0.0 && f < grid.dims[a] as f64, "particle at {p:?} outside the grid on axis {a}");
+        }
+    }
+    // Open at the top, the fluid can spill anywhere in the domain: every cell stays.
+    let mut open = scene.clone();
+    for b in &mut open.boundary {
+        if let wgsph::model::scene::Boundary::Container { open_top, .. } = b {
+            *open_top = true;
+        }
+    }
+    assert_eq!(open.grid().cell_count() as u64, whole);
+}
