@@ -264,14 +264,6 @@ fn open_part_on_gpu(scene: &Scene, params: &Params, initial: Option<InitialState
         }
         .into());
     }
-    if !params.probes.is_empty() {
-        return Err(SceneError {
-            origin: scene.name.clone(),
-            field: "probe".into(),
-            message: format!("has {} [[probe]] tables, which the GPU path does not sample across ranks yet ({size} ranks); remove them, or use --backend cpu", params.probes.probes.len()),
-        }
-        .into());
-    }
     let (ctx, why) = match &choice.context {
         Some(c) => (c.clone(), "the device given".to_string()),
         None => {

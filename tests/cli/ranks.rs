@@ -255,9 +255,9 @@ fn an_error_on_one_rank_stops_every_rank_naming_it() {
 /// Probes across MPI ranks: the first rank alone writes the series, and those of a point, a gauge
 /// and a front are byte for byte those of one rank (each point and gauge level is evaluated by
 /// the rank whose slab holds it; the tank's slabs cut the vertical, so the gauge crosses them).
-#[test]
-fn probes_on_two_ranks_write_the_series_of_one_rank() {
-    let Some(m) = mpi() else { return };
+/// The tank with a point probe, a gauge and a front every 10 steps, run for 100 steps on 1 and
+/// 2 ranks of `backend`: each probe's CSV file of both runs.
+fn probe_series_on_one_and_two_ranks(m: &(PathBuf, PathBuf), backend: &str) -> Vec<[String; 3]> {
     let tmp = tempfile::tempdir().unwrap();
     let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/hydrostatic.toml")).unwrap();
     let probes = r#"
@@ -282,12 +282,42 @@ every_steps = 10
     let mut series = Vec::new();
     for ranks in [1, 2] {
         let out = format!("r{ranks}");
-        run_ok(mpirun(&m, ranks, &["run", "tank.toml", "--backend", "cpu", "--quiet", "--particles", "800", "--steps", "100", "--out", &out], tmp.path()));
+        run_ok(mpirun(m, ranks, &["run", "tank.toml", "--backend", backend, "--quiet", "--particles", "800", "--steps", "100", "--out", &out], tmp.path()));
         let read = |name: &str| std::fs::read_to_string(tmp.path().join(&out).join("probes").join(format!("{name}.csv"))).unwrap();
         let files = ["sensor", "level", "front"].map(read);
         assert_eq!(files[0].lines().count(), 11, "a header and the steps 0, 10, ..., 90: {}", files[0]);
         assert!(tmp.path().join(&out).join("probes").join("sensor.png").exists(), "the plot");
         series.push(files);
     }
+    series
+}
+
+/// Probes across ranks on the CPU path: the CSV series of a point probe, a gauge
+/// and a front are byte for byte those of one rank (each point and gauge level is evaluated by
+/// the rank whose slab holds it; the tank's slabs cut the vertical, so the gauge crosses them).
+#[test]
+fn probes_on_two_ranks_write_the_series_of_one_rank() {
+    let Some(m) = mpi() else { return };
+    let series = probe_series_on_one_and_two_ranks(&m, "cpu");
     assert!(series[0] == series[1], "one rank:\n{:?}\ntwo ranks:\n{:?}", series[0], series[1]);
+}
+
+/// Probes on GPU ranks (sampled on the host from each device's density stage): the series of
+/// one GPU to the rounding of the probe stage's f32 sums.
+#[test]
+fn probes_on_two_gpu_ranks_write_the_series_of_one_gpu() {
+    let Some(m) = mpi() else { return };
+    let series = probe_series_on_one_and_two_ranks(&m, "gpu");
+    let numbers = |text: &str| -> Vec<Vec<f64>> { text.lines().skip(1).map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect()).collect() };
+    for (one, two) in series[0].iter().zip(&series[1]) {
+        assert_eq!(one.lines().next(), two.lines().next(), "the same columns");
+        let (a, b) = (numbers(one), numbers(two));
+        assert_eq!(a.len(), b.len());
+        for (r, s) in a.iter().zip(&b) {
+            for (x, y) in r.iter().zip(s) {
+                // Pressures in Pa and densities in kg/m^3 at the scale of rho0; lengths in m.
+                assert!((x - y).abs() <= 1e-5 * x.abs().max(1.0), "one GPU:\n{one}\ntwo GPU ranks:\n{two}");
+            }
+        }
+    }
 }

@@ -188,6 +188,16 @@ impl<R: Real> CpuSolver<R> {
     /// own particles the device gave back, and reduced over the ranks as on the host.
     pub(super) fn step_on_device(&mut self) {
         let device = self.device.clone().expect("only with device stages");
+        // Probes are sampled on the host from the state the step starts from: the device bins it
+        // and evaluates its density stage (as for a snapshot), and the CPU path's probe stage
+        // reads the result with its own particles counted (probes_across_ranks). A device that
+        // failed here has recorded its rank's failure; the collectives below still run, so no
+        // rank waits for it, and the step's health stops every rank.
+        if self.params.probes.samples_step(self.step, self.params.dt, false) {
+            self.fields_on_device();
+            self.compute_wall_pressure();
+            self.sample_probes();
+        }
         self.lists.clear();
         let step = self.step;
         let ran = lock(&device).run_step(step, self.held_arrays());
