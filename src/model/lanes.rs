@@ -29,6 +29,8 @@ pub trait LaneFloat: Copy + Default + PartialOrd + 'static {
     fn lt(a: Self::V, b: Self::V) -> Self::V;
     fn le(a: Self::V, b: Self::V) -> Self::V;
     fn ge(a: Self::V, b: Self::V) -> Self::V;
+    /// Not equal, true where either is NaN (Rust's `!=`).
+    fn ne(a: Self::V, b: Self::V) -> Self::V;
     fn and(a: Self::V, b: Self::V) -> Self::V;
     fn or(a: Self::V, b: Self::V) -> Self::V;
     /// `!a & b`.
@@ -39,6 +41,18 @@ pub trait LaneFloat: Copy + Default + PartialOrd + 'static {
     fn bits(m: Self::V) -> u32;
     /// The lane numbers 0..8.
     fn iota() -> Self::V;
+    /// `values[index[k]][c]` in lane k of the c-th result (each index checked against the slice).
+    #[inline(always)]
+    fn gather3(values: &[[Self; 3]], index: &[u32; LANES]) -> [Self::V; 3] {
+        let mut a = [[Self::default(); LANES]; 3];
+        for k in 0..LANES {
+            let v = values[index[k] as usize];
+            for c in 0..3 {
+                a[c][k] = v[c];
+            }
+        }
+        [Self::from_array(a[0]), Self::from_array(a[1]), Self::from_array(a[2])]
+    }
     /// `values[index[k]][c]` in lane k of the c-th result (each index checked against the slice).
     #[inline(always)]
     fn gather4(values: &[[Self; 4]], index: &[u32; LANES]) -> [Self::V; 4] {
@@ -110,6 +124,10 @@ mod avx2 {
             unsafe { _mm256_cmp_ps::<_CMP_GE_OQ>(a, b) }
         }
         #[inline(always)]
+        fn ne(a: __m256, b: __m256) -> __m256 {
+            unsafe { _mm256_cmp_ps::<_CMP_NEQ_UQ>(a, b) }
+        }
+        #[inline(always)]
         fn and(a: __m256, b: __m256) -> __m256 {
             unsafe { _mm256_and_ps(a, b) }
         }
@@ -137,25 +155,59 @@ mod avx2 {
         #[inline(always)]
         fn gather4(values: &[[f32; 4]], index: &[u32; LANES]) -> [__m256; 4] {
             let row = |k: usize| values[index[k] as usize].as_ptr();
-            let (r0, r1, r2, r3, r4, r5, r6, r7) = (row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7));
-            unsafe {
-                // Lane k in the low half, lane k + 4 in the high half.
-                let t0 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(r0)), _mm_loadu_ps(r4));
-                let t1 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(r1)), _mm_loadu_ps(r5));
-                let t2 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(r2)), _mm_loadu_ps(r6));
-                let t3 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(r3)), _mm_loadu_ps(r7));
-                // A 4 x 4 transpose in each half.
-                let xy01 = _mm256_unpacklo_ps(t0, t1);
-                let zw01 = _mm256_unpackhi_ps(t0, t1);
-                let xy23 = _mm256_unpacklo_ps(t2, t3);
-                let zw23 = _mm256_unpackhi_ps(t2, t3);
-                [
-                    _mm256_shuffle_ps::<0x44>(xy01, xy23),
-                    _mm256_shuffle_ps::<0xEE>(xy01, xy23),
-                    _mm256_shuffle_ps::<0x44>(zw01, zw23),
-                    _mm256_shuffle_ps::<0xEE>(zw01, zw23),
-                ]
+            // SAFETY: each pointer is to an element of the slice, 16 bytes long.
+            unsafe { transpose8x4([row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7)]) }
+        }
+        /// Eight loads of 16 bytes (the vector and the next one's x, where there is a next one)
+        /// and a transpose, instead of 24 loads of 4 bytes, each followed by an insert.
+        #[inline(always)]
+        fn gather3(values: &[[f32; 3]], index: &[u32; LANES]) -> [__m256; 3] {
+            // The element after each one must exist for its 16-byte load.
+            let inside = index.iter().fold(true, |ok, &i| ok & ((i as usize) + 1 < values.len()));
+            if !inside {
+                let mut a = [[0.0; LANES]; 3];
+                for k in 0..LANES {
+                    let v = values[index[k] as usize];
+                    for c in 0..3 {
+                        a[c][k] = v[c];
+                    }
+                }
+                return [Self::from_array(a[0]), Self::from_array(a[1]), Self::from_array(a[2])];
             }
+            let base = values.as_ptr().cast::<f32>();
+            // SAFETY: index[k] + 1 < len, so the 16 bytes from element index[k] (its 12 and the
+            // first 4 of the next) lie inside the slice.
+            let row = |k: usize| unsafe { base.add(3 * index[k] as usize) };
+            let [x, y, z, _] = unsafe { transpose8x4([row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7)]) };
+            [x, y, z]
+        }
+    }
+
+    /// Four floats from each of eight addresses, as four registers of eight lanes (lane k from
+    /// `rows[k]`).
+    ///
+    /// # Safety
+    /// Each pointer must be valid for reading 16 bytes; AVX must be available.
+    #[inline(always)]
+    unsafe fn transpose8x4(rows: [*const f32; LANES]) -> [__m256; 4] {
+        let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
+        unsafe {
+            // Lane k in the low half, lane k + 4 in the high half.
+            let t0 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(r0)), _mm_loadu_ps(r4));
+            let t1 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(r1)), _mm_loadu_ps(r5));
+            let t2 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(r2)), _mm_loadu_ps(r6));
+            let t3 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(r3)), _mm_loadu_ps(r7));
+            // A 4 x 4 transpose in each half.
+            let xy01 = _mm256_unpacklo_ps(t0, t1);
+            let zw01 = _mm256_unpackhi_ps(t0, t1);
+            let xy23 = _mm256_unpacklo_ps(t2, t3);
+            let zw23 = _mm256_unpackhi_ps(t2, t3);
+            [
+                _mm256_shuffle_ps::<0x44>(xy01, xy23),
+                _mm256_shuffle_ps::<0xEE>(xy01, xy23),
+                _mm256_shuffle_ps::<0x44>(zw01, zw23),
+                _mm256_shuffle_ps::<0xEE>(zw01, zw23),
+            ]
         }
     }
 
@@ -216,6 +268,10 @@ mod avx2 {
         #[inline(always)]
         fn ge(a: Self::V, b: Self::V) -> Self::V {
             unsafe { (_mm256_cmp_pd::<_CMP_GE_OQ>(a.0, b.0), _mm256_cmp_pd::<_CMP_GE_OQ>(a.1, b.1)) }
+        }
+        #[inline(always)]
+        fn ne(a: Self::V, b: Self::V) -> Self::V {
+            unsafe { (_mm256_cmp_pd::<_CMP_NEQ_UQ>(a.0, b.0), _mm256_cmp_pd::<_CMP_NEQ_UQ>(a.1, b.1)) }
         }
         #[inline(always)]
         fn and(a: Self::V, b: Self::V) -> Self::V {
@@ -297,6 +353,10 @@ mod portable {
                 #[inline(always)]
                 fn ge(a: Self::V, b: Self::V) -> Self::V {
                     std::array::from_fn(|k| if a[k] >= b[k] { 1.0 } else { 0.0 })
+                }
+                #[inline(always)]
+                fn ne(a: Self::V, b: Self::V) -> Self::V {
+                    std::array::from_fn(|k| if a[k] != b[k] { 1.0 } else { 0.0 })
                 }
                 #[inline(always)]
                 fn and(a: Self::V, b: Self::V) -> Self::V {
@@ -385,6 +445,10 @@ impl<R: LaneFloat> Pack<R> {
     pub fn ge(self, o: Self) -> Mask<R> {
         Mask(<R as LaneFloat>::ge(self.0, o.0))
     }
+    #[inline(always)]
+    pub fn ne(self, o: Self) -> Mask<R> {
+        Mask(<R as LaneFloat>::ne(self.0, o.0))
+    }
     /// `a` in the lanes where `m` is set, `b` elsewhere.
     #[inline(always)]
     pub fn select(m: Mask<R>, a: Self, b: Self) -> Self {
@@ -461,12 +525,8 @@ impl<R: LaneFloat> PackV3<R> {
     /// `values[index[k]]` in lane k (each index checked against the slice).
     #[inline(always)]
     pub fn gather(values: &[[R; 3]], index: &[u32; LANES]) -> Self {
-        let (mut x, mut y, mut z) = ([R::default(); LANES], [R::default(); LANES], [R::default(); LANES]);
-        for k in 0..LANES {
-            let v = values[index[k] as usize];
-            (x[k], y[k], z[k]) = (v[0], v[1], v[2]);
-        }
-        PackV3 { x: Pack::from_array(x), y: Pack::from_array(y), z: Pack::from_array(z) }
+        let [x, y, z] = R::gather3(values, index);
+        PackV3 { x: Pack(x), y: Pack(y), z: Pack(z) }
     }
     /// `values[index[k]]` in lane k: the vector from its first three components and the pack of
     /// the fourth.
@@ -489,6 +549,13 @@ impl<R: LaneFloat> PackV3<R> {
     #[inline(always)]
     pub fn dot(self, o: Self) -> Pack<R> {
         self.x * o.x + self.y * o.y + self.z * o.z
+    }
+    /// The lanes whose vector is not (0, 0, 0), as the scalar `v != V3::zero()` (a NaN component
+    /// counts as not zero).
+    #[inline(always)]
+    pub fn nonzero(self) -> Mask<R> {
+        let zero = Pack::zero();
+        self.x.ne(zero).or(self.y.ne(zero)).or(self.z.ne(zero))
     }
     #[inline(always)]
     pub fn scale(self, s: Pack<R>) -> Self {
@@ -538,6 +605,7 @@ mod tests {
             assert_eq!(pa.lt(pb).bits() >> k & 1 == 1, a[k] < b[k]);
             assert_eq!(pa.le(pb).bits() >> k & 1 == 1, a[k] <= b[k]);
             assert_eq!(pa.ge(pb).bits() >> k & 1 == 1, a[k] >= b[k]);
+            assert_eq!(pa.ne(pb).bits() >> k & 1 == 1, a[k] != b[k]);
         }
         for count in 0..=LANES {
             assert_eq!(Mask::<R>::first(count).bits(), (1u32 << count) - 1);
@@ -552,6 +620,23 @@ mod tests {
             for c in 0..4 {
                 assert!(got[c] == want[c] || (got[c].is_nan() && want[c].is_nan()), "gather lane {k} component {c}");
             }
+        }
+        // Three components: 16-byte loads where an element follows, the last element one by one.
+        let points: Vec<[R; 3]> = (0..LANES).map(|k| [a[k], b[k], a[(k + 5) % LANES]]).collect();
+        for index in [[3, 1, 4, 1, 5, 2, 6, 0], [7, 0, 7, 2, 1, 6, 5, 3]] {
+            let v = PackV3::gather(&points, &index);
+            let (x, y, z) = (v.x.to_array(), v.y.to_array(), v.z.to_array());
+            for k in 0..LANES {
+                let (want, got) = (points[index[k] as usize], [x[k], y[k], z[k]]);
+                for c in 0..3 {
+                    assert!(got[c] == want[c] || (got[c].is_nan() && want[c].is_nan()), "gather of three, lane {k} component {c}");
+                }
+            }
+        }
+        let zero = R::default();
+        let nonzero = PackV3 { x: pa, y: pb.sqrt(), z: pa }.nonzero().bits();
+        for k in 0..LANES {
+            assert_eq!(nonzero >> k & 1 == 1, [a[k], b[k].sqrt(), a[k]] != [zero; 3], "nonzero lane {k}");
         }
         let m = Mask::<R>::first(3);
         assert_eq!(m.and_not(Mask::first(5)).bits(), 0b11000);

@@ -240,13 +240,12 @@ impl LaneScratch {
 }
 
 /// The neighbours in `others` closer than h (`h2` = h^2) of the first `lane_count` lanes at
-/// `xi`, whose particles lie in `cell`: `rows` is replaced by the rows of their lists (row t holds
-/// the t-th neighbour of every lane, in the scalar loops' visiting order; entries past a lane's
-/// list are index 0), and each lane's count is returned. The same two-pass build as the density
-/// stage's lists, for callers that keep their own layout (DFSPH's per-particle lists).
+/// `xi`, whose particles lie in `cell`: the rows of their lists are appended to `rows` (row t
+/// holds the t-th neighbour of every lane, in the scalar loops' visiting order; entries past a
+/// lane's list are index 0), and each lane's count is returned. The same two-pass build as the
+/// density stage's lists, for callers that keep their own layout (DFSPH's lists).
 #[inline(always)]
 pub fn lane_lists<R: Real>(rows: &mut Vec<[u32; LANES]>, scratch: &mut LaneScratch, xi: PackV3<R>, lane_count: usize, others: Neighbours<R>, grid: &Grid<R>, cell: [u32; 3], h2: R) -> [u32; LANES] {
-    rows.clear();
     let runs = Runs::of(grid, cell);
     list(rows, &mut scratch.found, xi, Mask::first(lane_count), lane_count, others, &runs, h2).counts
 }

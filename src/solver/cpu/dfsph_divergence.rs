@@ -3,7 +3,8 @@
 //! wgsl/sim/dfsph_divergence.wgsl (`divergence_warm_start`, `divergence_rate`,
 //! `divergence_apply`).
 
-use super::dfsph_shared::{apply_stiffness, density_rate, error_units, SolveInput, WarmStart, CHUNK};
+use super::dfsph_shared::{apply_stiffness, density_rates, error_units, error_units_lanes, Rates, SolveInput, WarmStart, CHUNK};
+use crate::model::lanes::Pack;
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
 
@@ -11,33 +12,48 @@ use rayon::prelude::*;
 /// particle is being compressed (D_i > 0), none elsewhere: the last step's stiffness may have
 /// answered a compression that has since passed.
 pub fn divergence_warm_start<R: Real>(input: &SolveInput<R>, velocities: &[V3<R>], warm: &WarmStart<R>, stiffness: &mut [R]) {
-    input.pairs.chunks.par_iter().zip(stiffness.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (chunk, k))| {
-        for (local, k) in k.iter_mut().enumerate() {
+    stiffness.par_chunks_mut(CHUNK).enumerate().for_each(|(c, k)| {
+        let count = k.len();
+        let mut warm_start = |local: usize, d: R| {
             let i = c * CHUNK + local;
-            let d = density_rate(chunk, local, input.volume, velocities, velocities[i], input.wall_gradients[i]);
-            *k = if d > R::zero() { warm.share * warm.last[warm.ids[i] as usize] } else { R::zero() };
-        }
+            k[local] = if d > R::zero() { warm.share * warm.last[warm.ids[i] as usize] } else { R::zero() };
+        };
+        // Once a step: the lanes' values one by one.
+        density_rates(input, c, count, velocities, #[inline(always)] |rates| match rates {
+            Rates::One(local, d) => warm_start(local, d),
+            Rates::Eight(lanes, d) => {
+                for (lane, &d) in d.to_array().iter().enumerate().take(lanes.count) {
+                    warm_start(lanes.local + lane, d);
+                }
+            }
+        });
     });
 }
 
 /// Each particle's rate of compression D_i = max(Drho^_i/Dt, 0) (expansion is left alone, as
-/// at a free surface), its stiffness K_i = D_i alpha_i, and the sum of the errors dt D_i in
-/// fixed-point units.
+/// at a free surface; a NaN counts as 0), its stiffness K_i = D_i alpha_i, and the sum of the
+/// errors dt D_i in fixed-point units.
 pub fn divergence_rate<R: Real>(input: &SolveInput<R>, velocities: &[V3<R>], dt: R, stiffness: &mut [R]) -> u64 {
-    input
-        .pairs
-        .chunks
-        .par_iter()
-        .zip(stiffness.par_chunks_mut(CHUNK))
+    stiffness
+        .par_chunks_mut(CHUNK)
         .enumerate()
-        .map(|(c, (chunk, k))| {
+        .map(|(c, k)| {
             let mut units = 0u64;
-            for (local, k) in k.iter_mut().enumerate() {
-                let i = c * CHUNK + local;
-                let d = density_rate(chunk, local, input.volume, velocities, velocities[i], input.wall_gradients[i]).max(R::zero());
-                *k = d * input.factors[i];
-                units += error_units(d * dt);
-            }
+            let factors = &input.factors[c * CHUNK..];
+            density_rates(input, c, k.len(), velocities, #[inline(always)] |rates| match rates {
+                Rates::One(local, d) => {
+                    let d = if d > R::zero() { d } else { R::zero() };
+                    k[local] = d * factors[local];
+                    units += error_units(d * dt);
+                }
+                Rates::Eight(lanes, d) => {
+                    let zero = Pack::zero();
+                    let d = Pack::select(zero.lt(d), d, zero);
+                    let local = lanes.locals(c * CHUNK);
+                    lanes.store(d * Pack::gather(factors, &local), k);
+                    units += error_units_lanes(d * Pack::splat(dt), lanes.count);
+                }
+            });
             units
         })
         .sum()

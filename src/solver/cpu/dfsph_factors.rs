@@ -4,7 +4,7 @@
 //! neighbours with their kernel gradients here, for the passes that follow.
 
 use super::cell_batches::{lane_lists, lanes_available, wide, RowMasks};
-use super::dfsph_shared::{LaneWork, PairChunk, Pairs, CHUNK};
+use super::dfsph_shared::{LaneWork, PairChunk, Pairs, RowBatch, CHUNK};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::lanes::{Pack, PackV3, LANES};
 use crate::model::params::Grid;
@@ -114,12 +114,13 @@ fn finish<R: Real>(input: &FactorsInput<R>, sums: Sums<R>) -> Factors<R> {
     Factors { density: input.fluid_mass * sums.fluid_sum + sums.wall_sum, factor, wall_gradient }
 }
 
-/// The particles `first..first + lanes` (one cell's, `lanes` <= 8) eight at a time: their
-/// neighbours listed by the two-pass lane build, the kernel and its gradient on eight pairs at
-/// once, each lane's sums in the scalar loop's order (the same bits), the lists appended to
-/// `chunk` particle by particle as `particle_factors` appends them.
+/// The particles `first..first + lanes` (one cell's, `lanes` <= 8, from the chunk's particle
+/// `local`) eight at a time: their neighbours listed by the two-pass lane build, the kernel and
+/// its gradient on eight pairs at once, each lane's sums in the scalar loop's order (the same
+/// bits), and the rows of the lists kept in `chunk` with their gradients (the solves leave out
+/// the zero gradients that `particle_factors` does not list).
 #[inline(always)]
-fn batch_factors<R: Real>(input: &FactorsInput<R>, first: usize, lanes: usize, cell: [u32; 3], chunk: &mut PairChunk<R>) -> [Factors<R>; LANES] {
+fn batch_factors<R: Real>(input: &FactorsInput<R>, first: usize, local: usize, lanes: usize, cell: [u32; 3], chunk: &mut PairChunk<R>) -> [Factors<R>; LANES] {
     let kernel = input.kernel;
     let mut index = [first as u32; LANES];
     for (k, slot) in index.iter_mut().enumerate().take(lanes) {
@@ -127,14 +128,15 @@ fn batch_factors<R: Real>(input: &FactorsInput<R>, first: usize, lanes: usize, c
     }
     let fluid_positions = as_arrays(input.fluid.positions);
     let xi = PackV3::gather(fluid_positions, &index);
-    let PairChunk { starts, index: pair_index, grad: pair_grad, work } = chunk;
-    let LaneWork { rows, gradients, scratch } = work;
+    let PairChunk { batches, rows, row_grads, work, .. } = chunk;
+    let LaneWork { rows: wall_rows, scratch } = work;
 
+    let first_row = rows.len();
     let counts = lane_lists(rows, scratch, xi, lanes, input.fluid, input.grid, cell, kernel.h2);
+    batches.push(RowBatch { local: local as u32, lanes: lanes as u32, first_row: first_row as u32, rows: (rows.len() - first_row) as u32, counts });
     let (mut fluid_sum, mut gradient_squares, mut fluid_gradient) = (Pack::zero(), Pack::zero(), PackV3::zero());
     let mut live = RowMasks::new(&counts);
-    gradients.clear();
-    for row in rows.iter() {
+    for row in rows[first_row..].iter() {
         let d = xi - PackV3::gather(fluid_positions, row);
         let r2 = d.dot(d);
         let grad = kernel.grad_w_lanes(d, r2.sqrt());
@@ -142,26 +144,16 @@ fn batch_factors<R: Real>(input: &FactorsInput<R>, first: usize, lanes: usize, c
         fluid_sum = Pack::select(m, fluid_sum + kernel.w_lanes(r2), fluid_sum);
         fluid_gradient = PackV3::select(m, fluid_gradient + grad, fluid_gradient);
         gradient_squares = Pack::select(m, gradient_squares + grad.dot(grad), gradient_squares);
-        gradients.push(grad.to_arrays());
-    }
-    // Each lane's list in turn, as `particle_factors` writes it (zero gradients left out).
-    for k in 0..lanes {
-        for (row, grad) in rows.iter().zip(gradients.iter()).take(counts[k] as usize) {
-            let g = V3(grad[k]);
-            if g != V3::zero() {
-                pair_index.push(row[k]);
-                pair_grad.push(g);
-            }
-        }
-        starts.push(pair_index.len() as u32);
+        row_grads.push([grad.x.to_array(), grad.y.to_array(), grad.z.to_array()]);
     }
 
     let (mut wall_sum, mut wall_gradient) = (Pack::zero(), PackV3::zero());
     if !input.wall_masses.is_empty() {
         let wall_positions = as_arrays(input.walls.positions);
-        let counts = lane_lists(rows, scratch, xi, lanes, input.walls, input.grid, cell, kernel.h2);
+        wall_rows.clear();
+        let counts = lane_lists(wall_rows, scratch, xi, lanes, input.walls, input.grid, cell, kernel.h2);
         let mut live = RowMasks::new(&counts);
-        for row in rows.iter() {
+        for row in wall_rows.iter() {
             let d = xi - PackV3::gather(wall_positions, row);
             let r2 = d.dot(d);
             let mw = Pack::gather(input.wall_masses, row);
@@ -197,10 +189,7 @@ pub fn density_and_factor<R: Real>(input: &FactorsInput<R>, out: FactorsOutput<R
         .collect();
     let lanes = input.lanes && lanes_available();
     jobs.into_par_iter().enumerate().for_each(|(c, (((((chunk, rho), p), alpha), gw), ksum))| {
-        chunk.starts.clear();
-        chunk.index.clear();
-        chunk.grad.clear();
-        chunk.starts.push(0);
+        chunk.clear();
         let count = rho.len();
         let mut store = |local: usize, f: &Factors<R>| {
             let i = c * CHUNK + local;
@@ -224,7 +213,7 @@ pub fn density_and_factor<R: Real>(input: &FactorsInput<R>, out: FactorsOutput<R
                         while lanes < LANES && local + lanes < count && input.grid.cell_coords(input.fluid.positions[c * CHUNK + local + lanes]) == cell {
                             lanes += 1;
                         }
-                        let batch = batch_factors(input, c * CHUNK + local, lanes, cell, chunk);
+                        let batch = batch_factors(input, c * CHUNK + local, local, lanes, cell, chunk);
                         for (k, f) in batch.iter().enumerate().take(lanes) {
                             store(local + k, f);
                         }
@@ -233,6 +222,7 @@ pub fn density_and_factor<R: Real>(input: &FactorsInput<R>, out: FactorsOutput<R
                 },
             );
         } else {
+            chunk.starts.push(0);
             for local in 0..count {
                 let f = particle_factors(input, c * CHUNK + local, chunk);
                 chunk.starts.push(chunk.index.len() as u32);

@@ -3,43 +3,59 @@
 //! Twin of wgsl/sim/dfsph_pressure.wgsl (`pressure_warm_start`, `predict_density`,
 //! `pressure_apply`).
 
-use super::dfsph_shared::{apply_stiffness, density_rate, error_units, SolveInput, WarmStart, CHUNK};
+use super::dfsph_shared::{apply_stiffness, density_rates, error_units, error_units_lanes, Rates, SolveInput, WarmStart, CHUNK};
+use crate::model::lanes::Pack;
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
 
 /// The stiffness the solve starts from: a share of the last step's (by particle id) where the
 /// predicted density is above rest density, none elsewhere.
 pub fn pressure_warm_start<R: Real>(input: &SolveInput<R>, velocities: &[V3<R>], densities: &[R], rest_density: R, dt: R, warm: &WarmStart<R>, stiffness: &mut [R]) {
-    input.pairs.chunks.par_iter().zip(stiffness.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (chunk, k))| {
-        for (local, k) in k.iter_mut().enumerate() {
+    stiffness.par_chunks_mut(CHUNK).enumerate().for_each(|(c, k)| {
+        let count = k.len();
+        let mut warm_start = |local: usize, d: R| {
             let i = c * CHUNK + local;
-            let d = density_rate(chunk, local, input.volume, velocities, velocities[i], input.wall_gradients[i]);
             let predicted = densities[i] / rest_density + dt * d;
-            *k = if predicted > R::one() { warm.share * warm.last[warm.ids[i] as usize] } else { R::zero() };
-        }
+            k[local] = if predicted > R::one() { warm.share * warm.last[warm.ids[i] as usize] } else { R::zero() };
+        };
+        // Once a step: the lanes' values one by one.
+        density_rates(input, c, count, velocities, #[inline(always)] |rates| match rates {
+            Rates::One(local, d) => warm_start(local, d),
+            Rates::Eight(lanes, d) => {
+                for (lane, &d) in d.to_array().iter().enumerate().take(lanes.count) {
+                    warm_start(lanes.local + lane, d);
+                }
+            }
+        });
     });
 }
 
 /// Each particle's predicted density rho*_i = max(rho_i / rho0 + dt D_i, 1) (a particle below
-/// rest density, as at a free surface, is not pulled), its stiffness K_i = (rho*_i - 1) alpha_i,
+/// rest density, as at a free surface, is not pulled; a NaN counts as 1), its stiffness K_i = (rho*_i - 1) alpha_i,
 /// and the sum of the errors rho*_i - 1 in fixed-point units.
 pub fn predict_density<R: Real>(input: &SolveInput<R>, velocities: &[V3<R>], densities: &[R], rest_density: R, dt: R, stiffness: &mut [R]) -> u64 {
-    input
-        .pairs
-        .chunks
-        .par_iter()
-        .zip(stiffness.par_chunks_mut(CHUNK))
+    stiffness
+        .par_chunks_mut(CHUNK)
         .enumerate()
-        .map(|(c, (chunk, k))| {
+        .map(|(c, k)| {
             let mut units = 0u64;
-            for (local, k) in k.iter_mut().enumerate() {
-                let i = c * CHUNK + local;
-                let d = density_rate(chunk, local, input.volume, velocities, velocities[i], input.wall_gradients[i]);
-                let predicted = (densities[i] / rest_density + dt * d).max(R::one());
-                let error = predicted - R::one();
-                *k = error * input.factors[i];
-                units += error_units(error);
-            }
+            let (factors, densities) = (&input.factors[c * CHUNK..], &densities[c * CHUNK..]);
+            density_rates(input, c, k.len(), velocities, #[inline(always)] |rates| match rates {
+                Rates::One(local, d) => {
+                    let predicted = densities[local] / rest_density + dt * d;
+                    let error = if predicted > R::one() { predicted } else { R::one() } - R::one();
+                    k[local] = error * factors[local];
+                    units += error_units(error);
+                }
+                Rates::Eight(lanes, d) => {
+                    let one = Pack::splat(R::one());
+                    let local = lanes.locals(c * CHUNK);
+                    let predicted = Pack::gather(densities, &local) / Pack::splat(rest_density) + Pack::splat(dt) * d;
+                    let error = Pack::select(one.lt(predicted), predicted, one) - one;
+                    lanes.store(error * Pack::gather(factors, &local), k);
+                    units += error_units_lanes(error, lanes.count);
+                }
+            });
             units
         })
         .sum()

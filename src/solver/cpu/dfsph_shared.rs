@@ -16,10 +16,15 @@
 //! The CPU lists every particle's fluid neighbours with their kernel gradients once per step
 //! (`dfsph_factors`), and every later pass of the step reads the list: the same neighbours, in
 //! the same order, with the same gradients as the GPU recomputes them from the grid.
+//!
+//! Where the processor has the eight-lane instructions, the lists are kept as rows of eight
+//! (row t holds the t-th neighbour of each of eight consecutive particles of one cell, with its
+//! gradient), and the solves' sums run eight particles at a time: each lane adds its own
+//! particle's terms in the list's order, so every sum is the one-at-a-time sum bit for bit.
 
-use super::cell_batches::LaneScratch;
-use crate::model::lanes::LANES;
-use crate::model::real::{Real, V3};
+use super::cell_batches::{wide, LaneScratch, RowMasks};
+use crate::model::lanes::{Pack, PackV3, LANES};
+use crate::model::real::{as_arrays, Real, V3};
 use rayon::prelude::*;
 
 /// Particles per chunk of the neighbour lists: a chunk is built and read by one task.
@@ -54,28 +59,81 @@ pub fn average_error(sum: u64, n: usize) -> f64 {
 
 /// One chunk of the neighbour lists: for each of its particles, the fluid neighbours within the
 /// support (itself excluded: its gradient is zero) and grad W_ij, in the GPU's visiting order.
+/// Either one particle after the other (`starts`, `index`, `grad`) or, on the lane path, in rows
+/// of eight particles (`batches`, `rows`, `row_grads`); the other form is empty.
 #[derive(Clone, Debug, Default)]
 pub struct PairChunk<R> {
     /// `starts[k]..starts[k + 1]`: the pairs of the chunk's particle k.
     pub starts: Vec<u32>,
     pub index: Vec<u32>,
     pub grad: Vec<V3<R>>,
+    /// The chunk's particles by batches of up to eight consecutive ones of one cell.
+    pub batches: Vec<RowBatch>,
+    /// Row t of a batch: the t-th neighbour of each lane within the support (index 0 past a
+    /// lane's list; the particle itself included)...
+    pub rows: Vec<[u32; LANES]>,
+    /// ... and its gradient, x, y and z of the eight lanes. The sums leave out the entries past
+    /// a lane's list and those with a zero gradient, as the one-at-a-time lists do.
+    pub row_grads: Vec<[[R; LANES]; 3]>,
     /// The factors pass's working arrays for eight particles at a time (kept between steps).
-    pub work: LaneWork<R>,
+    pub work: LaneWork,
+}
+
+/// Up to eight consecutive particles of a chunk and where their rows are.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RowBatch {
+    /// The batch's first particle in the chunk, and its number of particles.
+    pub local: u32,
+    pub lanes: u32,
+    /// Its rows: `first_row..first_row + rows` of the chunk's rows.
+    pub first_row: u32,
+    pub rows: u32,
+    /// The length of each lane's rows (0 past `lanes`).
+    pub counts: [u32; LANES],
 }
 
 /// What the factors pass builds a batch of up to eight particles' lists in: the rows of their
-/// fluid and wall neighbours (`cell_batches::lane_lists`) and the fluid rows' kernel gradients.
+/// wall neighbours (`cell_batches::lane_lists`) and the listing's scratch arrays.
 #[derive(Clone, Debug, Default)]
-pub struct LaneWork<R> {
+pub struct LaneWork {
     pub rows: Vec<[u32; LANES]>,
-    pub gradients: Vec<[[R; 3]; LANES]>,
     pub scratch: LaneScratch,
 }
 
-impl<R> LaneWork<R> {
+impl LaneWork {
     fn bytes(&self) -> u64 {
-        (self.rows.capacity() * 4 * LANES + self.gradients.capacity() * std::mem::size_of::<[[R; 3]; LANES]>()) as u64 + self.scratch.bytes()
+        (self.rows.capacity() * 4 * LANES) as u64 + self.scratch.bytes()
+    }
+}
+
+impl<R> PairChunk<R> {
+    /// Empties both forms of the lists.
+    pub fn clear(&mut self) {
+        self.starts.clear();
+        self.index.clear();
+        self.grad.clear();
+        self.batches.clear();
+        self.rows.clear();
+        self.row_grads.clear();
+    }
+
+    fn bytes(&self) -> u64 {
+        let lists = self.index.capacity() * 4 + self.grad.capacity() * std::mem::size_of::<V3<R>>() + self.starts.capacity() * 4;
+        let rows = self.batches.capacity() * std::mem::size_of::<RowBatch>() + self.rows.capacity() * 4 * LANES + self.row_grads.capacity() * std::mem::size_of::<[[R; LANES]; 3]>();
+        (lists + rows) as u64 + self.work.bytes()
+    }
+}
+
+impl<R: Real> PairChunk<R> {
+    /// Pairs listed in the chunk (in rows: the entries within a lane's list with a gradient).
+    fn len(&self) -> usize {
+        let mut n = self.index.len();
+        for b in &self.batches {
+            for (t, g) in self.row_grads[b.first_row as usize..(b.first_row + b.rows) as usize].iter().enumerate() {
+                n += (0..LANES).filter(|&k| (t as u32) < b.counts[k] && V3([g[0][k], g[1][k], g[2][k]]) != V3::zero()).count();
+            }
+        }
+        n
     }
 }
 
@@ -88,13 +146,13 @@ pub struct Pairs<R> {
 impl<R: Real> Pairs<R> {
     /// Pairs listed (each pair of particles twice, once from each side).
     pub fn len(&self) -> usize {
-        self.chunks.iter().map(|c| c.index.len()).sum()
+        self.chunks.iter().map(PairChunk::len).sum()
     }
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
     pub fn bytes(&self) -> u64 {
-        self.chunks.iter().map(|c| (c.index.capacity() * 4 + c.grad.capacity() * std::mem::size_of::<V3<R>>() + c.starts.capacity() * 4) as u64 + c.work.bytes()).sum()
+        self.chunks.iter().map(PairChunk::bytes).sum()
     }
 }
 
@@ -131,16 +189,153 @@ pub fn stiffness_push<R: Real>(chunk: &PairChunk<R>, local: usize, volume: R, st
     sum * volume + wall_gradient * ki
 }
 
+/// The particles of a batch's lanes (slot numbers; lanes past the batch repeat its first, and
+/// are left out wherever they would count).
+#[inline(always)]
+fn batch_slots(first: usize, batch: &RowBatch) -> [u32; LANES] {
+    let mut slots = [(first + batch.local as usize) as u32; LANES];
+    for (k, slot) in slots.iter_mut().enumerate().take(batch.lanes as usize) {
+        *slot = (first + batch.local as usize + k) as u32;
+    }
+    slots
+}
+
+/// A row's gradients as three packs.
+#[inline(always)]
+fn row_gradient<R: Real>(g: &[[R; LANES]; 3]) -> PackV3<R> {
+    PackV3 { x: Pack::from_array(g[0]), y: Pack::from_array(g[1]), z: Pack::from_array(g[2]) }
+}
+
+/// D_i of one particle or of a batch's lanes.
+pub enum Rates<'a, R: Real> {
+    /// The particle's place in its chunk, and its D_i.
+    One(usize, R),
+    /// Eight lanes' D_i, each the scalar value bit for bit; lanes past `count` hold the batch's
+    /// first particle again and must be left out.
+    Eight(&'a BatchLanes, Pack<R>),
+}
+
+/// D_i (as [`density_rate`]) of every particle of chunk `c` (of `count` particles), given to
+/// `each` in the chunk's order: one particle at a time on the scalar path, eight at a time on
+/// the lane path.
+#[inline(always)]
+pub fn density_rates<R: Real>(input: &SolveInput<R>, c: usize, count: usize, velocities: &[V3<R>], mut each: impl FnMut(Rates<R>)) {
+    let chunk = &input.pairs.chunks[c];
+    let first = c * CHUNK;
+    if chunk.batches.is_empty() {
+        for local in 0..count {
+            let i = first + local;
+            each(Rates::One(local, density_rate(chunk, local, input.volume, velocities, velocities[i], input.wall_gradients[i])));
+        }
+        return;
+    }
+    let v = as_arrays(velocities);
+    let wall_gradients = as_arrays(input.wall_gradients);
+    wide(
+        #[inline(always)]
+        || {
+            for batch in &chunk.batches {
+                let lanes = BatchLanes::of(first, batch);
+                let vi = PackV3::gather(v, &lanes.slots);
+                let rows = batch.first_row as usize..(batch.first_row + batch.rows) as usize;
+                let mut live = RowMasks::new(&batch.counts);
+                let mut sum = Pack::zero();
+                for (row, g) in chunk.rows[rows.clone()].iter().zip(&chunk.row_grads[rows]) {
+                    let g = row_gradient(g);
+                    let m = live.next_row().and(g.nonzero());
+                    // Adding +0 where a lane has no pair keeps its sum's bits (a sum that starts
+                    // at +0 is never -0), and keeps the select off the chain of additions.
+                    sum = sum + Pack::select(m, (vi - PackV3::gather(v, row)).dot(g), Pack::zero());
+                }
+                // The end of `density_rate`.
+                each(Rates::Eight(&lanes, sum * Pack::splat(input.volume) + vi.dot(PackV3::gather(wall_gradients, &lanes.slots))));
+            }
+        },
+    )
+}
+
+/// The particles of a batch's lanes.
+pub struct BatchLanes {
+    /// Their slots; lanes past `count` repeat the first.
+    pub slots: [u32; LANES],
+    /// The first one's place in its chunk, and how many there are.
+    pub local: usize,
+    pub count: usize,
+}
+
+impl BatchLanes {
+    #[inline(always)]
+    fn of(first: usize, batch: &RowBatch) -> BatchLanes {
+        BatchLanes { slots: batch_slots(first, batch), local: batch.local as usize, count: batch.lanes as usize }
+    }
+
+    /// The lanes' places in their chunk (`first`: the chunk's first slot).
+    #[inline(always)]
+    pub fn locals(&self, first: usize) -> [u32; LANES] {
+        self.slots.map(|s| s - first as u32)
+    }
+
+    /// Writes the first `count` lanes of `values` to `out` from `local` on.
+    #[inline(always)]
+    pub fn store<R: Real>(&self, values: Pack<R>, out: &mut [R]) {
+        out[self.local..self.local + self.count].copy_from_slice(&values.to_array()[..self.count]);
+    }
+}
+
+/// [`error_units`] of the first `count` lanes, summed.
+#[inline(always)]
+pub fn error_units_lanes<R: Real>(error: Pack<R>, count: usize) -> u64 {
+    let (zero, clamp, inf) = (Pack::zero(), Pack::splat(R::of(ERROR_CLAMP)), Pack::splat(R::infinity()));
+    let finite = error.lt(inf).and(Pack::splat(R::neg_infinity()).lt(error));
+    // As error.max(0).min(clamp): a non-positive error (whatever the sign of its zero) counts 0.
+    let clamped = Pack::select(zero.lt(error), error, zero);
+    let clamped = Pack::select(clamped.lt(clamp), clamped, clamp);
+    let scaled = Pack::select(finite, clamped * Pack::splat(R::of((1u64 << ERROR_FRACTION_BITS) as f64)), zero).to_array();
+    scaled.iter().take(count).map(|&e| e.to64() as u64).sum()
+}
+
 /// v_i -= scale (V sum_j (K_i + K_j) grad W_ij + K_i g_i^w) and the sum of K_i, for every
 /// particle: the Jacobi step shared by both solves.
 pub fn apply_stiffness<R: Real>(input: &SolveInput<R>, stiffness: &[R], scale: R, velocities: &mut [V3<R>], sums: &mut [R]) {
     input.pairs.chunks.par_iter().zip(velocities.par_chunks_mut(CHUNK)).zip(sums.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, ((chunk, v), sum))| {
-        for local in 0..v.len() {
-            let i = c * CHUNK + local;
-            let ki = stiffness[i];
-            v[local] -= stiffness_push(chunk, local, input.volume, stiffness, ki, input.wall_gradients[i]) * scale;
-            sum[local] = sum[local] + ki;
+        let first = c * CHUNK;
+        if chunk.batches.is_empty() {
+            for local in 0..v.len() {
+                let i = first + local;
+                let ki = stiffness[i];
+                v[local] -= stiffness_push(chunk, local, input.volume, stiffness, ki, input.wall_gradients[i]) * scale;
+                sum[local] = sum[local] + ki;
+            }
+            return;
         }
+        let wall_gradients = as_arrays(input.wall_gradients);
+        wide(
+            #[inline(always)]
+            || {
+                for batch in &chunk.batches {
+                    let lanes = BatchLanes::of(first, batch);
+                    let ki = Pack::gather(stiffness, &lanes.slots);
+                    let rows = batch.first_row as usize..(batch.first_row + batch.rows) as usize;
+                    let mut live = RowMasks::new(&batch.counts);
+                    let mut push = PackV3::zero();
+                    for (row, g) in chunk.rows[rows.clone()].iter().zip(&chunk.row_grads[rows]) {
+                        let g = row_gradient(g);
+                        let m = live.next_row().and(g.nonzero());
+                        // +0 where a lane has no pair, as in `density_rates`.
+                        push = push + PackV3::select(m, g.scale(ki + Pack::gather(stiffness, row)), PackV3::zero());
+                    }
+                    // The end of `stiffness_push`, and v_i -= push * scale.
+                    let push = push.scale(Pack::splat(input.volume)) + PackV3::gather(wall_gradients, &lanes.slots).scale(ki);
+                    let local = lanes.locals(first);
+                    let vi = PackV3::gather(as_arrays(v), &local) - push.scale(Pack::splat(scale));
+                    let (vi, sum_i) = (vi.to_arrays(), (Pack::gather(sum, &local) + ki).to_array());
+                    for k in 0..lanes.count {
+                        v[lanes.local + k] = V3(vi[k]);
+                        sum[lanes.local + k] = sum_i[k];
+                    }
+                }
+            },
+        )
     });
 }
 
@@ -162,4 +357,30 @@ pub const WARM_START_SHARE: f64 = 0.5;
 /// neighbours is not pushed.
 pub fn factor_epsilon(h: f64) -> f64 {
     1e-6 / (h * h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lanes_count_the_scalar_units<R: Real>() {
+        let values = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0, 0.0, -1.5, 3.5, 3.0, 1e-4, 0.7, 2.999, 1e-12];
+        for window in values.windows(LANES) {
+            let errors: [R; LANES] = std::array::from_fn(|k| R::of(window[k]));
+            for count in [LANES, 5, 1] {
+                let scalar: u64 = errors.iter().take(count).map(|&e| error_units(e)).sum();
+                let lanes = wide(|| error_units_lanes(Pack::from_array(errors), count));
+                assert_eq!(lanes, scalar, "errors {window:?}, {count} lanes");
+            }
+        }
+    }
+
+    #[test]
+    fn error_units_of_eight_lanes_are_the_scalar_units() {
+        if !super::super::cell_batches::lanes_available() {
+            return;
+        }
+        lanes_count_the_scalar_units::<f32>();
+        lanes_count_the_scalar_units::<f64>();
+    }
 }
