@@ -135,7 +135,7 @@ pub fn collapse(tank: &Tank, every: f64, make: &mut MakeBackend) -> anyhow::Resu
     let mut scene = tank.scene()?;
     let column = &tank.fluid[0];
     let (width, column_height) = (column.1[0] - column.0[0], column.1[1] - column.0[1]);
-    // Probes sample the weakly compressible solver only: DFSPH's collapses have no noise figure.
+    // DFSPH's collapses have no noise figure (their cases read no probe).
     if !tank.dfsph {
         scene.probe.push(ProbeSpec::point("far_wall", [tank.size[0], 0.1 * width, 0.5 * tank.size[2]], 1));
     }

@@ -91,7 +91,7 @@ pub fn run(case: Case, resolution: Resolution, out: &Path, make: &mut MakeBacken
     let tank = Tank { dfsph: case.dfsph(), ..tank(resolution) };
     let mut scene = tank.scene()?;
     let centre = 0.5 * DEPTH;
-    // Probes sample the weakly compressible solver only: DFSPH's case reads the particles alone.
+    // DFSPH's case reads the particles alone (its checks were set on them, before DFSPH had probes).
     let probes = !tank.dfsph;
     if probes {
         for (j, f) in PROBE_HEIGHTS.iter().enumerate() {

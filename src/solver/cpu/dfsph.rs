@@ -256,6 +256,12 @@ impl<R: Real> DfsphCpu<R> {
     /// wrong and the step's dt.
     pub fn step(&mut self, s: &mut StepParts<'_, R>) -> (StepHealth, f64) {
         self.factors_stage(s);
+        self.step_after_factors(s)
+    }
+
+    /// The step after its factors stage (the caller may read the factors' fields in between, as
+    /// the probes do).
+    pub fn step_after_factors(&mut self, s: &mut StepParts<'_, R>) -> (StepHealth, f64) {
         if self.settings.divergence_solve {
             self.divergence_solve(s);
         }

@@ -509,8 +509,16 @@ impl<R: Real> CpuSolver<R> {
             }
             self.bin();
         }
-        if let Some((dfsph, mut parts)) = self.dfsph_parts() {
-            let (found, dt) = dfsph.step(&mut parts);
+        if self.dfsph.is_some() {
+            // The probes sample the state the step starts from with the factors' density and
+            // output pressure (wgsl: after the factors dispatch).
+            let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
+            dfsph.factors_stage(&mut parts);
+            if !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some()) {
+                self.sample_probes();
+            }
+            let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
+            let (found, dt) = dfsph.step_after_factors(&mut parts);
             let max_density = self.largest_density();
             self.health.max_density = self.health.max_density.max(max_density);
             self.record_step(dt, found, max_density);

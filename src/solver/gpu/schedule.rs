@@ -290,6 +290,16 @@ impl GpuSolver {
             self.accelerations_valid = false;
             return;
         }
+        // The probes sample the state the step starts from with its factors' density and output
+        // pressure, as the weakly compressible step's with its density stage (profiled with the
+        // factors; only on the steps where one is due).
+        if let Some(probes) = self.probes.as_mut() {
+            if self.params.probes.samples_step(self.steps, self.params.dt, self.params.adaptive.is_some()) {
+                probes.record(rec.pass(), read, self.steps);
+            }
+        }
+        let d = self.dfsph.as_ref().expect("a DFSPH scene");
+        let g = &d.groups[read];
         if d.settings.divergence_solve {
             rec.begin(ProfiledStage::DivergenceSolve);
             self.record_solve(rec, 0, read);
