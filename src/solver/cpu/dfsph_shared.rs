@@ -23,7 +23,7 @@
 //! particle's terms in the list's order, so every sum is the one-at-a-time sum bit for bit.
 
 use super::cell_batches::{wide, LaneScratch, RowMasks};
-use crate::model::lanes::{Pack, PackV3, LANES};
+use crate::model::lanes::{Mask, Pack, PackV3, LANES};
 use crate::model::real::{as_arrays, Real, V3};
 use rayon::prelude::*;
 
@@ -200,6 +200,19 @@ fn batch_slots(first: usize, batch: &RowBatch) -> [u32; LANES] {
     slots
 }
 
+/// A batch's rows in order: each row's neighbours, their gradients and the lanes that take the
+/// row's pair (within the lane's list, the gradient not zero: the pairs a one-at-a-time list
+/// holds), for the solves' sums.
+#[inline(always)]
+fn batch_rows<R: Real>(chunk: &PairChunk<R>, batch: &RowBatch, mut each: impl FnMut(&[u32; LANES], PackV3<R>, Mask<R>)) {
+    let rows = batch.first_row as usize..(batch.first_row + batch.rows) as usize;
+    let mut live = RowMasks::new(&batch.counts);
+    for (row, g) in chunk.rows[rows.clone()].iter().zip(&chunk.row_grads[rows]) {
+        let g = row_gradient(g);
+        each(row, g, live.next_row().and(g.nonzero()));
+    }
+}
+
 /// A row's gradients as three packs.
 #[inline(always)]
 fn row_gradient<R: Real>(g: &[[R; LANES]; 3]) -> PackV3<R> {
@@ -237,16 +250,10 @@ pub fn density_rates<R: Real>(input: &SolveInput<R>, c: usize, count: usize, vel
             for batch in &chunk.batches {
                 let lanes = BatchLanes::of(first, batch);
                 let vi = PackV3::gather(v, &lanes.slots);
-                let rows = batch.first_row as usize..(batch.first_row + batch.rows) as usize;
-                let mut live = RowMasks::new(&batch.counts);
                 let mut sum = Pack::zero();
-                for (row, g) in chunk.rows[rows.clone()].iter().zip(&chunk.row_grads[rows]) {
-                    let g = row_gradient(g);
-                    let m = live.next_row().and(g.nonzero());
-                    // Adding +0 where a lane has no pair keeps its sum's bits (a sum that starts
-                    // at +0 is never -0), and keeps the select off the chain of additions.
-                    sum = sum + Pack::select(m, (vi - PackV3::gather(v, row)).dot(g), Pack::zero());
-                }
+                // Adding +0 where a lane has no pair keeps its sum's bits (a sum that starts at
+                // +0 is never -0), and keeps the select off the chain of additions.
+                batch_rows(chunk, batch, #[inline(always)] |row, g, m| sum = sum + Pack::select(m, (vi - PackV3::gather(v, row)).dot(g), Pack::zero()));
                 // The end of `density_rate`.
                 each(Rates::Eight(&lanes, sum * Pack::splat(input.volume) + vi.dot(PackV3::gather(wall_gradients, &lanes.slots))));
             }
@@ -315,15 +322,9 @@ pub fn apply_stiffness<R: Real>(input: &SolveInput<R>, stiffness: &[R], scale: R
                 for batch in &chunk.batches {
                     let lanes = BatchLanes::of(first, batch);
                     let ki = Pack::gather(stiffness, &lanes.slots);
-                    let rows = batch.first_row as usize..(batch.first_row + batch.rows) as usize;
-                    let mut live = RowMasks::new(&batch.counts);
                     let mut push = PackV3::zero();
-                    for (row, g) in chunk.rows[rows.clone()].iter().zip(&chunk.row_grads[rows]) {
-                        let g = row_gradient(g);
-                        let m = live.next_row().and(g.nonzero());
-                        // +0 where a lane has no pair, as in `density_rates`.
-                        push = push + PackV3::select(m, g.scale(ki + Pack::gather(stiffness, row)), PackV3::zero());
-                    }
+                    // +0 where a lane has no pair, as in `density_rates`.
+                    batch_rows(chunk, batch, #[inline(always)] |row, g, m| push = push + PackV3::select(m, g.scale(ki + Pack::gather(stiffness, row)), PackV3::zero()));
                     // The end of `stiffness_push`, and v_i -= push * scale.
                     let push = push.scale(Pack::splat(input.volume)) + PackV3::gather(wall_gradients, &lanes.slots).scale(ki);
                     let local = lanes.locals(first);
