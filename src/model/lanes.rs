@@ -44,27 +44,27 @@ pub trait LaneFloat: Copy + Default + PartialOrd + 'static {
     /// `values[index[k]][c]` in lane k of the c-th result (each index checked against the slice).
     #[inline(always)]
     fn gather3(values: &[[Self; 3]], index: &[u32; LANES]) -> [Self::V; 3] {
-        let mut a = [[Self::default(); LANES]; 3];
-        for k in 0..LANES {
-            let v = values[index[k] as usize];
-            for c in 0..3 {
-                a[c][k] = v[c];
-            }
-        }
-        [Self::from_array(a[0]), Self::from_array(a[1]), Self::from_array(a[2])]
+        gather_elements(values, index)
     }
     /// `values[index[k]][c]` in lane k of the c-th result (each index checked against the slice).
     #[inline(always)]
     fn gather4(values: &[[Self; 4]], index: &[u32; LANES]) -> [Self::V; 4] {
-        let mut a = [[Self::default(); LANES]; 4];
-        for k in 0..LANES {
-            let v = values[index[k] as usize];
-            for c in 0..4 {
-                a[c][k] = v[c];
-            }
-        }
-        [Self::from_array(a[0]), Self::from_array(a[1]), Self::from_array(a[2]), Self::from_array(a[3])]
+        gather_elements(values, index)
     }
+}
+
+/// `values[index[k]][c]` in lane k of the c-th result, element by element (each index checked
+/// against the slice).
+#[inline(always)]
+fn gather_elements<T: LaneFloat, const C: usize>(values: &[[T; C]], index: &[u32; LANES]) -> [T::V; C] {
+    let mut a = [[T::default(); LANES]; C];
+    for k in 0..LANES {
+        let v = values[index[k] as usize];
+        for c in 0..C {
+            a[c][k] = v[c];
+        }
+    }
+    a.map(T::from_array)
 }
 
 
@@ -165,14 +165,7 @@ mod avx2 {
             // The element after each one must exist for its 16-byte load.
             let inside = index.iter().fold(true, |ok, &i| ok & ((i as usize) + 1 < values.len()));
             if !inside {
-                let mut a = [[0.0; LANES]; 3];
-                for k in 0..LANES {
-                    let v = values[index[k] as usize];
-                    for c in 0..3 {
-                        a[c][k] = v[c];
-                    }
-                }
-                return [Self::from_array(a[0]), Self::from_array(a[1]), Self::from_array(a[2])];
+                return super::gather_elements(values, index);
             }
             let base = values.as_ptr().cast::<f32>();
             // SAFETY: index[k] + 1 < len, so the 16 bytes from element index[k] (its 12 and the

@@ -19,14 +19,7 @@ pub fn divergence_warm_start<R: Real>(input: &SolveInput<R>, velocities: &[V3<R>
             k[local] = if d > R::zero() { warm.share * warm.last[warm.ids[i] as usize] } else { R::zero() };
         };
         // Once a step: the lanes' values one by one.
-        density_rates(input, c, count, velocities, #[inline(always)] |rates| match rates {
-            Rates::One(local, d) => warm_start(local, d),
-            Rates::Eight(lanes, d) => {
-                for (lane, &d) in d.to_array().iter().enumerate().take(lanes.count) {
-                    warm_start(lanes.local + lane, d);
-                }
-            }
-        });
+        density_rates(input, c, count, velocities, #[inline(always)] |rates| rates.each_particle(&mut warm_start));
     });
 }
 

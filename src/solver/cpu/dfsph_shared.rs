@@ -124,19 +124,6 @@ impl<R> PairChunk<R> {
     }
 }
 
-impl<R: Real> PairChunk<R> {
-    /// Pairs listed in the chunk (in rows: the entries within a lane's list with a gradient).
-    fn len(&self) -> usize {
-        let mut n = self.index.len();
-        for b in &self.batches {
-            for (t, g) in self.row_grads[b.first_row as usize..(b.first_row + b.rows) as usize].iter().enumerate() {
-                n += (0..LANES).filter(|&k| (t as u32) < b.counts[k] && V3([g[0][k], g[1][k], g[2][k]]) != V3::zero()).count();
-            }
-        }
-        n
-    }
-}
-
 /// The neighbour lists of every fluid particle, by chunks of [`CHUNK`] particles.
 #[derive(Clone, Debug, Default)]
 pub struct Pairs<R> {
@@ -144,13 +131,6 @@ pub struct Pairs<R> {
 }
 
 impl<R: Real> Pairs<R> {
-    /// Pairs listed (each pair of particles twice, once from each side).
-    pub fn len(&self) -> usize {
-        self.chunks.iter().map(PairChunk::len).sum()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
     pub fn bytes(&self) -> u64 {
         self.chunks.iter().map(PairChunk::bytes).sum()
     }
@@ -189,15 +169,18 @@ pub fn stiffness_push<R: Real>(chunk: &PairChunk<R>, local: usize, volume: R, st
     sum * volume + wall_gradient * ki
 }
 
-/// The particles of a batch's lanes (slot numbers; lanes past the batch repeat its first, and
-/// are left out wherever they would count).
+/// The chunk's batches in order (`first`: the chunk's first slot), each with its lanes, on the
+/// eight-lane instructions (`each` is compiled into them: mark it `#[inline(always)]`).
 #[inline(always)]
-fn batch_slots(first: usize, batch: &RowBatch) -> [u32; LANES] {
-    let mut slots = [(first + batch.local as usize) as u32; LANES];
-    for (k, slot) in slots.iter_mut().enumerate().take(batch.lanes as usize) {
-        *slot = (first + batch.local as usize + k) as u32;
-    }
-    slots
+fn each_batch<R: Real>(chunk: &PairChunk<R>, first: usize, mut each: impl FnMut(&RowBatch, &BatchLanes)) {
+    wide(
+        #[inline(always)]
+        || {
+            for batch in &chunk.batches {
+                each(batch, &BatchLanes::of(first, batch));
+            }
+        },
+    )
 }
 
 /// A batch's rows in order: each row's neighbours, their gradients and the lanes that take the
@@ -228,6 +211,21 @@ pub enum Rates<'a, R: Real> {
     Eight(&'a BatchLanes, Pack<R>),
 }
 
+impl<R: Real> Rates<'_, R> {
+    /// Each particle's D_i in turn, to `each(local, D_i)` (for the passes that run once a step).
+    #[inline(always)]
+    pub fn each_particle(self, mut each: impl FnMut(usize, R)) {
+        match self {
+            Rates::One(local, d) => each(local, d),
+            Rates::Eight(lanes, d) => {
+                for (lane, &d) in d.to_array().iter().enumerate().take(lanes.count) {
+                    each(lanes.local + lane, d);
+                }
+            }
+        }
+    }
+}
+
 /// D_i (as [`density_rate`]) of every particle of chunk `c` (of `count` particles), given to
 /// `each` in the chunk's order: one particle at a time on the scalar path, eight at a time on
 /// the lane path.
@@ -242,23 +240,16 @@ pub fn density_rates<R: Real>(input: &SolveInput<R>, c: usize, count: usize, vel
         }
         return;
     }
-    let v = as_arrays(velocities);
-    let wall_gradients = as_arrays(input.wall_gradients);
-    wide(
-        #[inline(always)]
-        || {
-            for batch in &chunk.batches {
-                let lanes = BatchLanes::of(first, batch);
-                let vi = PackV3::gather(v, &lanes.slots);
-                let mut sum = Pack::zero();
-                // Adding +0 where a lane has no pair keeps its sum's bits (a sum that starts at
-                // +0 is never -0), and keeps the select off the chain of additions.
-                batch_rows(chunk, batch, #[inline(always)] |row, g, m| sum = sum + Pack::select(m, (vi - PackV3::gather(v, row)).dot(g), Pack::zero()));
-                // The end of `density_rate`.
-                each(Rates::Eight(&lanes, sum * Pack::splat(input.volume) + vi.dot(PackV3::gather(wall_gradients, &lanes.slots))));
-            }
-        },
-    )
+    let (v, wall_gradients) = (as_arrays(velocities), as_arrays(input.wall_gradients));
+    each_batch(chunk, first, #[inline(always)] |batch, lanes| {
+        let vi = PackV3::gather(v, &lanes.slots);
+        let mut sum = Pack::zero();
+        // Adding +0 where a lane has no pair keeps its sum's bits (a sum that starts at +0 is
+        // never -0), and keeps the select off the chain of additions.
+        batch_rows(chunk, batch, #[inline(always)] |row, g, m| sum = sum + Pack::select(m, (vi - PackV3::gather(v, row)).dot(g), Pack::zero()));
+        // The end of `density_rate`.
+        each(Rates::Eight(lanes, sum * Pack::splat(input.volume) + vi.dot(PackV3::gather(wall_gradients, &lanes.slots))));
+    })
 }
 
 /// The particles of a batch's lanes.
@@ -271,9 +262,13 @@ pub struct BatchLanes {
 }
 
 impl BatchLanes {
+    /// Lanes past the batch's particles repeat its first: they are left out wherever they
+    /// would count.
     #[inline(always)]
     fn of(first: usize, batch: &RowBatch) -> BatchLanes {
-        BatchLanes { slots: batch_slots(first, batch), local: batch.local as usize, count: batch.lanes as usize }
+        let (local, count) = (batch.local as usize, batch.lanes as usize);
+        let slots = std::array::from_fn(|k| (first + local + if k < count { k } else { 0 }) as u32);
+        BatchLanes { slots, local, count }
     }
 
     /// The lanes' places in their chunk (`first`: the chunk's first slot).
@@ -316,27 +311,21 @@ pub fn apply_stiffness<R: Real>(input: &SolveInput<R>, stiffness: &[R], scale: R
             return;
         }
         let wall_gradients = as_arrays(input.wall_gradients);
-        wide(
-            #[inline(always)]
-            || {
-                for batch in &chunk.batches {
-                    let lanes = BatchLanes::of(first, batch);
-                    let ki = Pack::gather(stiffness, &lanes.slots);
-                    let mut push = PackV3::zero();
-                    // +0 where a lane has no pair, as in `density_rates`.
-                    batch_rows(chunk, batch, #[inline(always)] |row, g, m| push = push + PackV3::select(m, g.scale(ki + Pack::gather(stiffness, row)), PackV3::zero()));
-                    // The end of `stiffness_push`, and v_i -= push * scale.
-                    let push = push.scale(Pack::splat(input.volume)) + PackV3::gather(wall_gradients, &lanes.slots).scale(ki);
-                    let local = lanes.locals(first);
-                    let vi = PackV3::gather(as_arrays(v), &local) - push.scale(Pack::splat(scale));
-                    let (vi, sum_i) = (vi.to_arrays(), (Pack::gather(sum, &local) + ki).to_array());
-                    for k in 0..lanes.count {
-                        v[lanes.local + k] = V3(vi[k]);
-                        sum[lanes.local + k] = sum_i[k];
-                    }
-                }
-            },
-        )
+        each_batch(chunk, first, #[inline(always)] |batch, lanes| {
+            let ki = Pack::gather(stiffness, &lanes.slots);
+            let mut push = PackV3::zero();
+            // +0 where a lane has no pair, as in `density_rates`.
+            batch_rows(chunk, batch, #[inline(always)] |row, g, m| push = push + PackV3::select(m, g.scale(ki + Pack::gather(stiffness, row)), PackV3::zero()));
+            // The end of `stiffness_push`, and v_i -= push * scale.
+            let push = push.scale(Pack::splat(input.volume)) + PackV3::gather(wall_gradients, &lanes.slots).scale(ki);
+            let local = lanes.locals(first);
+            let vi = PackV3::gather(as_arrays(v), &local) - push.scale(Pack::splat(scale));
+            let (vi, sum_i) = (vi.to_arrays(), (Pack::gather(sum, &local) + ki).to_array());
+            for k in 0..lanes.count {
+                v[lanes.local + k] = V3(vi[k]);
+                sum[lanes.local + k] = sum_i[k];
+            }
+        })
     });
 }
 
