@@ -46,6 +46,16 @@ pub trait LaneFloat: Copy + Default + PartialOrd + 'static {
     fn gather3(values: &[[Self; 3]], index: &[u32; LANES]) -> [Self::V; 3] {
         gather_elements(values, index)
     }
+    /// As [`gather3`](Self::gather3), with no index checked.
+    ///
+    /// # Safety
+    /// Every `index[k] + 1` must be below `values.len()` (the eight-lane form reads 16 bytes
+    /// from each element: its own 12 and the next one's first 4).
+    #[inline(always)]
+    unsafe fn gather3_unchecked(values: &[[Self; 3]], index: &[u32; LANES]) -> [Self::V; 3] {
+        // SAFETY: every index is inside the slice (the caller's promise).
+        unsafe { gather_elements_unchecked(values, index) }
+    }
     /// `values[index[k]][c]` in lane k of the c-th result (each index checked against the slice).
     #[inline(always)]
     fn gather4(values: &[[Self; 4]], index: &[u32; LANES]) -> [Self::V; 4] {
@@ -60,6 +70,23 @@ fn gather_elements<T: LaneFloat, const C: usize>(values: &[[T; C]], index: &[u32
     let mut a = [[T::default(); LANES]; C];
     for k in 0..LANES {
         let v = values[index[k] as usize];
+        for c in 0..C {
+            a[c][k] = v[c];
+        }
+    }
+    a.map(T::from_array)
+}
+
+/// As [`gather_elements`], with no index checked.
+///
+/// # Safety
+/// Every `index[k]` must be below `values.len()`.
+#[inline(always)]
+unsafe fn gather_elements_unchecked<T: LaneFloat, const C: usize>(values: &[[T; C]], index: &[u32; LANES]) -> [T::V; C] {
+    let mut a = [[T::default(); LANES]; C];
+    for k in 0..LANES {
+        // SAFETY: the caller's promise.
+        let v = unsafe { *values.get_unchecked(index[k] as usize) };
         for c in 0..C {
             a[c][k] = v[c];
         }
@@ -167,9 +194,14 @@ mod avx2 {
             if !inside {
                 return super::gather_elements(values, index);
             }
+            // SAFETY: just checked.
+            unsafe { Self::gather3_unchecked(values, index) }
+        }
+        #[inline(always)]
+        unsafe fn gather3_unchecked(values: &[[f32; 3]], index: &[u32; LANES]) -> [__m256; 3] {
             let base = values.as_ptr().cast::<f32>();
-            // SAFETY: index[k] + 1 < len, so the 16 bytes from element index[k] (its 12 and the
-            // first 4 of the next) lie inside the slice.
+            // SAFETY: index[k] + 1 < len (the caller's promise), so the 16 bytes from element
+            // index[k] (its 12 and the first 4 of the next) lie inside the slice.
             let row = |k: usize| unsafe { base.add(3 * index[k] as usize) };
             let [x, y, z, _] = unsafe { transpose8x4([row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7)]) };
             [x, y, z]
@@ -416,6 +448,15 @@ impl<R: LaneFloat> Pack<R> {
         }
         Self::from_array(a)
     }
+    /// As [`gather`](Self::gather), with no index checked.
+    ///
+    /// # Safety
+    /// Every `index[k]` must be below `values.len()`.
+    #[inline(always)]
+    pub unsafe fn gather_unchecked(values: &[R], index: &[u32; LANES]) -> Self {
+        // SAFETY: the caller's promise.
+        Self::from_array(std::array::from_fn(|k| unsafe { *values.get_unchecked(index[k] as usize) }))
+    }
     /// `values[first..first + 8]`.
     #[inline(always)]
     pub fn load(values: &[R], first: usize) -> Self {
@@ -519,6 +560,16 @@ impl<R: LaneFloat> PackV3<R> {
     #[inline(always)]
     pub fn gather(values: &[[R; 3]], index: &[u32; LANES]) -> Self {
         let [x, y, z] = R::gather3(values, index);
+        PackV3 { x: Pack(x), y: Pack(y), z: Pack(z) }
+    }
+    /// As [`gather`](Self::gather), with no index checked.
+    ///
+    /// # Safety
+    /// Every `index[k] + 1` must be below `values.len()` (see [`LaneFloat::gather3_unchecked`]).
+    #[inline(always)]
+    pub unsafe fn gather_unchecked(values: &[[R; 3]], index: &[u32; LANES]) -> Self {
+        // SAFETY: the caller's promise.
+        let [x, y, z] = unsafe { R::gather3_unchecked(values, index) };
         PackV3 { x: Pack(x), y: Pack(y), z: Pack(z) }
     }
     /// `values[index[k]]` in lane k: the vector from its first three components and the pack of

@@ -18,12 +18,14 @@
 //! the same order, with the same gradients as the GPU recomputes them from the grid.
 //!
 //! Where the processor has the eight-lane instructions, the lists are kept as rows of eight
-//! (row t holds the t-th neighbour of each of eight consecutive particles of one cell, with its
-//! gradient), and the solves' sums run eight particles at a time: each lane adds its own
-//! particle's terms in the list's order, so every sum is the one-at-a-time sum bit for bit.
+//! (row t holds the t-th neighbour of each of eight consecutive particles, with its gradient;
+//! the particles are listed by cells but grouped by eights whatever their cells, so that few
+//! entries are empty), and the factors' and the solves' sums run eight particles at a time:
+//! each lane adds its own particle's terms in the list's order, so every sum is the
+//! one-at-a-time sum bit for bit.
 
-use super::cell_batches::{wide, LaneScratch, RowMasks};
-use crate::model::lanes::{Mask, Pack, PackV3, LANES};
+use super::cell_batches::{wide, LaneScratch};
+use crate::model::lanes::{Pack, PackV3, LANES};
 use crate::model::real::{as_arrays, Real, V3};
 use rayon::prelude::*;
 
@@ -67,16 +69,21 @@ pub struct PairChunk<R> {
     pub starts: Vec<u32>,
     pub index: Vec<u32>,
     pub grad: Vec<V3<R>>,
-    /// The chunk's particles by batches of up to eight consecutive ones of one cell.
+    /// The chunk's particles by batches of eight consecutive ones (fewer in the last).
     pub batches: Vec<RowBatch>,
-    /// Row t of a batch: the t-th neighbour of each lane within the support (index 0 past a
-    /// lane's list; the particle itself included)...
+    /// Row t of a batch: the t-th pair of each lane...
     pub rows: Vec<[u32; LANES]>,
-    /// ... and its gradient, x, y and z of the eight lanes. The sums leave out the entries past
-    /// a lane's list and those with a zero gradient, as the one-at-a-time lists do.
+    /// ... and its gradient, x, y and z of the eight lanes. The entries that a one-at-a-time
+    /// list leaves out (the particle itself, one at the same spot, and the entries past a lane's
+    /// list, which are the lane's own particle) have a zero gradient: their term is a signed
+    /// zero, which leaves the sum's bits as they are (a sum that starts at +0 is never -0, and
+    /// the velocities and stiffnesses are finite while a run is healthy), so the solves' sums
+    /// take every entry without a mask.
     pub row_grads: Vec<[[R; LANES]; 3]>,
+    /// The largest particle index in `rows` (for [`RowGather::unchecked`]).
+    pub max_index: u32,
     /// The factors pass's working arrays for eight particles at a time (kept between steps).
-    pub work: LaneWork,
+    pub work: LaneWork<R>,
 }
 
 /// Up to eight consecutive particles of a chunk and where their rows are.
@@ -88,21 +95,32 @@ pub struct RowBatch {
     /// Its rows: `first_row..first_row + rows` of the chunk's rows.
     pub first_row: u32,
     pub rows: u32,
-    /// The length of each lane's rows (0 past `lanes`).
+    /// The length of each lane's list (0 past `lanes`).
     pub counts: [u32; LANES],
 }
 
-/// What the factors pass builds a batch of up to eight particles' lists in: the rows of their
-/// wall neighbours (`cell_batches::lane_lists`) and the listing's scratch arrays.
+/// What the factors pass lists one cell's batch of up to eight particles in
+/// (`cell_batches::lane_lists`): their fluid and wall neighbours' rows and the listing's
+/// scratch arrays; and each particle's sums over the walls, by its place in the chunk.
 #[derive(Clone, Debug, Default)]
-pub struct LaneWork {
+pub struct LaneWork<R> {
     pub rows: Vec<[u32; LANES]>,
+    pub wall_rows: Vec<[u32; LANES]>,
     pub scratch: LaneScratch,
+    pub walls: Vec<WallSums<R>>,
 }
 
-impl LaneWork {
+/// A particle's sums over its wall neighbours: sum_b m_b W_ib and sum_b m_b grad W_ib.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WallSums<R> {
+    pub sum: R,
+    pub gradient: V3<R>,
+}
+
+impl<R> LaneWork<R> {
     fn bytes(&self) -> u64 {
-        (self.rows.capacity() * 4 * LANES) as u64 + self.scratch.bytes()
+        let rows = (self.rows.capacity() + self.wall_rows.capacity()) * 4 * LANES;
+        (rows + self.walls.capacity() * std::mem::size_of::<WallSums<R>>()) as u64 + self.scratch.bytes()
     }
 }
 
@@ -115,6 +133,7 @@ impl<R> PairChunk<R> {
         self.batches.clear();
         self.rows.clear();
         self.row_grads.clear();
+        self.max_index = 0;
     }
 
     fn bytes(&self) -> u64 {
@@ -183,16 +202,60 @@ fn each_batch<R: Real>(chunk: &PairChunk<R>, first: usize, mut each: impl FnMut(
     )
 }
 
-/// A batch's rows in order: each row's neighbours, their gradients and the lanes that take the
-/// row's pair (within the lane's list, the gradient not zero: the pairs a one-at-a-time list
-/// holds), for the solves' sums.
+/// A batch's rows in order: each row's neighbours and their gradients, for the solves' sums
+/// (every entry counts: those a one-at-a-time list leaves out add a zero, see
+/// [`PairChunk::row_grads`]).
 #[inline(always)]
-fn batch_rows<R: Real>(chunk: &PairChunk<R>, batch: &RowBatch, mut each: impl FnMut(&[u32; LANES], PackV3<R>, Mask<R>)) {
+fn batch_rows<R: Real>(chunk: &PairChunk<R>, batch: &RowBatch, mut each: impl FnMut(&[u32; LANES], PackV3<R>)) {
     let rows = batch.first_row as usize..(batch.first_row + batch.rows) as usize;
-    let mut live = RowMasks::new(&batch.counts);
     for (row, g) in chunk.rows[rows.clone()].iter().zip(&chunk.row_grads[rows]) {
-        let g = row_gradient(g);
-        each(row, g, live.next_row().and(g.nonzero()));
+        each(row, row_gradient(g));
+    }
+}
+
+/// Values loaded by the rows of one chunk: with each index checked against the slice
+/// (`CHECKED`), or with none checked where the chunk's largest index was checked once
+/// ([`RowGather::unchecked`]), which takes the checks out of the solves' inner loops.
+#[derive(Clone, Copy)]
+struct RowGather<'a, T, const CHECKED: bool> {
+    values: &'a [T],
+}
+
+impl<'a, T> RowGather<'a, T, true> {
+    fn checked(values: &'a [T]) -> Self {
+        RowGather { values }
+    }
+}
+
+impl<'a, T> RowGather<'a, T, false> {
+    /// The loads without checks, where every index of `chunk`'s rows and the one after it lie
+    /// inside `values` (the three-component loads read 16 bytes, into the next element).
+    fn unchecked<R>(values: &'a [T], chunk: &PairChunk<R>) -> Option<Self> {
+        (chunk.max_index as usize + 1 < values.len()).then_some(RowGather { values })
+    }
+}
+
+impl<R: Real, const CHECKED: bool> RowGather<'_, [R; 3], CHECKED> {
+    #[inline(always)]
+    fn vectors(self, row: &[u32; LANES]) -> PackV3<R> {
+        if CHECKED {
+            PackV3::gather(self.values, row)
+        } else {
+            // SAFETY: every index of the chunk's rows is below len - 1 (`unchecked`).
+            unsafe { PackV3::gather_unchecked(self.values, row) }
+        }
+    }
+}
+
+impl<R: Real, const CHECKED: bool> RowGather<'_, R, CHECKED> {
+    #[inline(always)]
+    fn scalars(self, row: &[u32; LANES]) -> Pack<R> {
+        if CHECKED {
+            Pack::gather(self.values, row)
+        } else {
+            // SAFETY: every index of the chunk's rows is below len - 1 (`unchecked`).
+            unsafe { Pack::gather_unchecked(self.values, row) }
+        }
     }
 }
 
@@ -240,13 +303,21 @@ pub fn density_rates<R: Real>(input: &SolveInput<R>, c: usize, count: usize, vel
         }
         return;
     }
-    let (v, wall_gradients) = (as_arrays(velocities), as_arrays(input.wall_gradients));
+    let v = as_arrays(velocities);
+    match RowGather::unchecked(v, chunk) {
+        Some(v) => rates_by_rows(input, chunk, first, v, &mut each),
+        None => rates_by_rows(input, chunk, first, RowGather::checked(v), &mut each),
+    }
+}
+
+/// The lane path of [`density_rates`].
+#[inline(always)]
+fn rates_by_rows<R: Real, const CHECKED: bool>(input: &SolveInput<R>, chunk: &PairChunk<R>, first: usize, v: RowGather<'_, [R; 3], CHECKED>, each: &mut impl FnMut(Rates<R>)) {
+    let wall_gradients = as_arrays(input.wall_gradients);
     each_batch(chunk, first, #[inline(always)] |batch, lanes| {
-        let vi = PackV3::gather(v, &lanes.slots);
+        let vi = PackV3::gather(v.values, &lanes.slots);
         let mut sum = Pack::zero();
-        // Adding +0 where a lane has no pair keeps its sum's bits (a sum that starts at +0 is
-        // never -0), and keeps the select off the chain of additions.
-        batch_rows(chunk, batch, #[inline(always)] |row, g, m| sum = sum + Pack::select(m, (vi - PackV3::gather(v, row)).dot(g), Pack::zero()));
+        batch_rows(chunk, batch, #[inline(always)] |row, g| sum = sum + (vi - v.vectors(row)).dot(g));
         // The end of `density_rate`.
         each(Rates::Eight(lanes, sum * Pack::splat(input.volume) + vi.dot(PackV3::gather(wall_gradients, &lanes.slots))));
     })
@@ -265,7 +336,7 @@ impl BatchLanes {
     /// Lanes past the batch's particles repeat its first: they are left out wherever they
     /// would count.
     #[inline(always)]
-    fn of(first: usize, batch: &RowBatch) -> BatchLanes {
+    pub fn of(first: usize, batch: &RowBatch) -> BatchLanes {
         let (local, count) = (batch.local as usize, batch.lanes as usize);
         let slots = std::array::from_fn(|k| (first + local + if k < count { k } else { 0 }) as u32);
         BatchLanes { slots, local, count }
@@ -310,23 +381,31 @@ pub fn apply_stiffness<R: Real>(input: &SolveInput<R>, stiffness: &[R], scale: R
             }
             return;
         }
-        let wall_gradients = as_arrays(input.wall_gradients);
-        each_batch(chunk, first, #[inline(always)] |batch, lanes| {
-            let ki = Pack::gather(stiffness, &lanes.slots);
-            let mut push = PackV3::zero();
-            // +0 where a lane has no pair, as in `density_rates`.
-            batch_rows(chunk, batch, #[inline(always)] |row, g, m| push = push + PackV3::select(m, g.scale(ki + Pack::gather(stiffness, row)), PackV3::zero()));
-            // The end of `stiffness_push`, and v_i -= push * scale.
-            let push = push.scale(Pack::splat(input.volume)) + PackV3::gather(wall_gradients, &lanes.slots).scale(ki);
-            let local = lanes.locals(first);
-            let vi = PackV3::gather(as_arrays(v), &local) - push.scale(Pack::splat(scale));
-            let (vi, sum_i) = (vi.to_arrays(), (Pack::gather(sum, &local) + ki).to_array());
-            for k in 0..lanes.count {
-                v[lanes.local + k] = V3(vi[k]);
-                sum[lanes.local + k] = sum_i[k];
-            }
-        })
+        match RowGather::unchecked(stiffness, chunk) {
+            Some(k) => push_by_rows(input, chunk, first, k, scale, v, sum),
+            None => push_by_rows(input, chunk, first, RowGather::checked(stiffness), scale, v, sum),
+        }
     });
+}
+
+/// The lane path of [`apply_stiffness`] on one chunk (`v` and `sum`: its particles').
+#[inline(always)]
+fn push_by_rows<R: Real, const CHECKED: bool>(input: &SolveInput<R>, chunk: &PairChunk<R>, first: usize, stiffness: RowGather<'_, R, CHECKED>, scale: R, v: &mut [V3<R>], sum: &mut [R]) {
+    let wall_gradients = as_arrays(input.wall_gradients);
+    each_batch(chunk, first, #[inline(always)] |batch, lanes| {
+        let ki = Pack::gather(stiffness.values, &lanes.slots);
+        let mut push = PackV3::zero();
+        batch_rows(chunk, batch, #[inline(always)] |row, g| push = push + g.scale(ki + stiffness.scalars(row)));
+        // The end of `stiffness_push`, and v_i -= push * scale.
+        let push = push.scale(Pack::splat(input.volume)) + PackV3::gather(wall_gradients, &lanes.slots).scale(ki);
+        let local = lanes.locals(first);
+        let vi = PackV3::gather(as_arrays(v), &local) - push.scale(Pack::splat(scale));
+        let (vi, sum_i) = (vi.to_arrays(), (Pack::gather(sum, &local) + ki).to_array());
+        for k in 0..lanes.count {
+            v[lanes.local + k] = V3(vi[k]);
+            sum[lanes.local + k] = sum_i[k];
+        }
+    })
 }
 
 /// Where a solve starts: `share` of the last step's stiffness sum, kept by particle id.
