@@ -308,12 +308,6 @@ impl Scene {
                 }
                 ProbeType::Force => {
                     forces += 1;
-                    if self.physics.solver == super::scene::PressureSolver::Dfsph {
-                        // DFSPH pushes a fluid particle off a wall with its own stiffness alone
-                        // (K_i g_i^w, Akinci's form), not the weakly compressible pair force a
-                        // force probe sums over the wall particles.
-                        return Err(err(origin, field("type"), "is \"force\", which reads the weakly compressible solver's wall force; physics.solver = \"dfsph\" has point, gauge and front probes only so far"));
-                    }
                     let Some(boundary) = p.boundary else {
                         return Err(err(origin, field("boundary"), "is missing; a force probe needs boundary = INDEX, the index of a box or container in the [[boundary]] list (from 0)"));
                     };

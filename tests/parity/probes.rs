@@ -33,9 +33,9 @@ fn probed(tank: TestScene, forces: bool) -> Scene {
     probes.into_iter().filter(|p| forces || p.kind != ProbeType::Force).fold(tank, |tank, p| tank.probe(p)).build()
 }
 
-/// The probes of [`probed_tank`] under DFSPH, which has no force probes.
+/// The probes of [`probed_tank`] under DFSPH.
 fn probed_dfsph_tank() -> Scene {
-    probed(TestScene::small_tank().dfsph(), false)
+    probed(TestScene::small_tank().dfsph(), true)
 }
 
 fn samples(backend: &mut dyn Backend, steps: u64) -> Vec<ProbeSample> {
@@ -60,8 +60,9 @@ fn every_probe_type_agrees_with_its_cpu_twin_on_adami_walls() {
 
 #[test]
 fn every_probe_type_agrees_with_its_cpu_twin_under_dfsph() {
-    // DFSPH's probes read the factors' density and output pressure (the last step's stiffness
-    // as a pressure), on the state the step starts from.
+    // DFSPH's points and gauges read the factors' density and output pressure (the last step's
+    // stiffness as a pressure) on the state the step starts from; its force probes the step's
+    // wall push, after the solves.
     every_probe_type_agrees_on(probed_dfsph_tank());
 }
 
@@ -70,8 +71,11 @@ fn every_probe_type_agrees_on(scene: Scene) {
     let mut cpu = common::cpu::<f64>(&scene);
     let expected = samples(&mut cpu, 21);
     assert_eq!(expected.iter().map(|s| s.step).collect::<Vec<_>>(), vec![0, 5, 10, 15, 20]);
-    // The force on the container holds the block up: about its weight, upwards.
-    if let Some(container) = probes.probes.iter().position(|p| p.name == "container") {
+    // The force on the container holds the block up: about its weight, upwards (DFSPH pushes
+    // in the steps its solve needs to, which at this dt are not every step: its weight is
+    // checked on a still tank, in tests/physics).
+    let dfsph = scene.physics.solver == wgsph::model::scene::PressureSolver::Dfsph;
+    if let Some(container) = probes.probes.iter().position(|p| p.name == "container" && !dfsph) {
         let weight = cpu.fluid_count() as f64 * scene.params().fluid_mass * 9.81;
         let up = expected[4].values[probes.offsets()[container] + 1];
         assert!(up < 0.0 && (up.abs() - weight).abs() < 0.5 * weight, "the container carries {up} N; the water weighs {weight} N");

@@ -1,9 +1,11 @@
 // Probes sampled on the state a step starts from (after its density stage): point probes and
 // gauges (probe_points, one invocation per probe), force probes and fronts (probe_particles,
 // one invocation per fluid particle, one partial per workgroup and slot), and the reduction of
-// the partials into a row of the sample buffer (probe_finish, one invocation). Recorded only on
-// the steps where a probe is due, and only in scenes with probes. What each probe measures is
-// in src/model/probes.rs and docs/probes.md. Twin of src/solver/cpu/probes.rs.
+// the partials into a row of the sample buffer (probe_finish, one invocation). Under DFSPH the
+// last two run after the solves, on the pressure of the step's wall push (wall_push_pressure).
+// Recorded only on the steps where a probe is due, and only in scenes with probes. What each
+// probe measures is in src/model/probes.rs and docs/probes.md. Twin of
+// src/solver/cpu/probes.rs.
 
 //! include shared/common.wgsl
 //! array positions: vec4<f32>, read
@@ -17,6 +19,12 @@
 //! array wall_probe_masks: u32, read
 // With ADAMI_WALL_PRESSURE, each wall particle's pressure (x) and density (y); not bound otherwise.
 //! array wall_fields: vec2<f32>, read, optional
+// Under DFSPH with force probes: the step's stiffness sums, and the pressure of its wall push
+// that wall_push_pressure writes and probe_particles then reads in place of `pressures`; not
+// bound otherwise.
+//! array pressure_sum: f32, read, optional
+//! array divergence_sum: f32, read, optional
+//! array push_pressures: f32, read_write, optional
 // The probe table written by the host (src/solver/gpu/probes.rs): floats as their bits, so that
 // every word reaches the shader unchanged (no float move may flush a small integer's bits).
 //! array probe_table: vec4<u32>, read
@@ -258,6 +266,24 @@ fn force_probe(k: u32) -> u32 {
 // Whether slot s of the partials keeps a largest value (a front's projection) and not a sum.
 fn is_max_slot(s: u32, forces: u32) -> bool {
     return s >= FORCE_SLOTS * forces && (s - FORCE_SLOTS * forces) % FRONT_SLOTS == 0u;
+}
+
+// Under DFSPH, after the solves: the pressure whose consistent wall force (-m_b p_i / rho_i^2
+// grad W_ib, as probe_particles sums it) is the step's wall push, -K_i g_i^w over dt in the
+// constant-density solve and once in the divergence solve, felt by the wall as the opposite of
+// m_i dv_i / dt: p_i = rho_i^2 (Kp_i / dt^2 + Kd_i / dt) / rho0 (src/solver/cpu/probes.rs).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn wall_push_pressure(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i >= params.fluid_count) {
+        return;
+    }
+    var dt = params.dt;
+    if (ADAPTIVE_DT) {
+        dt = bitcast<f32>(atomicLoad(&status[STATUS_DT]));
+    }
+    let rho = densities_at(i);
+    push_pressures_set(i, rho * rho * (pressure_sum_at(i) / (dt * dt) + divergence_sum_at(i) / dt) / params.rest_density);
 }
 
 @compute @workgroup_size(PROBE_WORKGROUP)

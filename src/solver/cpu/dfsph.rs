@@ -262,11 +262,25 @@ impl<R: Real> DfsphCpu<R> {
     /// The step after its factors stage (the caller may read the factors' fields in between, as
     /// the probes do).
     pub fn step_after_factors(&mut self, s: &mut StepParts<'_, R>) -> (StepHealth, f64) {
+        let dt = self.solve(s);
+        self.finish(s, dt)
+    }
+
+    /// The solves and the prediction between them; returns the step's dt. Afterwards
+    /// `s.velocities` holds the new velocities and `s.scratch` those the prediction started
+    /// from (after the divergence solve); the positions are still the step's first.
+    pub fn solve(&mut self, s: &mut StepParts<'_, R>) -> f64 {
         if self.settings.divergence_solve {
             self.divergence_solve(s);
         }
         let dt = self.predict(s);
         self.pressure_solve(s, dt);
+        dt
+    }
+
+    /// The end of a step after [`DfsphCpu::solve`]: the positions advanced, the warm start kept
+    /// and the step's accelerations. Returns what went wrong and dt.
+    pub fn finish(&mut self, s: &mut StepParts<'_, R>, dt: f64) -> (StepHealth, f64) {
         let p = s.params;
         let domain = (V3::from64(p.domain_min), V3::from64(p.domain_max));
         let found = integrate(s.positions, s.velocities, R::of(dt), s.backstops, domain);

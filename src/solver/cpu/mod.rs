@@ -510,15 +510,25 @@ impl<R: Real> CpuSolver<R> {
             self.bin();
         }
         if self.dfsph.is_some() {
-            // The probes sample the state the step starts from with the factors' density and
-            // output pressure (wgsl: after the factors dispatch).
+            // The point probes and gauges sample the state the step starts from with the
+            // factors' density and output pressure (wgsl: after the factors dispatch); the force
+            // and front probes the step's first positions after the solves, whose wall push the
+            // forces are (`sample_dfsph_forces`).
+            let due = !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
             dfsph.factors_stage(&mut parts);
-            if !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some()) {
-                self.sample_probes();
+            let points = due.then(|| {
+                let mut values = vec![R::zero(); self.params.probes.value_count()];
+                probes::probe_points(&self.probe_input(), &self.params.probes.probes, &self.params.probes.offsets(), &mut values);
+                values
+            });
+            let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
+            let dt = dfsph.solve(&mut parts);
+            if let Some(values) = points {
+                self.sample_dfsph_forces(values, dt);
             }
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
-            let (found, dt) = dfsph.step_after_factors(&mut parts);
+            let (found, dt) = dfsph.finish(&mut parts, dt);
             let max_density = self.largest_density();
             self.health.max_density = self.health.max_density.max(max_density);
             self.record_step(dt, found, max_density);
@@ -552,11 +562,10 @@ impl<R: Real> CpuSolver<R> {
         integrate::choose_dt(&adaptive, p.h, p.speed_of_sound(), (maxima[0], maxima[1]), p.viscosity_at_step(self.step))
     }
 
-    /// Samples every probe on the state the step starts from and the fields of its density
-    /// stage (wgsl/sim/probes.wgsl's three entry points in order).
-    pub fn sample_probes(&mut self) {
+    /// What the probes read: the solver's current arrays.
+    fn probe_input(&self) -> probes::ProbeInput<'_, R> {
         let p = &self.params;
-        let input = probes::ProbeInput {
+        probes::ProbeInput {
             kernel: &self.kernel,
             grid: &self.grid,
             fluid_mass: R::of(p.fluid_mass),
@@ -573,7 +582,38 @@ impl<R: Real> CpuSolver<R> {
             wall_fields: &self.wall_fields,
             gravity: V3::from64(p.gravity),
             artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
+        }
+    }
+
+    /// The force and front probes of a DFSPH step after its solves, into `values` (whose point
+    /// probes and gauges are sampled), and the sample kept: the positions are the step's first,
+    /// the forces the step's wall push ([`probes::wall_push_pressure`] through the consistent
+    /// wall pressure), the viscous part from the velocities the prediction started from.
+    fn sample_dfsph_forces(&mut self, mut values: Vec<R>, dt: f64) {
+        let d = self.dfsph.as_ref().expect("a DFSPH scene");
+        let p = &self.params;
+        let mut push = Vec::new();
+        probes::wall_push_pressure(&self.densities, &d.pressure_sum, &d.divergence_sum, R::of(p.rest_density), R::of(dt), &mut push);
+        let input = probes::ProbeInput {
+            pressures: &push,
+            velocities: &self.scratch_v3,
+            boundary_pressure: BoundaryPressure::Consistent,
+            artificial_viscosity_factor: R::zero(),
+            ..self.probe_input()
         };
+        let (list, offsets) = (&p.probes.probes, p.probes.offsets());
+        let mut partials = Vec::new();
+        probes::probe_particles(&input, list, None, &mut partials);
+        probes::probe_finish(list, &offsets, &partials, &mut values);
+        let values = values.iter().map(|v| v.to64()).collect();
+        self.push_probe_sample(values);
+    }
+
+    /// Samples every probe on the state the step starts from and the fields of its density
+    /// stage (wgsl/sim/probes.wgsl's three entry points in order).
+    pub fn sample_probes(&mut self) {
+        let input = self.probe_input();
+        let p = &self.params;
         let list = &p.probes.probes;
         let offsets = p.probes.offsets();
         let mut values = vec![R::zero(); p.probes.value_count()];
@@ -594,6 +634,11 @@ impl<R: Real> CpuSolver<R> {
                 values
             }
         };
+        self.push_probe_sample(values);
+    }
+
+    /// Keeps a sample of the probes taken in the step under way.
+    fn push_probe_sample(&mut self, values: Vec<f64>) {
         let p = &self.params;
         let (time, previous_time) = match p.adaptive {
             Some(_) => (self.time, if self.step == 0 { 0.0 } else { self.time - self.dt_stats.last }),

@@ -1,8 +1,9 @@
 //! Probes sampled on the state a step starts from: twin of wgsl/sim/probes.wgsl, with the same
-//! three entry points. `probe_points` evaluates the point probes and gauges (one invocation per
+//! four entry points. `probe_points` evaluates the point probes and gauges (one invocation per
 //! probe on the GPU), `probe_particles` sums the force probes and finds the fronts over the
 //! fluid particles in workgroups of [`PROBE_WORKGROUP`] (one partial per workgroup and slot),
-//! and `probe_finish` reduces the partials into the sample. What each probe measures is in
+//! and `probe_finish` reduces the partials into the sample; under DFSPH the last two run after
+//! the solves, on the pressure `wall_push_pressure` gives the step's wall push. What each probe measures is in
 //! [`crate::model::probes`] and docs/probes.md.
 
 use crate::model::kernels::{KernelCoefficients, Neighbours};
@@ -40,6 +41,18 @@ pub struct ProbeInput<'a, R> {
     pub gravity: V3<R>,
     /// alpha h_s c0 of artificial viscosity (0: off).
     pub artificial_viscosity_factor: R,
+}
+
+/// Under DFSPH, the pressure whose wall force as the force probes sum it (the consistent form,
+/// -m_b p_i / rho_i^2 grad W_ib) is the step's wall push: the solves change v_i by
+/// -K_i g_i^w (g_i^w = sum_b V_b grad W_ib, V_b = m_b / rho0), over dt in the constant-density
+/// solve (K per dt^2 after the 1 / dt of its velocity change) and once in the divergence solve,
+/// and the wall feels the opposite of m_i dv_i / dt (the force SPlisHSPlasH puts on its rigid
+/// bodies). So p_i = rho_i^2 (Kp_i / dt^2 + Kd_i / dt) / rho0, with the step's stiffness sums
+/// (wgsl `wall_push_pressure`).
+pub fn wall_push_pressure<R: Real>(densities: &[R], pressure_sum: &[R], divergence_sum: &[R], rest_density: R, dt: R, out: &mut Vec<R>) {
+    out.clear();
+    out.extend(densities.iter().zip(pressure_sum).zip(divergence_sum).map(|((&rho, &kp), &kd)| rho * rho * (kp / (dt * dt) + kd / dt) / rest_density));
 }
 
 /// Sums at a point over the fluid particles within h (wgsl `ShepardSums`).

@@ -23,10 +23,19 @@ const ROW_HEAD: u64 = 4;
 const FORCE_SLOTS: u64 = 6;
 const FRONT_SLOTS: u64 = 2;
 
+/// DFSPH's stiffness sums, which its force probes read (`wall_push_pressure`).
+pub(super) struct DfsphSums<'a> {
+    pub pressure_sum: &'a wgpu::Buffer,
+    pub divergence_sum: &'a wgpu::Buffer,
+}
+
 pub(super) struct GpuProbes {
     points: Option<Stage>,
     particles: Option<Stage>,
     finish: Stage,
+    /// Under DFSPH with force probes: `wall_push_pressure`, its output, its bind group per
+    /// parity and its workgroups.
+    push: Option<(Stage, wgpu::Buffer, [wgpu::BindGroup; 2], (u32, u32))>,
     /// Per parity (the state read): the bind groups of the three entry points.
     groups: [[wgpu::BindGroup; 3]; 2],
     pub data: wgpu::Buffer,
@@ -47,7 +56,9 @@ pub(super) struct GpuProbes {
 impl GpuProbes {
     /// The table, the buffers and the pipelines of `params.probes` for `fluid` particles;
     /// `wall_masks` is each sorted wall particle's mask of force probes; `lens` gives the
-    /// lengths of the solver's arrays, `buffers[c]` their buffers when state `c` is read.
+    /// lengths of the solver's arrays, `buffers[c]` their buffers when state `c` is read;
+    /// `dfsph`: DFSPH's stiffness sums in a DFSPH scene.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn new(
         ctx: &GpuContext,
         params: &Params,
@@ -57,6 +68,7 @@ impl GpuProbes {
         lens: ArrayLengths,
         uniform: &wgpu::Buffer,
         buffers: [ArrayBuffers; 2],
+        dfsph: Option<DfsphSums>,
     ) -> anyhow::Result<Self> {
         let probes = &params.probes;
         let max_dim = ctx.device.limits().max_compute_workgroups_per_dimension;
@@ -87,42 +99,76 @@ impl GpuProbes {
         let data = storage(device, "probe data", data_len * 4);
         let table_len = table.len() as u64;
         let walls = wall_masks.len() as u64;
+        // Under DFSPH the force probes read the step's wall push through the consistent wall
+        // pressure (src/solver/cpu/probes.rs `wall_push_pressure`).
+        let dfsph_forces = dfsph.as_ref().filter(|_| forces > 0);
+        let push_pressures = dfsph_forces.map(|_| storage(device, "probe push pressures", fluid.max(1) * 4));
+        let pushed = if dfsph_forces.is_some() { fluid } else { 0 };
         let len = |name: &str| -> u64 {
             match name {
                 "probe_table" => table_len,
                 "probe_data" => data_len,
                 "wall_probe_masks" => walls,
+                "pressure_sum" | "divergence_sum" | "push_pressures" => pushed,
                 other => lens(other),
             }
         };
         let mut k = constants.to_vec();
         k.push(("WORKGROUP_SIZE", 64.0));
+        if dfsph.is_some() {
+            for (name, value) in k.iter_mut() {
+                match *name {
+                    "CONSISTENT_WALL_PRESSURE" => *value = 1.0,
+                    "ADAMI_WALL_PRESSURE" | "ARTIFICIAL_VISCOSITY" => *value = 0.0,
+                    _ => {}
+                }
+            }
+        }
         let has_points = probes.probes.iter().any(|p| matches!(p.geometry, ProbeGeometry::Point { .. } | ProbeGeometry::Gauge { .. }));
         let points = if has_points { Some(stage(ctx, "probes", "probe_points", &len, &k)?) } else { None };
         let particles = if forces + fronts > 0 { Some(stage(ctx, "probes", "probe_particles", &len, &k)?) } else { None };
         let finish = stage(ctx, "probes", "probe_finish", &len, &k)?;
-        let group = |stage: &Stage, label: &str, c: usize| {
-            let (table_buffer, masks, data) = (&table_buffer, &masks, &data);
+        // `pressures_read`: the buffer `pressures` binds (the push's output for the DFSPH force
+        // probes' sums).
+        let group = |stage: &Stage, label: &str, c: usize, pressures_read: bool| {
+            let (table_buffer, masks, data, push_pressures, dfsph) = (&table_buffer, &masks, &data, &push_pressures, &dfsph_forces);
             let b = buffers[c];
-            stage.bind_group(device, label, uniform, &|name: &str| match name {
-                "probe_table" => table_buffer.clone(),
-                "probe_data" => data.clone(),
-                "wall_probe_masks" => masks.clone(),
-                other => b(other),
+            stage.bind_group(device, label, uniform, &|name: &str| match (name, push_pressures, dfsph) {
+                ("probe_table", ..) => table_buffer.clone(),
+                ("probe_data", ..) => data.clone(),
+                ("wall_probe_masks", ..) => masks.clone(),
+                // With the push's output read as `pressures`, its own name binds the scene's
+                // pressures (unused there), since one buffer may not be bound both ways.
+                ("push_pressures", Some(_), _) if pressures_read => b("pressures"),
+                ("push_pressures", Some(push), _) => push.clone(),
+                ("pressures", Some(push), _) if pressures_read => push.clone(),
+                ("pressure_sum", _, Some(d)) => d.pressure_sum.clone(),
+                ("divergence_sum", _, Some(d)) => d.divergence_sum.clone(),
+                (other, ..) => b(other),
             })
         };
         let parity = |c: usize| {
             [
-                group(points.as_ref().unwrap_or(&finish), "probe_points", c),
-                group(particles.as_ref().unwrap_or(&finish), "probe_particles", c),
-                group(&finish, "probe_finish", c),
+                group(points.as_ref().unwrap_or(&finish), "probe_points", c, false),
+                group(particles.as_ref().unwrap_or(&finish), "probe_particles", c, true),
+                group(&finish, "probe_finish", c, false),
             ]
         };
         let groups = [parity(0), parity(1)];
+        let push = match push_pressures.clone() {
+            Some(buffer) => {
+                let stage = stage(ctx, "probes", "wall_push_pressure", &len, &k)?;
+                let groups = [0, 1].map(|c| group(&stage, "wall_push_pressure", c, false));
+                let size = dispatch_size(fluid, stage.threads_per_group, max_dim);
+                Some((stage, buffer, groups, size))
+            }
+            None => None,
+        };
         Ok(GpuProbes {
             points,
             particles,
             finish,
+            push,
             groups,
             data,
             table: table_buffer,
@@ -139,7 +185,7 @@ impl GpuProbes {
 
     /// Bytes of the probes' buffers.
     pub fn bytes(&self) -> u64 {
-        self.data.size() + self.table.size() + self.masks.size()
+        self.data.size() + self.table.size() + self.masks.size() + self.push.as_ref().map_or(0, |p| p.1.size())
     }
 
     /// Whether the row buffer is full (the rows must be read back before another sample).
@@ -150,19 +196,42 @@ impl GpuProbes {
     /// Records into `pass` a sample of the state `read` (after its density stage) taken after
     /// `step` steps.
     pub(super) fn record(&mut self, pass: &mut wgpu::ComputePass<'static>, read: usize, step: u64) {
+        if self.room(step) {
+            self.record_points(pass, read);
+            self.record_particles(pass, read, step);
+        }
+    }
+
+    /// Whether the row buffer has room for the sample of `step` (it warns once when not).
+    pub(super) fn room(&mut self, step: u64) -> bool {
         if self.full() {
             // Only a caller that steps without ever reading the samples gets here.
             if !self.warned_full {
                 log::warn!("the probes' row buffer is full: samples from step {step} on are not taken until the rows are read");
                 self.warned_full = true;
             }
-            return;
+            return false;
         }
-        let g = &self.groups[read];
+        true
+    }
+
+    /// The point probes and gauges of a sample (its first part; [`GpuProbes::room`] first).
+    pub(super) fn record_points(&self, pass: &mut wgpu::ComputePass<'static>, read: usize) {
         if let Some(points) = &self.points {
             pass.set_pipeline(&points.pipeline);
-            pass.set_bind_group(0, &g[0], &[]);
+            pass.set_bind_group(0, &self.groups[read][0], &[]);
             pass.dispatch_workgroups(self.probe_count.div_ceil(points.threads_per_group), 1, 1);
+        }
+    }
+
+    /// The rest of a sample of `step`: the force and front probes (under DFSPH after the solves,
+    /// the push's pressure first) and the row.
+    pub(super) fn record_particles(&mut self, pass: &mut wgpu::ComputePass<'static>, read: usize, step: u64) {
+        let g = &self.groups[read];
+        if let Some((push, _, groups, size)) = &self.push {
+            pass.set_pipeline(&push.pipeline);
+            pass.set_bind_group(0, &groups[read], &[]);
+            pass.dispatch_workgroups(size.0, size.1, 1);
         }
         if let Some(particles) = &self.particles {
             pass.set_pipeline(&particles.pipeline);

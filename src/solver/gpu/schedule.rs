@@ -290,12 +290,15 @@ impl GpuSolver {
             self.accelerations_valid = false;
             return;
         }
-        // The probes sample the state the step starts from with its factors' density and output
-        // pressure, as the weakly compressible step's with its density stage (profiled with the
-        // factors; only on the steps where one is due).
+        // The point probes and gauges sample the state the step starts from with its factors'
+        // density and output pressure, as the weakly compressible step's with its density stage
+        // (profiled with the factors; only on the steps where one is due); the force and front
+        // probes after the solves (src/solver/cpu/mod.rs `step_once`).
+        let mut sampling = false;
         if let Some(probes) = self.probes.as_mut() {
-            if self.params.probes.samples_step(self.steps, self.params.dt, self.params.adaptive.is_some()) {
-                probes.record(rec.pass(), read, self.steps);
+            if self.params.probes.samples_step(self.steps, self.params.dt, self.params.adaptive.is_some()) && probes.room(self.steps) {
+                probes.record_points(rec.pass(), read);
+                sampling = true;
             }
         }
         let d = self.dfsph.as_ref().expect("a DFSPH scene");
@@ -315,6 +318,11 @@ impl GpuSolver {
         }
         rec.begin(ProfiledStage::PressureSolve);
         self.record_solve(rec, 1, read);
+        // The rest of the probes' sample, on the step's first positions (profiled with the
+        // solve): the forces are the step's wall push.
+        if let (true, Some(probes)) = (sampling, self.probes.as_mut()) {
+            probes.record_particles(rec.pass(), read, self.steps);
+        }
         rec.begin(ProfiledStage::DfsphIntegrate);
         self.dispatch_particles(rec, &d.stages.integrate, &g.integrate);
         dispatch_one(rec, &self.pipelines.finish_step, &self.finish_group);

@@ -8,7 +8,7 @@ use super::device::GpuContext;
 use super::memory::MemoryPlan;
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
-use super::probes::GpuProbes;
+use super::probes::{DfsphSums, GpuProbes};
 use super::readback::{read_buffers, visit_array, visit_pairs, visit_rows, Element, RowArrays};
 use super::shaders::{constants, stage, storage_bindings, Stage};
 use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, SharedBuffers};
@@ -345,14 +345,6 @@ impl GpuSolver {
             }
         };
         let groups = [make_parity(0), make_parity(1)];
-        let probes = if params.probes.is_empty() {
-            None
-        } else {
-            let masks = params.probes.wall_masks(&initial.wall_positions, &initial.wall_boundaries);
-            let sorted_masks: Vec<u32> = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
-            let (b0, b1) = (buffers(0), buffers(1));
-            Some(GpuProbes::new(&ctx, params, n, &sorted_masks, &k, &len, u, [&b0, &b1])?)
-        };
         let finish_group = p.finish_step.bind_group(device, "finish_step", u, &without_accelerations(0));
         let max_groups_per_dim = device.limits().max_compute_workgroups_per_dimension;
         let dfsph = dfsph_stages.map(|stages| {
@@ -369,6 +361,15 @@ impl GpuSolver {
             let buffers = DfsphBuffers::new(&ctx, n, solve_threads(&ws), max_groups_per_dim);
             DfsphGpu::new(&ctx, params.dfsph.as_ref().expect("DFSPH"), stages, buffers, &shared, &uniform)
         });
+        let probes = if params.probes.is_empty() {
+            None
+        } else {
+            let masks = params.probes.wall_masks(&initial.wall_positions, &initial.wall_boundaries);
+            let sorted_masks: Vec<u32> = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
+            let (b0, b1) = (buffers(0), buffers(1));
+            let sums = dfsph.as_ref().map(|d| DfsphSums { pressure_sum: &d.buffers.pressure_sum, divergence_sum: &d.buffers.divergence_sum });
+            Some(GpuProbes::new(&ctx, params, n, &sorted_masks, &k, &len, u, [&b0, &b1], sums)?)
+        };
         let memory = plan.total() + probes.as_ref().map_or(0, |p| p.bytes());
         let mut solver = GpuSolver {
             params: params.clone(),
