@@ -128,8 +128,8 @@ impl GpuProbes {
         let points = if has_points { Some(stage(ctx, "probes", "probe_points", &len, &k)?) } else { None };
         let particles = if forces + fronts > 0 { Some(stage(ctx, "probes", "probe_particles", &len, &k)?) } else { None };
         let finish = stage(ctx, "probes", "probe_finish", &len, &k)?;
-        // `pressures_read`: the buffer `pressures` binds (the push's output for the DFSPH force
-        // probes' sums).
+        // `pressures_read`: whether `pressures` binds the push's output (for the DFSPH force
+        // probes' sums in probe_particles).
         let group = |stage: &Stage, label: &str, c: usize, pressures_read: bool| {
             let (table_buffer, masks, data, push_pressures, dfsph) = (&table_buffer, &masks, &data, &push_pressures, &dfsph_forces);
             let b = buffers[c];
