@@ -252,19 +252,8 @@ impl<R: Real> DfsphCpu<R> {
         self.stats.pressure = stats;
     }
 
-    /// One DFSPH step on a binned state (the caller bins first when due). Returns what went
-    /// wrong and the step's dt.
-    pub fn step(&mut self, s: &mut StepParts<'_, R>) -> (StepHealth, f64) {
-        self.factors_stage(s);
-        self.step_after_factors(s)
-    }
-
-    /// The step after its factors stage (the caller may read the factors' fields in between, as
-    /// the probes do).
-    pub fn step_after_factors(&mut self, s: &mut StepParts<'_, R>) -> (StepHealth, f64) {
-        let dt = self.solve(s);
-        self.finish(s, dt)
-    }
+    // A step on a binned state is `factors_stage`, `solve`, `finish`, in that order
+    // (`CpuSolver::step_once`, which samples the probes between them).
 
     /// The solves and the prediction between them; returns the step's dt. Afterwards
     /// `s.velocities` holds the new velocities and `s.scratch` those the prediction started
