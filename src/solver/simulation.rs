@@ -256,14 +256,6 @@ fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choi
 /// rank's by its place on its machine ([`super::gpu::device::rank_adapter`]).
 fn open_part_on_gpu(scene: &Scene, params: &Params, initial: Option<InitialState>, choice: &BackendChoice, ranks: &Ranks) -> anyhow::Result<Simulation> {
     let (rank, size) = (ranks.comm.rank(), ranks.comm.size());
-    if params.adaptive.is_some() {
-        return Err(SceneError {
-            origin: scene.name.clone(),
-            field: "time.adaptive".into(),
-            message: format!("is set, which the GPU path does not run across ranks yet ({size} ranks): its dt would be chosen from each rank's particles apart; use a fixed time.dt, or --backend cpu"),
-        }
-        .into());
-    }
     let (ctx, why) = match &choice.context {
         Some(c) => (c.clone(), "the device given".to_string()),
         None => {
@@ -280,7 +272,7 @@ fn open_part_on_gpu(scene: &Scene, params: &Params, initial: Option<InitialState
     };
     let name = ctx.describe();
     let initial = initial.unwrap_or_else(|| scene.initial_state());
-    let stages = super::gpu::ranks::GpuRankStages::new(ctx, params, &initial, choice.gpu_options, why);
+    let stages = super::gpu::ranks::GpuRankStages::new(ctx, params, &initial, choice.gpu_options, why, ranks.comm.clone());
     let solver = CpuSolver::<f32>::new_part_on(params, &initial, ranks.comm.clone(), ranks.balance_every, Box::new(stages))?;
     let reason = format!("the GPU on {name}, as asked, on rank {rank} of {size} (the exchange on the host)");
     Ok(Simulation { scene: scene.clone(), solver: Solver::Cpu32(solver), reason })

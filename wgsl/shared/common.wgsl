@@ -18,6 +18,10 @@ override PLANES: bool = true;                   // the scene has analytic planes
 override SOLID_BOXES: bool = false;             // the scene has box obstacles, backed by their faces
 override GRAVITY: bool = true;                  // gravity is not zero
 override ADAPTIVE_DT: bool = false;             // dt chosen on the GPU every step (integrate.wgsl)
+// Across ranks: the top bit of a position's w marks a ghost (a neighbour rank's particle), which
+// the adaptive step's maxima leave out; the rest of w is the particle's place in the upload.
+override GHOSTS: bool = false;
+const GHOST_BIT: u32 = 0x80000000u;
 // Density carried by the continuity equation (in each velocity's w) instead of summed.
 override CONTINUITY: bool = false;
 override DENSITY_DIFFUSION: bool = false;       // delta-SPH diffusion (with CONTINUITY only)

@@ -94,7 +94,8 @@ fn integrate(
 }
 
 // Adaptive dt, 1 of 2: the largest |v| (at the start of the step) and |a| (of this step),
-// reduced per workgroup, then once per workgroup into the status buffer. Non-negative floats
+// reduced per workgroup, then once per workgroup into the status buffer (across ranks, of the
+// rank's own particles). Non-negative floats
 // order like their bits; a non-finite value is left out (the health check reports it).
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn reduce_maxima(
@@ -104,7 +105,9 @@ fn reduce_maxima(
 ) {
     reduce_begin(lid);
     let i = thread_index(gid, groups);
-    if (i < params.fluid_count) {
+    // A ghost is its own rank's to count: each rank offers its own particles, and the host
+    // takes the largest over the ranks before choose_dt.
+    if (i < params.fluid_count && !(GHOSTS && (bitcast<u32>(positions_at(i).w) & GHOST_BIT) != 0u)) {
         let speed = length(velocities_at(i).xyz);
         let accel = length(accelerations_at(i).xyz);
         if (is_finite_f32(speed)) {

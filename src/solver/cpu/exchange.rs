@@ -120,8 +120,9 @@ impl<R: Real> Held<R> {
 pub trait DeviceStages<R: Real>: Send {
     /// The device in words (the summary's adapter).
     fn describe(&self) -> String;
-    /// Runs step `step` on `held` and writes the result back into it.
-    fn run_step(&mut self, step: u64, held: HeldArrays<'_, R>) -> anyhow::Result<()>;
+    /// Runs step `step` on `held` and writes the result back into it; returns the step's dt
+    /// (with adaptive dt chosen from every rank's own particles, the ghosts left out).
+    fn run_step(&mut self, step: u64, held: HeldArrays<'_, R>) -> anyhow::Result<f64>;
     /// The binning and density stage of `held` at step `step`, without advancing it (for a
     /// snapshot), written back the same way.
     fn run_fields(&mut self, step: u64, held: HeldArrays<'_, R>) -> anyhow::Result<()>;
@@ -147,6 +148,8 @@ pub struct HeldArrays<'a, R: Real> {
     pub pressures: &'a mut Vec<R>,
     /// Cells + 1 values, written by the device.
     pub starts: &'a mut Vec<u32>,
+    /// Which of the particles handed over are ghosts (a neighbour's particles), in their order.
+    pub ghosts: &'a [bool],
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -158,9 +161,10 @@ impl<R: Real> CpuSolver<R> {
         Ok(solver)
     }
 
-    /// The held arrays, lent to the device stages.
-    fn held_arrays(&mut self) -> HeldArrays<'_, R> {
+    /// The held arrays, lent to the device stages, with which of them are `ghosts`.
+    fn held_arrays<'a>(&'a mut self, ghosts: &'a [bool]) -> HeldArrays<'a, R> {
         HeldArrays {
+            ghosts,
             positions: &mut self.positions,
             velocities: &mut self.velocities,
             ids: &mut self.ids,
@@ -176,7 +180,8 @@ impl<R: Real> CpuSolver<R> {
         let device = self.device.clone().expect("only with device stages");
         self.lists.clear();
         let step = self.step;
-        let ran = lock(&device).run_fields(step, self.held_arrays());
+        let ghosts = self.ghost_flags();
+        let ran = lock(&device).run_fields(step, self.held_arrays(&ghosts));
         if let Err(e) = ran {
             if let Some(part) = &mut self.ranks {
                 part.failure.get_or_insert(format!("rank {} of {}: the device's density stage failed: {e:#}", part.comm.rank(), part.comm.size()));
@@ -193,20 +198,23 @@ impl<R: Real> CpuSolver<R> {
         // reads the result with its own particles counted (probes_across_ranks). A device that
         // failed here has recorded its rank's failure; the collectives below still run, so no
         // rank waits for it, and the step's health stops every rank.
-        if self.params.probes.samples_step(self.step, self.params.dt, false) {
+        if self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some()) {
             self.fields_on_device();
             self.compute_wall_pressure();
             self.sample_probes();
         }
         self.lists.clear();
         let step = self.step;
-        let ran = lock(&device).run_step(step, self.held_arrays());
-        if let Err(e) = ran {
-            if let Some(part) = &mut self.ranks {
-                part.failure.get_or_insert(format!("rank {} of {}: the device step failed: {e:#}", part.comm.rank(), part.comm.size()));
+        let ghosts = self.ghost_flags();
+        let dt = match lock(&device).run_step(step, self.held_arrays(&ghosts)) {
+            Ok(dt) => dt,
+            Err(e) => {
+                if let Some(part) = &mut self.ranks {
+                    part.failure.get_or_insert(format!("rank {} of {}: the device step failed: {e:#}", part.comm.rank(), part.comm.size()));
+                }
+                return;
             }
-            return;
-        }
+        };
         let n = self.positions.len();
         self.accelerations.resize(n, V3::zero());
         let domain = (V3::<R>::from64(self.params.domain_min), V3::<R>::from64(self.params.domain_max));
@@ -223,7 +231,15 @@ impl<R: Real> CpuSolver<R> {
         let max_density = self.largest_density();
         let (found, max_density) = self.all_step_health(found, max_density);
         self.health.max_density = self.health.max_density.max(max_density);
-        self.record_step(self.params.dt, found, max_density);
+        self.record_step(dt, found, max_density);
+    }
+
+    /// Which held particles are ghosts: those outside this rank's slab (the exchange's own
+    /// test, on the same positions).
+    fn ghost_flags(&self) -> Vec<bool> {
+        let Some(part) = &self.ranks else { return Vec::new() };
+        let mine = part.slabs.layers_of(part.comm.rank());
+        self.positions.iter().map(|&x| !mine.contains(&self.grid.cell_coords(x)[part.axis])).collect()
     }
 
     /// The solver of one rank's part of a simulation across the ranks of `comm`: the particles

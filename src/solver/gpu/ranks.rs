@@ -12,7 +12,13 @@ use super::{GpuOptions, GpuSolver};
 use crate::model::initial::InitialState;
 use crate::model::params::Params;
 use crate::model::real::V3;
+use crate::solver::communicator::Communicator;
 use crate::solver::cpu::exchange::{DeviceStages, HeldArrays};
+use super::params::status;
+use std::sync::Arc;
+
+/// The top bit of a position's w marks a ghost (`GHOST_BIT` in wgsl/shared/common.wgsl).
+const GHOST_BIT: u32 = 0x8000_0000;
 
 /// Room made above the held count when the buffers are (re)made: migration and moving bounds
 /// change the count a little from step to step.
@@ -30,12 +36,14 @@ pub struct GpuRankStages {
     capacity: usize,
     /// Why this adapter, for the summary.
     why: String,
+    /// The ranks, for the adaptive step's maxima.
+    comm: Arc<dyn Communicator>,
 }
 
 impl GpuRankStages {
-    /// The stages on `ctx` for the scene's `params`, with the walls of `initial`. `why`: how the
-    /// adapter was chosen.
-    pub fn new(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions, why: String) -> Self {
+    /// The stages on `ctx` for the scene's `params`, with the walls of `initial`, for a rank of
+    /// `comm`. `why`: how the adapter was chosen.
+    pub fn new(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions, why: String, comm: Arc<dyn Communicator>) -> Self {
         let walls = InitialState {
             fluid_positions: Vec::new(),
             fluid_velocities: Vec::new(),
@@ -44,7 +52,7 @@ impl GpuRankStages {
             wall_masses: initial.wall_masses.clone(),
             wall_boundaries: initial.wall_boundaries.clone(),
         };
-        GpuRankStages { ctx, params: params.clone(), options, walls, solver: None, capacity: 0, why }
+        GpuRankStages { ctx, params: params.clone(), options, walls, solver: None, capacity: 0, why, comm }
     }
 
     /// A solver with buffers for `capacity` particles (placeholders at the domain's lower
@@ -57,7 +65,7 @@ impl GpuRankStages {
         if self.params.continuity_density {
             initial.fluid_densities = vec![self.params.rest_density; capacity];
         }
-        GpuSolver::with_options(self.ctx.clone(), &self.params, &initial, self.options)
+        GpuSolver::build(self.ctx.clone(), &self.params, &initial, self.options, Some(self.comm.clone()))
     }
 }
 
@@ -66,19 +74,20 @@ impl DeviceStages<f32> for GpuRankStages {
         format!("{} ({})", self.ctx.describe(), self.why)
     }
 
-    fn run_step(&mut self, step: u64, held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
+    fn run_step(&mut self, step: u64, held: HeldArrays<'_, f32>) -> anyhow::Result<f64> {
         self.run(step, held, true)
     }
 
     fn run_fields(&mut self, step: u64, held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
-        self.run(step, held, false)
+        self.run(step, held, false).map(|_| ())
     }
 }
 
 impl GpuRankStages {
     /// Uploads `held`, runs one step (`advance`) or only the binning and density stage, and
-    /// reads the cell-sorted result back into `held`.
-    fn run(&mut self, step: u64, held: HeldArrays<'_, f32>, advance: bool) -> anyhow::Result<()> {
+    /// reads the cell-sorted result back into `held`. Returns the step's dt (the GPU's choice
+    /// with adaptive dt).
+    fn run(&mut self, step: u64, held: HeldArrays<'_, f32>, advance: bool) -> anyhow::Result<f64> {
         let n = held.positions.len();
         if self.solver.is_none() || n > self.capacity {
             let capacity = ((n.max(1) as f64) * CAPACITY_MARGIN).ceil() as usize;
@@ -89,11 +98,14 @@ impl GpuRankStages {
         let wide = |v: &V3<f32>| [v.0[0] as f64, v.0[1] as f64, v.0[2] as f64];
         let positions: Vec<[f64; 3]> = held.positions.iter().map(wide).collect();
         let velocities: Vec<[f64; 3]> = held.velocities.iter().map(wide).collect();
-        solver.load_held(&positions, &velocities, held.carried_densities, step);
+        solver.load_held(&positions, &velocities, held.carried_densities, held.ghosts, step);
         if advance {
             solver.advance(1);
         } else {
             solver.refresh_fields();
+        }
+        if let Some(e) = solver.rank_error.borrow_mut().take() {
+            anyhow::bail!("the adaptive step's maxima across ranks: {e}");
         }
         let cells = self.params.grid.cell_count() as u64;
         let st = &solver.state[solver.current];
@@ -104,12 +116,14 @@ impl GpuRankStages {
             (&solver.densities, bytes * 4),
             (&solver.pressures, bytes * 4),
             (&solver.starts, (cells + 1) * 4),
+            (&solver.status, (status::DT as u64 + 1) * 4),
         ])?;
         let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
         let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
-        // The w of a position is the particle's place in the upload: its id comes from there.
+        // The w of a position is the particle's place in the upload (and the ghost bit): its id
+        // comes from there.
         let uploaded = std::mem::take(held.ids);
-        *held.ids = ids_of(&pos).iter().map(|&slot| uploaded[slot as usize]).collect();
+        *held.ids = ids_of(&pos).iter().map(|&slot| uploaded[(slot & !GHOST_BIT) as usize]).collect();
         *held.positions = pos.iter().map(|p| V3([p[0], p[1], p[2]])).collect();
         *held.velocities = vel.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
         if !held.carried_densities.is_empty() {
@@ -118,15 +132,20 @@ impl GpuRankStages {
         *held.densities = bytemuck::pod_collect_to_vec(&data[2]);
         *held.pressures = bytemuck::pod_collect_to_vec(&data[3]);
         *held.starts = bytemuck::pod_collect_to_vec(&data[4]);
-        Ok(())
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[5]);
+        Ok(match self.params.adaptive {
+            Some(_) => f32::from_bits(words[status::DT]) as f64,
+            None => self.params.dt,
+        })
     }
 }
 
 impl GpuSolver {
     /// Puts `positions`, `velocities` (and with continuity density `carried` densities) in the
-    /// buffers as the current state of step `step`, each particle's id its index, and binds the
-    /// stages to that many particles (at most the buffers' capacity).
-    pub(super) fn load_held(&mut self, positions: &[[f64; 3]], velocities: &[[f64; 3]], carried: &[f32], step: u64) {
+    /// buffers as the current state of step `step`, each particle's id its index with
+    /// [`GHOST_BIT`] where `ghosts` says so, and binds the stages to that many particles (at most
+    /// the buffers' capacity).
+    pub(super) fn load_held(&mut self, positions: &[[f64; 3]], velocities: &[[f64; 3]], carried: &[f32], ghosts: &[bool], step: u64) {
         let n = positions.len() as u32;
         if n != self.fluid_count {
             self.fluid_count = n;
@@ -135,7 +154,8 @@ impl GpuSolver {
             self.ctx.queue.write_buffer(&self.uniform, 0, &p.bytes());
         }
         let carried_of = |i: usize| carried.get(i).copied().unwrap_or(0.0);
-        self.state[0].upload(&self.ctx, positions, velocities, |i| i as u32, &carried_of);
+        let id_of = |i: usize| i as u32 | if ghosts.get(i).copied().unwrap_or(false) { GHOST_BIT } else { 0 };
+        self.state[0].upload(&self.ctx, positions, velocities, id_of, &carried_of);
         self.current = 0;
         self.fields_state = 0;
         self.accelerations_valid = false;

@@ -237,6 +237,7 @@ impl GpuSolver {
         rec.begin(ProfiledStage::Integrate);
         if let Some((reduce, choose)) = &w.adaptive {
             self.dispatch_particles(rec, reduce, &g.advance);
+            self.maxima_across_ranks(rec);
             dispatch_one(rec, choose, &g.advance);
         }
         if !self.pipelines.fused {
@@ -246,6 +247,30 @@ impl GpuSolver {
         self.current = 1 - read;
         self.fields_state = read;
         self.accelerations_valid = !self.pipelines.fused;
+    }
+
+    /// Across ranks, between the adaptive step's reduction and its choice of dt: the work so
+    /// far is submitted and waited for, this rank's largest speed and acceleration (of its own
+    /// particles) read back, the largest over the ranks written in their place, so that every
+    /// rank's choose_dt computes the dt one GPU computes for all the particles. Alone nothing.
+    fn maxima_across_ranks(&self, rec: &mut dyn Recorder) {
+        let Some(comm) = &self.ranks else { return };
+        let words = status::MAX_SPEED as u64 * 4;
+        debug_assert_eq!(status::MAX_ACCELERATION, status::MAX_SPEED + 1);
+        let reduced = (|| -> anyhow::Result<[f32; 2]> {
+            anyhow::ensure!(rec.submit_and_wait(&self.ctx), "the adaptive step across ranks cannot run in timed passes");
+            let data = read_ranges(&self.ctx, &[(&self.status, words, 8)])?;
+            let mine: [f32; 2] = std::array::from_fn(|k| f32::from_le_bytes(data[0][4 * k..4 * k + 4].try_into().expect("4 bytes")));
+            // f32 to f64 and back is exact, and so is the largest of them.
+            let all = crate::solver::communicator::all_max(&**comm, &[mine[0] as f64, mine[1] as f64])?;
+            Ok([all[0] as f32, all[1] as f32])
+        })();
+        match reduced {
+            Ok(all) => self.ctx.queue.write_buffer(&self.status, words, bytemuck::cast_slice(&all)),
+            Err(e) => {
+                self.rank_error.borrow_mut().get_or_insert(format!("{e:#}"));
+            }
+        }
     }
 
     /// Whether the step about to run rebuilds the neighbour grid (every `rebuild_every` steps;

@@ -131,6 +131,11 @@ pub struct GpuSolver {
     pub(super) steps_per_submit: u64,
     /// The probe stage, in a scene with probes.
     pub(super) probes: Option<GpuProbes>,
+    /// Across ranks (src/solver/gpu/ranks.rs): the ranks, with which the adaptive step takes the
+    /// largest speed and acceleration of every rank's own particles before choosing dt.
+    pub(super) ranks: Option<std::sync::Arc<dyn crate::solver::communicator::Communicator>>,
+    /// Why the last step's collective failed (across ranks), until the rank reads it.
+    pub(super) rank_error: std::cell::RefCell<Option<String>>,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
 }
@@ -164,6 +169,12 @@ impl GpuSolver {
     /// Uploads a scene's particles and builds every pipeline and bind group. Programs build a
     /// solver through [`crate::solver::open`], which checks the memory plan first.
     pub(crate) fn with_options(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions) -> anyhow::Result<Self> {
+        Self::build(ctx, params, initial, options, None)
+    }
+
+    /// [`GpuSolver::with_options`] for one rank's part of a simulation across `ranks`
+    /// (positions mark ghosts, see [`GpuSolver::load_held`]), or alone with `None`.
+    pub(super) fn build(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions, ranks: Option<std::sync::Arc<dyn crate::solver::communicator::Communicator>>) -> anyhow::Result<Self> {
         let n = initial.fluid_positions.len() as u64;
         let cells = params.grid.cell_count() as u64;
         let viscosity = params.viscosity_at_step(0);
@@ -208,6 +219,7 @@ impl GpuSolver {
         let mut k = constants(params);
         k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
         k.push(("STENCIL_RUNS", if options.single_cells { 0.0 } else { 1.0 }));
+        k.push(("GHOSTS", if ranks.is_some() { 1.0 } else { 0.0 }));
         let ws = options.workgroup_sizes;
         ws.check(&ctx)?;
         // The constants of a stage with `size` threads per workgroup.
@@ -404,6 +416,8 @@ impl GpuSolver {
             steps_per_submit: if options.steps_per_submit == 0 { STEPS_PER_SUBMIT } else { options.steps_per_submit },
             memory,
             probes,
+            ranks,
+            rank_error: std::cell::RefCell::new(None),
             ctx,
         };
         match (&mut solver.dfsph, accelerations) {
