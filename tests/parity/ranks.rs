@@ -188,8 +188,83 @@ fn what_does_not_run_across_ranks_yet_is_refused_by_name() {
     let dfsph = TestScene::small_tank().dfsph().build();
     let [comm, _other]: [_; 2] = LocalGroup::new(2).try_into().ok().expect("two ranks");
     let ranks = Ranks::new(Arc::new(comm));
-    let e = open(&dfsph, &BackendChoice::cpu(Precision::F64).on_ranks(ranks.clone())).err().expect("refused").to_string();
-    assert!(e.contains("physics.solver") && e.contains("not supported across ranks yet"), "{e}");
+    let e = open(&dfsph, &BackendChoice::gpu().on_ranks(ranks.clone())).err().expect("refused").to_string();
+    assert!(e.contains("physics.solver") && e.contains("CPU path only"), "{e}");
+    let probed = with_probes(dfsph, 5, [[0.1, 0.05, 0.1], [0.3, 0.05, 0.1]], [[0.1, 0.0, 0.1], [0.3, 0.0, 0.1]]);
+    let e = open(&probed, &BackendChoice::cpu(Precision::F64).on_ranks(ranks)).err().expect("refused").to_string();
+    assert!(e.contains("probe") && e.contains("dfsph") && e.contains("across ranks yet"), "{e}");
+}
+
+/// DFSPH across ranks: the ghosts take their owners' velocities after every velocity change
+/// of the solves, the error sums and the adaptive step's maxima are the ranks' together, and
+/// the warm starts travel with the particles; so N ranks run the same iterations with the same
+/// dt and compute one rank's bits, through migration, moving bounds and a restart on another
+/// rank count.
+fn dfsph_tank() -> TestScene {
+    TestScene::small_tank().dfsph().dt(0.001)
+}
+
+#[test]
+fn dfsph_on_ranks_computes_bit_for_bit_what_one_rank_computes() {
+    let fixed = dfsph_tank().build();
+    let adaptive = dfsph_tank().adaptive().dt_max(0.004).build();
+    let mut dam = dam_break(1000);
+    dam.physics.solver = wgsph::model::scene::PressureSolver::Dfsph;
+    dam.physics.stiffness = None;
+    dam.physics.speed_of_sound = None;
+    dam.time.dt = 0.001;
+    for (scene, ranks, precision) in [(fixed, 2, Precision::F64), (adaptive, 3, Precision::F64), (dam, 3, Precision::F32), (moving_block_dfsph(), 3, Precision::F64)] {
+        let mut single = open(&scene, &BackendChoice::cpu(precision)).expect("opens");
+        single.step(40).expect("steps");
+        let health = single.health().expect("health");
+        assert!(health.is_ok(), "{}: one rank stays healthy: {health:?}", scene.name);
+        let one = single.snapshot().expect("snapshot");
+        let iterations = health.iterations.expect("DFSPH counts its iterations");
+        assert!(iterations.pressure.total > 40, "{}: the solves iterate ({iterations:?})", scene.name);
+        let dt = single.backend().dt_stats().expect("dt");
+        let all = on_ranks(&scene, ranks, 10, precision, &|b: &mut dyn Backend| {
+            b.step(40)?;
+            Ok((b.snapshot()?, b.health()?, b.dt_stats()?, b.rank_report().expect("across ranks")))
+        });
+        for (rank, (_, h, d, _)) in all.iter().enumerate() {
+            assert_eq!(h.iterations, Some(iterations), "{}: rank {rank} of {ranks} iterates as one rank", scene.name);
+            assert_eq!((d.min, d.max, d.last), (dt.min, dt.max, dt.last), "{}: rank {rank} of {ranks} steps with one rank's dt", scene.name);
+        }
+        assert!(all.iter().any(|r| r.3.stats.ghosts > 0), "{}: ranks hold ghosts", scene.name);
+        assert!(all[0].0 == one, "{}: {ranks} ranks against one, {precision:?}, bit for bit", scene.name);
+    }
+}
+
+/// The moving block of the migration tests, with DFSPH.
+fn moving_block_dfsph() -> Scene {
+    let mut scene = moving_block();
+    scene.physics.solver = wgsph::model::scene::PressureSolver::Dfsph;
+    scene.physics.stiffness = None;
+    scene.physics.speed_of_sound = None;
+    scene.time.dt = 0.002;
+    scene
+}
+
+#[test]
+fn a_dfsph_state_saved_on_some_ranks_continues_on_another_count() {
+    let scene = dfsph_tank().build();
+    let uninterrupted = one_rank(&scene, 40);
+    let saved: Vec<BackendState> = on_ranks(&scene, 3, 10, Precision::F64, &|b: &mut dyn Backend| {
+        b.step(20)?;
+        b.save_state()
+    });
+    let mut single = open(&scene, &BackendChoice::cpu(Precision::F64)).expect("opens");
+    single.step(20).expect("steps");
+    assert!(saved[0] == single.backend().save_state().expect("state"), "the DFSPH state saved on 3 ranks (warm starts included) is the one one rank saves");
+    for ranks in [1, 2] {
+        let state = saved[0].clone();
+        let resumed = on_ranks(&scene, ranks, 10, Precision::F64, &move |b: &mut dyn Backend| {
+            b.restore_state(&state)?;
+            b.step(20)?;
+            b.snapshot()
+        });
+        assert!(resumed[0] == uninterrupted, "DFSPH saved on 3 ranks, continued on {ranks}");
+    }
 }
 
 /// Each rank on its own device of `ctx`'s adapter, like the ranks of one machine sharing a

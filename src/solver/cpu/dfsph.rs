@@ -10,6 +10,7 @@ use super::dfsph_integrate::{integrate, keep_warm_start, step_accelerations};
 use super::dfsph_predict::{choose_dt, non_pressure_accelerations, predict_from_accelerations, predict_velocities, PredictInput};
 use super::dfsph_pressure::{predict_density, pressure_apply, pressure_warm_start};
 use super::dfsph_shared::{error_threshold, factor_epsilon, Pairs, SolveInput, WarmStart, WARM_START_SHARE};
+use super::exchange::GhostLink;
 use super::integrate::{Backstops, StepHealth};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
@@ -65,6 +66,32 @@ pub struct StepParts<'a, R: Real> {
     pub step: u64,
     /// Whether the factors pass runs eight particles at a time ([`super::CpuSolver::use_lanes`]).
     pub lanes: bool,
+    /// The fluid particles of the whole simulation (the solves' average error is over them).
+    pub particles: usize,
+    /// Across ranks: the ghosts' part in the solves (`None` alone).
+    pub link: Option<&'a mut GhostLink>,
+}
+
+impl<R: Real> StepParts<'_, R> {
+    /// Which slots hold ghosts (empty alone).
+    fn ghosts(&self) -> &[bool] {
+        self.link.as_ref().map_or(&[], |l| &l.ghosts[..])
+    }
+
+    /// After a change of the velocities: across ranks the ghosts take their owners'.
+    fn sync_velocities(&mut self) {
+        if let Some(link) = self.link.as_deref_mut() {
+            link.sync(&mut self.velocities[..]);
+        }
+    }
+
+    /// This rank's error sum, across ranks the ranks' together.
+    fn total_error(&mut self, units: u64) -> u64 {
+        match self.link.as_deref_mut() {
+            Some(link) => link.sum_units(units),
+            None => units,
+        }
+    }
 }
 
 impl<R: Real> DfsphCpu<R> {
@@ -83,6 +110,16 @@ impl<R: Real> DfsphCpu<R> {
             last_dt: 0.0,
             dt: 0.0,
         }
+    }
+
+    /// The arrays kept by slot for `n` held particles (across ranks the count changes from step
+    /// to step; the warm starts are kept by id for every particle of the simulation).
+    pub fn resize(&mut self, n: usize) {
+        self.factors.resize(n, R::zero());
+        self.wall_gradients.resize(n, V3::zero());
+        self.stiffness.resize(n, R::zero());
+        self.pressure_sum.resize(n, R::zero());
+        self.divergence_sum.resize(n, R::zero());
     }
 
     /// Bytes of the arrays (the neighbour lists at their current capacity).
@@ -113,8 +150,8 @@ impl<R: Real> DfsphCpu<R> {
         }
     }
 
-    fn solve_input(&self, volume: R) -> SolveInput<'_, R> {
-        SolveInput { pairs: &self.pairs, volume, factors: &self.factors, wall_gradients: &self.wall_gradients }
+    fn solve_input<'a>(&'a self, volume: R, ghosts: &'a [bool]) -> SolveInput<'a, R> {
+        SolveInput { pairs: &self.pairs, volume, factors: &self.factors, wall_gradients: &self.wall_gradients, ghosts }
     }
 
     /// The factors stage on the current state: density, output pressure, alpha, wall gradients,
@@ -151,29 +188,32 @@ impl<R: Real> DfsphCpu<R> {
         let p = s.params;
         let volume = R::of(p.fluid_mass / p.rest_density);
         let dt = R::of(self.divergence_dt(p));
-        let n = s.velocities.len();
+        let n = s.particles;
         let limits = SolveLimits {
             min_iterations: self.settings.min_divergence_iterations,
             max_iterations: self.settings.max_divergence_iterations,
             threshold: error_threshold(self.settings.divergence_error, n),
             particles: n,
         };
+        let ghosts = s.ghosts().to_vec();
         let mut stats = self.stats.divergence;
         let mut stiffness = std::mem::take(&mut self.stiffness);
         let mut sums = std::mem::take(&mut self.divergence_sum);
         let warm = self.settings.warm_start;
         if warm {
             let last = WarmStart { ids: s.ids, last: &self.warm_divergence, share: R::of(WARM_START_SHARE) };
-            divergence_warm_start(&self.solve_input(volume), s.velocities, &last, &mut stiffness);
-            divergence_apply(&self.solve_input(volume), &stiffness, s.velocities, &mut sums);
+            divergence_warm_start(&self.solve_input(volume, &ghosts), s.velocities, &last, &mut stiffness);
+            divergence_apply(&self.solve_input(volume, &ghosts), &stiffness, s.velocities, &mut sums);
+            s.sync_velocities();
         }
         let mut solve = begin_solve(warm);
-        let mut error = divergence_rate(&self.solve_input(volume), s.velocities, dt, &mut stiffness);
-        check_convergence(&limits, &mut solve, error, &mut stats);
+        let error = divergence_rate(&self.solve_input(volume, &ghosts), s.velocities, dt, &mut stiffness);
+        check_convergence(&limits, &mut solve, s.total_error(error), &mut stats);
         while solve.solving {
-            divergence_apply(&self.solve_input(volume), &stiffness, s.velocities, &mut sums);
-            error = divergence_rate(&self.solve_input(volume), s.velocities, dt, &mut stiffness);
-            check_convergence(&limits, &mut solve, error, &mut stats);
+            divergence_apply(&self.solve_input(volume, &ghosts), &stiffness, s.velocities, &mut sums);
+            s.sync_velocities();
+            let error = divergence_rate(&self.solve_input(volume, &ghosts), s.velocities, dt, &mut stiffness);
+            check_convergence(&limits, &mut solve, s.total_error(error), &mut stats);
         }
         self.stiffness = stiffness;
         self.divergence_sum = sums;
@@ -206,13 +246,23 @@ impl<R: Real> DfsphCpu<R> {
                 p.dt
             }
             Some(adaptive) => {
-                let maxima = non_pressure_accelerations(&input, s.accelerations);
+                let mut maxima = non_pressure_accelerations(&input, s.accelerations);
+                if let Some(link) = s.link.as_deref_mut() {
+                    // The own particles' maxima (as non_pressure_accelerations takes them), then
+                    // the ranks' largest.
+                    let own = |values: &[V3<R>]| {
+                        values.iter().zip(&link.ghosts).filter(|(_, &ghost)| !ghost).map(|(v, _)| v.length().to64()).filter(|v| v.is_finite()).fold(0.0, f64::max)
+                    };
+                    let all = link.max(&[own(input.velocities), own(s.accelerations)]);
+                    maxima = (all[0], all[1]);
+                }
                 let dt = choose_dt(&adaptive, p.h, maxima, p.viscosity_at_step(s.step));
                 predict_from_accelerations(s.velocities, s.accelerations, R::of(dt), s.scratch, &mut self.pressure_sum);
                 dt
             }
         };
         std::mem::swap(s.velocities, s.scratch);
+        s.sync_velocities();
         self.dt = dt;
         dt
     }
@@ -223,29 +273,32 @@ impl<R: Real> DfsphCpu<R> {
         let volume = R::of(p.fluid_mass / p.rest_density);
         let (dt, inv_dt) = (R::of(dt), R::one() / R::of(dt));
         let rest_density = R::of(p.rest_density);
-        let n = s.velocities.len();
+        let n = s.particles;
         let limits = SolveLimits {
             min_iterations: self.settings.min_iterations,
             max_iterations: self.settings.max_iterations,
             threshold: error_threshold(self.settings.density_error, n),
             particles: n,
         };
+        let ghosts = s.ghosts().to_vec();
         let mut stats = self.stats.pressure;
         let mut stiffness = std::mem::take(&mut self.stiffness);
         let mut sums = std::mem::take(&mut self.pressure_sum);
         let warm = self.settings.warm_start;
         if warm {
             let last = WarmStart { ids: s.ids, last: &self.warm_pressure, share: R::of(WARM_START_SHARE) };
-            pressure_warm_start(&self.solve_input(volume), s.velocities, s.densities, rest_density, dt, &last, &mut stiffness);
-            pressure_apply(&self.solve_input(volume), &stiffness, inv_dt, s.velocities, &mut sums);
+            pressure_warm_start(&self.solve_input(volume, &ghosts), s.velocities, s.densities, rest_density, dt, &last, &mut stiffness);
+            pressure_apply(&self.solve_input(volume, &ghosts), &stiffness, inv_dt, s.velocities, &mut sums);
+            s.sync_velocities();
         }
         let mut solve = begin_solve(warm);
-        let mut error = predict_density(&self.solve_input(volume), s.velocities, s.densities, rest_density, dt, &mut stiffness);
-        check_convergence(&limits, &mut solve, error, &mut stats);
+        let error = predict_density(&self.solve_input(volume, &ghosts), s.velocities, s.densities, rest_density, dt, &mut stiffness);
+        check_convergence(&limits, &mut solve, s.total_error(error), &mut stats);
         while solve.solving {
-            pressure_apply(&self.solve_input(volume), &stiffness, inv_dt, s.velocities, &mut sums);
-            error = predict_density(&self.solve_input(volume), s.velocities, s.densities, rest_density, dt, &mut stiffness);
-            check_convergence(&limits, &mut solve, error, &mut stats);
+            pressure_apply(&self.solve_input(volume, &ghosts), &stiffness, inv_dt, s.velocities, &mut sums);
+            s.sync_velocities();
+            let error = predict_density(&self.solve_input(volume, &ghosts), s.velocities, s.densities, rest_density, dt, &mut stiffness);
+            check_convergence(&limits, &mut solve, s.total_error(error), &mut stats);
         }
         self.stiffness = stiffness;
         self.pressure_sum = sums;
@@ -272,7 +325,8 @@ impl<R: Real> DfsphCpu<R> {
     pub fn finish(&mut self, s: &mut StepParts<'_, R>, dt: f64) -> (StepHealth, f64) {
         let p = s.params;
         let domain = (V3::from64(p.domain_min), V3::from64(p.domain_max));
-        let found = integrate(s.positions, s.velocities, R::of(dt), s.backstops, domain);
+        let ghosts: &[bool] = s.link.as_ref().map_or(&[], |l| &l.ghosts[..]);
+        let found = integrate(s.positions, s.velocities, R::of(dt), s.backstops, domain, ghosts);
         keep_warm_start(s.ids, &self.pressure_sum, &self.divergence_sum, &mut self.warm_pressure, &mut self.warm_divergence);
         step_accelerations(s.scratch, s.velocities, R::of(dt), s.accelerations);
         self.last_dt = dt;

@@ -3,7 +3,7 @@
 //! wgsl/sim/dfsph_divergence.wgsl (`divergence_warm_start`, `divergence_rate`,
 //! `divergence_apply`).
 
-use super::dfsph_shared::{apply_stiffness, density_rates, error_units, error_units_lanes, Rates, SolveInput, WarmStart, CHUNK};
+use super::dfsph_shared::{apply_stiffness, density_rates, error_units, Rates, SolveInput, WarmStart, CHUNK};
 use crate::model::lanes::Pack;
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
@@ -37,14 +37,16 @@ pub fn divergence_rate<R: Real>(input: &SolveInput<R>, velocities: &[V3<R>], dt:
                 Rates::One(local, d) => {
                     let d = if d > R::zero() { d } else { R::zero() };
                     k[local] = d * factors[local];
-                    units += error_units(d * dt);
+                    if input.counts(c * CHUNK + local) {
+                        units += error_units(d * dt);
+                    }
                 }
                 Rates::Eight(lanes, d) => {
                     let zero = Pack::zero();
                     let d = Pack::select(zero.lt(d), d, zero);
                     let local = lanes.locals(c * CHUNK);
                     lanes.store(d * Pack::gather(factors, &local), k);
-                    units += error_units_lanes(d * Pack::splat(dt), lanes.count);
+                    units += input.lane_error_units(d * Pack::splat(dt), lanes);
                 }
             });
             units

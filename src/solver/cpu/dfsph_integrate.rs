@@ -8,12 +8,21 @@ use crate::model::real::{Real, V3};
 use rayon::prelude::*;
 
 /// Every particle advanced in place with its velocity (planes and solid boxes may change both); returns what
-/// went wrong.
-pub fn integrate<R: Real>(positions: &mut [V3<R>], velocities: &mut [V3<R>], dt: R, backstops: &Backstops<R>, domain: (V3<R>, V3<R>)) -> StepHealth {
+/// went wrong, across ranks with the slots `ghosts` marks left out (their owners count them;
+/// empty alone).
+pub fn integrate<R: Real>(positions: &mut [V3<R>], velocities: &mut [V3<R>], dt: R, backstops: &Backstops<R>, domain: (V3<R>, V3<R>), ghosts: &[bool]) -> StepHealth {
     positions
         .par_iter_mut()
         .zip(velocities.par_iter_mut())
-        .map(|(x, v)| advance_particle(x, v, V3::zero(), dt, backstops, domain))
+        .enumerate()
+        .map(|(i, (x, v))| {
+            let found = advance_particle(x, v, V3::zero(), dt, backstops, domain);
+            if ghosts.get(i).copied().unwrap_or(false) {
+                StepHealth::default()
+            } else {
+                found
+            }
+        })
         .reduce(StepHealth::default, StepHealth::add)
 }
 

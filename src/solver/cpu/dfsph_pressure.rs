@@ -3,7 +3,7 @@
 //! Twin of wgsl/sim/dfsph_pressure.wgsl (`pressure_warm_start`, `predict_density`,
 //! `pressure_apply`).
 
-use super::dfsph_shared::{apply_stiffness, density_rates, error_units, error_units_lanes, Rates, SolveInput, WarmStart, CHUNK};
+use super::dfsph_shared::{apply_stiffness, density_rates, error_units, Rates, SolveInput, WarmStart, CHUNK};
 use crate::model::lanes::Pack;
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
@@ -38,7 +38,9 @@ pub fn predict_density<R: Real>(input: &SolveInput<R>, velocities: &[V3<R>], den
                     let predicted = densities[local] / rest_density + dt * d;
                     let error = if predicted > R::one() { predicted } else { R::one() } - R::one();
                     k[local] = error * factors[local];
-                    units += error_units(error);
+                    if input.counts(c * CHUNK + local) {
+                        units += error_units(error);
+                    }
                 }
                 Rates::Eight(lanes, d) => {
                     let one = Pack::splat(R::one());
@@ -46,7 +48,7 @@ pub fn predict_density<R: Real>(input: &SolveInput<R>, velocities: &[V3<R>], den
                     let predicted = Pack::gather(densities, &local) / Pack::splat(rest_density) + Pack::splat(dt) * d;
                     let error = Pack::select(one.lt(predicted), predicted, one) - one;
                     lanes.store(error * Pack::gather(factors, &local), k);
-                    units += error_units_lanes(error, lanes.count);
+                    units += input.lane_error_units(error, lanes);
                 }
             });
             units

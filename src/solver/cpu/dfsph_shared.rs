@@ -162,6 +162,26 @@ pub struct SolveInput<'a, R> {
     pub volume: R,
     pub factors: &'a [R],
     pub wall_gradients: &'a [V3<R>],
+    /// Across ranks, which slots hold ghosts, whose errors their owner counts (empty alone).
+    pub ghosts: &'a [bool],
+}
+
+impl<R: Real> SolveInput<'_, R> {
+    /// Whether the error of the particle in `slot` counts towards this rank's sum.
+    #[inline(always)]
+    pub fn counts(&self, slot: usize) -> bool {
+        self.ghosts.is_empty() || !self.ghosts[slot]
+    }
+
+    /// [`error_units_lanes`] of a batch's lanes whose errors count.
+    #[inline(always)]
+    pub fn lane_error_units(&self, error: Pack<R>, lanes: &BatchLanes) -> u64 {
+        if self.ghosts.is_empty() {
+            return error_units_lanes(error, lanes.count);
+        }
+        let errors = error.to_array();
+        (0..lanes.count).filter(|&k| !self.ghosts[lanes.slots[k] as usize]).map(|k| error_units(errors[k])).sum()
+    }
 }
 
 /// D_i = V sum_j (v_i - v_j) . grad W_ij + v_i . g_i^w: the rate of change of rho_i / rho0

@@ -41,12 +41,102 @@ pub struct RankPart {
     pub(super) failure: Option<String>,
     /// The state gathered from every rank, until the next step changes it.
     pub(super) gathered: Option<BackendState>,
+    /// DFSPH: the ghosts of this step's solves ([`GhostLink`]), made after the binning.
+    pub(super) link: Option<GhostLink>,
+}
+
+/// DFSPH across ranks, the ghosts' part in a step's solves (docs/scale-out.md). A Jacobi step
+/// changes every velocity from its neighbours' stiffnesses, and the outer layer of ghosts lacks
+/// the neighbours beyond it: its new velocities are wrong, and one step later so would be the
+/// inner layer's stiffnesses, which the own particles next to the face read. So after every
+/// velocity change of the solves (and the prediction) the ghosts take their owners' velocities,
+/// one message per neighbour; the solves' error sums and the adaptive step's maxima are the
+/// ranks' together, so every rank runs the same iterations with the same dt.
+#[derive(Clone)]
+pub struct GhostLink {
+    comm: Arc<dyn Communicator>,
+    /// Own slots whose particles are ghosts of the lower and of the upper neighbour, in cell
+    /// order.
+    send: [Vec<usize>; 2],
+    /// Ghost slots owned by the lower and by the upper neighbour, in cell order (their owner's
+    /// order: both sides bin the same particles from the same order).
+    receive: [Vec<usize>; 2],
+    /// Which slots hold ghosts.
+    pub ghosts: Vec<bool>,
+    /// Why a message failed, for the rank's failure.
+    pub failure: Option<String>,
+    /// Seconds spent in the messages (the exchange's share of the step).
+    pub seconds: f64,
+}
+
+impl GhostLink {
+    /// The ghosts' velocities (or any per-particle vector) replaced by their owners'.
+    pub fn sync<R: Real>(&mut self, values: &mut [V3<R>]) {
+        let t0 = Instant::now();
+        let encode = |slots: &[usize]| slots.iter().flat_map(|&i| values[i].to64()).collect::<Vec<f64>>();
+        let (down, up) = (encode(&self.send[0]), encode(&self.send[1]));
+        match self.comm.exchange(&down, &up) {
+            Ok((lower, upper)) => {
+                for (slots, words) in self.receive.iter().zip([lower, upper]) {
+                    if words.len() != 3 * slots.len() {
+                        self.failure.get_or_insert(format!("a neighbour sent {} values for {} ghosts in a DFSPH solve", words.len() / 3, slots.len()));
+                        continue;
+                    }
+                    for (&i, w) in slots.iter().zip(words.chunks_exact(3)) {
+                        values[i] = V3::from64([w[0], w[1], w[2]]);
+                    }
+                }
+            }
+            Err(e) => {
+                self.failure.get_or_insert(format!("{e:#}"));
+            }
+        }
+        self.seconds += t0.elapsed().as_secs_f64();
+    }
+
+    /// The ranks' sum of an error sum in fixed-point units, exact: the high and low 32 bits
+    /// travel apart, and their sums stay far below 2^53. A failed message gives the largest
+    /// sum (the solve then runs to its limit, and the failure stops the run).
+    pub fn sum_units(&mut self, units: u64) -> u64 {
+        let t0 = Instant::now();
+        let summed = all_sum(&*self.comm, &[(units >> 32) as f64, (units & 0xffff_ffff) as f64]);
+        self.seconds += t0.elapsed().as_secs_f64();
+        match summed {
+            Ok(v) => ((v[0] as u64) << 32).saturating_add(v[1] as u64),
+            Err(e) => {
+                self.failure.get_or_insert(format!("{e:#}"));
+                u64::MAX
+            }
+        }
+    }
+
+    /// The ranks' largest of each value (NaN where a message failed).
+    pub fn max(&mut self, values: &[f64]) -> Vec<f64> {
+        let t0 = Instant::now();
+        let out = all_max(&*self.comm, values).unwrap_or_else(|e| {
+            self.failure.get_or_insert(format!("{e:#}"));
+            vec![f64::NAN; values.len()]
+        });
+        self.seconds += t0.elapsed().as_secs_f64();
+        out
+    }
+}
+
+/// What a particle carries through the exchange besides its position, velocity, id and place.
+#[derive(Clone, Copy)]
+struct Carried {
+    /// The carried density (continuity density).
+    density: bool,
+    /// DFSPH's warm-start stiffnesses (constant-density and divergence solves), kept by the
+    /// particle's owner.
+    warm: bool,
 }
 
 /// Words per particle in a message: position, velocity, id, place in the one-process order (two
-/// words of 32 bits), and with continuity density the carried density.
-fn words(continuity: bool) -> usize {
-    9 + continuity as usize
+/// words of 32 bits), with continuity density the carried density, with DFSPH the two
+/// warm-start stiffnesses.
+fn words(carried: Carried) -> usize {
+    9 + carried.density as usize + 2 * carried.warm as usize
 }
 
 /// Particles on their way through the exchange, as a structure of arrays.
@@ -56,6 +146,8 @@ struct Held<R: Real> {
     v: Vec<V3<R>>,
     id: Vec<u32>,
     rho: Vec<R>,
+    /// DFSPH: the warm-start stiffnesses (constant density, divergence).
+    warm: Vec<[R; 2]>,
     order: Vec<u64>,
 }
 
@@ -70,32 +162,41 @@ impl<R: Real> Held<R> {
         if !o.rho.is_empty() {
             self.rho.push(o.rho[i]);
         }
+        if !o.warm.is_empty() {
+            self.warm.push(o.warm[i]);
+        }
         self.order.push(o.order[i]);
     }
-    fn encode(&self, which: &[usize], continuity: bool) -> Vec<f64> {
-        let mut out = Vec::with_capacity(which.len() * words(continuity));
+    fn encode(&self, which: &[usize], carried: Carried) -> Vec<f64> {
+        let mut out = Vec::with_capacity(which.len() * words(carried));
         for &i in which {
             out.extend_from_slice(&self.x[i].to64());
             out.extend_from_slice(&self.v[i].to64());
             out.push(self.id[i] as f64);
             out.push((self.order[i] >> 32) as f64);
             out.push((self.order[i] & 0xffff_ffff) as f64);
-            if continuity {
+            if carried.density {
                 out.push(self.rho[i].to64());
+            }
+            if carried.warm {
+                out.extend(self.warm[i].map(|k| k.to64()));
             }
         }
         out
     }
-    fn decode(&mut self, words_in: &[f64], continuity: bool) -> anyhow::Result<()> {
-        let w = words(continuity);
+    fn decode(&mut self, words_in: &[f64], carried: Carried) -> anyhow::Result<()> {
+        let w = words(carried);
         anyhow::ensure!(words_in.len() % w == 0, "a neighbour sent {} words, not a whole number of particles of {w} words", words_in.len());
         for p in words_in.chunks_exact(w) {
             self.x.push(V3::from64([p[0], p[1], p[2]]));
             self.v.push(V3::from64([p[3], p[4], p[5]]));
             self.id.push(p[6] as u32);
             self.order.push(((p[7] as u64) << 32) | p[8] as u64);
-            if continuity {
+            if carried.density {
                 self.rho.push(R::of(p[9]));
+            }
+            if carried.warm {
+                self.warm.push([R::of(p[w - 2]), R::of(p[w - 1])]);
             }
         }
         Ok(())
@@ -234,6 +335,62 @@ impl<R: Real> CpuSolver<R> {
         self.record_step(dt, found, max_density);
     }
 
+    /// DFSPH across ranks, after the binning: this step's [`GhostLink`] (which slots to send
+    /// to each neighbour and which to receive), checked once by the particles' ids.
+    pub(super) fn link_ghosts(&mut self) {
+        let Some(part) = self.ranks.as_deref() else { return };
+        let (rank, size) = (part.comm.rank(), part.comm.size());
+        let mine = part.slabs.layers_of(rank);
+        let n = self.positions.len();
+        let mut ghosts = vec![true; n];
+        for own in self.own_slots() {
+            ghosts[own].fill(false);
+        }
+        let layer = |i: usize| self.grid.cell_coords(self.positions[i])[part.axis];
+        let (mut send, mut receive): ([Vec<usize>; 2], [Vec<usize>; 2]) = Default::default();
+        for i in 0..n {
+            let l = layer(i);
+            if ghosts[i] {
+                receive[(l >= mine.end) as usize].push(i);
+            } else {
+                if rank > 0 && l < mine.start + HALO_LAYERS {
+                    send[0].push(i);
+                }
+                if rank + 1 < size && l + HALO_LAYERS >= mine.end {
+                    send[1].push(i);
+                }
+            }
+        }
+        let mut link = GhostLink { comm: part.comm.clone(), send, receive, ghosts, failure: None, seconds: 0.0 };
+        let t0 = Instant::now();
+        let ids = |slots: &[usize]| slots.iter().map(|&i| self.ids[i] as f64).collect::<Vec<f64>>();
+        let checked = link.comm.exchange(&ids(&link.send[0]), &ids(&link.send[1])).map_err(|e| format!("{e:#}")).and_then(|(lower, upper)| {
+            let expected = [ids(&link.receive[0]), ids(&link.receive[1])];
+            if lower == expected[0] && upper == expected[1] {
+                Ok(())
+            } else {
+                Err(format!("rank {rank} of {size}: its ghosts in cell order are not its neighbours' particles in theirs ({} and {} received, {} and {} held)", lower.len(), upper.len(), expected[0].len(), expected[1].len()))
+            }
+        });
+        link.seconds += t0.elapsed().as_secs_f64();
+        let part = self.ranks.as_deref_mut().expect("across ranks");
+        if let Err(e) = checked {
+            part.failure.get_or_insert(e);
+        }
+        part.link = Some(link);
+    }
+
+    /// After a DFSPH step across ranks: what its link measured and met goes to the rank's.
+    pub(super) fn unlink_ghosts(&mut self) {
+        let Some(part) = self.ranks.as_deref_mut() else { return };
+        if let Some(link) = part.link.take() {
+            part.stats.exchange_seconds += link.seconds;
+            if let Some(e) = link.failure {
+                part.failure.get_or_insert(format!("rank {} of {}: {e}", part.comm.rank(), part.comm.size()));
+            }
+        }
+    }
+
     /// Which held particles are ghosts: those outside this rank's slab (the exchange's own
     /// test, on the same positions).
     fn ghost_flags(&self) -> Vec<bool> {
@@ -266,6 +423,12 @@ impl<R: Real> CpuSolver<R> {
         };
         let mut solver = Self::new(params, &part);
         solver.ids = chosen.iter().map(|&i| i as u32).collect();
+        if let Some(d) = &mut solver.dfsph {
+            // Kept by id: room for every particle of the simulation.
+            let total = initial.fluid_positions.len();
+            d.warm_pressure = vec![R::zero(); total];
+            d.warm_divergence = vec![R::zero(); total];
+        }
         let counts_per_rank: Vec<u64> = (0..comm.size()).map(|r| slabs.layers_of(r).map(|l| counts[l as usize]).sum()).collect();
         let start_imbalance = imbalance(&counts_per_rank);
         solver.ranks = Some(Box::new(RankPart {
@@ -278,6 +441,7 @@ impl<R: Real> CpuSolver<R> {
             stats: RankStats { last_imbalance: start_imbalance, max_imbalance: start_imbalance, ..RankStats::default() },
             failure: None,
             gathered: None,
+            link: None,
         }));
         Ok(solver)
     }
@@ -370,14 +534,17 @@ impl<R: Real> CpuSolver<R> {
             held.v.extend_from_slice(&self.velocities[slots.clone()]);
             held.id.extend_from_slice(&self.ids[slots.clone()]);
             if !self.carried_densities.is_empty() {
-                held.rho.extend_from_slice(&self.carried_densities[slots]);
+                held.rho.extend_from_slice(&self.carried_densities[slots.clone()]);
+            }
+            if let Some(d) = &self.dfsph {
+                held.warm.extend(self.ids[slots].iter().map(|&id| [d.warm_pressure[id as usize], d.warm_divergence[id as usize]]));
             }
         }
         held
     }
 
     fn exchange_across_ranks(&mut self, balance: bool) -> anyhow::Result<()> {
-        let continuity = self.params.continuity_density;
+        let carried = Carried { density: self.params.continuity_density, warm: self.dfsph.is_some() };
         let mut held = self.own_particles();
         let grid = self.grid;
         let step = self.step;
@@ -420,13 +587,13 @@ impl<R: Real> CpuSolver<R> {
             }
             anyhow::ensure!(round < comm.size(), "particles still lie outside their rank's slab after {round} rounds of migration");
             part.stats.migrated += moving as u64;
-            let (from_lower, from_upper) = comm.exchange(&held.encode(&down, continuity), &held.encode(&up, continuity))?;
+            let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
             let mut next = Held::default();
             for &i in &stay {
                 next.push_from(&held, i);
             }
-            next.decode(&from_lower, continuity)?;
-            next.decode(&from_upper, continuity)?;
+            next.decode(&from_lower, carried)?;
+            next.decode(&from_upper, carried)?;
             held = next;
         }
         let held = held.sorted();
@@ -442,11 +609,11 @@ impl<R: Real> CpuSolver<R> {
                 up.push(i);
             }
         }
-        let (from_lower, from_upper) = comm.exchange(&held.encode(&down, continuity), &held.encode(&up, continuity))?;
+        let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
         let own_count = held.len();
         let mut all = held;
-        all.decode(&from_lower, continuity)?;
-        all.decode(&from_upper, continuity)?;
+        all.decode(&from_lower, carried)?;
+        all.decode(&from_upper, carried)?;
         part.stats.ghosts = all.len() - own_count;
         let all = all.sorted();
         let n = all.len();
@@ -454,6 +621,15 @@ impl<R: Real> CpuSolver<R> {
         self.velocities = all.v;
         self.ids = all.id;
         self.carried_densities = all.rho;
+        if let Some(d) = &mut self.dfsph {
+            // Each held particle's warm start is its owner's (by id; the entries of particles
+            // this rank does not hold are not read).
+            for (&id, w) in self.ids.iter().zip(&all.warm) {
+                d.warm_pressure[id as usize] = w[0];
+                d.warm_divergence[id as usize] = w[1];
+            }
+            d.resize(n);
+        }
         for v in [&mut self.densities, &mut self.pressures] {
             v.resize(n, R::zero());
         }
@@ -505,8 +681,15 @@ impl<R: Real> CpuSolver<R> {
             self.fields_on_device();
         } else {
             self.bin();
-            self.compute_density();
-            self.compute_wall_pressure();
+            match self.dfsph_parts() {
+                // Density, and the pressure of the last constant-density solve (each particle's
+                // warm start is its owner's).
+                Some((dfsph, mut parts)) => dfsph.factors_stage(&mut parts),
+                None => {
+                    self.compute_density();
+                    self.compute_wall_pressure();
+                }
+            }
         }
         if let Some(e) = self.rank_failure() {
             anyhow::bail!("{e}");
@@ -592,12 +775,17 @@ impl<R: Real> CpuSolver<R> {
     /// (the other ranks' holds the step, time and health, and no particle).
     pub(super) fn save_state_across_ranks(&mut self) -> anyhow::Result<BackendState> {
         let continuity = !self.carried_densities.is_empty();
-        let w = 7 + continuity as usize;
+        let warm = self.dfsph.is_some();
+        let w = 7 + continuity as usize + 2 * warm as usize;
         let rows = self.gather_own(w, |s, i| {
             let (x, v) = (s.positions[i].to64(), s.velocities[i].to64());
             let mut r = vec![x[0], x[1], x[2], v[0], v[1], v[2], s.ids[i] as f64];
             if continuity {
                 r.push(s.carried_densities[i].to64());
+            }
+            if let Some(d) = &s.dfsph {
+                let id = s.ids[i] as usize;
+                r.extend([d.warm_pressure[id].to64(), d.warm_divergence[id].to64()]);
             }
             r
         })?;
@@ -612,6 +800,13 @@ impl<R: Real> CpuSolver<R> {
         state.velocities = rows.chunks_exact(w).map(|r| [r[3], r[4], r[5]]).collect();
         state.ids = rows.chunks_exact(w).map(|r| r[6] as u32).collect();
         state.densities = if continuity { rows.chunks_exact(w).map(|r| r[7]).collect() } else { Vec::new() };
+        if warm {
+            // By id, as one process saves them (rank 0 holds every particle's; the others none).
+            state.warm_start = vec![[0.0; 2]; state.ids.len()];
+            for r in rows.chunks_exact(w) {
+                state.warm_start[r[6] as usize] = [r[w - 2], r[w - 1]];
+            }
+        }
         Ok(state)
     }
 
@@ -662,6 +857,16 @@ impl<R: Real> CpuSolver<R> {
         self.time = state.time;
         let [min, max, last] = state.dt_min_max_last;
         self.dt_stats = crate::model::state::DtStats { min, max, last, ..Default::default() };
+        if let Some(d) = &mut self.dfsph {
+            // By id, every particle's: each rank reads those it will hold.
+            let total = state.positions.len();
+            anyhow::ensure!(state.warm_start.len() == total, "the state holds {} warm-start stiffnesses for DFSPH; the scene has {total} particles", state.warm_start.len());
+            d.warm_pressure = state.warm_start.iter().map(|w| R::of(w[0])).collect();
+            d.warm_divergence = state.warm_start.iter().map(|w| R::of(w[1])).collect();
+            d.stats = state.iterations;
+            d.last_dt = if state.step > 0 { last } else { 0.0 };
+            d.resize(n);
+        }
         let part = self.ranks.as_mut().expect("only across ranks");
         part.slabs = slabs;
         part.first_order = Some(chosen.iter().map(|&i| i as u64).collect());

@@ -404,6 +404,10 @@ impl<R: Real> CpuSolver<R> {
     /// The parts of the solver a DFSPH stage reads and writes, and DFSPH's own arrays.
     fn dfsph_parts(&mut self) -> Option<(&mut DfsphCpu<R>, StepParts<'_, R>)> {
         let dfsph = self.dfsph.as_mut()?;
+        let (particles, link) = match self.ranks.as_deref_mut() {
+            Some(part) => (part.total_fluid, part.link.as_mut()),
+            None => (self.positions.len(), None),
+        };
         let parts = StepParts {
             params: &self.params,
             kernel: &self.kernel,
@@ -422,6 +426,8 @@ impl<R: Real> CpuSolver<R> {
             wall_masses: &self.wall_masses,
             step: self.step,
             lanes: self.lanes,
+            particles,
+            link,
         };
         Some((dfsph, parts))
     }
@@ -456,7 +462,7 @@ impl<R: Real> CpuSolver<R> {
         use crate::solver::backend::DfsphStage;
         let (d, mut s) = self.dfsph_parts()?;
         let volume = R::of(s.params.fluid_mass / s.params.rest_density);
-        let input = dfsph_shared::SolveInput { pairs: &d.pairs, volume, factors: &d.factors, wall_gradients: &d.wall_gradients };
+        let input = dfsph_shared::SolveInput { pairs: &d.pairs, volume, factors: &d.factors, wall_gradients: &d.wall_gradients, ghosts: &[] };
         // The step's dt, as the prediction chose it.
         let dt = if d.dt > 0.0 { d.dt } else { s.params.dt };
         let share = R::of(dfsph_shared::WARM_START_SHARE);
@@ -515,6 +521,8 @@ impl<R: Real> CpuSolver<R> {
             // and front probes the step's first positions after the solves, whose wall push the
             // forces are (`sample_dfsph_forces`).
             let due = !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
+            // Across ranks, the ghosts' part in the solves (docs/scale-out.md).
+            self.link_ghosts();
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
             dfsph.factors_stage(&mut parts);
             let points = due.then(|| {
@@ -529,7 +537,9 @@ impl<R: Real> CpuSolver<R> {
             }
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
             let (found, dt) = dfsph.finish(&mut parts, dt);
+            self.unlink_ghosts();
             let max_density = self.largest_density();
+            let (found, max_density) = self.all_step_health(found, max_density);
             self.health.max_density = self.health.max_density.max(max_density);
             self.record_step(dt, found, max_density);
             return;
