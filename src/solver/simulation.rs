@@ -227,9 +227,6 @@ fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choi
     if params.dfsph.is_some() && choice.device == Device::Gpu {
         return refuse("physics.solver", format!("is dfsph, which runs across ranks ({size}) on the CPU path only: its solves exchange the ghosts' velocities after every iteration, which the GPU path would read back each time; use --backend cpu, or run it on one GPU"));
     }
-    if params.dfsph.is_some() && !params.probes.probes.is_empty() {
-        return refuse("probe", format!("is set with physics.solver = \"dfsph\", which does not sample probes across ranks yet ({size} ranks); run it on one rank, or without probes"));
-    }
     if params.rebuild_every != 1 {
         return refuse("time.neighbour_rebuild_every", format!("is {}; across ranks ({size}) the exchange runs with every rebuild of the grid, so it must be 1", params.rebuild_every));
     }

@@ -29,7 +29,7 @@ use cell_batches::NeighbourLists;
 use crate::model::initial::InitialState;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
-use crate::model::probes::ProbeSample;
+use crate::model::probes::{ProbeGeometry, ProbeSample};
 use crate::model::real::{Real, V3};
 use crate::model::scene::BoundaryPressure;
 use crate::model::state::{BackendState, DfsphFields, DtStats, Health, Snapshot, StepFields};
@@ -525,11 +525,7 @@ impl<R: Real> CpuSolver<R> {
             self.link_ghosts();
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
             dfsph.factors_stage(&mut parts);
-            let points = due.then(|| {
-                let mut values = vec![R::zero(); self.params.probes.value_count()];
-                probes::probe_points(&self.probe_input(), &self.params.probes.probes, &self.params.probes.offsets(), &mut values);
-                values
-            });
+            let points = due.then(|| self.sample_probe_points());
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
             let dt = dfsph.solve(&mut parts);
             if let Some(values) = points {
@@ -599,7 +595,7 @@ impl<R: Real> CpuSolver<R> {
     /// probes and gauges are sampled), and the sample kept: the positions are the step's first,
     /// the forces the step's wall push ([`probes::wall_push_pressure`] through the consistent
     /// wall pressure), the viscous part from the velocities the prediction started from.
-    fn sample_dfsph_forces(&mut self, mut values: Vec<R>, dt: f64) {
+    fn sample_dfsph_forces(&mut self, values: Vec<f64>, dt: f64) {
         let d = self.dfsph.as_ref().expect("a DFSPH scene");
         let p = &self.params;
         let mut push = Vec::new();
@@ -612,11 +608,54 @@ impl<R: Real> CpuSolver<R> {
             ..self.probe_input()
         };
         let (list, offsets) = (&p.probes.probes, p.probes.offsets());
-        let mut partials = Vec::new();
-        probes::probe_particles(&input, list, None, &mut partials);
-        probes::probe_finish(list, &offsets, &partials, &mut values);
-        let values = values.iter().map(|v| v.to64()).collect();
+        let values = match &self.ranks {
+            None => {
+                let mut values: Vec<R> = values.iter().map(|&v| R::of(v)).collect();
+                let mut partials = Vec::new();
+                probes::probe_particles(&input, list, None, &mut partials);
+                probes::probe_finish(list, &offsets, &partials, &mut values);
+                values.iter().map(|v| v.to64()).collect()
+            }
+            Some(part) => {
+                // Every probe's values from the push (as one rank takes the gauges and fronts from
+                // the same positions and densities), then the points' from the factors' state.
+                let own = self.own_slots();
+                let (mut all, failure) = exchange::probes_across_ranks(&input, part, &own, list, &offsets);
+                if let (Some(e), Some(part)) = (failure, self.ranks.as_mut()) {
+                    part.failure.get_or_insert(e);
+                }
+                for (probe, &at) in list.iter().zip(&offsets) {
+                    if matches!(probe.geometry, ProbeGeometry::Point { .. }) {
+                        let columns = at..at + probe.geometry.columns().len();
+                        all[columns.clone()].copy_from_slice(&values[columns]);
+                    }
+                }
+                all
+            }
+        };
         self.push_probe_sample(values);
+    }
+
+    /// DFSPH: the point probes (and, alone, the gauges) on the state the step starts from, with
+    /// the factors' density and output pressure; across ranks every probe's values of that state
+    /// (the points' are kept, the rest sampled again after the solves).
+    fn sample_probe_points(&mut self) -> Vec<f64> {
+        let (list, offsets) = (&self.params.probes.probes, self.params.probes.offsets());
+        match &self.ranks {
+            None => {
+                let mut values = vec![R::zero(); self.params.probes.value_count()];
+                probes::probe_points(&self.probe_input(), list, &offsets, &mut values);
+                values.iter().map(|v| v.to64()).collect()
+            }
+            Some(part) => {
+                let own = self.own_slots();
+                let (values, failure) = exchange::probes_across_ranks(&self.probe_input(), part, &own, list, &offsets);
+                if let (Some(e), Some(part)) = (failure, self.ranks.as_mut()) {
+                    part.failure.get_or_insert(e);
+                }
+                values
+            }
+        }
     }
 
     /// Samples every probe on the state the step starts from and the fields of its density
