@@ -380,6 +380,21 @@ impl<R: Real> CpuSolver<R> {
         part.link = Some(link);
     }
 
+    /// Every probe's values read from `input` by the ranks together ([`probes_across_ranks`]),
+    /// and the error of a failed collective.
+    pub(super) fn probes_on_ranks(&self, input: &ProbeInput<R>) -> (Vec<f64>, Option<String>) {
+        let part = self.ranks.as_deref().expect("across ranks");
+        let p = &self.params.probes;
+        probes_across_ranks(input, part, &self.own_slots(), &p.probes, &p.offsets())
+    }
+
+    /// Keeps the first failure of this rank (across ranks; alone nothing fails this way).
+    pub(super) fn note_failure(&mut self, failure: Option<String>) {
+        if let (Some(e), Some(part)) = (failure, self.ranks.as_mut()) {
+            part.failure.get_or_insert(e);
+        }
+    }
+
     /// After a DFSPH step across ranks: what its link measured and met goes to the rank's.
     pub(super) fn unlink_ghosts(&mut self) {
         let Some(part) = self.ranks.as_deref_mut() else { return };

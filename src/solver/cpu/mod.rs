@@ -608,31 +608,28 @@ impl<R: Real> CpuSolver<R> {
             ..self.probe_input()
         };
         let (list, offsets) = (&p.probes.probes, p.probes.offsets());
-        let values = match &self.ranks {
+        let (values, failure) = match &self.ranks {
             None => {
                 let mut values: Vec<R> = values.iter().map(|&v| R::of(v)).collect();
                 let mut partials = Vec::new();
                 probes::probe_particles(&input, list, None, &mut partials);
                 probes::probe_finish(list, &offsets, &partials, &mut values);
-                values.iter().map(|v| v.to64()).collect()
+                (values.iter().map(|v| v.to64()).collect(), None)
             }
-            Some(part) => {
+            Some(_) => {
                 // Every probe's values from the push (as one rank takes the gauges and fronts from
                 // the same positions and densities), then the points' from the factors' state.
-                let own = self.own_slots();
-                let (mut all, failure) = exchange::probes_across_ranks(&input, part, &own, list, &offsets);
-                if let (Some(e), Some(part)) = (failure, self.ranks.as_mut()) {
-                    part.failure.get_or_insert(e);
-                }
+                let (mut all, failure) = self.probes_on_ranks(&input);
                 for (probe, &at) in list.iter().zip(&offsets) {
                     if matches!(probe.geometry, ProbeGeometry::Point { .. }) {
                         let columns = at..at + probe.geometry.columns().len();
                         all[columns.clone()].copy_from_slice(&values[columns]);
                     }
                 }
-                all
+                (all, failure)
             }
         };
+        self.note_failure(failure);
         self.push_probe_sample(values);
     }
 
@@ -647,12 +644,9 @@ impl<R: Real> CpuSolver<R> {
                 probes::probe_points(&self.probe_input(), list, &offsets, &mut values);
                 values.iter().map(|v| v.to64()).collect()
             }
-            Some(part) => {
-                let own = self.own_slots();
-                let (values, failure) = exchange::probes_across_ranks(&self.probe_input(), part, &own, list, &offsets);
-                if let (Some(e), Some(part)) = (failure, self.ranks.as_mut()) {
-                    part.failure.get_or_insert(e);
-                }
+            Some(_) => {
+                let (values, failure) = self.probes_on_ranks(&self.probe_input());
+                self.note_failure(failure);
                 values
             }
         }
@@ -674,12 +668,9 @@ impl<R: Real> CpuSolver<R> {
                 probes::probe_finish(list, &offsets, &partials, &mut values);
                 values.iter().map(|v| v.to64()).collect()
             }
-            Some(part) => {
-                let own = self.own_slots();
-                let (values, failure) = exchange::probes_across_ranks(&input, part, &own, list, &offsets);
-                if let (Some(e), Some(part)) = (failure, self.ranks.as_mut()) {
-                    part.failure.get_or_insert(e);
-                }
+            Some(_) => {
+                let (values, failure) = self.probes_on_ranks(&input);
+                self.note_failure(failure);
                 values
             }
         };
