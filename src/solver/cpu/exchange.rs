@@ -342,10 +342,7 @@ impl<R: Real> CpuSolver<R> {
         let (rank, size) = (part.comm.rank(), part.comm.size());
         let mine = part.slabs.layers_of(rank);
         let n = self.positions.len();
-        let mut ghosts = vec![true; n];
-        for own in self.own_slots() {
-            ghosts[own].fill(false);
-        }
+        let ghosts = self.ghost_flags();
         let layer = |i: usize| self.grid.cell_coords(self.positions[i])[part.axis];
         let (mut send, mut receive): ([Vec<usize>; 2], [Vec<usize>; 2]) = Default::default();
         for i in 0..n {
@@ -407,7 +404,7 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// Which held particles are ghosts: those outside this rank's slab (the exchange's own
-    /// test, on the same positions).
+    /// test, on the same positions; before or after the binning).
     fn ghost_flags(&self) -> Vec<bool> {
         let Some(part) = &self.ranks else { return Vec::new() };
         let mine = part.slabs.layers_of(part.comm.rank());
