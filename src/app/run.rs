@@ -166,7 +166,12 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
         let step = backend.steps_done();
         let s = (|| -> anyhow::Result<Option<Snapshot>> {
-            // Streamed where the backend can (the GPU): no host copy of every array.
+            // Across ranks in pieces, every rank writing its own; streamed where the backend
+            // can (the GPU): no host copy of every array either way.
+            if let Some(written) = writer.write_pieces(backend) {
+                (*last, *max_speed) = written.map(|(path, speed)| (Some(path), speed))?;
+                return Ok(None);
+            }
             if let Some(written) = writer.write_streamed(backend) {
                 (*last, *max_speed) = written.map(|(path, speed)| (Some(path), speed))?;
                 return Ok(None);

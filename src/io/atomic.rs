@@ -28,6 +28,7 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::
 pub struct AtomicFile {
     path: PathBuf,
     temporary: PathBuf,
+    token: u64,
     out: Option<std::io::BufWriter<File>>,
 }
 
@@ -35,18 +36,25 @@ impl AtomicFile {
     pub fn create(path: &Path) -> anyhow::Result<Self> {
         let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create directory {}", dir.display()))?;
-        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         // A new file gets the permissions any new file would (0666 less the umask).
         let mut attempt = 0;
-        let (file, temporary) = loop {
-            let temporary = dir.join(format!("{TEMP_PREFIX}{:016x}-{name}", rand::random::<u64>()));
+        let (file, temporary, token) = loop {
+            let token = rand::random::<u64>();
+            let temporary = temporary_path(path, token);
             match std::fs::OpenOptions::new().write(true).create_new(true).open(&temporary) {
-                Ok(f) => break (f, temporary),
+                Ok(f) => break (f, temporary, token),
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && attempt < 16 => attempt += 1,
                 Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
             }
         };
-        Ok(AtomicFile { path: path.to_path_buf(), temporary, out: Some(std::io::BufWriter::new(file)) })
+        Ok(AtomicFile { path: path.to_path_buf(), temporary, token, out: Some(std::io::BufWriter::new(file)) })
+    }
+
+    /// The random part of the temporary file's name: with the target's path it names the
+    /// temporary file ([`temporary_path`]), which other processes writing pieces of the same
+    /// file open (`io::snapshot::pieces`).
+    pub fn token(&self) -> u64 {
+        self.token
     }
 
     /// The file this one replaces once committed.
@@ -101,6 +109,13 @@ impl std::io::Seek for AtomicFile {
     fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
         self.writer().seek(pos)
     }
+}
+
+/// The temporary file of the [`AtomicFile`] for `path` whose [`AtomicFile::token`] is `token`.
+pub fn temporary_path(path: &Path, token: u64) -> PathBuf {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    dir.join(format!("{TEMP_PREFIX}{token:016x}-{name}"))
 }
 
 /// Whether `name` is that of a temporary file of the atomic writer.

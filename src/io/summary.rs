@@ -102,6 +102,9 @@ pub struct RankSummary {
     /// Fluid particles it owns at the end (ghosts left out), and the ghosts it holds.
     pub particles: usize,
     pub ghosts: usize,
+    /// Wall particles it holds (those near its slab).
+    #[serde(default)]
+    pub walls: usize,
     /// Particles it sent to a neighbour over the run.
     pub migrated: u64,
     /// Seconds in the exchange and the collectives, and their share of the run's wall time.
@@ -136,6 +139,7 @@ impl RanksSummary {
                     rank: r.rank,
                     particles: r.own_particles,
                     ghosts: r.stats.ghosts,
+                    walls: r.walls,
                     migrated: r.stats.migrated,
                     exchange_seconds: r.stats.exchange_seconds,
                     exchange_share: if wall_seconds > 0.0 { r.stats.exchange_seconds / wall_seconds } else { 0.0 },

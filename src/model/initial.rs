@@ -17,6 +17,17 @@ pub struct SolidRegion {
     pub max: [f64; 3],
 }
 
+/// One fluid particle at t = 0, as [`Scene::visit_fluid`] hands it over.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FluidParticle {
+    /// Its original index.
+    pub id: u64,
+    pub position: [f64; 3],
+    pub velocity: [f64; 3],
+    /// Its density at t = 0, where the continuity equation carries density.
+    pub density: Option<f64>,
+}
+
 /// Particles of a scene at t = 0.
 #[derive(Clone, Debug, Default)]
 pub struct InitialState {
@@ -32,6 +43,14 @@ pub struct InitialState {
 }
 
 impl InitialState {
+    /// Keeps the wall particles whose position `keep` accepts, in their order.
+    pub fn retain_walls(&mut self, keep: impl Fn([f64; 3]) -> bool) {
+        let kept: Vec<usize> = (0..self.wall_positions.len()).filter(|&i| keep(self.wall_positions[i])).collect();
+        self.wall_positions = kept.iter().map(|&i| self.wall_positions[i]).collect();
+        self.wall_masses = kept.iter().map(|&i| self.wall_masses[i]).collect();
+        self.wall_boundaries = kept.iter().map(|&i| self.wall_boundaries[i]).collect();
+    }
+
     /// Fluid particle `i`'s density at t = 0 (rest density where none was set).
     pub fn fluid_density(&self, i: usize, rest_density: f64) -> f64 {
         self.fluid_densities.get(i).copied().unwrap_or(rest_density)
@@ -121,11 +140,26 @@ impl Scene {
 
     /// The particles at t = 0: fluid on jittered lattices, walls on regular lattices.
     pub fn initial_state(&self) -> InitialState {
+        let mut st = self.initial_walls();
+        self.visit_fluid(|p| {
+            st.fluid_positions.push(p.position);
+            st.fluid_velocities.push(p.velocity);
+            if let Some(d) = p.density {
+                st.fluid_densities.push(d);
+            }
+        });
+        st
+    }
+
+    /// Every fluid particle at t = 0 in original order (the order of
+    /// [`Scene::initial_state`]), one at a time, none kept: one rank of a simulation across
+    /// several keeps those of its slab and never holds all of them.
+    pub fn visit_fluid(&self, mut visit: impl FnMut(FluidParticle)) {
         let s = self.physics.particle_spacing;
         let mut rng = rand_pcg::Pcg64::seed_from_u64(self.seed);
-        let mut st = InitialState::default();
         let continuity = self.physics.density == DensityMethod::Continuity;
         let params = self.params();
+        let mut id = 0u64;
         for (i, b) in self.fluid.iter().enumerate() {
             let j = b.jitter * s;
             for q in points(self.fluid_lattice(i)) {
@@ -135,13 +169,27 @@ impl Scene {
                         *c += rng.random_range(-j..=j);
                     }
                 }
-                st.fluid_positions.push(q);
-                st.fluid_velocities.push(b.velocity);
-                if continuity {
-                    st.fluid_densities.push(self.initial_density(&params, q, b.min, b.max));
-                }
+                let density = continuity.then(|| self.initial_density(&params, q, b.min, b.max));
+                visit(FluidParticle { id, position: q, velocity: b.velocity, density });
+                id += 1;
             }
         }
+    }
+
+    /// The wall particles at t = 0 (an [`InitialState`] without fluid).
+    pub fn initial_walls(&self) -> InitialState {
+        self.initial_walls_where(|_| true)
+    }
+
+    /// The wall particles at t = 0 that `keep` accepts, in the order of
+    /// [`Scene::initial_walls`], the others never held. With Akinci's volumes a wall particle's
+    /// mass follows from its wall neighbours within h, so `keep` must accept the walls within
+    /// h of those the caller uses: a margin of one cell, dropped afterwards
+    /// ([`InitialState::retain_walls`]).
+    pub fn initial_walls_where(&self, keep: impl Fn([f64; 3]) -> bool) -> InitialState {
+        let s = self.physics.particle_spacing;
+        let params = self.params();
+        let mut st = InitialState::default();
         for (index, b) in self.boundary.iter().enumerate() {
             let (min, max, walls, open_top, hollow_box) = match b {
                 Boundary::Container { min, max, walls, open_top } => (min, max, walls, *open_top, false),
@@ -162,7 +210,7 @@ impl Scene {
                 let hi: [f64; 3] = std::array::from_fn(|a| max[a] - layers as f64 * axes[a].spacing);
                 let mass = mass_of(axes.map(|x| x.spacing));
                 for q in points(axes) {
-                    if !inner(&q, lo, hi) {
+                    if !inner(&q, lo, hi) && keep(q) {
                         st.wall_positions.push(q);
                         st.wall_masses.push(mass);
                         st.wall_boundaries.push(index as u32);
@@ -194,7 +242,7 @@ impl Scene {
                     for &(y, cy) in &axes[1] {
                         for &(x, cx) in &axes[0] {
                             let q = [x, y, z];
-                            if !inner(&q, *min, cavity_hi) {
+                            if !inner(&q, *min, cavity_hi) && keep(q) {
                                 st.wall_positions.push(q);
                                 st.wall_masses.push(mass_of([cx, cy, cz]));
                                 st.wall_boundaries.push(index as u32);

@@ -12,6 +12,29 @@ use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
 /// density, pressure, in f32 (what the GPU holds).
 pub type SnapshotRow = [f32; 8];
 
+/// Across ranks, one rank's part of a snapshot that every rank writes into the same files
+/// (`io::snapshot::pieces`): the particles of a block of consecutive original ids
+/// ([`id_block`]), in original order, and the ranks that write together. No rank holds every
+/// particle.
+pub struct SnapshotPiece {
+    pub step: u64,
+    pub time: f64,
+    /// Fluid particles of the whole simulation.
+    pub total: u64,
+    /// The original id of the first row.
+    pub first: u64,
+    /// `x y z vx vy vz density pressure` of particles `first..first + rows.len()`.
+    pub rows: Vec<[f64; 8]>,
+    pub comm: std::sync::Arc<dyn super::communicator::Communicator>,
+}
+
+/// The original ids whose snapshot rows rank `rank` of `ranks` writes: `total` cut into
+/// blocks of consecutive ids whose sizes differ by at most one.
+pub fn id_block(total: u64, ranks: usize, rank: usize) -> std::ops::Range<u64> {
+    let start = |r: usize| (total as u128 * r as u128 / ranks.max(1) as u128) as u64;
+    start(rank)..start(rank + 1)
+}
+
 /// One of the particle arrays of a saved state ([`BackendState`]), in the backend's internal
 /// order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -99,6 +122,12 @@ pub trait Backend {
     /// [`Backend::streams_snapshots`]; elsewhere an error.
     fn visit_snapshot_rows(&mut self, _visit: &mut dyn FnMut(u64, &[SnapshotRow]) -> anyhow::Result<()>) -> anyhow::Result<()> {
         anyhow::bail!("the {} backend hands out whole snapshots only", self.kind())
+    }
+    /// Across ranks: this rank's [`SnapshotPiece`] of the snapshot [`Backend::snapshot`]
+    /// would give (collective: every rank calls it; the rows travel to the rank whose block of
+    /// ids holds them, never all to one). `None` alone.
+    fn snapshot_piece(&mut self) -> Option<anyhow::Result<SnapshotPiece>> {
+        None
     }
     /// Density, pressure and acceleration computed by the last step, in original particle
     /// order (read before a snapshot, which re-evaluates density for the new positions).

@@ -20,6 +20,9 @@ pub trait Communicator: Send + Sync {
     fn all_gather(&self, values: &[f64]) -> anyhow::Result<Vec<Vec<f64>>>;
     /// Every rank's `values`, in rank order, on rank 0 (`None` on the others).
     fn gather(&self, values: &[f64]) -> anyhow::Result<Option<Vec<Vec<f64>>>>;
+    /// Sends `parts[r]` to rank r (one part per rank, this rank's own included) and returns
+    /// what every rank sent here, in rank order.
+    fn all_to_all(&self, parts: &[Vec<f64>]) -> anyhow::Result<Vec<Vec<f64>>>;
     /// Stops every rank of the simulation with `message` (said by this rank): what a rank that
     /// cannot go on does, so that no other rank waits forever in the next collective.
     fn abort(&self, message: &str) -> !;
@@ -166,6 +169,13 @@ impl Communicator for LocalCommunicator {
             return Ok(None);
         }
         (0..self.size).map(|from| if from == 0 { Ok(values.to_vec()) } else { self.receive(from) }).collect::<anyhow::Result<Vec<_>>>().map(Some)
+    }
+    fn all_to_all(&self, parts: &[Vec<f64>]) -> anyhow::Result<Vec<Vec<f64>>> {
+        anyhow::ensure!(parts.len() == self.size, "rank {} sent {} parts to {} ranks", self.rank, parts.len(), self.size);
+        for to in (0..self.size).filter(|&r| r != self.rank) {
+            self.send(to, &parts[to])?;
+        }
+        (0..self.size).map(|from| if from == self.rank { Ok(parts[from].clone()) } else { self.receive(from) }).collect()
     }
     fn abort(&self, message: &str) -> ! {
         // Threads of one process: the process ends, and with it every rank.

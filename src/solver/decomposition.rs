@@ -45,25 +45,34 @@ pub fn cell_runs(dims: [u32; 3], axis: usize, layers: std::ops::Range<u32>) -> V
 /// of a second one for the ghosts' densities and pressures.
 pub const HALO_LAYERS: u32 = 2;
 
+/// The ghost layers a scene needs: [`HALO_LAYERS`], and one more with Adami's wall pressure,
+/// where a wall particle next to the face takes its pressure from the fluid one layer beyond
+/// it (Adami et al. 2012, Eq. 27), whose density needs the layer beyond that.
+pub fn halo_layers(adami_walls: bool) -> u32 {
+    HALO_LAYERS + adami_walls as u32
+}
+
 /// The slabs: rank r owns the cell layers `bounds[r]..bounds[r + 1]`; `bounds[0]` is 0 and the
-/// last bound is the number of layers. Every slab is at least [`HALO_LAYERS`] thick, so the
-/// ghosts a rank needs all come from its two neighbours.
+/// last bound is the number of layers. Every slab is at least `halo` layers thick (the ghost
+/// layers on each side), so the ghosts a rank needs all come from its two neighbours.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Slabs {
     pub bounds: Vec<u32>,
+    pub halo: u32,
 }
 
 impl Slabs {
     /// Slabs holding as equal counts as whole layers allow, for `layer_counts[l]` particles in
-    /// layer l, over `ranks` ranks. Errs when the grid has fewer layers than the ranks need.
-    pub fn balanced(layer_counts: &[u64], ranks: usize) -> anyhow::Result<Slabs> {
+    /// layer l, over `ranks` ranks, with `halo` ghost layers on each side. Errs when the grid
+    /// has fewer layers than the ranks need.
+    pub fn balanced(layer_counts: &[u64], ranks: usize, halo: u32) -> anyhow::Result<Slabs> {
         let layers = layer_counts.len() as u64;
-        let need = HALO_LAYERS as u64 * ranks as u64;
+        let need = halo as u64 * ranks as u64;
         anyhow::ensure!(
             layers >= need,
-            "the grid has {layers} cell layers along its longest axis (domain length / smoothing_length); {ranks} ranks need at least {need} ({HALO_LAYERS} per rank): use fewer ranks or a smaller smoothing_length"
+            "the grid has {layers} cell layers along its longest axis (domain length / smoothing_length); {ranks} ranks need at least {need} ({halo} per rank): use fewer ranks or a smaller smoothing_length"
         );
-        Ok(Slabs { bounds: equal_cuts(layer_counts, ranks, |_| (0, u32::MAX)) })
+        Ok(Slabs { bounds: equal_cuts(layer_counts, ranks, halo, |_| (0, u32::MAX)), halo })
     }
 
     /// The slabs moved towards equal counts: each bound goes to the equal-count cut but stays
@@ -71,7 +80,7 @@ impl Slabs {
     /// or a neighbour of it (one migration moves it).
     pub fn rebalanced(&self, layer_counts: &[u64]) -> Slabs {
         let old = &self.bounds;
-        Slabs { bounds: equal_cuts(layer_counts, self.ranks(), |i| (old[i - 1] + 1, old[i + 1] - 1)) }
+        Slabs { bounds: equal_cuts(layer_counts, self.ranks(), self.halo, |i| (old[i - 1] + 1, old[i + 1] - 1)), halo: self.halo }
     }
 
     pub fn ranks(&self) -> usize {
@@ -92,8 +101,8 @@ impl Slabs {
 }
 
 /// Bounds for `ranks` slabs over `layer_counts`, each at the first layer whose running count
-/// reaches its share, kept inside `limits(i)` and leaving every slab [`HALO_LAYERS`] thick.
-fn equal_cuts(layer_counts: &[u64], ranks: usize, limits: impl Fn(usize) -> (u32, u32)) -> Vec<u32> {
+/// reaches its share, kept inside `limits(i)` and leaving every slab `halo` layers thick.
+fn equal_cuts(layer_counts: &[u64], ranks: usize, halo: u32, limits: impl Fn(usize) -> (u32, u32)) -> Vec<u32> {
     let layers = layer_counts.len() as u32;
     let total: u64 = layer_counts.iter().sum();
     let mut running = Vec::with_capacity(layer_counts.len() + 1);
@@ -108,8 +117,8 @@ fn equal_cuts(layer_counts: &[u64], ranks: usize, limits: impl Fn(usize) -> (u32
         let target = |b: usize| running[b] as u128 * ranks as u128 >= total as u128 * i as u128;
         let ideal = (0..=layers as usize).find(|&b| target(b)).unwrap_or(layers as usize) as u32;
         let (lo, hi) = limits(i);
-        let lo = lo.max(bounds[i - 1] + HALO_LAYERS);
-        let hi = hi.min(layers - HALO_LAYERS * (ranks - i) as u32);
+        let lo = lo.max(bounds[i - 1] + halo);
+        let hi = hi.min(layers - halo * (ranks - i) as u32);
         bounds[i] = ideal.clamp(lo, hi.max(lo));
     }
     bounds
@@ -145,6 +154,8 @@ pub struct RankReport {
     pub bounds: Vec<u32>,
     /// The particles this rank owns now (ghosts left out).
     pub own_particles: usize,
+    /// The wall particles it holds: those near its slab.
+    pub walls: usize,
     /// Its place among the ranks of its machine, and how many run there.
     pub node_rank: usize,
     pub node_ranks: usize,
@@ -173,17 +184,17 @@ mod tests {
     #[test]
     fn balanced_slabs_cut_equal_counts_and_keep_the_halo_thickness() {
         let counts = vec![10u64; 12];
-        let s = Slabs::balanced(&counts, 3).unwrap();
+        let s = Slabs::balanced(&counts, 3, HALO_LAYERS).unwrap();
         assert_eq!(s.bounds, vec![0, 4, 8, 12]);
         // All particles in the two lowest layers: the other slabs are as thin as allowed, and
         // empty.
         let mut low = vec![0u64; 12];
         low[0] = 50;
         low[1] = 50;
-        let s = Slabs::balanced(&low, 4).unwrap();
+        let s = Slabs::balanced(&low, 4, HALO_LAYERS).unwrap();
         assert_eq!(s.bounds, vec![0, 2, 4, 6, 12]);
         assert_eq!((s.owner(0), s.owner(1), s.owner(2), s.owner(5), s.owner(6), s.owner(11)), (0, 0, 1, 2, 3, 3));
-        let e = Slabs::balanced(&counts, 7).unwrap_err().to_string();
+        let e = Slabs::balanced(&counts, 7, HALO_LAYERS).unwrap_err().to_string();
         assert!(e.contains("12 cell layers") && e.contains("7 ranks need at least 14"), "{e}");
     }
 
@@ -202,7 +213,7 @@ mod tests {
 
     #[test]
     fn rebalancing_moves_each_bound_no_further_than_its_neighbouring_slabs() {
-        let s = Slabs { bounds: vec![0, 2, 4, 6, 20] };
+        let s = Slabs { bounds: vec![0, 2, 4, 6, 20], halo: HALO_LAYERS };
         let counts = vec![5u64; 20];
         let once = s.rebalanced(&counts);
         // Every new bound lies strictly inside the two old slabs it separates.

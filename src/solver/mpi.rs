@@ -2,7 +2,7 @@
 //! `mpirun` (Open MPI, MPICH or any MPI the `mpi` crate builds against). See docs/scale-out.md.
 
 use super::communicator::Communicator as RankCommunicator;
-use mpi::datatype::PartitionMut;
+use mpi::datatype::{Partition, PartitionMut};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
 use mpi::Count;
@@ -103,6 +103,22 @@ impl RankCommunicator for MpiCommunicator {
             root.gather_varcount_into_root(values, &mut partition);
         }
         Ok(Some(split(&all, &counts, &displs)))
+    }
+    fn all_to_all(&self, parts: &[Vec<f64>]) -> anyhow::Result<Vec<Vec<f64>>> {
+        let size = self.world.size() as usize;
+        anyhow::ensure!(parts.len() == size, "rank {} sent {} parts to {size} ranks", self.world.rank(), parts.len());
+        let send_counts: Vec<Count> = parts.iter().map(|p| p.len() as Count).collect();
+        let mut receive_counts: Vec<Count> = vec![0; size];
+        self.world.all_to_all_into(&send_counts[..], &mut receive_counts[..]);
+        let (send_displs, receive_displs) = (displacements(&send_counts), displacements(&receive_counts));
+        let sent: Vec<f64> = parts.concat();
+        let mut all = vec![0.0f64; receive_counts.iter().map(|&c| c as usize).sum()];
+        {
+            let send = Partition::new(&sent[..], &send_counts[..], &send_displs[..]);
+            let mut receive = PartitionMut::new(&mut all[..], &receive_counts[..], &receive_displs[..]);
+            self.world.all_to_all_varcount_into(&send, &mut receive);
+        }
+        Ok(split(&all, &receive_counts, &receive_displs))
     }
     fn abort(&self, message: &str) -> ! {
         eprintln!("error: rank {} of {} stops every rank: {message}", self.world.rank(), self.world.size());

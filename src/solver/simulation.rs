@@ -20,6 +20,7 @@
 //! # Ok::<(), anyhow::Error>(())
 //! ```
 
+use super::cpu::exchange::InitialSource;
 use super::cpu::CpuSolver;
 use super::gpu::{GpuContext, GpuOptions, GpuSolver, ParticleBuffers};
 use super::backend::Backend;
@@ -181,7 +182,7 @@ pub fn open_with(scene: &Scene, initial: Option<InitialState>, choice: &BackendC
         Ok(Solver::Gpu(Box::new(GpuSolver::with_options(ctx, &params, &initial_of(initial), choice.gpu_options)?)))
     };
     let cpu = |initial: Option<InitialState>| -> anyhow::Result<Solver> {
-        check_host_memory(scene)?;
+        check_host_memory(scene, 1.0)?;
         let initial = initial_of(initial);
         Ok(match choice.precision {
             Precision::F64 => Solver::Cpu64(CpuSolver::new(&params, &initial)),
@@ -242,11 +243,13 @@ fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choi
         Device::Cpu => format!("{cpu_name}, as asked, on rank {} of {size}", ranks.comm.rank()),
         Device::Auto => format!("{cpu_name} on rank {} of {size}: across ranks only the CPU path runs yet", ranks.comm.rank()),
     };
-    check_host_memory(scene)?;
-    let initial = initial.unwrap_or_else(|| scene.initial_state());
+    // This machine's ranks hold their shares of the particles (the grid is every rank's).
+    let (_, node_ranks) = ranks.comm.node_rank();
+    check_host_memory(scene, node_ranks as f64 / size as f64)?;
+    let source = initial.as_ref().map_or(InitialSource::Scene(scene), InitialSource::Whole);
     let solver = match choice.precision {
-        Precision::F64 => Solver::Cpu64(CpuSolver::new_part(params, &initial, ranks.comm.clone(), ranks.balance_every)?),
-        Precision::F32 => Solver::Cpu32(CpuSolver::new_part(params, &initial, ranks.comm.clone(), ranks.balance_every)?),
+        Precision::F64 => Solver::Cpu64(CpuSolver::new_part(params, source, ranks.comm.clone(), ranks.balance_every)?),
+        Precision::F32 => Solver::Cpu32(CpuSolver::new_part(params, source, ranks.comm.clone(), ranks.balance_every)?),
     };
     Ok(Simulation { scene: scene.clone(), solver, reason })
 }
@@ -271,16 +274,17 @@ fn open_part_on_gpu(scene: &Scene, params: &Params, initial: Option<InitialState
         }
     };
     let name = ctx.describe();
-    let initial = initial.unwrap_or_else(|| scene.initial_state());
-    let stages = super::gpu::ranks::GpuRankStages::new(ctx, params, &initial, choice.gpu_options, why, ranks.comm.clone());
-    let solver = CpuSolver::<f32>::new_part_on(params, &initial, ranks.comm.clone(), ranks.balance_every, Box::new(stages))?;
+    let source = initial.as_ref().map_or(InitialSource::Scene(scene), InitialSource::Whole);
+    let stages = super::gpu::ranks::GpuRankStages::new(ctx, params, choice.gpu_options, why, ranks.comm.clone());
+    let solver = CpuSolver::<f32>::new_part_on(params, source, ranks.comm.clone(), ranks.balance_every, Box::new(stages))?;
     let reason = format!("the GPU on {name}, as asked, on rank {rank} of {size} (the exchange on the host)");
     Ok(Simulation { scene: scene.clone(), solver: Solver::Cpu32(solver), reason })
 }
 
-/// The CPU path's host memory against what the machine has (where the platform tells).
-fn check_host_memory(scene: &Scene) -> Result<(), SceneError> {
-    let count = scene.estimated_particle_count();
+/// The CPU path's host memory against what the machine has (where the platform tells), for
+/// `share` of the scene's particles (across ranks, those of the machine's ranks).
+fn check_host_memory(scene: &Scene, share: f64) -> Result<(), SceneError> {
+    let count = (scene.estimated_particle_count() as f64 * share.min(1.0)).ceil() as u64;
     let cells = scene.grid().cell_count() as u64;
     match available_memory_bytes() {
         Some(available) if count * CPU_BYTES_PER_PARTICLE + cells * 8 > available => Err(SceneError {

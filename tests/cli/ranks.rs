@@ -98,6 +98,9 @@ fn the_dam_break_on_one_two_and_four_ranks_writes_the_same_snapshots() {
         assert_eq!(four.per_rank.iter().map(|r| r.particles).sum::<usize>(), s[2].fluid_particles);
         assert!(four.per_rank.iter().map(|r| r.migrated).sum::<u64>() > 0, "the collapsing column crosses slab faces: {four:?}");
         assert!(four.per_rank.iter().all(|r| (0.0..=1.0).contains(&r.exchange_share)));
+        // Each rank holds the walls near its slab; the summary counts the scene's.
+        assert_eq!(s[2].wall_particles, s[0].wall_particles);
+        assert!(four.per_rank.iter().all(|r| r.walls > 0 && r.walls < s[2].wall_particles), "{four:?}");
         // One machine: its 4 ranks, each in its own place.
         let mut places: Vec<usize> = four.per_rank.iter().map(|r| r.node_rank).collect();
         places.sort();

@@ -20,6 +20,10 @@ use wgsph::app::run::RunOptions;
 use wgsph::solver::Backend;
 use wgsph::model::scene::Scene;
 use wgsph::model::state::Snapshot;
+use wgsph::io::snapshot::pieces::write_pieces;
+use wgsph::solver::communicator::Communicator;
+use wgsph::solver::{id_block, LocalGroup, SnapshotPiece};
+use std::sync::Arc;
 
 const FORMATS: [SnapshotFormat; 3] = [SnapshotFormat::Csv, SnapshotFormat::Vtk, SnapshotFormat::Ply];
 
@@ -100,6 +104,96 @@ fn streamed_snapshots_with_nan_missing_or_misordered_rows_leave_no_file() {
     let e = out.finish().unwrap_err().to_string();
     assert!(e.contains(&format!("only 10 of {n} particles")), "{e}");
     assert!(names_in(dir.path()).is_empty(), "no file and no temporary file is left: {:?}", names_in(dir.path()));
+}
+
+/// `ranks` threads, each writing its block of `rows` (ids cut as the solver cuts them) with
+/// [`write_pieces`]; every rank's result.
+fn written_in_pieces(fs: &[(SnapshotFormat, PathBuf)], rows: &[[f64; 8]], ranks: usize, step: u64, time: f64) -> Vec<anyhow::Result<wgsph::io::snapshot::stream::StreamedSnapshot>> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = LocalGroup::new(ranks)
+            .into_iter()
+            .map(|comm| {
+                scope.spawn(move || {
+                    let block = id_block(rows.len() as u64, ranks, comm.rank());
+                    let piece = SnapshotPiece { step, time, total: rows.len() as u64, first: block.start, rows: rows[block.start as usize..block.end as usize].to_vec(), comm: Arc::new(comm) };
+                    write_pieces(fs, &piece)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().expect("rank thread")).collect()
+    })
+}
+
+#[test]
+fn snapshots_written_in_pieces_by_several_ranks_equal_the_whole_array_files() {
+    // f64 values, as the CPU path's ranks hand them over; 4 ranks over 7 particles leave blocks
+    // of one and two, 3 over 301 uneven ones, 5 over 3 empty blocks.
+    let scene = Scene::builtin("dam_break").unwrap().with_fluid_particles(300);
+    let mut cpu = common::cpu::<f64>(&scene);
+    cpu.step(3);
+    let whole = Backend::snapshot(&mut cpu).unwrap();
+    for (particles, ranks) in [(whole.len(), 3), (7, 4), (3, 5), (whole.len(), 1)] {
+        let mut s = whole.clone();
+        s.positions.truncate(particles);
+        s.velocities.truncate(particles);
+        s.densities.truncate(particles);
+        s.pressures.truncate(particles);
+        let dir = tempfile::tempdir().unwrap();
+        let expected = whole_bytes(dir.path(), &s);
+        let rows: Vec<[f64; 8]> = (0..s.len())
+            .map(|i| {
+                let (p, v) = (s.positions[i], s.velocities[i]);
+                [p[0], p[1], p[2], v[0], v[1], v[2], s.densities[i], s.pressures[i]]
+            })
+            .collect();
+        let fs = files(dir.path(), "step_000003");
+        for written in written_in_pieces(&fs, &rows, ranks, s.step, s.time) {
+            let written = written.unwrap();
+            assert_eq!((written.step, written.particles, written.max_speed), (s.step, s.len() as u64, s.max_speed()), "every rank reports the whole snapshot");
+        }
+        for ((f, path), want) in fs.iter().zip(&expected) {
+            assert!(&std::fs::read(path).unwrap() == want, "{f:?}: {particles} particles by {ranks} ranks differ from the whole-array file");
+        }
+        let mut names = names_in(dir.path());
+        names.retain(|n| !n.starts_with("whole"));
+        assert_eq!(names, ["step_000003.csv", "step_000003.ply", "step_000003.vtk"], "no temporary file is left");
+    }
+    // A NaN on one rank: every rank refuses, and no file (nor temporary file) is written.
+    let mut rows: Vec<[f64; 8]> = (0..40).map(|i| [i as f64, 0.0, 0.0, 1.0, 0.0, 0.0, 1000.0, 0.0]).collect();
+    rows[33][4] = f64::NAN;
+    let dir = tempfile::tempdir().unwrap();
+    for e in written_in_pieces(&files(dir.path(), "step_000009"), &rows, 3, 9, 0.5) {
+        let e = e.unwrap_err().to_string();
+        assert!(e.contains("refusing to write") && e.contains("step_000009.csv") && e.contains("1 particles hold NaN or infinity at step 9"), "{e}");
+    }
+    assert!(names_in(dir.path()).is_empty(), "{:?}", names_in(dir.path()));
+}
+
+#[test]
+fn a_rank_that_cannot_write_its_piece_stops_every_rank_and_leaves_no_file() {
+    // Rank 1 looks for the files in another directory than rank 0 writes to: what a rank on
+    // a machine that does not share the output directory meets.
+    let (shared, elsewhere) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let rows: Vec<[f64; 8]> = (0..20).map(|i| [i as f64, 0.0, 0.0, 1.0, 0.0, 0.0, 1000.0, 0.0]).collect();
+    let results: Vec<anyhow::Result<_>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = LocalGroup::new(2)
+            .into_iter()
+            .map(|comm| {
+                let (rows, dir) = (&rows, if comm.rank() == 0 { shared.path() } else { elsewhere.path() });
+                scope.spawn(move || {
+                    let block = id_block(20, 2, comm.rank());
+                    let piece = SnapshotPiece { step: 7, time: 0.1, total: 20, first: block.start, rows: rows[block.start as usize..block.end as usize].to_vec(), comm: Arc::new(comm) };
+                    write_pieces(&files(dir, "step_000007"), &piece)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().expect("rank thread")).collect()
+    });
+    let e0 = format!("{:#}", results[0].as_ref().unwrap_err());
+    let e1 = format!("{:#}", results[1].as_ref().unwrap_err());
+    assert!(e0.contains("rank 1 of 2 could not write its piece of") && e0.contains("step_000007.csv"), "{e0}");
+    assert!(e1.contains("rank 1 of 2 cannot open the file rank 0 created") && e1.contains("every rank must see the output directory"), "{e1}");
+    assert!(names_in(shared.path()).is_empty() && names_in(elsewhere.path()).is_empty(), "no file and no temporary file: {:?} {:?}", names_in(shared.path()), names_in(elsewhere.path()));
 }
 
 #[test]

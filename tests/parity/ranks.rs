@@ -147,6 +147,65 @@ fn particles_migrate_across_faces_and_slabs_follow_the_counts() {
 }
 
 #[test]
+fn every_rank_writes_its_piece_of_the_one_snapshot_file_one_process_writes() {
+    use wgsph::io::snapshot::format::SnapshotFormat;
+    let scene = moving_block();
+    let dir = tempfile::tempdir().unwrap();
+    let files = |stem: &str| [SnapshotFormat::Csv, SnapshotFormat::Vtk, SnapshotFormat::Ply].map(|f| (f, dir.path().join(format!("{stem}.{}", f.extension()))));
+    let one = one_rank(&scene, 40);
+    for (f, path) in files("one") {
+        wgsph::io::snapshot::write_snapshot(&path, f, &one).unwrap();
+    }
+    let held = on_ranks(&scene, 3, 10, Precision::F64, &|b: &mut dyn Backend| {
+        b.step(40)?;
+        let piece = b.snapshot_piece().expect("across ranks")?;
+        wgsph::io::snapshot::pieces::write_pieces(&files("ranks"), &piece)?;
+        Ok(piece.rows.len())
+    });
+    assert_eq!(held.iter().sum::<usize>(), one.len());
+    assert!(held.iter().all(|&n| n < one.len()), "no rank holds every particle: {held:?}");
+    for ((f, a), (_, b)) in files("one").iter().zip(&files("ranks")) {
+        assert!(std::fs::read(a).unwrap() == std::fs::read(b).unwrap(), "{f:?}: the pieces of 3 ranks against one process's file");
+    }
+}
+
+/// The moving block with Akinci's volumes (a wall's mass from its wall neighbours) and Adami's
+/// wall pressure (from the fluid near the wall, one ghost layer more): both read the walls a
+/// rank holds, which follow the slab.
+fn moving_block_akinci_adami() -> Scene {
+    TestScene::new()
+        .named("block")
+        .domain([-0.1, -0.1, -0.1], [0.3, 0.3, 1.3])
+        .container([0.0; 3], [0.2, 0.2, 1.2])
+        .gravity([0.0; 3])
+        .fluid([0.0; 3], [0.2, 0.2, 0.16])
+        .moving_at([0.0, 0.0, 0.5])
+        .clamp_negative_pressure(true)
+        .boundary_volume(wgsph::model::scene::BoundaryVolume::Akinci)
+        .boundary_pressure(BoundaryPressure::Adami)
+        .build()
+}
+
+#[test]
+fn each_rank_holds_the_walls_near_its_slab_and_takes_new_ones_when_the_bounds_move() {
+    let scene = moving_block_akinci_adami();
+    let one = one_rank(&scene, 100);
+    let total_walls = scene.initial_walls().wall_positions.len();
+    let runs = on_ranks(&scene, 3, 10, Precision::F64, &|b: &mut dyn Backend| {
+        let first = b.rank_report().expect("across ranks").walls;
+        b.step(100)?;
+        Ok((first, b.rank_report().expect("across ranks"), b.wall_count(), b.snapshot()?))
+    });
+    for (first, report, count, _) in &runs {
+        assert_eq!(*count, total_walls, "a rank reports the simulation's walls");
+        assert!(*first < total_walls && report.walls < total_walls, "rank {} holds {first}, then {} of {total_walls} walls", report.rank, report.walls);
+    }
+    assert!(runs[0].1.stats.rebalances > 0, "the bounds moved");
+    assert!(runs.iter().any(|r| r.0 != r.1.walls), "a rank whose bounds moved took other walls: {:?}", runs.iter().map(|r| (r.0, r.1.walls)).collect::<Vec<_>>());
+    assert!(runs[0].3 == one, "3 ranks with walls per rank, Akinci volumes and Adami pressure against one rank");
+}
+
+#[test]
 fn a_rank_without_particles_takes_part_in_every_step() {
     // 4 ranks on the moving block: the upper ones start empty.
     let scene = moving_block();
@@ -457,6 +516,24 @@ fn gpu_ranks_with_empty_ones_compute_what_one_gpu_computes() {
     });
     assert!(runs.iter().any(|r| r.0 == 0), "a rank starts empty: {:?}", runs.iter().map(|r| r.0).collect::<Vec<_>>());
     assert!(runs[0].1 == one, "4 GPU ranks, some empty, against one GPU, bit for bit");
+}
+
+#[test]
+fn gpu_ranks_with_walls_near_their_slabs_and_adami_pressure_compute_what_one_gpu_computes() {
+    let Some(ctx) = common::contexts().into_iter().next() else { return };
+    let scene = moving_block_akinci_adami();
+    let one = one_gpu(&ctx, &scene, 100);
+    let runs = gpu_on_ranks(&ctx, &scene, 3, 10, &|b: &mut dyn Backend| {
+        b.step(100)?;
+        Ok((b.rank_report().expect("across ranks"), b.snapshot()?))
+    });
+    assert!(runs[0].0.stats.rebalances > 0, "the bounds moved");
+    assert!(runs.iter().all(|r| r.0.walls < total_walls(&scene)), "every rank holds only the walls near its slab");
+    assert!(runs[0].1 == one, "3 GPU ranks, walls per rank, Akinci and Adami, against one GPU, bit for bit");
+}
+
+fn total_walls(scene: &Scene) -> usize {
+    scene.initial_walls().wall_positions.len()
 }
 
 /// Probes on GPU ranks: each rank samples on the host what its device's binning and density

@@ -6,6 +6,7 @@
 pub mod csv;
 pub mod format;
 pub mod index;
+pub mod pieces;
 pub mod ply;
 pub mod stream;
 pub mod vtk;
@@ -94,6 +95,29 @@ impl SnapshotWriter {
                 log::info!("wrote {}", path.display());
             }
             self.add_to_index(s.step, s.time)?;
+            let (_, first) = files.into_iter().next().ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))?;
+            Ok((first, s.max_speed))
+        }))
+    }
+
+    /// Across ranks: every rank writes its piece of the backend's snapshot into the one file
+    /// of each format ([`pieces::write_pieces`], collective); rank 0 keeps the VTK series and
+    /// the index up to date. Returns the path of the first format's file and the largest
+    /// speed, or `None` alone.
+    pub fn write_pieces(&mut self, backend: &mut dyn Backend) -> Option<anyhow::Result<(PathBuf, f64)>> {
+        let piece = backend.snapshot_piece()?;
+        Some(piece.and_then(|piece| {
+            let files: Vec<(SnapshotFormat, PathBuf)> = self.formats.iter().map(|&f| (f, snapshot_file(&self.out, piece.step, f))).collect();
+            let s = pieces::write_pieces(&files, &piece)?;
+            if piece.comm.rank() == 0 {
+                for (f, path) in &files {
+                    if *f == SnapshotFormat::Vtk {
+                        self.add_to_series(path, s.time)?;
+                    }
+                    log::info!("wrote {} (in pieces, by {} ranks)", path.display(), piece.comm.size());
+                }
+                self.add_to_index(s.step, s.time)?;
+            }
             let (_, first) = files.into_iter().next().ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))?;
             Ok((first, s.max_speed))
         }))

@@ -103,7 +103,7 @@ impl SnapshotStream {
                     let writer = ply_rs_bw::writer::Writer::<PlyVertex>::new();
                     rows.iter().try_for_each(|r| writer.write_little_endian_element(f, &PlyVertex(*r), vertex).map(|_| ()))
                 }
-                FormatFile::Vtk(f, layout) => layout.write_rows(f, first, rows),
+                FormatFile::Vtk(f, layout) => layout.write_rows(f, first, &rows.iter().map(|r| r.map(f64::from)).collect::<Vec<_>>()),
             };
             written.with_context(|| format!("cannot write {}", file.file().path().display()))?;
         }

@@ -2,9 +2,8 @@
 //! as an animation; and the file layout the streamed writer fills in pieces.
 
 use super::csv::refuse_non_finite;
-use crate::io::atomic::{write_atomic, AtomicFile};
+use crate::io::atomic::write_atomic;
 use crate::model::state::Snapshot;
-use crate::solver::SnapshotRow;
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use std::io::{Seek, SeekFrom, Write};
@@ -137,7 +136,7 @@ impl VtkLayout {
         VtkLayout { texts, starts, arrays }
     }
 
-    pub(crate) fn write_text(&self, f: &mut AtomicFile) -> std::io::Result<()> {
+    pub(crate) fn write_text(&self, f: &mut (impl Write + Seek)) -> std::io::Result<()> {
         for (&at, text) in self.starts.iter().zip(&self.texts) {
             f.seek(SeekFrom::Start(at))?;
             f.write_all(text.as_bytes())?;
@@ -146,12 +145,12 @@ impl VtkLayout {
     }
 
     /// Writes particles `first..` into each array's section.
-    pub(crate) fn write_rows(&self, f: &mut AtomicFile, first: u64, rows: &[SnapshotRow]) -> std::io::Result<()> {
+    pub(crate) fn write_rows(&self, f: &mut (impl Write + Seek), first: u64, rows: &[[f64; 8]]) -> std::io::Result<()> {
         let vertex = vtkio::model::CellType::Vertex as i32;
         for (array, &at) in self.arrays.iter().enumerate() {
             f.seek(SeekFrom::Start(at + first * VTK_ARRAY_BYTES[array]))?;
             for (j, r) in rows.iter().enumerate() {
-                let values: &[f32] = match array {
+                let values: &[f64] = match array {
                     0 => &r[0..3],
                     3 => &r[3..6],
                     4 => &r[6..7],
@@ -167,7 +166,7 @@ impl VtkLayout {
                     }
                 };
                 for &x in values {
-                    f.write_all(&(x as f64).to_be_bytes())?;
+                    f.write_all(&x.to_be_bytes())?;
                 }
             }
         }

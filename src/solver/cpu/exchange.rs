@@ -1,6 +1,6 @@
 //! The exchange stage on the CPU, the first stage of a step across ranks (before the binning):
 //! particles that left the rank's slab migrate to the rank that owns their cell layer now, and
-//! the particles in the [`HALO_LAYERS`] layers next to each face travel to the neighbour as
+//! the particles in the ghost layers next to each face ([`halo_layers`]) travel to the neighbour as
 //! ghosts, which take part in its neighbour sums but are not integrated, counted or written.
 //! Alone (one process) the stage does nothing. See docs/scale-out.md.
 //!
@@ -11,12 +11,14 @@
 //! the same order, and N ranks compute bit for bit what one computes.
 
 use super::CpuSolver;
+use crate::model::initial::{FluidParticle, InitialState};
 use crate::model::real::{Real, V3};
 use crate::model::state::{BackendState, Snapshot, StepFields};
 use super::probes::{self, ProbeInput};
 use crate::model::probes::{Probe, ProbeGeometry};
 use crate::solver::communicator::{all_max, all_sum, Communicator};
-use crate::solver::decomposition::{cell_runs, imbalance, slab_axis, RankReport, RankStats, Slabs, HALO_LAYERS};
+use crate::model::scene::BoundaryPressure;
+use crate::solver::decomposition::{cell_runs, halo_layers, imbalance, slab_axis, RankReport, RankStats, Slabs};
 use std::ops::Range;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
@@ -43,6 +45,63 @@ pub struct RankPart {
     pub(super) gathered: Option<BackendState>,
     /// DFSPH: the ghosts of this step's solves ([`GhostLink`]), made after the binning.
     pub(super) link: Option<GhostLink>,
+    /// Where the walls near the slab come from when its bounds move.
+    pub(super) walls: WallSource,
+    /// Wall particles of the whole simulation.
+    pub(super) total_walls: usize,
+}
+
+/// Where a rank takes the wall particles near its slab from ([`WallSource::near`]).
+#[derive(Clone)]
+pub enum WallSource {
+    /// The walls of a state given whole (an imported scene): every rank keeps a copy.
+    Whole(Arc<InitialState>),
+    /// The scene, which generates them: no rank holds every wall particle.
+    Scene(Arc<crate::model::scene::Scene>),
+}
+
+
+impl WallSource {
+    /// The wall particles whose cell layer along `axis` lies within `halo` + 1 layers of
+    /// `slab` (the ghosts lie up to `halo` layers out, their neighbours one further), in the
+    /// order of the whole scene's walls (so each cell holds the walls one process holds there,
+    /// in its order). Akinci's volumes are computed over one more layer, which is then
+    /// dropped, so every kept wall has all its wall neighbours.
+    pub(super) fn near<R: Real>(&self, grid: &crate::model::params::Grid<R>, axis: usize, slab: Range<u32>, halo: u32) -> InitialState {
+        let reach = halo + 1;
+        let layer = |p: [f64; 3]| grid.cell_coords(V3::from64(p))[axis];
+        let within = |reach: u32| move |p: [f64; 3]| {
+            let l = layer(p);
+            l + reach >= slab.start && l < slab.end + reach
+        };
+        match self {
+            WallSource::Whole(st) => {
+                let mut walls = InitialState { wall_positions: st.wall_positions.clone(), wall_masses: st.wall_masses.clone(), wall_boundaries: st.wall_boundaries.clone(), ..InitialState::default() };
+                walls.retain_walls(within(reach));
+                walls
+            }
+            WallSource::Scene(scene) => {
+                let mut walls = scene.initial_walls_where(within(reach + 1));
+                walls.retain_walls(within(reach));
+                walls
+            }
+        }
+    }
+
+    /// Wall particles of the whole simulation (counted, not held).
+    fn total(&self) -> usize {
+        match self {
+            WallSource::Whole(st) => st.wall_positions.len(),
+            WallSource::Scene(scene) => {
+                let count = std::cell::Cell::new(0usize);
+                scene.initial_walls_where(|_| {
+                    count.set(count.get() + 1);
+                    false
+                });
+                count.get()
+            }
+        }
+    }
 }
 
 /// DFSPH across ranks, the ghosts' part in a step's solves (docs/scale-out.md). A Jacobi step
@@ -221,6 +280,9 @@ impl<R: Real> Held<R> {
 pub trait DeviceStages<R: Real>: Send {
     /// The device in words (the summary's adapter).
     fn describe(&self) -> String;
+    /// The wall particles near the rank's slab (again whenever its bounds move), in the
+    /// order of the whole scene's walls.
+    fn set_walls(&mut self, walls: &InitialState);
     /// Runs step `step` on `held` and writes the result back into it; returns the step's dt
     /// (with adaptive dt chosen from every rank's own particles, the ghosts left out).
     fn run_step(&mut self, step: u64, held: HeldArrays<'_, R>) -> anyhow::Result<f64>;
@@ -236,6 +298,42 @@ pub type SharedDeviceStages<R> = Arc<Mutex<Box<dyn DeviceStages<R>>>>;
 /// between calls).
 pub fn lock<R: Real>(device: &SharedDeviceStages<R>) -> MutexGuard<'_, Box<dyn DeviceStages<R>>> {
     device.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// Where a rank finds its part of the initial state.
+#[derive(Clone, Copy)]
+pub(crate) enum InitialSource<'a> {
+    /// A state given whole to every rank (an imported scene, a changed one).
+    Whole(&'a InitialState),
+    /// The scene: every rank generates its particles one at a time and keeps its own.
+    Scene(&'a crate::model::scene::Scene),
+}
+
+impl InitialSource<'_> {
+    /// Every fluid particle in original order, one at a time.
+    fn visit_fluid(&self, mut visit: impl FnMut(FluidParticle)) {
+        match self {
+            InitialSource::Whole(st) => {
+                for (i, (&position, &velocity)) in st.fluid_positions.iter().zip(&st.fluid_velocities).enumerate() {
+                    visit(FluidParticle { id: i as u64, position, velocity, density: st.fluid_densities.get(i).copied() });
+                }
+            }
+            InitialSource::Scene(scene) => scene.visit_fluid(visit),
+        }
+    }
+
+    /// Where the rank's walls come from.
+    pub(crate) fn walls(&self) -> WallSource {
+        match self {
+            InitialSource::Whole(st) => WallSource::Whole(Arc::new(InitialState {
+                wall_positions: st.wall_positions.clone(),
+                wall_masses: st.wall_masses.clone(),
+                wall_boundaries: st.wall_boundaries.clone(),
+                ..InitialState::default()
+            })),
+            InitialSource::Scene(scene) => WallSource::Scene(Arc::new((*scene).clone())),
+        }
+    }
 }
 
 /// The particles a rank holds, handed to the device stages (see [`DeviceStages`]).
@@ -256,10 +354,18 @@ pub struct HeldArrays<'a, R: Real> {
 impl<R: Real> CpuSolver<R> {
     /// One rank's part on a device: like [`CpuSolver::new_part`], with the step's stages after
     /// the exchange run by `device`.
-    pub(crate) fn new_part_on(params: &crate::model::params::Params, initial: &crate::model::initial::InitialState, comm: Arc<dyn Communicator>, balance_every: u64, device: Box<dyn DeviceStages<R>>) -> anyhow::Result<Self> {
+    pub(crate) fn new_part_on(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64, device: Box<dyn DeviceStages<R>>) -> anyhow::Result<Self> {
         let mut solver = Self::new_part(params, initial, comm, balance_every)?;
         solver.device = Some(Arc::new(Mutex::new(device)));
+        let walls = solver.walls_near_slab();
+        solver.install_walls(&walls);
         Ok(solver)
+    }
+
+    /// The wall particles near this rank's slab, from the scene (or the whole state given).
+    fn walls_near_slab(&self) -> InitialState {
+        let part = self.ranks.as_deref().expect("across ranks");
+        part.walls.near(&self.grid, part.axis, part.slabs.layers_of(part.comm.rank()), part.slabs.halo)
     }
 
     /// The held arrays, lent to the device stages, with which of them are `ghosts`.
@@ -350,10 +456,10 @@ impl<R: Real> CpuSolver<R> {
             if ghosts[i] {
                 receive[(l >= mine.end) as usize].push(i);
             } else {
-                if rank > 0 && l < mine.start + HALO_LAYERS {
+                if rank > 0 && l < mine.start + part.slabs.halo {
                     send[0].push(i);
                 }
-                if rank + 1 < size && l + HALO_LAYERS >= mine.end {
+                if rank + 1 < size && l + part.slabs.halo >= mine.end {
                     send[1].push(i);
                 }
             }
@@ -411,33 +517,37 @@ impl<R: Real> CpuSolver<R> {
         self.positions.iter().map(|&x| !mine.contains(&self.grid.cell_coords(x)[part.axis])).collect()
     }
 
-    /// The solver of one rank's part of a simulation across the ranks of `comm`: the particles
-    /// of `initial` whose cell layer lies in this rank's slab (slabs of equal counts), and
-    /// every wall particle. `balance_every`: steps between moves of the slab bounds (0: never).
-    pub(crate) fn new_part(params: &crate::model::params::Params, initial: &crate::model::initial::InitialState, comm: Arc<dyn Communicator>, balance_every: u64) -> anyhow::Result<Self> {
+    /// The solver of one rank's part of a simulation across the ranks of `comm`: the fluid
+    /// particles of `initial` whose cell layer lies in this rank's slab (slabs of equal
+    /// counts), and every wall particle. `balance_every`: steps between moves of the slab
+    /// bounds (0: never). From a scene, the particles are generated one at a time (twice: to
+    /// count them per layer, then to keep this rank's), so no rank holds every fluid particle.
+    pub(crate) fn new_part(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64) -> anyhow::Result<Self> {
         let grid = params.grid.cast::<R>();
         let axis = slab_axis(grid.dims);
         let layer_of = |p: [f64; 3]| grid.cell_coords(V3::from64(p))[axis];
         let mut counts = vec![0u64; grid.dims[axis] as usize];
-        for &p in &initial.fluid_positions {
-            counts[layer_of(p) as usize] += 1;
-        }
-        let slabs = Slabs::balanced(&counts, comm.size())?;
+        initial.visit_fluid(|p| counts[layer_of(p.position) as usize] += 1);
+        let total = counts.iter().sum::<u64>() as usize;
+        let slabs = Slabs::balanced(&counts, comm.size(), halo_layers(params.boundary_pressure == BoundaryPressure::Adami))?;
         let mine = slabs.layers_of(comm.rank());
-        let chosen: Vec<usize> = (0..initial.fluid_positions.len()).filter(|&i| mine.contains(&layer_of(initial.fluid_positions[i]))).collect();
-        let part = crate::model::initial::InitialState {
-            fluid_positions: chosen.iter().map(|&i| initial.fluid_positions[i]).collect(),
-            fluid_velocities: chosen.iter().map(|&i| initial.fluid_velocities[i]).collect(),
-            fluid_densities: if initial.fluid_densities.is_empty() { Vec::new() } else { chosen.iter().map(|&i| initial.fluid_densities[i]).collect() },
-            wall_positions: initial.wall_positions.clone(),
-            wall_masses: initial.wall_masses.clone(),
-            wall_boundaries: initial.wall_boundaries.clone(),
-        };
+        let walls = initial.walls();
+        let mut part = walls.near(&grid, axis, mine.clone(), slabs.halo);
+        let mut chosen = Vec::new();
+        initial.visit_fluid(|p| {
+            if mine.contains(&layer_of(p.position)) {
+                chosen.push(p.id);
+                part.fluid_positions.push(p.position);
+                part.fluid_velocities.push(p.velocity);
+                if let Some(d) = p.density {
+                    part.fluid_densities.push(d);
+                }
+            }
+        });
         let mut solver = Self::new(params, &part);
         solver.ids = chosen.iter().map(|&i| i as u32).collect();
         if let Some(d) = &mut solver.dfsph {
             // Kept by id: room for every particle of the simulation.
-            let total = initial.fluid_positions.len();
             d.warm_pressure = vec![R::zero(); total];
             d.warm_divergence = vec![R::zero(); total];
         }
@@ -447,13 +557,15 @@ impl<R: Real> CpuSolver<R> {
             comm,
             slabs,
             axis,
-            first_order: Some(chosen.iter().map(|&i| i as u64).collect()),
-            total_fluid: initial.fluid_positions.len(),
+            first_order: Some(chosen),
+            total_fluid: total,
             balance_every,
             stats: RankStats { last_imbalance: start_imbalance, max_imbalance: start_imbalance, ..RankStats::default() },
             failure: None,
             gathered: None,
             link: None,
+            total_walls: walls.total(),
+            walls,
         }));
         Ok(solver)
     }
@@ -488,6 +600,7 @@ impl<R: Real> CpuSolver<R> {
             axis: p.axis,
             bounds: p.slabs.bounds.clone(),
             own_particles: self.own_slots().iter().map(|r| r.len()).sum(),
+            walls: self.walls().0.len(),
             node_rank: p.comm.node_rank().0,
             node_ranks: p.comm.node_rank().1,
             threads: rayon::current_num_threads(),
@@ -565,6 +678,7 @@ impl<R: Real> CpuSolver<R> {
         let layer_of = |grid: &crate::model::params::Grid<R>, p: V3<R>| grid.cell_coords(p)[axis];
         let comm = part.comm.clone();
         let rank = comm.rank();
+        let mut slab_moved = false;
         if balance && part.balance_every > 0 && step > 0 && step % part.balance_every == 0 {
             let mut layers = vec![0.0; grid.dims[axis] as usize];
             for &p in &held.x {
@@ -579,6 +693,7 @@ impl<R: Real> CpuSolver<R> {
             if moved != part.slabs {
                 part.slabs = moved;
                 part.stats.rebalances += 1;
+                slab_moved = true;
             }
         }
         // Migration: towards the owner's side, one neighbour per round, until no rank holds a
@@ -614,10 +729,10 @@ impl<R: Real> CpuSolver<R> {
         let (mut down, mut up) = (Vec::new(), Vec::new());
         for i in 0..held.len() {
             let l = layer_of(&grid, held.x[i]);
-            if rank > 0 && l < mine.start + HALO_LAYERS {
+            if rank > 0 && l < mine.start + part.slabs.halo {
                 down.push(i);
             }
-            if rank + 1 < comm.size() && l + HALO_LAYERS >= mine.end {
+            if rank + 1 < comm.size() && l + part.slabs.halo >= mine.end {
                 up.push(i);
             }
         }
@@ -648,6 +763,11 @@ impl<R: Real> CpuSolver<R> {
         self.accelerations.resize(n, V3::zero());
         self.keys.resize(n, 0);
         self.sorted.resize(n, 0);
+        if slab_moved {
+            // The walls near the new bounds (the ones near the old are dropped).
+            let walls = self.walls_near_slab();
+            self.install_walls(&walls);
+        }
         Ok(())
     }
 
@@ -688,6 +808,63 @@ impl<R: Real> CpuSolver<R> {
     /// and evaluates density; the rows are gathered on rank 0, which writes the files (the
     /// other ranks get a snapshot of no particle, at the same step and time).
     pub(super) fn snapshot_across_ranks(&mut self) -> anyhow::Result<Snapshot> {
+        self.snapshot_fields_across_ranks()?;
+        let rows = self.gather_own(9, Self::snapshot_row)?;
+        let Some(rows) = rows else { return Ok(Snapshot::with_len(0, self.step, self.time())) };
+        let n = self.ranks.as_ref().map_or(0, |p| p.total_fluid);
+        let mut s = Snapshot::with_len(n, self.step, self.time());
+        for r in rows.chunks_exact(11).map(|r| &r[2..]) {
+            let id = r[0] as usize;
+            s.positions[id] = [r[1], r[2], r[3]];
+            s.velocities[id] = [r[4], r[5], r[6]];
+            s.densities[id] = r[7];
+            s.pressures[id] = r[8];
+        }
+        Ok(s)
+    }
+
+    /// A snapshot's row of the particle in `slot`: its id, then `x y z vx vy vz density pressure`.
+    fn snapshot_row(&self, slot: usize) -> Vec<f64> {
+        let (x, v) = (self.positions[slot].to64(), self.velocities[slot].to64());
+        vec![self.ids[slot] as f64, x[0], x[1], x[2], v[0], v[1], v[2], self.densities[slot].to64(), self.pressures[slot].to64()]
+    }
+
+    /// [`crate::solver::Backend::snapshot_piece`]: the fields of a snapshot as for
+    /// [`CpuSolver::snapshot`], then every own particle's row to the rank whose block of ids
+    /// holds it (one all-to-all), which puts its rows in id order.
+    pub(super) fn snapshot_piece_across_ranks(&mut self) -> anyhow::Result<crate::solver::backend::SnapshotPiece> {
+        self.snapshot_fields_across_ranks()?;
+        let part = self.ranks.as_ref().expect("only across ranks");
+        let (comm, total) = (part.comm.clone(), part.total_fluid as u64);
+        let size = comm.size();
+        let blocks: Vec<Range<u64>> = (0..size).map(|r| crate::solver::backend::id_block(total, size, r)).collect();
+        let mut parts = vec![Vec::new(); size];
+        for (slot, _) in self.own_order() {
+            let id = self.ids[slot] as u64;
+            let owner = blocks.partition_point(|b| b.end <= id);
+            parts[owner].extend(self.snapshot_row(slot));
+        }
+        let t0 = Instant::now();
+        let received = comm.all_to_all(&parts);
+        if let Some(part) = &mut self.ranks {
+            part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+        }
+        let mine = blocks[comm.rank()].clone();
+        let mut rows = vec![[f64::NAN; 8]; (mine.end - mine.start) as usize];
+        let mut filled = 0;
+        for r in received?.iter().flat_map(|p| p.chunks_exact(9)) {
+            let id = r[0] as u64;
+            anyhow::ensure!(mine.contains(&id), "rank {} of {size} received the snapshot row of particle {id}, outside its block {mine:?}", comm.rank());
+            rows[(id - mine.start) as usize].copy_from_slice(&r[1..]);
+            filled += 1;
+        }
+        anyhow::ensure!(filled == rows.len(), "rank {} of {size} received {filled} snapshot rows for its block of {} particles", comm.rank(), rows.len());
+        Ok(crate::solver::backend::SnapshotPiece { step: self.step, time: self.time(), total, first: mine.start, rows, comm })
+    }
+
+    /// A snapshot's fields on every rank: the exchange with fresh ghosts, the binning and the
+    /// density (and the pressure of the last solve, for DFSPH).
+    fn snapshot_fields_across_ranks(&mut self) -> anyhow::Result<()> {
         self.exchange(false);
         if self.rank_failure().is_none() && self.device.is_some() {
             self.fields_on_device();
@@ -706,21 +883,7 @@ impl<R: Real> CpuSolver<R> {
         if let Some(e) = self.rank_failure() {
             anyhow::bail!("{e}");
         }
-        let rows = self.gather_own(9, |s, i| {
-            let (x, v) = (s.positions[i].to64(), s.velocities[i].to64());
-            vec![s.ids[i] as f64, x[0], x[1], x[2], v[0], v[1], v[2], s.densities[i].to64(), s.pressures[i].to64()]
-        })?;
-        let Some(rows) = rows else { return Ok(Snapshot::with_len(0, self.step, self.time())) };
-        let n = self.ranks.as_ref().map_or(0, |p| p.total_fluid);
-        let mut s = Snapshot::with_len(n, self.step, self.time());
-        for r in rows.chunks_exact(11).map(|r| &r[2..]) {
-            let id = r[0] as usize;
-            s.positions[id] = [r[1], r[2], r[3]];
-            s.velocities[id] = [r[4], r[5], r[6]];
-            s.densities[id] = r[7];
-            s.pressures[id] = r[8];
-        }
-        Ok(s)
+        Ok(())
     }
 
     /// [`CpuSolver::step_fields`] across ranks, gathered on rank 0 (empty on the others).
@@ -759,7 +922,7 @@ impl<R: Real> CpuSolver<R> {
         let Some(mine) = self.rank_report() else { return Ok(None) };
         let comm = self.ranks.as_ref().expect("across ranks").comm.clone();
         let s = &mine.stats;
-        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64])?;
+        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64, mine.walls as f64])?;
         // The adapters' names travel as bytes, padded to the longest.
         let longest = all_max(comm.as_ref(), &[mine.adapter.len() as f64])?[0] as usize;
         let mut name: Vec<f64> = mine.adapter.bytes().map(f64::from).collect();
@@ -771,6 +934,7 @@ impl<R: Real> CpuSolver<R> {
                 .map(|(rank, r)| RankReport {
                     rank,
                     own_particles: r[0] as usize,
+                    walls: r[7] as usize,
                     node_rank: r[4] as usize,
                     node_ranks: r[5] as usize,
                     threads: r[6] as usize,
@@ -835,7 +999,7 @@ impl<R: Real> CpuSolver<R> {
         for &p in &state.positions {
             counts[layer_of(p) as usize] += 1;
         }
-        let slabs = Slabs::balanced(&counts, part.comm.size())?;
+        let slabs = Slabs::balanced(&counts, part.comm.size(), part.slabs.halo)?;
         let mine = slabs.layers_of(part.comm.rank());
         let chosen: Vec<usize> = (0..state.positions.len()).filter(|&i| mine.contains(&layer_of(state.positions[i]))).collect();
         let pick = |v: &Vec<[f64; 3]>| chosen.iter().map(|&i| v[i]).collect::<Vec<_>>();

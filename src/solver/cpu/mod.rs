@@ -101,21 +101,11 @@ impl<R: Real> CpuSolver<R> {
     pub(crate) fn new(params: &Params, initial: &InitialState) -> Self {
         let grid = params.grid.cast::<R>();
         let n = initial.fluid_positions.len();
-        // Walls never move: sort them by cell once.
-        let walls: Vec<V3<R>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
-        let (wall_order, wall_starts) = sort_by_cell(&grid, &walls);
-        let masks = params.probes.wall_masks(&initial.wall_positions, &initial.wall_boundaries);
-        let wall_probe_masks = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
-        // Without walls no stage visits them: no per-cell array.
-        let wall_starts = if walls.is_empty() { Vec::new() } else { wall_starts };
         let backstops = Backstops {
             planes: params.planes.iter().map(|p| PlaneR { normal: V3::from64(p.normal), offset: R::of(p.offset), restitution: R::of(p.restitution) }).collect(),
             boxes: params.solid_boxes.iter().map(|b| SolidBoxR { min: V3::from64(b.min), max: V3::from64(b.max) }).collect(),
         };
-        let wall_positions: Vec<V3<R>> = wall_order.iter().map(|&i| walls[i as usize]).collect();
-        let wall_masses: Vec<R> = wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect();
-        let wall_points = wall_positions.iter().zip(&wall_masses).map(|(x, &m)| [x.0[0], x.0[1], x.0[2], m]).collect();
-        CpuSolver {
+        let mut solver = CpuSolver {
             params: params.clone(),
             kernel: KernelCoefficients::new(params.kernel, params.h),
             grid,
@@ -131,27 +121,50 @@ impl<R: Real> CpuSolver<R> {
             lanes: true,
             lists: NeighbourLists::default(),
             fluid_points: Vec::new(),
-            wall_points,
+            wall_points: Vec::new(),
             keys: vec![0; n],
             counts: vec![0; grid.cell_count()],
             starts: vec![0; grid.cell_count() + 1],
             sorted: vec![0; n],
             scratch_v3: Vec::with_capacity(n),
             scratch_ids: Vec::with_capacity(n),
-            wall_positions,
-            wall_masses,
-            wall_starts,
-            wall_fields: if params.boundary_pressure == BoundaryPressure::Adami { vec![[R::zero(), R::of(params.rest_density)]; walls.len()] } else { Vec::new() },
-            wall_order,
+            wall_positions: Vec::new(),
+            wall_masses: Vec::new(),
+            wall_starts: Vec::new(),
+            wall_fields: Vec::new(),
+            wall_order: Vec::new(),
             step: 0,
             health: Health::default(),
             time: 0.0,
             dt_stats: DtStats { min: f64::INFINITY, ..DtStats::default() },
             dfsph: params.dfsph.as_ref().map(|settings| DfsphCpu::new(settings, n)),
-            wall_probe_masks,
+            wall_probe_masks: Vec::new(),
             probe_samples: Vec::new(),
             ranks: None,
             device: None,
+        };
+        solver.install_walls(initial);
+        solver
+    }
+
+    /// The wall particles of `walls` (its fluid is not read): sorted by cell once, as walls
+    /// never move; across ranks again whenever the slab's bounds move, and handed to the
+    /// device stages too.
+    pub(crate) fn install_walls(&mut self, initial: &InitialState) {
+        let params = &self.params;
+        let walls: Vec<V3<R>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
+        let (wall_order, wall_starts) = sort_by_cell(&self.grid, &walls);
+        let masks = params.probes.wall_masks(&initial.wall_positions, &initial.wall_boundaries);
+        self.wall_probe_masks = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
+        // Without walls no stage visits them: no per-cell array.
+        self.wall_starts = if walls.is_empty() { Vec::new() } else { wall_starts };
+        self.wall_positions = wall_order.iter().map(|&i| walls[i as usize]).collect();
+        self.wall_masses = wall_order.iter().map(|&i| R::of(initial.wall_masses[i as usize])).collect();
+        self.wall_points = self.wall_positions.iter().zip(&self.wall_masses).map(|(x, &m)| [x.0[0], x.0[1], x.0[2], m]).collect();
+        self.wall_fields = if params.boundary_pressure == BoundaryPressure::Adami { vec![[R::zero(), R::of(params.rest_density)]; walls.len()] } else { Vec::new() };
+        self.wall_order = wall_order;
+        if let Some(device) = &self.device {
+            exchange::lock(device).set_walls(initial);
         }
     }
 
@@ -852,7 +865,8 @@ impl<R: Real> Backend for CpuSolver<R> {
         self.ranks.as_ref().map_or(self.fluid_len(), |p| p.total_fluid)
     }
     fn wall_count(&self) -> usize {
-        self.walls().0.len()
+        // Across ranks, the simulation's: each rank holds only those near its slab.
+        self.ranks.as_ref().map_or(self.walls().0.len(), |p| p.total_walls)
     }
     fn step(&mut self, n: u64) -> anyhow::Result<()> {
         CpuSolver::step(self, n);
@@ -881,6 +895,9 @@ impl<R: Real> Backend for CpuSolver<R> {
             Some(_) => self.snapshot_across_ranks(),
             None => Ok(CpuSolver::snapshot(self)),
         }
+    }
+    fn snapshot_piece(&mut self) -> Option<anyhow::Result<crate::solver::backend::SnapshotPiece>> {
+        self.ranks.is_some().then(|| self.snapshot_piece_across_ranks())
     }
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {
         match self.ranks {

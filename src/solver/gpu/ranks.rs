@@ -29,7 +29,7 @@ pub struct GpuRankStages {
     ctx: GpuContext,
     params: Params,
     options: GpuOptions,
-    /// The scene's walls (every rank holds all of them), in the initial state's form.
+    /// The walls near the rank's slab, in the initial state's form.
     walls: InitialState,
     /// Made on the first step, with room for `capacity` particles.
     solver: Option<GpuSolver>,
@@ -41,18 +41,10 @@ pub struct GpuRankStages {
 }
 
 impl GpuRankStages {
-    /// The stages on `ctx` for the scene's `params`, with the walls of `initial`, for a rank of
-    /// `comm`. `why`: how the adapter was chosen.
-    pub fn new(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions, why: String, comm: Arc<dyn Communicator>) -> Self {
-        let walls = InitialState {
-            fluid_positions: Vec::new(),
-            fluid_velocities: Vec::new(),
-            fluid_densities: Vec::new(),
-            wall_positions: initial.wall_positions.clone(),
-            wall_masses: initial.wall_masses.clone(),
-            wall_boundaries: initial.wall_boundaries.clone(),
-        };
-        GpuRankStages { ctx, params: params.clone(), options, walls, solver: None, capacity: 0, why, comm }
+    /// The stages on `ctx` for the scene's `params`, for a rank of `comm` (the walls come
+    /// with [`DeviceStages::set_walls`]). `why`: how the adapter was chosen.
+    pub fn new(ctx: GpuContext, params: &Params, options: GpuOptions, why: String, comm: Arc<dyn Communicator>) -> Self {
+        GpuRankStages { ctx, params: params.clone(), options, walls: InitialState::default(), solver: None, capacity: 0, why, comm }
     }
 
     /// A solver with buffers for `capacity` particles (placeholders at the domain's lower
@@ -72,6 +64,17 @@ impl GpuRankStages {
 impl DeviceStages<f32> for GpuRankStages {
     fn describe(&self) -> String {
         format!("{} ({})", self.ctx.describe(), self.why)
+    }
+
+    fn set_walls(&mut self, walls: &InitialState) {
+        self.walls = InitialState {
+            wall_positions: walls.wall_positions.clone(),
+            wall_masses: walls.wall_masses.clone(),
+            wall_boundaries: walls.wall_boundaries.clone(),
+            ..InitialState::default()
+        };
+        // Made again, with these walls, at the next step.
+        self.solver = None;
     }
 
     fn run_step(&mut self, step: u64, held: HeldArrays<'_, f32>) -> anyhow::Result<f64> {
