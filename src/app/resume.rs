@@ -4,7 +4,7 @@ use super::args::RunArgs;
 use super::errors::InputError;
 use super::run::{exit_code_of, report_run, run, steps_for_time, ResumedRun, RunOptions};
 use super::signals;
-use crate::io::checkpoint::{read, Checkpoint, CHECKPOINT_FILE};
+use crate::io::checkpoint::{read, read_where, Checkpoint, CheckpointFile, CHECKPOINT_FILE};
 use crate::io::rundir::remove_partial_files;
 use crate::io::summary::Summary;
 use crate::model::scene::{Scene, SceneOrigin};
@@ -25,7 +25,13 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
         ))
         .into());
     }
-    let c = read(&path).map_err(|e| InputError(format!("--resume: {e}")))?;
+    // Across ranks each rank reads only its part of the particles, once its backend is open;
+    // here the rest (a read that keeps no particle).
+    let c = match ranks {
+        None => read(&path),
+        Some(_) => read_where(&path, &mut |_, _| false).map(|(c, _)| c),
+    }
+    .map_err(|e| InputError(format!("--resume: {e}")))?;
     let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::File(path.clone()))?;
     let params = scene.params();
     let step = c.state.step;
@@ -60,7 +66,14 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
             backend.adapter()
         );
     }
-    let summary = resume_with(backend, dir, &c, end, !args.quiet && writes_files, writes_files)?;
+    let summary = match ranks {
+        None => resume_with(backend, dir, &c, end, !args.quiet && writes_files, writes_files)?,
+        Some(_) => {
+            let restored = backend.restore_state_part(&mut CheckpointFile(&path)).unwrap_or_else(|| Err(anyhow::anyhow!("the backend does not run across ranks")));
+            restored.with_context(|| format!("cannot restore the checkpoint in {}", dir.display()))?;
+            continue_run(backend, dir, &c, end, !args.quiet && writes_files, writes_files)?
+        }
+    };
     if !writes_files {
         return Ok(exit_code_of(&summary));
     }
@@ -70,8 +83,13 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
 /// Restores `c` into `backend` (a fresh one of the kind that saved it) and runs on to step
 /// `end`, writing into `dir` with the settings of the interrupted run.
 pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u64, progress: bool, writes_files: bool) -> anyhow::Result<Summary> {
-    let step = c.state.step;
     backend.restore_state(&c.state).with_context(|| format!("cannot restore the checkpoint in {}", dir.display()))?;
+    continue_run(backend, dir, c, end, progress, writes_files)
+}
+
+/// Runs a backend that holds the state of `c` on to step `end` (see [`resume_with`]).
+fn continue_run(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u64, progress: bool, writes_files: bool) -> anyhow::Result<Summary> {
+    let step = c.state.step;
     log::info!("resuming {} at step {step} towards step {end}", dir.display());
     let opts = RunOptions {
         steps: end.saturating_sub(step),

@@ -410,8 +410,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
 /// Writes the run's checkpoint (`DIR/checkpoint.wgsph`) at the backend's step.
 fn write_checkpoint(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions, end: u64, last_snapshot: Option<&Path>, max_speed: f64) -> anyhow::Result<()> {
     if !opts.writes_files {
-        // The state is gathered from every rank; the rank that writes it asks for the rest.
-        backend.save_state_header()?;
+        // Across ranks the state streams to the rank that writes it, piece by piece: the
+        // other ranks make the same requests and write nothing.
+        checkpoint::take_part_in_save(backend)?;
         return Ok(());
     }
     let path = opts.out.join(CHECKPOINT_FILE);

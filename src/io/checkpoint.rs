@@ -16,7 +16,7 @@ use crate::io::atomic::AtomicFile;
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::surface::MeshFormat;
 use crate::model::state::{BackendState, BadStep};
-use crate::solver::{Backend, StateArray, StatePiece};
+use crate::solver::{Backend, StateArray, StatePiece, StateSource};
 use anyhow::Context;
 use serde::ser::{Error as _, SerializeSeq, Serializer};
 use serde::{Deserialize, Serialize};
@@ -152,6 +152,11 @@ impl std::io::Write for Payload<'_> {
 /// and checksum, a second decodes it, so the host never holds the file's bytes besides the
 /// state decoded from them.
 pub fn read(path: &Path) -> Result<Checkpoint, CheckpointError> {
+    read_with(path, |de| Checkpoint::deserialize(de))
+}
+
+/// [`read`] with the payload decoded by `decode`.
+fn read_with<T>(path: &Path, decode: impl for<'de> FnOnce(&mut PayloadDeserializer<'de>) -> postcard::Result<T>) -> Result<T, CheckpointError> {
     use std::io::{BufReader, Read, Seek, SeekFrom};
     let p = path.display().to_string();
     let io = |source| CheckpointError::Io { path: p.clone(), source };
@@ -201,9 +206,8 @@ pub fn read(path: &Path) -> Result<Checkpoint, CheckpointError> {
     // Room for the payload's strings (the scene's TOML and the run's names), which postcard
     // decodes through this buffer; the particle arrays go straight into the state.
     let mut scratch = vec![0u8; (payload_len as usize).min(16 << 20)];
-    postcard::from_io((r.take(payload_len), scratch.as_mut_slice()))
-        .map(|(c, _)| c)
-        .map_err(|e| corrupt(&format!("cannot decode the payload: {e}")))
+    let mut de = postcard::Deserializer::from_flavor(postcard::de_flavors::io::io::IOReader::new(r.take(payload_len), scratch.as_mut_slice()));
+    decode(&mut de).map_err(|e| corrupt(&format!("cannot decode the payload: {e}")))
 }
 
 /// The checkpoint of a backend's current state.
@@ -217,6 +221,12 @@ pub fn capture(backend: &mut dyn Backend, scene_toml: &str, run: RunRecord) -> a
 /// is made where the backend keeps them elsewhere (the GPU).
 pub fn save(backend: &mut dyn Backend, scene_toml: &str, run: &RunRecord, path: &Path) -> anyhow::Result<()> {
     write_with_state(path, scene_toml, run, |w| write_state_in_pieces(backend, w, crate::solver::gpu::buffers::STREAM_CHUNK))
+}
+
+/// Across ranks, what a rank that does not write the checkpoint does while rank 0 [`save`]s
+/// it: the same requests for the state's pieces (they are collective), written nowhere.
+pub fn take_part_in_save(backend: &mut dyn Backend) -> anyhow::Result<()> {
+    write_state_in_pieces(backend, &mut std::io::sink(), crate::solver::gpu::buffers::STREAM_CHUNK)
 }
 
 /// Writes the postcard encoding of the backend's [`BackendState`] to `w`, the particle arrays
@@ -314,5 +324,240 @@ impl Serialize for StateArrayInPieces<'_, '_> {
             return Err(S::Error::custom("the backend could not hand its state over"));
         }
         seq.take().expect("still open").end()
+    }
+}
+
+/// Reads a checkpoint keeping only the particles whose index and position `keep` accepts (in
+/// the state's order), streaming the file as [`read`] does: what one rank of several reads to
+/// resume, without holding every particle. Returns the checkpoint with those particles (and
+/// DFSPH's warm starts, by id in the file, those of the kept particles in their order) and
+/// their indices in the saved state.
+pub fn read_where(path: &Path, keep: &mut dyn FnMut(usize, [f64; 3]) -> bool) -> Result<(Checkpoint, Vec<u64>), CheckpointError> {
+    let mut kept = Vec::new();
+    let c = read_with(path, |de| serde::de::DeserializeSeed::deserialize(CheckpointSeed { keep, kept: &mut kept }, de))?;
+    Ok((c, kept))
+}
+
+/// Every particle position of a checkpoint's state, in order, none kept (a rank counts them to
+/// cut its slabs before it reads its part).
+pub fn visit_positions(path: &Path, visit: &mut dyn FnMut([f64; 3])) -> Result<(), CheckpointError> {
+    read_where(path, &mut |_, p| {
+        visit(p);
+        false
+    })
+    .map(|_| ())
+}
+
+/// A checkpoint file as a [`StateSource`]: one rank of several reads its part, streaming.
+pub struct CheckpointFile<'a>(pub &'a Path);
+
+impl StateSource for CheckpointFile<'_> {
+    fn visit_positions(&mut self, visit: &mut dyn FnMut([f64; 3])) -> anyhow::Result<()> {
+        Ok(visit_positions(self.0, visit)?)
+    }
+    fn read_kept(&mut self, keep: &mut dyn FnMut(usize, [f64; 3]) -> bool) -> anyhow::Result<(BackendState, Vec<u64>)> {
+        let (c, kept) = read_where(self.0, keep)?;
+        Ok((c.state, kept))
+    }
+}
+
+/// Decodes a checkpoint's payload with a deserialiser `'de` of postcard over the file.
+type PayloadDeserializer<'de> = postcard::Deserializer<'de, postcard::de_flavors::io::io::IOReader<'de, std::io::Take<std::io::BufReader<std::fs::File>>>>;
+
+/// The seed of a [`Checkpoint`] whose particle arrays keep what `keep` accepts: postcard
+/// stores a struct as its fields in order, so the checkpoint is read as a tuple of its fields.
+struct CheckpointSeed<'k> {
+    keep: &'k mut dyn FnMut(usize, [f64; 3]) -> bool,
+    kept: &'k mut Vec<u64>,
+}
+
+/// The fields of [`BackendState`], in its order (the tests check a filtered read that keeps
+/// every particle against [`read`]).
+const STATE_FIELDS: usize = 17;
+
+impl<'de> serde::de::DeserializeSeed<'de> for CheckpointSeed<'_> {
+    type Value = Checkpoint;
+    fn deserialize<D: serde::Deserializer<'de>>(self, de: D) -> Result<Checkpoint, D::Error> {
+        de.deserialize_tuple(3, self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for CheckpointSeed<'_> {
+    type Value = Checkpoint;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a wgsph checkpoint")
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Checkpoint, A::Error> {
+        use serde::de::Error;
+        let missing = || A::Error::custom("the checkpoint ends early");
+        let scene_toml: String = seq.next_element()?.ok_or_else(missing)?;
+        let run: RunRecord = seq.next_element()?.ok_or_else(missing)?;
+        let state = seq.next_element_seed(StateSeed { keep: self.keep, kept: self.kept })?.ok_or_else(missing)?;
+        Ok(Checkpoint { scene_toml, run, state })
+    }
+}
+
+struct StateSeed<'k> {
+    keep: &'k mut dyn FnMut(usize, [f64; 3]) -> bool,
+    kept: &'k mut Vec<u64>,
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for StateSeed<'_> {
+    type Value = BackendState;
+    fn deserialize<D: serde::Deserializer<'de>>(self, de: D) -> Result<BackendState, D::Error> {
+        de.deserialize_tuple(STATE_FIELDS, self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for StateSeed<'_> {
+    type Value = BackendState;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a saved state")
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<BackendState, A::Error> {
+        use serde::de::Error;
+        let missing = || A::Error::custom("the saved state ends early");
+        let kind = seq.next_element()?.ok_or_else(missing)?;
+        let step = seq.next_element()?.ok_or_else(missing)?;
+        let positions = seq.next_element_seed(KeptPositions { keep: self.keep, kept: &mut *self.kept })?.ok_or_else(missing)?;
+        let kept: &[u64] = self.kept;
+        let velocities = seq.next_element_seed(Kept::<[f64; 3]>::at(kept))?.ok_or_else(missing)?;
+        let ids: Vec<u32> = seq.next_element_seed(Kept::<u32>::at(kept))?.ok_or_else(missing)?;
+        Ok(BackendState {
+            kind,
+            step,
+            positions,
+            velocities,
+            ids: ids.clone(),
+            non_finite: seq.next_element()?.ok_or_else(missing)?,
+            escaped: seq.next_element()?.ok_or_else(missing)?,
+            first_bad_step: seq.next_element()?.ok_or_else(missing)?,
+            max_density: seq.next_element()?.ok_or_else(missing)?,
+            max_speed: seq.next_element()?.ok_or_else(missing)?,
+            bad_step: seq.next_element()?.ok_or_else(missing)?,
+            time: seq.next_element()?.ok_or_else(missing)?,
+            dt_min_max_last: seq.next_element()?.ok_or_else(missing)?,
+            gpu_status: seq.next_element()?.ok_or_else(missing)?,
+            warm_start: seq.next_element_seed(KeptById::of(&ids))?.ok_or_else(missing)?,
+            iterations: seq.next_element()?.ok_or_else(missing)?,
+            densities: seq.next_element_seed(Kept::<f64>::at(kept))?.ok_or_else(missing)?,
+        })
+    }
+}
+
+/// The positions `keep` accepts, with their indices noted in `kept`.
+struct KeptPositions<'k> {
+    keep: &'k mut dyn FnMut(usize, [f64; 3]) -> bool,
+    kept: &'k mut Vec<u64>,
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for KeptPositions<'_> {
+    type Value = Vec<[f64; 3]>;
+    fn deserialize<D: serde::Deserializer<'de>>(self, de: D) -> Result<Vec<[f64; 3]>, D::Error> {
+        de.deserialize_seq(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for KeptPositions<'_> {
+    type Value = Vec<[f64; 3]>;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("the positions")
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<[f64; 3]>, A::Error> {
+        let mut out = Vec::new();
+        let mut i = 0;
+        while let Some(p) = seq.next_element::<[f64; 3]>()? {
+            if (self.keep)(i, p) {
+                out.push(p);
+                self.kept.push(i as u64);
+            }
+            i += 1;
+        }
+        Ok(out)
+    }
+}
+
+/// The elements of an array by particle id at the `ids` of the kept particles, in their
+/// order; an empty array stays empty (WCSPH has no warm starts).
+struct KeptById {
+    /// Each kept id's place among the kept particles.
+    place: std::collections::HashMap<u32, usize>,
+}
+
+impl KeptById {
+    fn of(ids: &[u32]) -> Self {
+        KeptById { place: ids.iter().enumerate().map(|(k, &id)| (id, k)).collect() }
+    }
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for KeptById {
+    type Value = Vec<[f64; 2]>;
+    fn deserialize<D: serde::Deserializer<'de>>(self, de: D) -> Result<Vec<[f64; 2]>, D::Error> {
+        de.deserialize_seq(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for KeptById {
+    type Value = Vec<[f64; 2]>;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("an array by particle id")
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<[f64; 2]>, A::Error> {
+        let mut out = Vec::new();
+        let mut id = 0u32;
+        let mut found = 0;
+        while let Some(x) = seq.next_element::<[f64; 2]>()? {
+            if let Some(&k) = self.place.get(&id) {
+                if out.is_empty() {
+                    out = vec![[f64::NAN; 2]; self.place.len()];
+                }
+                out[k] = x;
+                found += 1;
+            }
+            id += 1;
+        }
+        if found != self.place.len() && id > 0 {
+            return Err(serde::de::Error::custom(format!("the warm starts of {} of {} particles are missing", self.place.len() - found, self.place.len())));
+        }
+        Ok(out)
+    }
+}
+
+/// The elements of a particle array at the `kept` indices (ascending); an empty array stays
+/// empty (the carried densities of a scene without continuity density).
+struct Kept<'k, T> {
+    kept: &'k [u64],
+    _element: std::marker::PhantomData<T>,
+}
+
+impl<'k, T> Kept<'k, T> {
+    fn at(kept: &'k [u64]) -> Self {
+        Kept { kept, _element: std::marker::PhantomData }
+    }
+}
+
+impl<'de, T: Deserialize<'de>> serde::de::DeserializeSeed<'de> for Kept<'_, T> {
+    type Value = Vec<T>;
+    fn deserialize<D: serde::Deserializer<'de>>(self, de: D) -> Result<Vec<T>, D::Error> {
+        de.deserialize_seq(self)
+    }
+}
+
+impl<'de, T: Deserialize<'de>> serde::de::Visitor<'de> for Kept<'_, T> {
+    type Value = Vec<T>;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a particle array")
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<T>, A::Error> {
+        let mut out = Vec::with_capacity(self.kept.len());
+        let (mut i, mut next) = (0u64, 0);
+        while let Some(x) = seq.next_element::<T>()? {
+            if next < self.kept.len() && self.kept[next] == i {
+                out.push(x);
+                next += 1;
+            }
+            i += 1;
+        }
+        Ok(out)
     }
 }

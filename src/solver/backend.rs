@@ -35,6 +35,41 @@ pub fn id_block(total: u64, ranks: usize, rank: usize) -> std::ops::Range<u64> {
     start(rank)..start(rank + 1)
 }
 
+/// A saved state that one rank of several reads its part of, without holding every particle
+/// (a checkpoint file, `io::checkpoint`, or a state held whole).
+pub trait StateSource {
+    /// Every particle's position, in the state's order.
+    fn visit_positions(&mut self, visit: &mut dyn FnMut([f64; 3])) -> anyhow::Result<()>;
+    /// The state with only the particles that `keep(index, position)` accepts, and their
+    /// indices in the state, ascending; DFSPH's warm starts (by id in the state) are those of
+    /// the kept particles, in their order.
+    fn read_kept(&mut self, keep: &mut dyn FnMut(usize, [f64; 3]) -> bool) -> anyhow::Result<(BackendState, Vec<u64>)>;
+}
+
+/// A state held whole as a [`StateSource`].
+pub struct WholeState<'a>(pub &'a BackendState);
+
+impl StateSource for WholeState<'_> {
+    fn visit_positions(&mut self, visit: &mut dyn FnMut([f64; 3])) -> anyhow::Result<()> {
+        self.0.positions.iter().for_each(|&p| visit(p));
+        Ok(())
+    }
+    fn read_kept(&mut self, keep: &mut dyn FnMut(usize, [f64; 3]) -> bool) -> anyhow::Result<(BackendState, Vec<u64>)> {
+        let state = self.0;
+        let kept: Vec<u64> = (0..state.positions.len()).filter(|&i| keep(i, state.positions[i])).map(|i| i as u64).collect();
+        let pick = |v: &Vec<[f64; 3]>| kept.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
+        let part = BackendState {
+            positions: pick(&state.positions),
+            velocities: pick(&state.velocities),
+            ids: kept.iter().map(|&i| state.ids[i as usize]).collect(),
+            densities: if state.densities.is_empty() { Vec::new() } else { kept.iter().map(|&i| state.densities[i as usize]).collect() },
+            warm_start: if state.warm_start.is_empty() { Vec::new() } else { kept.iter().map(|&i| state.warm_start[state.ids[i as usize] as usize]).collect() },
+            ..state.clone()
+        };
+        Ok((part, kept))
+    }
+}
+
 /// One of the particle arrays of a saved state ([`BackendState`]), in the backend's internal
 /// order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -142,13 +177,7 @@ pub trait Backend {
     /// [`Backend::save_state`] without its particle arrays (left empty), which
     /// [`Backend::visit_state_array`] hands over in pieces.
     fn save_state_header(&mut self) -> anyhow::Result<BackendState> {
-        let mut state = self.save_state()?;
-        state.positions = Vec::new();
-        state.velocities = Vec::new();
-        state.ids = Vec::new();
-        state.warm_start = Vec::new();
-        state.densities = Vec::new();
-        Ok(state)
+        Ok(state_header(self.save_state()?))
     }
     /// Elements of one particle array of the saved state: every fluid particle's, but DFSPH's
     /// warm start, which only DFSPH has.
@@ -161,19 +190,16 @@ pub trait Backend {
     }
     /// One particle array of the saved state, in pieces of at most `chunk` particles, in order.
     fn visit_state_array(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
-        let state = self.save_state()?;
-        let chunk = chunk.max(1) as usize;
-        match array {
-            StateArray::Positions => state.positions.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
-            StateArray::Velocities => state.velocities.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
-            StateArray::Ids => state.ids.chunks(chunk).try_for_each(|c| visit(StatePiece::Ids(c))),
-            StateArray::WarmStart => state.warm_start.chunks(chunk).try_for_each(|c| visit(StatePiece::Pairs(c))),
-            StateArray::Densities => state.densities.chunks(chunk).try_for_each(|c| visit(StatePiece::Scalars(c))),
-        }
+        visit_state_pieces(&self.save_state()?, array, chunk, visit)
     }
     /// Continues from a saved state: the following steps are bitwise those the saving backend
     /// would have computed (on the same adapter or float type).
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()>;
+    /// Across ranks: [`Backend::restore_state`] with each rank reading only its part of the
+    /// state from `source` (collective). `None` alone.
+    fn restore_state_part(&mut self, _source: &mut dyn StateSource) -> Option<anyhow::Result<()>> {
+        None
+    }
     /// The samples of the scene's probes taken since the last call, in step order: each holds
     /// every probe's values, for the steps at which some probe was due
     /// ([`crate::model::probes::Probes::samples_step`]). A few numbers per sample: no particle
@@ -193,6 +219,24 @@ pub trait Backend {
     /// every rank must take together, such as stopping at a signal one rank saw first.
     fn any_rank(&mut self, flag: bool) -> anyhow::Result<bool> {
         Ok(flag)
+    }
+}
+
+/// `state` without its particle arrays (left empty).
+pub fn state_header(mut state: BackendState) -> BackendState {
+    (state.positions, state.velocities, state.ids, state.warm_start, state.densities) = Default::default();
+    state
+}
+
+/// One particle array of `state` in pieces of at most `chunk` particles, in order.
+pub fn visit_state_pieces(state: &BackendState, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
+    let chunk = chunk.max(1) as usize;
+    match array {
+        StateArray::Positions => state.positions.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
+        StateArray::Velocities => state.velocities.chunks(chunk).try_for_each(|c| visit(StatePiece::Vectors(c))),
+        StateArray::Ids => state.ids.chunks(chunk).try_for_each(|c| visit(StatePiece::Ids(c))),
+        StateArray::WarmStart => state.warm_start.chunks(chunk).try_for_each(|c| visit(StatePiece::Pairs(c))),
+        StateArray::Densities => state.densities.chunks(chunk).try_for_each(|c| visit(StatePiece::Scalars(c))),
     }
 }
 

@@ -13,6 +13,6 @@ pub mod gpu;
 pub mod mpi;
 pub mod simulation;
 
-pub use backend::{id_block, Backend, DfsphStage, SnapshotPiece, SnapshotRow, StateArray, StatePiece};
+pub use backend::{id_block, Backend, DfsphStage, SnapshotPiece, SnapshotRow, StateArray, StatePiece, StateSource, WholeState};
 pub use communicator::{Communicator, LocalGroup, Ranks};
 pub use simulation::{open, open_with, BackendChoice, Device, Precision, Simulation, Solver};

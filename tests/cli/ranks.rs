@@ -187,15 +187,23 @@ fn a_rank_without_particles_takes_part() {
 fn a_checkpoint_of_two_ranks_continues_on_four_and_on_one() {
     let Some(m) = mpi() else { return };
     let tmp = tempfile::tempdir().unwrap();
-    let common = ["run", "dam_break", "--particles", "800", "--backend", "cpu", "--quiet"];
-    run_ok(mpirun(&m, 1, &[&common[..], &["--steps", "60", "--out", "straight"]].concat(), tmp.path()));
-    let straight = last_snapshot(&tmp.path().join("straight"));
-    for (name, ranks) in [("four", 4), ("one", 1)] {
-        run_ok(mpirun(&m, 2, &[&common[..], &["--steps", "30", "--checkpoint-every", "30", "--out", name]].concat(), tmp.path()));
-        run_ok(mpirun(&m, ranks, &["run", "--resume", name, "--steps", "30", "--quiet"], tmp.path()));
-        let s = summary(&tmp.path().join(name));
-        assert_eq!(s.status, RunStatus::Completed);
-        assert!(last_snapshot(&tmp.path().join(name)) == straight, "saved on 2 ranks, continued on {ranks}: not the uninterrupted run");
+    // WCSPH, and DFSPH (whose warm starts travel with the particles and are read per rank).
+    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/dam_break.toml")).unwrap();
+    let dfsph = tmp.path().join("dam_break_dfsph.toml");
+    std::fs::write(&dfsph, base.replace("speed_of_sound = 40.0", "solver = \"dfsph\"").replace("dt = 0.00025", "dt = 0.001")).unwrap();
+    for scene in ["dam_break", dfsph.to_str().unwrap()] {
+        let common = ["run", scene, "--particles", "800", "--backend", "cpu", "--quiet"];
+        let out = |name: &str| format!("{name}-{}", scene.len());
+        run_ok(mpirun(&m, 1, &[&common[..], &["--steps", "60", "--out", &out("straight")]].concat(), tmp.path()));
+        let straight = last_snapshot(&tmp.path().join(out("straight")));
+        for (name, ranks) in [("four", 4), ("one", 1)] {
+            let name = out(name);
+            run_ok(mpirun(&m, 2, &[&common[..], &["--steps", "30", "--checkpoint-every", "30", "--out", &name]].concat(), tmp.path()));
+            run_ok(mpirun(&m, ranks, &["run", "--resume", &name, "--steps", "30", "--quiet"], tmp.path()));
+            let s = summary(&tmp.path().join(&name));
+            assert_eq!(s.status, RunStatus::Completed);
+            assert!(last_snapshot(&tmp.path().join(&name)) == straight, "{scene}: saved on 2 ranks, continued on {ranks}: not the uninterrupted run");
+        }
     }
 }
 

@@ -230,6 +230,48 @@ fn gpu_snapshots_streamed_in_pieces_and_passes_equal_the_whole_array_files_on_ev
 }
 
 #[test]
+fn a_checkpoint_read_in_part_keeps_exactly_the_particles_asked_for() {
+    use wgsph::io::checkpoint::{read_where, visit_positions};
+    // Continuity density (an array per particle) and DFSPH (warm starts by id, read whole).
+    let continuity = common::TestScene::from(Scene::builtin("dam_break").unwrap().with_fluid_particles(400)).continuity().build();
+    let dfsph = common::TestScene::from(Scene::builtin("dam_break").unwrap().with_fluid_particles(400)).dfsph().dt(0.001).build();
+    for scene in [continuity, dfsph] {
+        let mut cpu = common::cpu::<f64>(&scene);
+        cpu.step(5);
+        let dir = tempfile::tempdir().unwrap();
+        let opts = RunOptions { steps: 10, out: dir.path().to_path_buf(), checkpoint_every: 5, ..Default::default() };
+        let path = dir.path().join("c.wgsph");
+        let record = run_record(&cpu, &opts, 10, None, 0.5);
+        wgsph::io::checkpoint::save(&mut cpu, &scene.to_toml(), &record, &path).unwrap();
+        let whole = read(&path).unwrap();
+        // DFSPH's warm starts, by id in the file, come in the kept particles' order.
+        let warm_of = |kept: &[u64]| if whole.state.warm_start.is_empty() { Vec::new() } else { kept.iter().map(|&i| whole.state.warm_start[whole.state.ids[i as usize] as usize]).collect::<Vec<_>>() };
+        // Keeping every particle reads what the whole read reads.
+        let (mut all, kept) = read_where(&path, &mut |_, _| true).unwrap();
+        assert!(all.state.warm_start == warm_of(&kept));
+        all.state.warm_start = whole.state.warm_start.clone();
+        assert!(all == whole && kept.len() == whole.state.positions.len());
+        // Every third particle and those below y = 0.1, by index and position.
+        let (part, kept) = read_where(&path, &mut |i, p| i % 3 == 0 || p[1] < 0.1).unwrap();
+        let expected: Vec<u64> = (0..whole.state.positions.len()).filter(|&i| i % 3 == 0 || whole.state.positions[i][1] < 0.1).map(|i| i as u64).collect();
+        assert_eq!(kept, expected);
+        assert!(kept.len() < whole.state.positions.len());
+        let at = |i: &u64| *i as usize;
+        assert!(part.state.positions == kept.iter().map(|i| whole.state.positions[at(i)]).collect::<Vec<_>>());
+        assert!(part.state.velocities == kept.iter().map(|i| whole.state.velocities[at(i)]).collect::<Vec<_>>());
+        assert!(part.state.ids == kept.iter().map(|i| whole.state.ids[at(i)]).collect::<Vec<_>>());
+        assert!(part.state.densities == if whole.state.densities.is_empty() { Vec::new() } else { kept.iter().map(|i| whole.state.densities[at(i)]).collect::<Vec<_>>() });
+        assert!(part.state.warm_start == warm_of(&kept) && part.state.step == whole.state.step && part.scene_toml == whole.scene_toml && part.run == whole.run);
+        // Keeping none: the header alone; the positions visited in order.
+        let (header, none) = read_where(&path, &mut |_, _| false).unwrap();
+        assert!(none.is_empty() && header.state.positions.is_empty() && header.state.time == whole.state.time);
+        let mut seen = Vec::new();
+        visit_positions(&path, &mut |p| seen.push(p)).unwrap();
+        assert!(seen == whole.state.positions);
+    }
+}
+
+#[test]
 fn gpu_checkpoints_streamed_in_pieces_equal_the_whole_state_ones_and_resume_bitwise_on_every_adapter() {
     // Adaptive dt: the status words (time, dt and its compensation) are in the state too;
     // continuity density: the densities the particles carry.

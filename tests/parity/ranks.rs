@@ -173,17 +173,10 @@ fn every_rank_writes_its_piece_of_the_one_snapshot_file_one_process_writes() {
 /// wall pressure (from the fluid near the wall, one ghost layer more): both read the walls a
 /// rank holds, which follow the slab.
 fn moving_block_akinci_adami() -> Scene {
-    TestScene::new()
-        .named("block")
-        .domain([-0.1, -0.1, -0.1], [0.3, 0.3, 1.3])
-        .container([0.0; 3], [0.2, 0.2, 1.2])
-        .gravity([0.0; 3])
-        .fluid([0.0; 3], [0.2, 0.2, 0.16])
-        .moving_at([0.0, 0.0, 0.5])
-        .clamp_negative_pressure(true)
-        .boundary_volume(wgsph::model::scene::BoundaryVolume::Akinci)
-        .boundary_pressure(BoundaryPressure::Adami)
-        .build()
+    let mut scene = moving_block();
+    scene.physics.boundary_volume = wgsph::model::scene::BoundaryVolume::Akinci;
+    scene.physics.boundary_pressure = BoundaryPressure::Adami;
+    scene
 }
 
 #[test]
@@ -203,6 +196,29 @@ fn each_rank_holds_the_walls_near_its_slab_and_takes_new_ones_when_the_bounds_mo
     assert!(runs[0].1.stats.rebalances > 0, "the bounds moved");
     assert!(runs.iter().any(|r| r.0 != r.1.walls), "a rank whose bounds moved took other walls: {:?}", runs.iter().map(|r| (r.0, r.1.walls)).collect::<Vec<_>>());
     assert!(runs[0].3 == one, "3 ranks with walls per rank, Akinci volumes and Adami pressure against one rank");
+}
+
+#[test]
+fn a_checkpoint_streams_from_every_rank_in_pieces_to_the_bytes_one_rank_writes() {
+    use wgsph::io::checkpoint::write_state_in_pieces;
+    // The moving block (migration, moving bounds), DFSPH's warm starts, continuity density;
+    // before the first step (the initial order) and after steps (the cell order); pieces of 7
+    // particles, so every rank's particles spread over many pieces.
+    let continuity = TestScene::small_tank().continuity().build();
+    for (scene, steps) in [(moving_block(), 40), (moving_block(), 0), (moving_block_dfsph(), 30), (continuity, 20)] {
+        let mut single = open(&scene, &BackendChoice::cpu(Precision::F64)).expect("opens");
+        single.step(steps).expect("steps");
+        let mut one = Vec::new();
+        write_state_in_pieces(single.backend(), &mut one, 7).expect("writes");
+        let streamed = on_ranks(&scene, 3, 10, Precision::F64, &|b: &mut dyn Backend| {
+            b.step(steps)?;
+            let mut bytes = Vec::new();
+            write_state_in_pieces(b, &mut bytes, 7)?;
+            Ok(bytes)
+        });
+        assert!(streamed[0] == one, "{} after {steps} steps: the checkpoint streamed from 3 ranks against one rank's", scene.name);
+        assert!(streamed[1].len() < one.len() / 2, "the other ranks receive no particle");
+    }
 }
 
 #[test]

@@ -53,7 +53,9 @@ pub struct StepParts<'a, R: Real> {
     /// Receives the predicted velocities; afterwards it holds the velocities after the
     /// divergence solve.
     pub scratch: &'a mut Vec<V3<R>>,
-    pub ids: &'a [u32],
+    /// Each slot's entry in DFSPH's warm-start arrays: its id alone, across ranks its place in
+    /// the rank's last exchange.
+    pub warm_index: &'a [u32],
     pub densities: &'a mut [R],
     pub pressures: &'a mut [R],
     /// The non-pressure accelerations (adaptive dt), then the step's accelerations
@@ -167,7 +169,7 @@ impl<R: Real> DfsphCpu<R> {
             fluid: Neighbours { positions: s.positions, starts: s.starts },
             walls: Neighbours { positions: s.wall_positions, starts: s.wall_starts },
             wall_masses: s.wall_masses,
-            ids: s.ids,
+            ids: s.warm_index,
             warm_pressure: &self.warm_pressure,
             pressure_scale: self.pressure_scale(p),
             factor_epsilon: R::of(factor_epsilon(p.h)),
@@ -201,7 +203,7 @@ impl<R: Real> DfsphCpu<R> {
         let mut sums = std::mem::take(&mut self.divergence_sum);
         let warm = self.settings.warm_start;
         if warm {
-            let last = WarmStart { ids: s.ids, last: &self.warm_divergence, share: R::of(WARM_START_SHARE) };
+            let last = WarmStart { ids: s.warm_index, last: &self.warm_divergence, share: R::of(WARM_START_SHARE) };
             divergence_warm_start(&self.solve_input(volume, &ghosts), s.velocities, &last, &mut stiffness);
             divergence_apply(&self.solve_input(volume, &ghosts), &stiffness, s.velocities, &mut sums);
             s.sync_velocities();
@@ -286,7 +288,7 @@ impl<R: Real> DfsphCpu<R> {
         let mut sums = std::mem::take(&mut self.pressure_sum);
         let warm = self.settings.warm_start;
         if warm {
-            let last = WarmStart { ids: s.ids, last: &self.warm_pressure, share: R::of(WARM_START_SHARE) };
+            let last = WarmStart { ids: s.warm_index, last: &self.warm_pressure, share: R::of(WARM_START_SHARE) };
             pressure_warm_start(&self.solve_input(volume, &ghosts), s.velocities, s.densities, rest_density, dt, &last, &mut stiffness);
             pressure_apply(&self.solve_input(volume, &ghosts), &stiffness, inv_dt, s.velocities, &mut sums);
             s.sync_velocities();
@@ -327,7 +329,7 @@ impl<R: Real> DfsphCpu<R> {
         let domain = (V3::from64(p.domain_min), V3::from64(p.domain_max));
         let ghosts: &[bool] = s.link.as_ref().map_or(&[], |l| &l.ghosts[..]);
         let found = integrate(s.positions, s.velocities, R::of(dt), s.backstops, domain, ghosts);
-        keep_warm_start(s.ids, &self.pressure_sum, &self.divergence_sum, &mut self.warm_pressure, &mut self.warm_divergence);
+        keep_warm_start(s.warm_index, &self.pressure_sum, &self.divergence_sum, &mut self.warm_pressure, &mut self.warm_divergence);
         step_accelerations(s.scratch, s.velocities, R::of(dt), s.accelerations);
         self.last_dt = dt;
         (found, dt)

@@ -14,6 +14,7 @@ use super::CpuSolver;
 use crate::model::initial::{FluidParticle, InitialState};
 use crate::model::real::{Real, V3};
 use crate::model::state::{BackendState, Snapshot, StepFields};
+use crate::solver::backend::{StateArray, StatePiece, StateSource};
 use super::probes::{self, ProbeInput};
 use crate::model::probes::{Probe, ProbeGeometry};
 use crate::solver::communicator::{all_max, all_sum, Communicator};
@@ -546,10 +547,9 @@ impl<R: Real> CpuSolver<R> {
         });
         let mut solver = Self::new(params, &part);
         solver.ids = chosen.iter().map(|&i| i as u32).collect();
-        if let Some(d) = &mut solver.dfsph {
-            // Kept by id: room for every particle of the simulation.
-            d.warm_pressure = vec![R::zero(); total];
-            d.warm_divergence = vec![R::zero(); total];
+        if solver.dfsph.is_some() {
+            // In the held particles' order (they start from zero, as alone).
+            solver.warm_keys = (0..chosen.len() as u32).collect();
         }
         let counts_per_rank: Vec<u64> = (0..comm.size()).map(|r| slabs.layers_of(r).map(|l| counts[l as usize]).sum()).collect();
         let start_imbalance = imbalance(&counts_per_rank);
@@ -662,7 +662,7 @@ impl<R: Real> CpuSolver<R> {
                 held.rho.extend_from_slice(&self.carried_densities[slots.clone()]);
             }
             if let Some(d) = &self.dfsph {
-                held.warm.extend(self.ids[slots].iter().map(|&id| [d.warm_pressure[id as usize], d.warm_divergence[id as usize]]));
+                held.warm.extend(self.warm_keys[slots].iter().map(|&k| [d.warm_pressure[k as usize], d.warm_divergence[k as usize]]));
             }
         }
         held
@@ -749,13 +749,11 @@ impl<R: Real> CpuSolver<R> {
         self.ids = all.id;
         self.carried_densities = all.rho;
         if let Some(d) = &mut self.dfsph {
-            // Each held particle's warm start is its owner's (by id; the entries of particles
-            // this rank does not hold are not read).
-            for (&id, w) in self.ids.iter().zip(&all.warm) {
-                d.warm_pressure[id as usize] = w[0];
-                d.warm_divergence[id as usize] = w[1];
-            }
+            // Each held particle's warm start is its owner's, in the held order.
+            d.warm_pressure = all.warm.iter().map(|w| w[0]).collect();
+            d.warm_divergence = all.warm.iter().map(|w| w[1]).collect();
             d.resize(n);
+            self.warm_keys = (0..n as u32).collect();
         }
         for v in [&mut self.densities, &mut self.pressures] {
             v.resize(n, R::zero());
@@ -960,8 +958,8 @@ impl<R: Real> CpuSolver<R> {
                 r.push(s.carried_densities[i].to64());
             }
             if let Some(d) = &s.dfsph {
-                let id = s.ids[i] as usize;
-                r.extend([d.warm_pressure[id].to64(), d.warm_divergence[id].to64()]);
+                let k = s.warm_keys[i] as usize;
+                r.extend([d.warm_pressure[k].to64(), d.warm_divergence[k].to64()]);
             }
             r
         })?;
@@ -986,39 +984,144 @@ impl<R: Real> CpuSolver<R> {
         Ok(state)
     }
 
-    /// [`CpuSolver::restore_state`] across ranks (any rank count saved it): slabs of equal
-    /// counts for the state's particles, and this rank takes those in its slab, in the state's
-    /// order.
-    pub(super) fn restore_state_across_ranks(&mut self, state: &BackendState) -> anyhow::Result<()> {
+    /// [`crate::solver::Backend::save_state_header`] across ranks: this rank's step, time,
+    /// health and dt, which every rank shares (no particle is gathered).
+    pub(super) fn state_header_across_ranks(&self) -> BackendState {
+        crate::solver::backend::state_header(self.save_state())
+    }
+
+    /// Each own slot's place in the one-process order of the saved state: its index in the
+    /// initial or restored state before the first binning; after it, the particles of the
+    /// cells before its cell (the ranks' cell runs and their counts, all-gathered) plus its
+    /// place in the cell. Sorted by place.
+    fn places_in_one_process_order(&self) -> anyhow::Result<Vec<(usize, u64)>> {
         let part = self.ranks.as_ref().expect("only across ranks");
-        state.check_fits(&Self::state_kind(), part.total_fluid)?;
+        if let Some(first) = &part.first_order {
+            let mut places: Vec<(usize, u64)> = first.iter().enumerate().map(|(slot, &o)| (slot, o)).collect();
+            places.sort_unstable_by_key(|p| p.1);
+            return Ok(places);
+        }
+        let runs = self.own_cells(part);
+        let mine: Vec<f64> = runs.iter().flat_map(|r| [r.start as f64, (self.starts[r.end] - self.starts[r.start]) as f64]).collect();
+        let mut all: Vec<(u64, u64)> = part.comm.all_gather(&mine)?.iter().flat_map(|r| r.chunks_exact(2).map(|c| (c[0] as u64, c[1] as u64)).collect::<Vec<_>>()).collect();
+        all.sort_unstable();
+        // The particles before each run's first cell.
+        let mut before = std::collections::HashMap::with_capacity(runs.len());
+        let mut running = 0u64;
+        for (cell, count) in all {
+            before.insert(cell, running);
+            running += count;
+        }
+        let mut places = Vec::with_capacity(self.positions.len());
+        for run in runs {
+            let (first, offset) = (self.starts[run.start] as usize, before[&(run.start as u64)]);
+            places.extend((first..self.starts[run.end] as usize).map(|slot| (slot, offset + (slot - first) as u64)));
+        }
+        places.sort_unstable_by_key(|p| p.1);
+        Ok(places)
+    }
+
+    /// [`crate::solver::Backend::visit_state_array`] across ranks (collective): for each piece
+    /// of `chunk` places of the saved state's order (by id for DFSPH's warm starts), every rank
+    /// sends its own particles' values there to rank 0, which hands the piece to `visit`; the
+    /// other ranks visit nothing. No rank holds more than its own particles and one piece.
+    pub(super) fn visit_state_array_across_ranks(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        let total = crate::solver::backend::Backend::state_array_len(self, array) as u64;
+        let mut places = self.places_in_one_process_order()?;
+        if array == StateArray::WarmStart {
+            places = places.iter().map(|&(slot, _)| (slot, self.ids[slot] as u64)).collect();
+            places.sort_unstable_by_key(|p| p.1);
+        }
+        let width = match array {
+            StateArray::Positions | StateArray::Velocities => 3,
+            StateArray::WarmStart => 2,
+            StateArray::Ids | StateArray::Densities => 1,
+        };
+        let value = |slot: usize| -> Vec<f64> {
+            match array {
+                StateArray::Positions => self.positions[slot].to64().to_vec(),
+                StateArray::Velocities => self.velocities[slot].to64().to_vec(),
+                StateArray::Ids => vec![self.ids[slot] as f64],
+                StateArray::Densities => vec![self.carried_densities[slot].to64()],
+                StateArray::WarmStart => {
+                    let (d, k) = (self.dfsph.as_ref().expect("DFSPH's array"), self.warm_keys[slot] as usize);
+                    vec![d.warm_pressure[k].to64(), d.warm_divergence[k].to64()]
+                }
+            }
+        };
+        let comm = self.ranks.as_ref().expect("only across ranks").comm.clone();
+        let chunk = chunk.max(1);
+        let mut next = 0;
+        let mut start = 0u64;
+        while start < total {
+            let end = (start + chunk).min(total);
+            let mut mine = Vec::new();
+            while next < places.len() && places[next].1 < end {
+                mine.push((places[next].1 - start) as f64);
+                mine.extend(value(places[next].0));
+                next += 1;
+            }
+            let t0 = Instant::now();
+            let gathered = comm.gather(&mine)?;
+            if let Some(part) = &mut self.ranks {
+                part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+            }
+            if let Some(parts) = gathered {
+                let n = (end - start) as usize;
+                let mut values = vec![f64::NAN; n * width];
+                let mut filled = 0;
+                for row in parts.iter().flat_map(|p| p.chunks_exact(width + 1)) {
+                    let at = row[0] as usize;
+                    anyhow::ensure!(at < n, "a rank sent place {} of a piece of {n}", at);
+                    values[at * width..(at + 1) * width].copy_from_slice(&row[1..]);
+                    filled += 1;
+                }
+                anyhow::ensure!(filled == n, "the ranks sent {filled} of the {n} values of places {start}..{end} of the saved state's {array:?}");
+                match array {
+                    StateArray::Positions | StateArray::Velocities => visit(StatePiece::Vectors(&values.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect::<Vec<_>>()))?,
+                    StateArray::WarmStart => visit(StatePiece::Pairs(&values.chunks_exact(2).map(|v| [v[0], v[1]]).collect::<Vec<_>>()))?,
+                    StateArray::Ids => visit(StatePiece::Ids(&values.iter().map(|&v| v as u32).collect::<Vec<_>>()))?,
+                    StateArray::Densities => visit(StatePiece::Scalars(&values))?,
+                }
+            }
+            start = end;
+        }
+        Ok(())
+    }
+
+    /// [`CpuSolver::restore_state`] across ranks (any rank count saved it), each rank reading
+    /// its part of `source`: the positions counted per cell layer cut slabs of equal counts,
+    /// and this rank takes the particles of its slab, in the state's order, and the walls
+    /// near it.
+    pub(super) fn restore_state_across_ranks(&mut self, source: &mut dyn StateSource) -> anyhow::Result<()> {
+        let part = self.ranks.as_ref().expect("only across ranks");
         let grid = self.grid;
         let axis = part.axis;
         let layer_of = |p: [f64; 3]| grid.cell_coords(V3::<R>::from64(p))[axis];
         let mut counts = vec![0u64; grid.dims[axis] as usize];
-        for &p in &state.positions {
+        let mut total = 0usize;
+        source.visit_positions(&mut |p| {
             counts[layer_of(p) as usize] += 1;
-        }
+            total += 1;
+        })?;
+        anyhow::ensure!(total == part.total_fluid, "the state holds {total} particles; the scene has {}", part.total_fluid);
         let slabs = Slabs::balanced(&counts, part.comm.size(), part.slabs.halo)?;
         let mine = slabs.layers_of(part.comm.rank());
-        let chosen: Vec<usize> = (0..state.positions.len()).filter(|&i| mine.contains(&layer_of(state.positions[i]))).collect();
-        let pick = |v: &Vec<[f64; 3]>| chosen.iter().map(|&i| v[i]).collect::<Vec<_>>();
-        let local = BackendState {
-            positions: pick(&state.positions),
-            velocities: pick(&state.velocities),
-            ids: chosen.iter().map(|&i| state.ids[i]).collect(),
-            densities: if state.densities.is_empty() { Vec::new() } else { chosen.iter().map(|&i| state.densities[i]).collect() },
-            ..state.clone()
-        };
+        let (local, chosen) = source.read_kept(&mut |_, p| mine.contains(&layer_of(p)))?;
+        anyhow::ensure!(local.kind == Self::state_kind(), "the state was saved by the {} backend, not {}", local.kind, Self::state_kind());
+        anyhow::ensure!(local.velocities.len() == chosen.len() && local.ids.len() == chosen.len(), "the state's arrays differ in length");
+        anyhow::ensure!(local.ids.iter().all(|&id| (id as usize) < total), "the state's particle ids are not a permutation");
+        let state = &local;
         let n = chosen.len();
         self.positions = local.positions.iter().map(|&p| V3::from64(p)).collect();
         self.velocities = local.velocities.iter().map(|&v| V3::from64(v)).collect();
         self.ids = local.ids.clone();
         anyhow::ensure!(
             local.densities.is_empty() == !self.params.continuity_density,
-            "the state holds {} carried densities; the scene's density method needs {}",
-            state.densities.len(),
-            if self.params.continuity_density { state.positions.len() } else { 0 }
+            "the state holds {} carried densities for {} particles; the scene's density method needs {}",
+            local.densities.len(),
+            chosen.len(),
+            if self.params.continuity_density { "one per particle" } else { "none" }
         );
         self.carried_densities = local.densities.iter().map(|&d| R::of(d)).collect();
         for v in [&mut self.densities, &mut self.pressures] {
@@ -1034,20 +1137,23 @@ impl<R: Real> CpuSolver<R> {
         let [min, max, last] = state.dt_min_max_last;
         self.dt_stats = crate::model::state::DtStats { min, max, last, ..Default::default() };
         if let Some(d) = &mut self.dfsph {
-            // By id, every particle's: each rank reads those it will hold.
-            let total = state.positions.len();
-            anyhow::ensure!(state.warm_start.len() == total, "the state holds {} warm-start stiffnesses for DFSPH; the scene has {total} particles", state.warm_start.len());
+            // The held particles' (the part read holds them in its particles' order).
+            anyhow::ensure!(state.warm_start.len() == n, "the state holds {} warm-start stiffnesses for DFSPH for this rank's {n} particles", state.warm_start.len());
             d.warm_pressure = state.warm_start.iter().map(|w| R::of(w[0])).collect();
             d.warm_divergence = state.warm_start.iter().map(|w| R::of(w[1])).collect();
+            self.warm_keys = (0..n as u32).collect();
             d.stats = state.iterations;
             d.last_dt = if state.step > 0 { last } else { 0.0 };
             d.resize(n);
         }
         let part = self.ranks.as_mut().expect("only across ranks");
         part.slabs = slabs;
-        part.first_order = Some(chosen.iter().map(|&i| i as u64).collect());
+        part.first_order = Some(chosen);
         part.failure = None;
         part.gathered = None;
+        // The walls near the slab cut for the state.
+        let walls = self.walls_near_slab();
+        self.install_walls(&walls);
         Ok(())
     }
 

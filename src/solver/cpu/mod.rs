@@ -24,7 +24,7 @@ pub mod probes;
 pub mod reorder;
 pub mod wall_pressure;
 
-use super::backend::Backend;
+use super::backend::{Backend, StateArray, StatePiece};
 use cell_batches::NeighbourLists;
 use crate::model::initial::InitialState;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients, Neighbours};
@@ -71,6 +71,10 @@ pub struct CpuSolver<R: Real> {
     sorted: Vec<u32>,
     scratch_v3: Vec<V3<R>>,
     scratch_ids: Vec<u32>,
+    /// Across ranks with DFSPH: each slot's entry in the warm-start arrays, which hold the
+    /// held particles' stiffnesses in the order of the last exchange (the binning moves these
+    /// keys with the particles). Alone the arrays are by id and this is empty.
+    warm_keys: Vec<u32>,
     wall_positions: Vec<V3<R>>,
     wall_masses: Vec<R>,
     wall_starts: Vec<u32>,
@@ -128,6 +132,7 @@ impl<R: Real> CpuSolver<R> {
             sorted: vec![0; n],
             scratch_v3: Vec::with_capacity(n),
             scratch_ids: Vec::with_capacity(n),
+            warm_keys: Vec::new(),
             wall_positions: Vec::new(),
             wall_masses: Vec::new(),
             wall_starts: Vec::new(),
@@ -227,6 +232,10 @@ impl<R: Real> CpuSolver<R> {
         std::mem::swap(&mut self.velocities, &mut self.scratch_v3);
         reorder::reorder(&self.sorted, &self.ids, &mut self.scratch_ids);
         std::mem::swap(&mut self.ids, &mut self.scratch_ids);
+        if self.warm_keys.len() == self.ids.len() && !self.warm_keys.is_empty() {
+            reorder::reorder(&self.sorted, &self.warm_keys, &mut self.scratch_ids);
+            std::mem::swap(&mut self.warm_keys, &mut self.scratch_ids);
+        }
         if !self.carried_densities.is_empty() {
             reorder::reorder(&self.sorted, &self.carried_densities, &mut self.scratch_r);
             std::mem::swap(&mut self.carried_densities, &mut self.scratch_r);
@@ -417,9 +426,9 @@ impl<R: Real> CpuSolver<R> {
     /// The parts of the solver a DFSPH stage reads and writes, and DFSPH's own arrays.
     fn dfsph_parts(&mut self) -> Option<(&mut DfsphCpu<R>, StepParts<'_, R>)> {
         let dfsph = self.dfsph.as_mut()?;
-        let (particles, link) = match self.ranks.as_deref_mut() {
-            Some(part) => (part.total_fluid, part.link.as_mut()),
-            None => (self.positions.len(), None),
+        let (particles, link, warm_index) = match self.ranks.as_deref_mut() {
+            Some(part) => (part.total_fluid, part.link.as_mut(), &self.warm_keys),
+            None => (self.positions.len(), None, &self.ids),
         };
         let parts = StepParts {
             params: &self.params,
@@ -430,7 +439,7 @@ impl<R: Real> CpuSolver<R> {
             velocities: &mut self.velocities,
             starts: &self.starts,
             scratch: &mut self.scratch_v3,
-            ids: &self.ids,
+            warm_index,
             densities: &mut self.densities,
             pressures: &mut self.pressures,
             accelerations: &mut self.accelerations,
@@ -485,12 +494,12 @@ impl<R: Real> CpuSolver<R> {
                 0.0
             }
             DfsphStage::DivergenceWarmStart => {
-                let warm = dfsph_shared::WarmStart { ids: s.ids, last: &d.warm_divergence, share };
+                let warm = dfsph_shared::WarmStart { ids: s.warm_index, last: &d.warm_divergence, share };
                 dfsph_divergence::divergence_warm_start(&input, s.velocities, &warm, &mut d.stiffness);
                 0.0
             }
             DfsphStage::PressureWarmStart => {
-                let warm = dfsph_shared::WarmStart { ids: s.ids, last: &d.warm_pressure, share };
+                let warm = dfsph_shared::WarmStart { ids: s.warm_index, last: &d.warm_pressure, share };
                 dfsph_pressure::pressure_warm_start(&input, s.velocities, s.densities, R::of(s.params.rest_density), R::of(dt), &warm, &mut d.stiffness);
                 0.0
             }
@@ -908,17 +917,31 @@ impl<R: Real> Backend for CpuSolver<R> {
     }
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
         match self.ranks {
-            // Gathered once per state: a checkpoint asks for the header and each array in turn
-            // (on the rank that writes it), the other ranks for the header only.
+            // Gathered on rank 0 once per state (a checkpoint streams it instead, below).
             Some(_) => self.gathered_state(),
             None => Ok(CpuSolver::save_state(self)),
         }
     }
+    fn save_state_header(&mut self) -> anyhow::Result<BackendState> {
+        match self.ranks {
+            Some(_) => Ok(self.state_header_across_ranks()),
+            None => Ok(super::backend::state_header(CpuSolver::save_state(self))),
+        }
+    }
+    fn visit_state_array(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        match self.ranks {
+            Some(_) => self.visit_state_array_across_ranks(array, chunk, visit),
+            None => super::backend::visit_state_pieces(&CpuSolver::save_state(self), array, chunk, visit),
+        }
+    }
     fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
         match self.ranks {
-            Some(_) => self.restore_state_across_ranks(state),
+            Some(_) => self.restore_state_across_ranks(&mut super::backend::WholeState(state)),
             None => CpuSolver::restore_state(self, state),
         }
+    }
+    fn restore_state_part(&mut self, source: &mut dyn super::backend::StateSource) -> Option<anyhow::Result<()>> {
+        self.ranks.is_some().then(|| self.restore_state_across_ranks(source))
     }
     fn take_probe_samples(&mut self) -> anyhow::Result<Vec<ProbeSample>> {
         Ok(CpuSolver::take_probe_samples(self))
