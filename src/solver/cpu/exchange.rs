@@ -55,7 +55,7 @@ pub struct RankPart {
 /// Where a rank takes the wall particles near its slab from ([`WallSource::near`]).
 #[derive(Clone)]
 pub enum WallSource {
-    /// The walls of a state given whole (an imported scene): every rank keeps a copy.
+    /// The walls of a state given whole (`open_with`): every rank keeps a copy.
     Whole(Arc<InitialState>),
     /// The scene, which generates them: no rank holds every wall particle.
     Scene(Arc<crate::model::scene::Scene>),
@@ -304,7 +304,7 @@ pub fn lock<R: Real>(device: &SharedDeviceStages<R>) -> MutexGuard<'_, Box<dyn D
 /// Where a rank finds its part of the initial state.
 #[derive(Clone, Copy)]
 pub(crate) enum InitialSource<'a> {
-    /// A state given whole to every rank (an imported scene, a changed one).
+    /// A state given whole to every rank (`open_with`: a library caller's own particles).
     Whole(&'a InitialState),
     /// The scene: every rank generates its particles one at a time and keeps its own.
     Scene(&'a crate::model::scene::Scene),
