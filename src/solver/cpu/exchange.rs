@@ -61,7 +61,6 @@ pub enum WallSource {
     Scene(Arc<crate::model::scene::Scene>),
 }
 
-
 impl WallSource {
     /// The wall particles whose cell layer along `axis` lies within `halo` + 1 layers of
     /// `slab` (the ghosts lie up to `halo` layers out, their neighbours one further), in the
@@ -356,11 +355,7 @@ impl<R: Real> CpuSolver<R> {
     /// One rank's part on a device: like [`CpuSolver::new_part`], with the step's stages after
     /// the exchange run by `device`.
     pub(crate) fn new_part_on(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64, device: Box<dyn DeviceStages<R>>) -> anyhow::Result<Self> {
-        let mut solver = Self::new_part(params, initial, comm, balance_every)?;
-        solver.device = Some(Arc::new(Mutex::new(device)));
-        let walls = solver.walls_near_slab();
-        solver.install_walls(&walls);
-        Ok(solver)
+        Self::new_part_with(params, initial, comm, balance_every, Some(device))
     }
 
     /// The wall particles near this rank's slab, from the scene (or the whole state given).
@@ -520,10 +515,16 @@ impl<R: Real> CpuSolver<R> {
 
     /// The solver of one rank's part of a simulation across the ranks of `comm`: the fluid
     /// particles of `initial` whose cell layer lies in this rank's slab (slabs of equal
-    /// counts), and every wall particle. `balance_every`: steps between moves of the slab
-    /// bounds (0: never). From a scene, the particles are generated one at a time (twice: to
-    /// count them per layer, then to keep this rank's), so no rank holds every fluid particle.
+    /// counts), and the wall particles near it. `balance_every`: steps between moves of the
+    /// slab bounds (0: never). From a scene, the particles are generated one at a time (the
+    /// fluid twice: to count it per layer, then to keep this rank's), so no rank holds every
+    /// particle.
     pub(crate) fn new_part(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64) -> anyhow::Result<Self> {
+        Self::new_part_with(params, initial, comm, balance_every, None)
+    }
+
+    /// [`CpuSolver::new_part`], with the stages after the exchange on `device` where given.
+    fn new_part_with(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64, device: Option<Box<dyn DeviceStages<R>>>) -> anyhow::Result<Self> {
         let grid = params.grid.cast::<R>();
         let axis = slab_axis(grid.dims);
         let layer_of = |p: [f64; 3]| grid.cell_coords(V3::from64(p))[axis];
@@ -546,6 +547,10 @@ impl<R: Real> CpuSolver<R> {
             }
         });
         let mut solver = Self::new(params, &part);
+        if let Some(mut device) = device {
+            device.set_walls(&part);
+            solver.device = Some(Arc::new(Mutex::new(device)));
+        }
         solver.ids = chosen.iter().map(|&i| i as u32).collect();
         if solver.dfsph.is_some() {
             // In the held particles' order (they start from zero, as alone).
@@ -867,16 +872,8 @@ impl<R: Real> CpuSolver<R> {
         if self.rank_failure().is_none() && self.device.is_some() {
             self.fields_on_device();
         } else {
-            self.bin();
-            match self.dfsph_parts() {
-                // Density, and the pressure of the last constant-density solve (each particle's
-                // warm start is its owner's).
-                Some((dfsph, mut parts)) => dfsph.factors_stage(&mut parts),
-                None => {
-                    self.compute_density();
-                    self.compute_wall_pressure();
-                }
-            }
+            // Each particle's warm start (DFSPH's last pressure) is its owner's.
+            self.snapshot_fields();
         }
         if let Some(e) = self.rank_failure() {
             anyhow::bail!("{e}");

@@ -741,18 +741,24 @@ impl<R: Real> CpuSolver<R> {
         }
     }
 
-    /// The state in the original particle order; density and pressure are evaluated for the
-    /// current positions.
-    pub fn snapshot(&mut self) -> Snapshot {
+    /// A snapshot's fields for the current positions: the binning, then the density (and the
+    /// walls' pressure), or for DFSPH its factors stage (density, and the pressure of the last
+    /// constant-density solve).
+    fn snapshot_fields(&mut self) {
         self.bin();
         match self.dfsph_parts() {
-            // Density, and the pressure of the last constant-density solve.
             Some((dfsph, mut parts)) => dfsph.factors_stage(&mut parts),
             None => {
                 self.compute_density();
                 self.compute_wall_pressure();
             }
         }
+    }
+
+    /// The state in the original particle order; density and pressure are evaluated for the
+    /// current positions.
+    pub fn snapshot(&mut self) -> Snapshot {
+        self.snapshot_fields();
         let n = self.positions.len();
         let mut s = Snapshot::with_len(n, self.step, self.time());
         for (slot, &id) in self.ids.iter().enumerate() {
