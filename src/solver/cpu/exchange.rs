@@ -42,8 +42,6 @@ pub struct RankPart {
     pub(super) stats: RankStats,
     /// Why this rank could not go on (a collective failed).
     pub(super) failure: Option<String>,
-    /// The state gathered from every rank, until the next step changes it.
-    pub(super) gathered: Option<BackendState>,
     /// DFSPH: the ghosts of this step's solves ([`GhostLink`]), made after the binning.
     pub(super) link: Option<GhostLink>,
     /// Where the walls near the slab come from when its bounds move.
@@ -567,7 +565,6 @@ impl<R: Real> CpuSolver<R> {
             balance_every,
             stats: RankStats { last_imbalance: start_imbalance, max_imbalance: start_imbalance, ..RankStats::default() },
             failure: None,
-            gathered: None,
             link: None,
             total_walls: walls.total(),
             walls,
@@ -626,9 +623,6 @@ impl<R: Real> CpuSolver<R> {
             return;
         }
         let t0 = Instant::now();
-        if let Some(part) = &mut self.ranks {
-            part.gathered = None;
-        }
         if let Err(e) = self.exchange_across_ranks(balance) {
             if let Some(part) = &mut self.ranks {
                 part.failure.get_or_insert(format!("{e:#}"));
@@ -899,19 +893,6 @@ impl<R: Real> CpuSolver<R> {
         Ok(out)
     }
 
-    /// The state of every rank, gathered at the first call after a step (collective) and
-    /// kept until the next.
-    pub(super) fn gathered_state(&mut self) -> anyhow::Result<BackendState> {
-        if let Some(state) = self.ranks.as_ref().and_then(|p| p.gathered.clone()) {
-            return Ok(state);
-        }
-        let state = self.save_state_across_ranks()?;
-        if let Some(part) = &mut self.ranks {
-            part.gathered = Some(state.clone());
-        }
-        Ok(state)
-    }
-
     /// Every rank's [`RankReport`], in rank order (collective).
     pub(super) fn gather_rank_reports(&mut self) -> anyhow::Result<Option<Vec<RankReport>>> {
         let Some(mine) = self.rank_report() else { return Ok(None) };
@@ -941,42 +922,22 @@ impl<R: Real> CpuSolver<R> {
         ))
     }
 
-    /// [`CpuSolver::save_state`] across ranks: the own particles of every rank in the
-    /// one-process (cell) order, on rank 0, so the state is the one one process would save
-    /// (the other ranks' holds the step, time and health, and no particle).
+    /// [`CpuSolver::save_state`] across ranks (collective): the state one process would save,
+    /// its arrays streamed to rank 0 as a checkpoint streams them, in one piece each; the other
+    /// ranks' holds the step, time and health, and no particle.
     pub(super) fn save_state_across_ranks(&mut self) -> anyhow::Result<BackendState> {
-        let continuity = !self.carried_densities.is_empty();
-        let warm = self.dfsph.is_some();
-        let w = 7 + continuity as usize + 2 * warm as usize;
-        let rows = self.gather_own(w, |s, i| {
-            let (x, v) = (s.positions[i].to64(), s.velocities[i].to64());
-            let mut r = vec![x[0], x[1], x[2], v[0], v[1], v[2], s.ids[i] as f64];
-            if continuity {
-                r.push(s.carried_densities[i].to64());
-            }
-            if let Some(d) = &s.dfsph {
-                let k = s.warm_keys[i] as usize;
-                r.extend([d.warm_pressure[k].to64(), d.warm_divergence[k].to64()]);
-            }
-            r
-        })?;
-        // In the one-process order: by the place each row carries (on rank 0; the other
-        // ranks' state holds no particle).
-        let rows = rows.unwrap_or_default();
-        let mut rows: Vec<&[f64]> = rows.chunks_exact(w + 2).collect();
-        rows.sort_unstable_by_key(|r| ((r[0] as u64) << 32) | r[1] as u64);
-        let rows: Vec<f64> = rows.iter().flat_map(|r| r[2..].iter().copied()).collect();
-        let mut state = self.save_state();
-        state.positions = rows.chunks_exact(w).map(|r| [r[0], r[1], r[2]]).collect();
-        state.velocities = rows.chunks_exact(w).map(|r| [r[3], r[4], r[5]]).collect();
-        state.ids = rows.chunks_exact(w).map(|r| r[6] as u32).collect();
-        state.densities = if continuity { rows.chunks_exact(w).map(|r| r[7]).collect() } else { Vec::new() };
-        if warm {
-            // By id, as one process saves them (rank 0 holds every particle's; the others none).
-            state.warm_start = vec![[0.0; 2]; state.ids.len()];
-            for r in rows.chunks_exact(w) {
-                state.warm_start[r[6] as usize] = [r[w - 2], r[w - 1]];
-            }
+        let mut state = self.state_header_across_ranks();
+        for array in [StateArray::Positions, StateArray::Velocities, StateArray::Ids, StateArray::WarmStart, StateArray::Densities] {
+            self.visit_state_array_across_ranks(array, u64::MAX, &mut |piece| {
+                match piece {
+                    StatePiece::Vectors(v) if array == StateArray::Positions => state.positions = v.to_vec(),
+                    StatePiece::Vectors(v) => state.velocities = v.to_vec(),
+                    StatePiece::Ids(v) => state.ids = v.to_vec(),
+                    StatePiece::Pairs(v) => state.warm_start = v.to_vec(),
+                    StatePiece::Scalars(v) => state.densities = v.to_vec(),
+                }
+                Ok(())
+            })?;
         }
         Ok(state)
     }
@@ -1051,7 +1012,7 @@ impl<R: Real> CpuSolver<R> {
         let mut next = 0;
         let mut start = 0u64;
         while start < total {
-            let end = (start + chunk).min(total);
+            let end = start.saturating_add(chunk).min(total);
             let mut mine = Vec::new();
             while next < places.len() && places[next].1 < end {
                 mine.push((places[next].1 - start) as f64);
@@ -1147,7 +1108,6 @@ impl<R: Real> CpuSolver<R> {
         part.slabs = slabs;
         part.first_order = Some(chosen);
         part.failure = None;
-        part.gathered = None;
         // The walls near the slab cut for the state.
         let walls = self.walls_near_slab();
         self.install_walls(&walls);

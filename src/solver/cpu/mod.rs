@@ -923,8 +923,8 @@ impl<R: Real> Backend for CpuSolver<R> {
     }
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
         match self.ranks {
-            // Gathered on rank 0 once per state (a checkpoint streams it instead, below).
-            Some(_) => self.gathered_state(),
+            // On rank 0 (a checkpoint streams it instead, below).
+            Some(_) => self.save_state_across_ranks(),
             None => Ok(CpuSolver::save_state(self)),
         }
     }

@@ -5,12 +5,13 @@
 //! the stages bound to `fluid_count`, so a changing count costs no new pipelines unless it
 //! outgrows the capacity.
 
-use super::buffers::ids_of;
+use super::buffers::{ids_of, vec4s};
 use super::device::GpuContext;
 use super::readback::read_buffers;
 use super::{GpuOptions, GpuSolver};
 use crate::model::initial::InitialState;
 use crate::model::params::Params;
+use crate::model::kernels::sort_by_cell;
 use crate::model::real::V3;
 use crate::solver::communicator::Communicator;
 use crate::solver::cpu::exchange::{DeviceStages, HeldArrays};
@@ -48,16 +49,29 @@ impl GpuRankStages {
     }
 
     /// A solver with buffers for `capacity` particles (placeholders at the domain's lower
-    /// corner, never bound past the held count).
+    /// corner, never bound past the held count) and room for [`CAPACITY_MARGIN`] times the
+    /// walls near the slab, which are loaded into it: when the slab's bounds move, other walls
+    /// replace them in the same buffers ([`GpuSolver::load_walls`]) and no pipeline is made
+    /// again unless they outgrow that room.
     fn make_solver(&self, capacity: usize) -> anyhow::Result<GpuSolver> {
         let corner = self.params.domain_min;
         let mut initial = self.walls.clone();
+        // The room: the walls repeated (overwritten by the load below before any step), where
+        // other walls can be loaded later (no force probe on the device: their masks follow the
+        // walls made with).
+        let reloadable = self.params.probes.force_count() == 0 && !initial.wall_positions.is_empty();
+        let room = if reloadable { ((initial.wall_positions.len() as f64) * CAPACITY_MARGIN).ceil() as usize } else { 0 };
+        repeat_to(&mut initial.wall_positions, room);
+        repeat_to(&mut initial.wall_masses, room);
+        repeat_to(&mut initial.wall_boundaries, room);
         initial.fluid_positions = vec![corner; capacity];
         initial.fluid_velocities = vec![[0.0; 3]; capacity];
         if self.params.continuity_density {
             initial.fluid_densities = vec![self.params.rest_density; capacity];
         }
-        GpuSolver::build(self.ctx.clone(), &self.params, &initial, self.options, Some(self.comm.clone()))
+        let mut solver = GpuSolver::build(self.ctx.clone(), &self.params, &initial, self.options, Some(self.comm.clone()))?;
+        anyhow::ensure!(!reloadable || solver.load_walls(&self.walls), "the walls near the slab do not fit the buffers made for them");
+        Ok(solver)
     }
 }
 
@@ -73,8 +87,10 @@ impl DeviceStages<f32> for GpuRankStages {
             wall_boundaries: walls.wall_boundaries.clone(),
             ..InitialState::default()
         };
-        // Made again, with these walls, at the next step.
-        self.solver = None;
+        // Loaded where they fit; otherwise made again, with these walls, at the next step.
+        if !self.solver.as_mut().is_some_and(|solver| solver.load_walls(walls)) {
+            self.solver = None;
+        }
     }
 
     fn run_step(&mut self, step: u64, held: HeldArrays<'_, f32>) -> anyhow::Result<f64> {
@@ -144,6 +160,39 @@ impl GpuRankStages {
 }
 
 impl GpuSolver {
+    /// Replaces the wall particles by `walls` (a rank's walls near its slab) in the buffers
+    /// made for the walls, sorted by cell as [`GpuSolver::build`] sorts them, without making
+    /// any pipeline again. False, and nothing changed, where they do not fit: more walls than
+    /// the buffers hold, a solver made without walls (its stages skip them), or force probes on
+    /// the device (their masks follow the walls).
+    pub(super) fn load_walls(&mut self, walls: &InitialState) -> bool {
+        let w = walls.wall_positions.len();
+        let cells = self.params.grid.cell_count() as u64;
+        let made_with_walls = self.wall_starts.size() >= (cells + 1) * 4;
+        if w as u64 > self.wall_positions.size() / 16 || !made_with_walls || self.params.probes.force_count() > 0 {
+            return false;
+        }
+        let grid = self.params.grid.cast::<f32>();
+        let wall_f32: Vec<V3<f32>> = walls.wall_positions.iter().map(|&p| V3::from64(p)).collect();
+        let (order, starts) = sort_by_cell(&grid, &wall_f32);
+        let sorted: Vec<[f64; 3]> = order.iter().map(|&i| walls.wall_positions[i as usize]).collect();
+        let positions = vec4s(&sorted, |k| walls.wall_masses[order[k] as usize] as f32);
+        let queue = &self.ctx.queue;
+        queue.write_buffer(&self.wall_positions, 0, bytemuck::cast_slice(&positions));
+        queue.write_buffer(&self.wall_starts, 0, bytemuck::cast_slice(&starts));
+        if let Some(fields) = &self.wall_fields {
+            // As at the start: no pressure, rest density (each step evaluates them first).
+            let rest: Vec<[f32; 2]> = vec![[0.0, self.params.rest_density as f32]; w];
+            queue.write_buffer(fields, 0, bytemuck::cast_slice(&rest));
+        }
+        self.wall_order = order;
+        self.wall_count = w as u32;
+        // Every stage reads the wall count from the uniform block.
+        let p = super::params::GpuParams::new(&self.params, self.fluid_count, self.wall_count, self.uniform_viscosity);
+        queue.write_buffer(&self.uniform, 0, &p.bytes());
+        true
+    }
+
     /// Puts `positions`, `velocities` (and with continuity density `carried` densities) in the
     /// buffers as the current state of step `step`, each particle's id its index with
     /// [`GHOST_BIT`] where `ghosts` says so, and binds the stages to that many particles (at most
@@ -164,4 +213,10 @@ impl GpuSolver {
         self.accelerations_valid = false;
         self.steps = step;
     }
+}
+
+/// `v` repeated from its start until it holds `len` elements (as it is when empty or longer).
+fn repeat_to<T: Clone>(v: &mut Vec<T>, len: usize) {
+    let extra: Vec<T> = v.iter().cycle().take(len.saturating_sub(v.len())).cloned().collect();
+    v.extend(extra);
 }
