@@ -261,12 +261,12 @@ impl RunArgs {
 /// The GPU step's tuning options of `wgsph run` and `wgsph profile` (none changes a value).
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct GpuTuning {
-    /// Run the forces and the integration as two passes with fixed dt (the default on software
-    /// adapters).
+    /// Run the forces and the integration as two passes, the particle state updated in place
+    /// (the default: 48 bytes of state per fluid particle).
     #[arg(long, conflicts_with = "fused")]
     pub unfused: bool,
-    /// Run the forces and the integration as one pass with fixed dt (the default on hardware
-    /// adapters).
+    /// Run the forces and the integration as one pass with fixed dt (one pass over the state
+    /// less, but two copies of it: 16 bytes more per fluid particle).
     #[arg(long)]
     pub fused: bool,
     /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes

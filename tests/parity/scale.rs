@@ -5,6 +5,7 @@ use crate::common;
 use crate::common::TestScene;
 
 use std::process::Command;
+use wgsph::solver::gpu::buffers::StateLayout;
 use wgsph::solver::gpu::memory::MemoryPlan;
 use wgsph::model::scene::{EquationOfState, Kernel, Scene};
 
@@ -21,7 +22,8 @@ fn the_memory_figure_is_the_plan_and_matches_the_buffers_created() {
                 Some(initial.wall_positions.len() as u64),
                 params.grid.cell_count() as u64,
                 wgsph::solver::gpu::params::GpuParams::default().bytes().len() as u64,
-                !solver.fused(),
+                if solver.fused() { StateLayout::PingPong } else { StateLayout::InPlace },
+                false,
             );
             assert_eq!(solver.memory_bytes(), plan.total(), "{name} on {}", ctx.describe());
             assert_eq!(solver.allocated_bytes(), plan.total(), "{name} on {}", ctx.describe());
@@ -34,8 +36,8 @@ fn a_plan_over_the_buffer_limit_is_refused_naming_adapter_particles_bytes_and_li
     for ctx in common::contexts() {
         // Arrays are bound in segments, so only max_buffer_size bounds one array.
         let fit = ctx.device.limits().max_buffer_size / 16;
-        assert!(MemoryPlan::new(fit, Some(0), 1000, 256, false).check(&ctx).is_ok(), "{} particles fit {}", fit, ctx.describe());
-        let plan = MemoryPlan::new(fit + 1, Some(0), 1000, 256, false);
+        assert!(MemoryPlan::new(fit, Some(0), 1000, 256, StateLayout::InPlace, false).check(&ctx).is_ok(), "{} particles fit {}", fit, ctx.describe());
+        let plan = MemoryPlan::new(fit + 1, Some(0), 1000, 256, StateLayout::InPlace, false);
         let e = plan.check(&ctx).unwrap_err();
         let msg = e.to_string();
         assert_eq!((e.particles, e.total), (fit + 1, plan.total()));
@@ -195,7 +197,7 @@ fn streamed_csv_snapshots_equal_the_whole_array_ones_byte_for_byte() {
 }
 
 #[test]
-fn fused_forces_and_integration_step_bit_for_bit_like_two_passes_with_less_memory() {
+fn the_state_in_place_steps_bit_for_bit_like_the_fused_ping_pong_pair_with_less_memory() {
     use wgsph::solver::gpu::GpuOptions;
     use wgsph::solver::Backend;
     for ctx in common::contexts() {
@@ -205,12 +207,12 @@ fn fused_forces_and_integration_step_bit_for_bit_like_two_passes_with_less_memor
         let mut fused = common::gpu_with(ctx.clone(), &scene, None, option(true)).unwrap();
         let mut two_pass = common::gpu_with(ctx.clone(), &scene, None, option(false)).unwrap();
         assert!(fused.fused() && !two_pass.fused());
-        // By default only a hardware adapter fuses (on a software one the fused pass is slower).
+        // By default the state is held in place (two passes), on every adapter.
         let default = common::gpu(ctx.clone(), &scene);
-        assert_eq!(default.fused(), ctx.info.device_type != wgpu::DeviceType::Cpu, "{}", ctx.describe());
-        // The accelerations array (16 bytes per fluid particle) is what fusion saves.
+        assert!(!default.fused(), "{}", ctx.describe());
+        // Three 16-byte buffers instead of two pairs of them: 16 bytes per fluid particle less.
         let n = initial.fluid_positions.len() as u64;
-        assert_eq!(two_pass.memory_bytes() - fused.memory_bytes(), 16 * n);
+        assert_eq!(fused.memory_bytes() - two_pass.memory_bytes(), 16 * n);
         for solver in [&mut fused, &mut two_pass] {
             solver.step(30).unwrap();
         }

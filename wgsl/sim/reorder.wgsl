@@ -1,18 +1,18 @@
 // Cell binning, step 4 of 4: each particle's slot in its cell is the number of particles of the
 // cell with a smaller current index (so the order inside a cell never depends on thread timing,
-// as in a stable counting sort), and its state is gathered into that slot. The particle's
-// original index travels in the w component of its position (as u32 bits), so it needs no
-// array of its own.
+// as in a stable counting sort), and one of its state arrays is gathered into that slot; the
+// step dispatches it once for the positions and once for the velocities, which lets the state
+// be gathered into a buffer that the first dispatch has just freed (src/solver/gpu/buffers.rs,
+// `StateLayout::InPlace`). The particle's original index travels in the w component of its
+// position (as u32 bits), so it needs no array of its own.
 // Twin of src/solver/cpu/reorder.rs.
 
 //! include shared/common.wgsl
 //! array keys: u32, read
 //! array starts: u32, read
 //! array unordered: u32, read
-//! array positions_in: vec4<f32>, read
-//! array velocities_in: vec4<f32>, read
-//! array positions_out: vec4<f32>, read_write
-//! array velocities_out: vec4<f32>, read_write
+//! array gathered_in: vec4<f32>, read
+//! array gathered_out: vec4<f32>, read_write
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn reorder(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -27,7 +27,5 @@ fn reorder(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     for (var s = begin; s < end; s++) {
         rank += select(0u, 1u, unordered_at(s) < i);
     }
-    let dest = begin + rank;
-    positions_out_set(dest, positions_in_at(i));
-    velocities_out_set(dest, velocities_in_at(i));
+    gathered_out_set(begin + rank, gathered_in_at(i));
 }

@@ -31,21 +31,101 @@ pub fn vec4s(points: &[[f64; 3]], w: impl Fn(usize) -> f32) -> Vec<[f32; 4]> {
     points.iter().enumerate().map(|(i, p)| [p[0] as f32, p[1] as f32, p[2] as f32, w(i)]).collect()
 }
 
-/// The particle state (one of a ping-pong pair): positions whose w holds each particle's
-/// original index as u32 bits, and velocities (w = 0).
+/// The particle state: positions whose w holds each particle's original index as u32 bits,
+/// and velocities (w = 0, or the carried density with the continuity equation).
+#[derive(Clone)]
 pub struct StateBuffers {
     pub positions: wgpu::Buffer,
     pub velocities: wgpu::Buffer,
 }
 
-impl StateBuffers {
-    pub fn new(device: &wgpu::Device, index: usize, fluid: u64) -> Self {
-        StateBuffers {
-            positions: storage(device, &format!("positions {index}"), fluid * 16),
-            velocities: storage(device, &format!("velocities {index}"), fluid * 16),
+/// How the particle state's buffers are used from one step to the next.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StateLayout {
+    /// Two states of positions and velocities (32 bytes each per particle): the binning gathers
+    /// one into the other, and the step writes the new state back into the first while other
+    /// threads still read the old one. The fused forces-and-integration pass and DFSPH's
+    /// prediction need this.
+    PingPong,
+    /// Three `vec4` buffers (48 bytes per particle) whose roles rotate: positions, velocities
+    /// and a spare that holds the binning's ranks and then the accelerations. The binning
+    /// gathers the positions into the spare and the velocities into the old positions' buffer;
+    /// the integration, which reads only a particle's own slot of every array, writes the new
+    /// state in place. The two-pass weakly compressible step uses it.
+    InPlace,
+}
+
+/// The buffers of the particle state and which of them holds what in each phase: a phase is
+/// an assignment of the roles to the buffers, and the binning moves the state to the next.
+pub struct StateStore {
+    pub layout: StateLayout,
+    /// Ping-pong: positions 0, velocities 0, positions 1, velocities 1. In place: three buffers.
+    buffers: Vec<wgpu::Buffer>,
+}
+
+impl StateStore {
+    pub fn new(device: &wgpu::Device, layout: StateLayout, fluid: u64) -> Self {
+        let labels: &[&str] = match layout {
+            StateLayout::PingPong => &["positions 0", "velocities 0", "positions 1", "velocities 1"],
+            StateLayout::InPlace => &["particle state 0", "particle state 1", "particle state 2"],
+        };
+        StateStore { layout, buffers: labels.iter().map(|l| storage(device, l, fluid * 16)).collect() }
+    }
+
+    /// Bytes per particle of the state's buffers.
+    pub fn bytes_per_particle(layout: StateLayout) -> u64 {
+        match layout {
+            StateLayout::PingPong => 64,
+            StateLayout::InPlace => 48,
         }
     }
 
+    /// The number of phases (2 or 3).
+    pub fn phases(&self) -> usize {
+        match self.layout {
+            StateLayout::PingPong => 2,
+            StateLayout::InPlace => 3,
+        }
+    }
+
+    /// The positions and velocities of phase `c`.
+    pub fn state(&self, c: usize) -> StateBuffers {
+        match self.layout {
+            StateLayout::PingPong => StateBuffers { positions: self.buffers[2 * c].clone(), velocities: self.buffers[2 * c + 1].clone() },
+            StateLayout::InPlace => StateBuffers { positions: self.buffers[c].clone(), velocities: self.buffers[(c + 1) % 3].clone() },
+        }
+    }
+
+    /// In place: the spare buffer of phase `c` (the binning's ranks, then the accelerations).
+    pub fn spare(&self, c: usize) -> wgpu::Buffer {
+        debug_assert_eq!(self.layout, StateLayout::InPlace);
+        self.buffers[(c + 2) % 3].clone()
+    }
+
+    /// The phase after the binning of phase `c`: the other pair, or in place the phase whose
+    /// positions are `c`'s spare and whose velocities are `c`'s positions.
+    pub fn after_binning(&self, c: usize) -> usize {
+        match self.layout {
+            StateLayout::PingPong => 1 - c,
+            StateLayout::InPlace => (c + 2) % 3,
+        }
+    }
+
+    /// The phase after the integration of phase `c`: the other pair, or in place the same.
+    pub fn after_integration(&self, c: usize) -> usize {
+        match self.layout {
+            StateLayout::PingPong => 1 - c,
+            StateLayout::InPlace => c,
+        }
+    }
+
+    /// Bytes of every buffer.
+    pub fn bytes(&self) -> u64 {
+        self.buffers.iter().map(|b| b.size()).sum()
+    }
+}
+
+impl StateBuffers {
     /// Writes positions (with the ids `id(i)` in their w) and velocities (w = 0, as the
     /// integration writes them), `STREAM_CHUNK` particles at a time with a submission after
     /// each piece, so the host converts and stages one piece instead of two whole `vec4` arrays
@@ -86,7 +166,7 @@ pub fn widen(v: &[f32; 4]) -> [f64; 3] {
 
 /// The buffers of the current particle state, for rendering or post-processing on the GPU, with
 /// the device they live on. They are the solver's own buffers (handles, not copies), in its
-/// cell order, all four in the same order; the solver alternates between two sets, so ask again
+/// cell order, all four in the same order; the solver's buffers change roles as it steps, so ask again
 /// after every step.
 #[derive(Clone, Debug)]
 pub struct ParticleBuffers {

@@ -7,7 +7,7 @@
 //! velocities of `1 - c`, the constant-density solve changes those in place, and the integration
 //! writes the new positions next to them. The warm-start stiffnesses are kept by particle id.
 
-use super::buffers::{storage, StateBuffers};
+use super::buffers::{storage, StateStore};
 use super::device::{GpuContext, GpuError};
 use super::shaders::{dispatch_size, stage, ArrayLengths, Stage};
 use super::workgroups::WorkgroupSizes;
@@ -79,7 +79,8 @@ pub(super) struct DfsphGpu {
 
 /// The shared buffers a DFSPH stage binds besides its own.
 pub(super) struct SharedBuffers<'a> {
-    pub state: &'a [StateBuffers; 2],
+    /// The particle state, held as a ping-pong pair (the prediction writes the other state).
+    pub store: &'a StateStore,
     pub starts: &'a wgpu::Buffer,
     pub densities: &'a wgpu::Buffer,
     pub pressures: &'a wgpu::Buffer,
@@ -200,7 +201,7 @@ impl DfsphGpu {
         let device = &ctx.device;
         let groups = [0, 1].map(|c| {
             let lookup = |velocities_of: usize| {
-                let (read, write) = (&shared.state[c], &shared.state[1 - c]);
+                let (read, write) = (shared.store.state(c), shared.store.state(1 - c));
                 let (b, s) = (&buffers, shared);
                 move |name: &str| -> wgpu::Buffer {
                     match name {
@@ -208,7 +209,7 @@ impl DfsphGpu {
                         // The velocities a stage works on: the state's own (the divergence
                         // solve, the prediction) or the predicted ones (the constant-density
                         // solve, the integration).
-                        "velocities" => shared.state[velocities_of].velocities.clone(),
+                        "velocities" => shared.store.state(velocities_of).velocities.clone(),
                         "velocities_out" => write.velocities.clone(),
                         "velocities_start" => read.velocities.clone(),
                         "positions_out" => write.positions.clone(),
@@ -266,7 +267,7 @@ impl DfsphGpu {
     /// The bind groups of `step_accelerations` for the state pair read from `c` (made on
     /// request, with the accelerations array then in use).
     pub fn step_accelerations_group(&self, ctx: &GpuContext, shared: &SharedBuffers, uniform: &wgpu::Buffer, c: usize) -> wgpu::BindGroup {
-        let (read, write) = (&shared.state[c], &shared.state[1 - c]);
+        let (read, write) = (shared.store.state(c), shared.store.state(1 - c));
         let b = &self.buffers;
         self.stages.step_accelerations.bind_group(&ctx.device, "step_accelerations", uniform, &|name: &str| {
             match name {

@@ -7,6 +7,7 @@
 //! (`max_buffer_size`, `max_storage_buffer_binding_size`) are checked; an allocation beyond the
 //! device's memory still fails inside the driver.
 
+use super::buffers::StateLayout;
 use super::device::GpuContext;
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
@@ -63,10 +64,11 @@ fn padded(bytes: u64) -> u64 {
 
 impl MemoryPlan {
     /// The buffers of a solver with `fluid` particles, `walls` wall particles and `cells` grid
-    /// cells; `uniform_bytes` is the size of the parameter block. `accelerations`: whether the
-    /// step keeps an accelerations array (adaptive dt; with fixed dt the forces and the
-    /// integration are one pass).
-    pub fn new(fluid: u64, walls: Option<u64>, cells: u64, uniform_bytes: u64, accelerations: bool) -> MemoryPlan {
+    /// cells; `uniform_bytes` is the size of the parameter block. `layout`: how the particle
+    /// state is held (see [`StateLayout`]); `accelerations`: whether a separate accelerations
+    /// array exists (DFSPH with adaptive dt; in place they live in the state's spare buffer, and
+    /// the fused step keeps them in registers).
+    pub fn new(fluid: u64, walls: Option<u64>, cells: u64, uniform_bytes: u64, layout: StateLayout, accelerations: bool) -> MemoryPlan {
         let w = walls.unwrap_or(0);
         let per_fluid = |label, per: u64| PlannedBuffer { label, bytes: padded(fluid * per), bytes_per_fluid_particle: per, single_binding: false };
         let fixed = |label, bytes| PlannedBuffer { label, bytes, bytes_per_fluid_particle: 0, single_binding: false };
@@ -75,19 +77,22 @@ impl MemoryPlan {
             fixed("wall positions", padded(w * 16)),
             // Without walls the shaders never read the per-cell wall array.
             fixed("wall cell starts", padded(if w > 0 { (cells + 1) * 4 } else { 0 })),
-            // The particles' ids ride in the w of the positions.
-            per_fluid("positions 0", 16),
-            per_fluid("velocities 0", 16),
-            per_fluid("positions 1", 16),
-            per_fluid("velocities 1", 16),
+        ];
+        // The particles' ids ride in the w of the positions.
+        let state: &[&'static str] = match layout {
+            StateLayout::PingPong => &["positions 0", "velocities 0", "positions 1", "velocities 1"],
+            StateLayout::InPlace => &["particle state 0", "particle state 1", "particle state 2"],
+        };
+        buffers.extend(state.iter().map(|&label| per_fluid(label, 16)));
+        buffers.extend([
             fixed("cell starts", padded((cells + 1) * 4)),
             // Also the binning's unordered slots and cell keys, dead by the time density is
-            // written; its ranks live in the velocities the reorder then writes.
+            // written; its ranks live in the buffer the reorder gathers into last.
             per_fluid("densities", 4),
             per_fluid("pressures", 4),
             fixed("placeholder", 16),
             PlannedBuffer { label: "status", bytes: padded(status::BYTES), bytes_per_fluid_particle: 0, single_binding: true },
-        ];
+        ]);
         if accelerations {
             buffers.push(per_fluid("accelerations", 16));
         }
@@ -115,15 +120,15 @@ impl MemoryPlan {
     }
 
     /// The plan of a scene from its lattice sizes, before any particle is created on the host:
-    /// a lower bound (walls not counted, as they are known only once generated; the fused step's
-    /// arrays unless the scene has adaptive dt). The solver checks its exact plan again before
-    /// it allocates.
+    /// a lower bound (walls not counted, as they are known only once generated; the weakly
+    /// compressible step's state in place, its smallest). The solver checks its exact plan
+    /// again before it allocates.
     pub fn for_scene(scene: &Scene) -> MemoryPlan {
         let uniform = GpuParams::default().bytes().len() as u64;
-        let plan = MemoryPlan::new(scene.fluid_particle_count(), None, scene.grid().cell_count() as u64, uniform, scene.time.adaptive);
+        let (n, cells) = (scene.fluid_particle_count(), scene.grid().cell_count() as u64);
         match scene.physics.solver {
-            PressureSolver::Dfsph => plan.with_dfsph(scene.fluid_particle_count()),
-            PressureSolver::Wcsph => plan,
+            PressureSolver::Dfsph => MemoryPlan::new(n, None, cells, uniform, StateLayout::PingPong, scene.time.adaptive).with_dfsph(n),
+            PressureSolver::Wcsph => MemoryPlan::new(n, None, cells, uniform, StateLayout::InPlace, false),
         }
     }
 

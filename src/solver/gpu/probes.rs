@@ -35,9 +35,9 @@ pub(super) struct GpuProbes {
     finish: Stage,
     /// Under DFSPH with force probes: `wall_push_pressure`, its output, its bind group per
     /// parity and its workgroups.
-    push: Option<(Stage, wgpu::Buffer, [wgpu::BindGroup; 2], (u32, u32))>,
-    /// Per parity (the state read): the bind groups of the three entry points.
-    groups: [[wgpu::BindGroup; 3]; 2],
+    push: Option<(Stage, wgpu::Buffer, Vec<wgpu::BindGroup>, (u32, u32))>,
+    /// Per phase of the state read: the bind groups of the three entry points.
+    groups: Vec<[wgpu::BindGroup; 3]>,
     pub data: wgpu::Buffer,
     table: wgpu::Buffer,
     masks: wgpu::Buffer,
@@ -56,7 +56,7 @@ pub(super) struct GpuProbes {
 impl GpuProbes {
     /// The table, the buffers and the pipelines of `params.probes` for `fluid` particles;
     /// `wall_masks` is each sorted wall particle's mask of force probes; `lens` gives the
-    /// lengths of the solver's arrays, `buffers[c]` their buffers when state `c` is read;
+    /// lengths of the solver's arrays, `buffers[c]` their buffers when phase `c` of the state is read;
     /// `dfsph`: DFSPH's stiffness sums in a DFSPH scene.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn new(
@@ -67,7 +67,7 @@ impl GpuProbes {
         constants: &[(&str, f64)],
         lens: ArrayLengths,
         uniform: &wgpu::Buffer,
-        buffers: [ArrayBuffers; 2],
+        buffers: &[ArrayBuffers],
         dfsph: Option<DfsphSums>,
     ) -> anyhow::Result<Self> {
         let probes = &params.probes;
@@ -154,11 +154,11 @@ impl GpuProbes {
                 group(&finish, "probe_finish", c, false),
             ]
         };
-        let groups = [parity(0), parity(1)];
+        let groups: Vec<_> = (0..buffers.len()).map(parity).collect();
         let push = match push_pressures.clone() {
             Some(buffer) => {
                 let stage = stage(ctx, "probes", "wall_push_pressure", &len, &k)?;
-                let groups = [0, 1].map(|c| group(&stage, "wall_push_pressure", c, false));
+                let groups: Vec<_> = (0..buffers.len()).map(|c| group(&stage, "wall_push_pressure", c, false)).collect();
                 let size = dispatch_size(fluid, stage.threads_per_group, max_dim);
                 Some((stage, buffer, groups, size))
             }

@@ -127,7 +127,7 @@ impl GpuRankStages {
             anyhow::bail!("the adaptive step's maxima across ranks: {e}");
         }
         let cells = self.params.grid.cell_count() as u64;
-        let st = &solver.state[solver.current];
+        let st = solver.store.state(solver.current);
         let bytes = n as u64;
         let data = read_buffers(&self.ctx, &[
             (&st.positions, bytes * 16),
@@ -207,7 +207,7 @@ impl GpuSolver {
         }
         let carried_of = |i: usize| carried.get(i).copied().unwrap_or(0.0);
         let id_of = |i: usize| i as u32 | if ghosts.get(i).copied().unwrap_or(false) { GHOST_BIT } else { 0 };
-        self.state[0].upload(&self.ctx, positions, velocities, id_of, &carried_of);
+        self.store.state(0).upload(&self.ctx, positions, velocities, id_of, &carried_of);
         self.current = 0;
         self.fields_state = 0;
         self.accelerations_valid = false;

@@ -190,8 +190,10 @@ impl GpuSolver {
             rec.begin(ProfiledStage::BinScatter);
             self.dispatch_particles(rec, &self.pipelines.bin_scatter, &g.bin_scatter);
             rec.begin(ProfiledStage::Reorder);
-            self.dispatch_particles(rec, &self.pipelines.reorder, &g.reorder);
-            self.current = 1 - self.current;
+            for gather in &g.reorder {
+                self.dispatch_particles(rec, &self.pipelines.reorder, gather);
+            }
+            self.current = self.store.after_binning(self.current);
         }
         if self.dfsph.is_some() {
             self.schedule_dfsph(work, rec);
@@ -231,8 +233,8 @@ impl GpuSolver {
         rec.begin(ProfiledStage::Forces);
         if self.pipelines.fused {
             self.dispatch_particles(rec, &w.advance, &g.advance);
-        } else if let Some(acc) = &self.accelerations {
-            self.dispatch_particles(rec, &w.forces, &acc.groups[read]);
+        } else if let Some(forces) = &g.forces {
+            self.dispatch_particles(rec, &w.forces, forces);
         }
         rec.begin(ProfiledStage::Integrate);
         if let Some((reduce, choose)) = &w.adaptive {
@@ -244,7 +246,7 @@ impl GpuSolver {
             self.dispatch_particles(rec, &w.advance, &g.advance);
         }
         dispatch_one(rec, &self.pipelines.finish_step, &self.finish_group);
-        self.current = 1 - read;
+        self.current = self.store.after_integration(read);
         self.fields_state = read;
         self.accelerations_valid = !self.pipelines.fused;
     }
@@ -351,7 +353,7 @@ impl GpuSolver {
         rec.begin(ProfiledStage::DfsphIntegrate);
         self.dispatch_particles(rec, &d.stages.integrate, &g.integrate);
         dispatch_one(rec, &self.pipelines.finish_step, &self.finish_group);
-        self.current = 1 - read;
+        self.current = self.store.after_integration(read);
         self.fields_state = read;
         self.accelerations_valid = false;
     }
@@ -462,11 +464,16 @@ impl GpuSolver {
     }
 
     /// The forces of the state the fields belong to, into the accelerations array (the fused
-    /// step keeps them in registers; `step_fields` asks for them).
+    /// step keeps them in registers, a refresh overwrites the spare buffer that holds them in
+    /// place; `step_fields` asks for them).
     pub(super) fn record_accelerations(&mut self) {
         let mut rec = PlainRecorder::new(&self.ctx.device, "accelerations");
-        let acc = self.accelerations.as_ref().expect("made by the caller");
-        self.dispatch_particles(&mut rec, &self.wcsph_stages().forces, &acc.groups[self.fields_state]);
+        let in_place = self.groups[self.fields_state].wcsph.as_ref().and_then(|g| g.forces.as_ref());
+        let group = match in_place {
+            Some(group) => group,
+            None => &self.accelerations.as_ref().expect("made by the caller").groups[self.fields_state],
+        };
+        self.dispatch_particles(&mut rec, &self.wcsph_stages().forces, group);
         self.ctx.queue.submit([rec.finish()]);
     }
 
@@ -479,7 +486,7 @@ impl GpuSolver {
         if self.step_accelerations_groups.is_none() {
             let d = self.dfsph.as_ref().expect("DFSPH");
             let shared = SharedBuffers {
-                state: &self.state,
+                store: &self.store,
                 starts: &self.starts,
                 densities: &self.densities,
                 pressures: &self.pressures,

@@ -346,13 +346,43 @@ pub fn buffer_range(buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> wgpu::Bin
 /// Builds the pipeline of `entry` in stage file `sim/NAME.wgsl`, whose `//! array` declarations
 /// have the lengths `lens` gives: one binding per segment (see [`ArrayDecl`]).
 pub fn stage(ctx: &GpuContext, name: &str, entry: &str, lens: ArrayLengths, constants: &[(&str, f64)]) -> Result<Stage, GpuError> {
+    stage_with_aliases(ctx, name, entry, lens, constants, &[])
+}
+
+/// Drops the declaration of each `(alias, target)` array from `decls` and returns WGSL accessors
+/// of the alias that act on the target, which becomes read_write where the alias was: a stage
+/// that reads one array and writes another then works in place on one buffer (wgpu refuses one
+/// buffer bound both read-only and read_write in a dispatch).
+pub fn apply_aliases(decls: &mut Vec<ArrayDecl>, aliases: &[(&str, &str)]) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    for &(alias, target) in aliases {
+        let Some(at) = decls.iter().position(|d| d.name == alias) else { continue };
+        let a = decls.remove(at);
+        let t = decls.iter_mut().find(|d| d.name == target).unwrap_or_else(|| panic!("array '{alias}' aliases '{target}', which the stage does not declare"));
+        assert!(t.ty == a.ty && a.access != Access::Atomic && t.access != Access::Atomic, "array '{alias}' cannot alias '{target}'");
+        if a.access == Access::ReadWrite {
+            t.access = Access::ReadWrite;
+        }
+        let ty = &a.ty;
+        writeln!(out, "fn {alias}_at(i: u32) -> {ty} {{ return {target}_at(i); }}").unwrap();
+        if a.access == Access::ReadWrite {
+            writeln!(out, "fn {alias}_set(i: u32, v: {ty}) {{ {target}_set(i, v); }}").unwrap();
+        }
+    }
+    out
+}
+
+/// [`stage`] with the arrays of `aliases` bound as others (see [`apply_aliases`]).
+pub fn stage_with_aliases(ctx: &GpuContext, name: &str, entry: &str, lens: ArrayLengths, constants: &[(&str, f64)], aliases: &[(&str, &str)]) -> Result<Stage, GpuError> {
     let device = &ctx.device;
     let segment_bytes = ctx.storage_segment_bytes();
     let text = stage_text(name);
-    let decls = array_decls(&text);
+    let mut decls = array_decls(&text);
+    let forwarding = apply_aliases(&mut decls, aliases);
     let segments = segment_counts(&decls, lens, segment_bytes);
     check_bindings(ctx, name, segments.iter().sum())?;
-    let source = format!("{}\n{text}", array_bindings_wgsl(&decls, &segments, segment_bytes));
+    let source = format!("{}{forwarding}\n{text}", array_bindings_wgsl(&decls, &segments, segment_bytes));
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(name), source: wgpu::ShaderSource::Wgsl(source.into()) });
     let mut uses = vec![Use::Uniform];
     for (d, &count) in decls.iter().zip(&segments) {

@@ -3,14 +3,14 @@
 //! which a step dispatches the stages is recorded in one place, `schedule.rs`; nothing is read
 //! back, waited for or created while steps are recorded.
 
-use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, ParticleBuffers, StateBuffers, STREAM_CHUNK};
+use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, ParticleBuffers, StateLayout, StateStore, STREAM_CHUNK};
 use super::device::GpuContext;
 use super::memory::MemoryPlan;
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
 use super::probes::{DfsphSums, GpuProbes};
 use super::readback::{read_buffers, visit_array, visit_pairs, visit_rows, Element, RowArrays};
-use super::shaders::{constants, stage, storage_bindings, Stage};
+use super::shaders::{constants, stage, stage_with_aliases, storage_bindings, Stage};
 use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, SharedBuffers};
 use super::workgroups::{GpuOptions, SolverLoop};
 use crate::model::initial::InitialState;
@@ -26,11 +26,17 @@ use wgpu::util::DeviceExt;
 /// Steps per command buffer: enough to amortise submission, few enough to check health often.
 pub const STEPS_PER_SUBMIT: u64 = 32;
 
-/// Bind groups of one parity: reading state `c`, writing state `1 - c`.
+/// The integration with the state in place: it writes each particle's new state into the slot
+/// it read it from.
+const IN_PLACE: &[(&str, &str)] = &[("positions_out", "positions"), ("velocities_out", "velocities")];
+
+/// Bind groups of one phase of the state (see [`StateStore`]): reading its buffers, and writing
+/// those of the phase after it where a stage writes another state.
 pub(super) struct ParityBindGroups {
     pub bin_count: wgpu::BindGroup,
     pub bin_scatter: wgpu::BindGroup,
-    pub reorder: wgpu::BindGroup,
+    /// The reorder gathering the positions, then the velocities.
+    pub reorder: [wgpu::BindGroup; 2],
     /// The weakly compressible step's (`None` with DFSPH).
     pub wcsph: Option<WcsphBindGroups>,
 }
@@ -40,6 +46,9 @@ pub(super) struct WcsphBindGroups {
     pub density: wgpu::BindGroup,
     /// With the Adami wall pressure: the wall stage's.
     pub wall_pressure: Option<wgpu::BindGroup>,
+    /// The forces into the state's spare buffer (the state in place; the fused step makes its
+    /// forces' groups on request, see `GpuSolver::accelerations`).
+    pub forces: Option<wgpu::BindGroup>,
     /// The integration (after `forces`, adaptive dt) or the fused forces and integration.
     pub advance: wgpu::BindGroup,
 }
@@ -71,7 +80,8 @@ pub(super) struct WcsphStages {
     pub adaptive: Option<(Stage, Stage)>,
 }
 
-/// The accelerations array with the forces' bind groups of each parity.
+/// The fused step's accelerations array, made on request, with the forces' bind groups of each
+/// parity.
 pub(super) struct Accelerations {
     pub buffer: wgpu::Buffer,
     pub groups: [wgpu::BindGroup; 2],
@@ -85,11 +95,13 @@ pub struct GpuSolver {
     pub(super) uniform: wgpu::Buffer,
     /// Viscosity currently in the uniform block.
     pub(super) uniform_viscosity: f64,
-    pub(super) state: [StateBuffers; 2],
-    /// Which of `state` holds the current particles.
+    /// The particle state's buffers and their roles in each phase.
+    pub(super) store: StateStore,
+    /// The phase of `store` that holds the current particles.
     pub(super) current: usize,
-    /// Which of `state` the densities and pressures (and accelerations, when valid) belong to:
-    /// the state the last step or refresh evaluated them on.
+    /// The phase the densities and pressures (and accelerations, when valid) belong to: the
+    /// state the last step or refresh evaluated them on (in place, the state the step then
+    /// advanced, in the same slots).
     pub(super) fields_state: usize,
     /// Whether `accelerations` holds the accelerations of `fields_state`.
     pub(super) accelerations_valid: bool,
@@ -99,7 +111,8 @@ pub struct GpuSolver {
     pub(super) densities: wgpu::Buffer,
     /// Also the binning's cell keys (u32), which are dead once the state is reordered.
     pub(super) pressures: wgpu::Buffer,
-    /// Every step with two passes; with the fused step created on the first `step_fields`.
+    /// The fused step's, created on the first `step_fields` (in place the accelerations live in
+    /// the state's spare buffer).
     pub(super) accelerations: Option<Accelerations>,
     /// Bound where a fused stage declares the accelerations it does not use.
     pub(super) placeholder: wgpu::Buffer,
@@ -113,7 +126,8 @@ pub struct GpuSolver {
     pub(super) wall_order: Vec<u32>,
     pub(super) scan: Scan,
     pub(super) pipelines: Pipelines,
-    pub(super) groups: [ParityBindGroups; 2],
+    /// Per phase of `store`.
+    pub(super) groups: Vec<ParityBindGroups>,
     pub(super) finish_group: wgpu::BindGroup,
     /// DFSPH's stages, arrays and bind groups, when the scene uses it.
     pub(super) dfsph: Option<DfsphGpu>,
@@ -202,15 +216,16 @@ impl GpuSolver {
             && !dfsph
             && storage_bindings(&ctx, "forces_integrate", &without_accelerations) <= ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
         let uniform_bytes = gpu_params.bytes().len() as u64;
-        let fused = can_fuse
-            && options.fuse_forces_and_integration.unwrap_or_else(|| {
-                ctx.info.device_type != wgpu::DeviceType::Cpu || MemoryPlan::new(n, Some(w), cells, uniform_bytes, true).check(&ctx).is_err()
-            });
+        // The two-pass step with its state in place is the default: 48 bytes of state per
+        // particle instead of the fused step's 64 (docs/performance.md).
+        let fused = can_fuse && options.fuse_forces_and_integration.unwrap_or(false);
+        // DFSPH predicts into a second state; so does the fused step.
+        let layout = if dfsph || fused { StateLayout::PingPong } else { StateLayout::InPlace };
         // DFSPH keeps accelerations with adaptive dt only (fixed dt: in registers).
         let plan = if dfsph {
-            MemoryPlan::new(n, Some(w), cells, uniform_bytes, params.adaptive.is_some()).with_dfsph(n)
+            MemoryPlan::new(n, Some(w), cells, uniform_bytes, layout, params.adaptive.is_some()).with_dfsph(n)
         } else {
-            MemoryPlan::new(n, Some(w), cells, uniform_bytes, !fused).with_wall_fields(counts.wall_fields)
+            MemoryPlan::new(n, Some(w), cells, uniform_bytes, layout, false).with_wall_fields(counts.wall_fields)
         };
         plan.check(&ctx)?;
 
@@ -248,19 +263,19 @@ impl GpuSolver {
                     advance: if fused {
                         stage(&ctx, "forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
                     } else {
-                        stage(&ctx, "integrate", "integrate", &len, &sized(ws.integrate))?
+                        stage_with_aliases(&ctx, "integrate", "integrate", &len, &sized(ws.integrate), IN_PLACE)?
                     },
                     adaptive: match params.adaptive {
                         Some(_) => Some((
-                            stage(&ctx, "integrate", "reduce_maxima", &len, &sized(ws.integrate))?,
-                            stage(&ctx, "integrate", "choose_dt", &len, &k)?,
+                            stage_with_aliases(&ctx, "integrate", "reduce_maxima", &len, &sized(ws.integrate), IN_PLACE)?,
+                            stage_with_aliases(&ctx, "integrate", "choose_dt", &len, &k, IN_PLACE)?,
                         )),
                         None => None,
                     },
                 })
             },
             // One thread on the status words.
-            finish_step: stage(&ctx, "integrate", "finish_step", &without_accelerations, &k)?,
+            finish_step: stage_with_aliases(&ctx, "integrate", "finish_step", &without_accelerations, &k, if layout == StateLayout::InPlace { IN_PLACE } else { &[] })?,
             fused,
         };
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
@@ -291,36 +306,40 @@ impl GpuSolver {
             storage_init(device, "wall fields", bytemuck::cast_slice(&rest))
         });
 
-        let state = [StateBuffers::new(device, 0, n), StateBuffers::new(device, 1, n)];
+        let store = StateStore::new(device, layout, n);
         // With continuity density the w of each velocity carries the particle's density.
         let carried = |i: usize| if params.continuity_density { initial.fluid_density(i, params.rest_density) as f32 } else { 0.0 };
-        state[0].upload(&ctx, &initial.fluid_positions, &initial.fluid_velocities, |i| i as u32, &carried);
+        store.state(0).upload(&ctx, &initial.fluid_positions, &initial.fluid_velocities, |i| i as u32, &carried);
         let starts = storage(device, "cell starts", (cells + 1) * 4);
         let densities = storage(device, "densities", n * 4);
         let pressures = storage(device, "pressures", n * 4);
         let placeholder = storage(device, "placeholder", 16);
-        let accelerations = if dfsph { params.adaptive.is_some() } else { !fused }.then(|| storage(device, "accelerations", n * 16));
+        let accelerations = (dfsph && params.adaptive.is_some()).then(|| storage(device, "accelerations", n * 16));
         let status = storage_init(device, "status", bytemuck::cast_slice(&status::initial()));
         let scan = Scan::new(&ctx, &uniform, &starts, cells + 1)?;
 
         let u = &uniform;
         let p = &pipelines;
-        // The buffer of every array name, reading state `c` and writing state `1 - c`. The
-        // binning's arrays live in arrays that are dead while it runs: the cell keys and the
-        // unordered slots in the pressures and densities (written again only after the reorder),
-        // the ranks in the velocities of the state being gathered into (written by the reorder,
-        // after the scatter has read the ranks).
+        // The buffer of every array name in phase `c` (writing the phase after it where a
+        // stage writes another state). The binning's arrays live in arrays that are dead while
+        // it runs: the cell keys and the unordered slots in the pressures and densities (written
+        // again only after the reorder), the ranks in the buffer the reorder gathers into last
+        // (the other state's velocities, or in place the spare), which the scatter has read by
+        // then. In place the accelerations live in the spare buffer.
         let buffers = |c: usize| {
-            let (src, dst) = (&state[c], &state[1 - c]);
-            let acc = accelerations.as_ref().unwrap_or(&placeholder);
+            let (src, dst) = (store.state(c), store.state(store.after_binning(c)));
+            let spare = (layout == StateLayout::InPlace).then(|| store.spare(c));
+            let acc = spare.clone().or_else(|| accelerations.clone()).unwrap_or_else(|| placeholder.clone());
+            let ranks = spare.unwrap_or_else(|| dst.velocities.clone());
             let (starts, densities, pressures, status, wall_positions, wall_starts, wall_fields) =
                 (&starts, &densities, &pressures, &status, &wall_positions, &wall_starts, &wall_fields);
             move |name: &str| -> wgpu::Buffer {
                 match name {
-                    "positions" | "positions_in" => src.positions.clone(),
-                    "velocities" | "velocities_in" => src.velocities.clone(),
+                    "positions" => src.positions.clone(),
+                    "velocities" => src.velocities.clone(),
                     "positions_out" => dst.positions.clone(),
-                    "velocities_out" | "ranks" => dst.velocities.clone(),
+                    "velocities_out" => dst.velocities.clone(),
+                    "ranks" => ranks.clone(),
                     "keys" | "pressures" => pressures.clone(),
                     "unordered" | "densities" => densities.clone(),
                     "starts" | "counts" => starts.clone(),
@@ -339,15 +358,29 @@ impl GpuSolver {
             let placeholder = &placeholder;
             move |name: &str| if name == "accelerations" { placeholder.clone() } else { b(name) }
         };
+        // The reorder's two dispatches: positions, then velocities, each from phase `c` into
+        // the phase after it (in place: the positions into the spare, then the velocities into
+        // the positions' buffer, which the first has finished reading).
+        let gather = |c: usize, k: usize| {
+            let b = buffers(c);
+            let (from, to) = (store.state(c), store.state(store.after_binning(c)));
+            let (input, output) = if k == 0 { (from.positions, to.positions) } else { (from.velocities, to.velocities) };
+            p.reorder.bind_group(device, "reorder", u, &move |name: &str| match name {
+                "gathered_in" => input.clone(),
+                "gathered_out" => output.clone(),
+                other => b(other),
+            })
+        };
         let make_parity = |c: usize| {
             let b = buffers(c);
             ParityBindGroups {
                 bin_count: p.bin_count.bind_group(device, "bin_count", u, &b),
                 bin_scatter: p.bin_scatter.bind_group(device, "bin_scatter", u, &b),
-                reorder: p.reorder.bind_group(device, "reorder", u, &b),
+                reorder: [gather(c, 0), gather(c, 1)],
                 wcsph: p.wcsph.as_ref().map(|w| WcsphBindGroups {
                     density: w.density.bind_group(device, "density", u, &b),
                     wall_pressure: w.wall_pressure.as_ref().map(|stage| stage.bind_group(device, "wall_pressure", u, &b)),
+                    forces: (layout == StateLayout::InPlace).then(|| w.forces.bind_group(device, "forces", u, &b)),
                     advance: if fused {
                         w.advance.bind_group(device, "forces_and_integrate", u, &without_accelerations(c))
                     } else {
@@ -356,12 +389,12 @@ impl GpuSolver {
                 }),
             }
         };
-        let groups = [make_parity(0), make_parity(1)];
+        let groups: Vec<ParityBindGroups> = (0..store.phases()).map(make_parity).collect();
         let finish_group = p.finish_step.bind_group(device, "finish_step", u, &without_accelerations(0));
         let max_groups_per_dim = device.limits().max_compute_workgroups_per_dimension;
         let dfsph = dfsph_stages.map(|stages| {
             let shared = SharedBuffers {
-                state: &state,
+                store: &store,
                 starts: &starts,
                 densities: &densities,
                 pressures: &pressures,
@@ -378,9 +411,10 @@ impl GpuSolver {
         } else {
             let masks = params.probes.wall_masks(&initial.wall_positions, &initial.wall_boundaries);
             let sorted_masks: Vec<u32> = if params.probes.force_count() > 0 { wall_order.iter().map(|&i| masks[i as usize]).collect() } else { Vec::new() };
-            let (b0, b1) = (buffers(0), buffers(1));
+            let phases: Vec<_> = (0..store.phases()).map(buffers).collect();
+            let phases: Vec<&dyn Fn(&str) -> wgpu::Buffer> = phases.iter().map(|b| b as &dyn Fn(&str) -> wgpu::Buffer).collect();
             let sums = dfsph.as_ref().map(|d| DfsphSums { pressure_sum: &d.buffers.pressure_sum, divergence_sum: &d.buffers.divergence_sum });
-            Some(GpuProbes::new(&ctx, params, n, &sorted_masks, &k, &len, u, [&b0, &b1], sums)?)
+            Some(GpuProbes::new(&ctx, params, n, &sorted_masks, &k, &len, u, &phases, sums)?)
         };
         let memory = plan.total() + probes.as_ref().map_or(0, |p| p.bytes());
         let mut solver = GpuSolver {
@@ -389,7 +423,7 @@ impl GpuSolver {
             wall_count: w as u32,
             uniform,
             uniform_viscosity: viscosity,
-            state,
+            store,
             current: 0,
             fields_state: 0,
             accelerations_valid: false,
@@ -420,19 +454,17 @@ impl GpuSolver {
             rank_error: std::cell::RefCell::new(None),
             ctx,
         };
-        match (&mut solver.dfsph, accelerations) {
-            (Some(d), buffer) => d.accelerations = buffer,
-            (None, Some(buffer)) => solver.accelerations = Some(solver.forces_groups(buffer)),
-            (None, None) => {}
+        if let Some(d) = &mut solver.dfsph {
+            d.accelerations = accelerations;
         }
         Ok(solver)
     }
 
-    /// The forces' bind groups of both parities, writing into `buffer`.
+    /// The fused step's forces' bind groups of both parities, writing into `buffer`.
     fn forces_groups(&self, buffer: wgpu::Buffer) -> Accelerations {
         let device = &self.ctx.device;
         let group = |c: usize| {
-            let st = &self.state[c];
+            let st = self.store.state(c);
             self.wcsph_stages().forces.bind_group(device, "forces", &self.uniform, &|name: &str| {
                 match name {
                     "positions" => &st.positions,
@@ -453,9 +485,10 @@ impl GpuSolver {
         Accelerations { buffer, groups }
     }
 
-    /// Makes `accelerations` hold the accelerations of `fields_state`: the fused step keeps them
-    /// in registers, so they are evaluated again here (same inputs, same shader code: the same
-    /// values), into an array created on first use.
+    /// Makes the accelerations array hold the accelerations of `fields_state`: after a refresh
+    /// (in place) or a fused step, which keeps them in registers, they are evaluated again here
+    /// (same inputs, same shader code: the same values), the fused step's into an array created
+    /// on first use.
     fn ensure_accelerations(&mut self) {
         if self.accelerations_valid {
             return;
@@ -465,7 +498,7 @@ impl GpuSolver {
             self.accelerations_valid = true;
             return;
         }
-        if self.accelerations.is_none() {
+        if self.store.layout == StateLayout::PingPong && self.accelerations.is_none() {
             let buffer = storage(&self.ctx.device, "accelerations", self.fluid_count as u64 * 16);
             self.accelerations = Some(self.forces_groups(buffer));
         }
@@ -474,10 +507,11 @@ impl GpuSolver {
     }
 
     /// The accelerations array `step_fields` reads.
-    fn accelerations_buffer(&self) -> &wgpu::Buffer {
+    fn accelerations_buffer(&self) -> wgpu::Buffer {
         match &self.dfsph {
-            Some(d) => d.accelerations.as_ref().expect("made by ensure_accelerations"),
-            None => &self.accelerations.as_ref().expect("made by ensure_accelerations").buffer,
+            Some(d) => d.accelerations.clone().expect("made by ensure_accelerations"),
+            None if self.store.layout == StateLayout::InPlace => self.store.spare(self.fields_state),
+            None => self.accelerations.as_ref().expect("made by ensure_accelerations").buffer.clone(),
         }
     }
 
@@ -488,9 +522,9 @@ impl GpuSolver {
         let n = self.fluid_count as u64;
         let b = &d.buffers;
         let c = self.current;
-        let velocities = &self.state[if predicted { 1 - c } else { c }].velocities;
+        let velocities = &self.store.state(if predicted { 1 - c } else { c }).velocities;
         let data = read_buffers(&self.ctx, &[
-            (&self.state[c].positions, n * 16),
+            (&self.store.state(c).positions, n * 16),
             (&self.densities, n * 4),
             (&self.pressures, n * 4),
             (&b.factors, n * 4),
@@ -576,16 +610,16 @@ impl GpuSolver {
         self.refresh_fields();
         let n = self.fluid_count as u64;
         let cells = self.params.grid.cell_count() as u64;
-        let data = read_buffers(&self.ctx, &[(&self.state[self.current].positions, n * 16), (&self.starts, (cells + 1) * 4)])?;
+        let data = read_buffers(&self.ctx, &[(&self.store.state(self.current).positions, n * 16), (&self.starts, (cells + 1) * 4)])?;
         Ok((ids_of(bytemuck::cast_slice(&data[0])), bytemuck::pod_collect_to_vec(&data[1])))
     }
 
-    /// The buffers holding the current particle state (they alternate between two pairs as the
-    /// solver steps: ask again after stepping). Particles are in cell order; the w component of
+    /// The buffers holding the current particle state (they change roles as the solver steps:
+    /// ask again after stepping). Particles are in cell order; the w component of
     /// each position holds the particle's original index as u32 bits. `densities` and
     /// `pressures` are in the same order after a snapshot.
     pub fn particle_buffers(&self) -> ParticleBuffers {
-        let st = &self.state[self.current];
+        let st = self.store.state(self.current);
         ParticleBuffers {
             context: self.ctx.clone(),
             positions: st.positions.clone(),
@@ -623,18 +657,15 @@ impl GpuSolver {
     pub fn allocated_bytes(&self) -> u64 {
         let s = self;
         // With the fused step (and DFSPH with a fixed dt) the accelerations exist only after
-        // `step_fields` asked for them.
-        let planned_accelerations = match &s.dfsph {
-            Some(d) => d.accelerations.as_ref().filter(|_| s.params.adaptive.is_some()),
-            None => s.accelerations.as_ref().filter(|_| !s.pipelines.fused).map(|a| &a.buffer),
-        };
+        // `step_fields` asked for them; in place they live in the state's spare buffer.
+        let planned_accelerations = s.dfsph.as_ref().and_then(|d| d.accelerations.as_ref().filter(|_| s.params.adaptive.is_some()));
         [&s.uniform, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
             .into_iter()
             .chain(planned_accelerations)
             .chain(s.wall_fields.as_ref())
             .map(|b| b.size())
-            .chain(s.state.iter().flat_map(|st| [st.positions.size(), st.velocities.size()]))
             .sum::<u64>()
+            + s.store.bytes()
             + s.scan.bytes()
             + s.dfsph.as_ref().map_or(0, |d| d.buffers.bytes())
             + s.probes.as_ref().map_or(0, |p| p.bytes())
@@ -644,14 +675,14 @@ impl GpuSolver {
     /// streamed snapshot with an explicit piece size (the tests use small ones).
     pub fn visit_rows_in_pieces(&mut self, chunk: u64, visit: &mut dyn FnMut(u64, &[SnapshotRow]) -> anyhow::Result<()>) -> anyhow::Result<()> {
         self.refresh_fields();
-        let st = &self.state[self.current];
+        let st = self.store.state(self.current);
         let arrays = RowArrays { positions: &st.positions, velocities: &st.velocities, densities: &self.densities, pressures: &self.pressures, count: self.fluid_count as u64 };
         visit_rows(&self.ctx, &arrays, chunk, visit)
     }
 
     /// One array of the saved state in pieces of `chunk` particles (the tests use small ones).
     pub fn visit_state_in_pieces(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
-        let st = &self.state[self.current];
+        let st = self.store.state(self.current);
         let n = self.fluid_count as u64;
         match array {
             StateArray::Positions => visit_array(&self.ctx, &st.positions, n, Element::Vector, chunk, visit),
@@ -751,7 +782,7 @@ impl Backend for GpuSolver {
     fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
         self.refresh_fields();
         let n = self.fluid_count as u64;
-        let st = &self.state[self.current];
+        let st = self.store.state(self.current);
         let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16), (&self.densities, n * 4), (&self.pressures, n * 4)])?;
         let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
         let ids = ids_of(&pos);
@@ -843,7 +874,7 @@ impl Backend for GpuSolver {
             if continuity { state.positions.len() } else { 0 }
         );
         let carried = |i: usize| if continuity { state.densities[i] as f32 } else { 0.0 };
-        self.state[0].upload(&self.ctx, &state.positions, &state.velocities, |i| state.ids[i], &carried);
+        self.store.state(0).upload(&self.ctx, &state.positions, &state.velocities, |i| state.ids[i], &carried);
         if let Some(d) = &self.dfsph {
             let n = self.fluid_count as usize;
             anyhow::ensure!(state.warm_start.len() == n, "the state holds {} warm-start stiffnesses for DFSPH; the scene has {n} particles", state.warm_start.len());
@@ -867,8 +898,8 @@ impl Backend for GpuSolver {
         let data = read_buffers(&self.ctx, &[
             (&self.densities, n * 4),
             (&self.pressures, n * 4),
-            (acc, n * 16),
-            (&self.state[self.fields_state].positions, n * 16),
+            (&acc, n * 16),
+            (&self.store.state(self.fields_state).positions, n * 16),
         ])?;
         let ids = ids_of(bytemuck::cast_slice(&data[3]));
         let rho: Vec<f32> = bytemuck::pod_collect_to_vec(&data[0]);

@@ -167,11 +167,10 @@ impl FromStr for SolverLoop {
 /// Choices of the GPU step that do not change its results.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GpuOptions {
-    /// Fuse the forces and the integration into one pass when dt is fixed: the same values,
-    /// without the accelerations array (16 bytes per fluid particle) and a second pass over the
-    /// state. `None` (the default) fuses on every adapter but software ones (llvmpipe, lavapipe,
-    /// WARP), where the fused pass measured 3-20 % slower, unless only the fused step fits the
-    /// adapter's buffers.
+    /// Fuse the forces and the integration into one pass when dt is fixed: the same values and
+    /// one pass over the state less, but the state then needs two copies (64 bytes per fluid
+    /// particle) instead of three buffers used in place (48). `None` (the default) and `false`
+    /// run two passes in place.
     pub fuse_forces_and_integration: Option<bool>,
     /// Threads per workgroup of each particle stage.
     pub workgroup_sizes: WorkgroupSizes,
