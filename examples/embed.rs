@@ -73,7 +73,7 @@ fn run(context: GpuContext, frames: u32, steps_per_frame: u64) -> anyhow::Result
     });
     for frame in 0..frames {
         sim.step(steps_per_frame)?;
-        let buffers = sim.particle_buffers().expect("on the GPU");
+        let buffers = sim.particle_buffers().expect("on the GPU")?;
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         encoder.copy_buffer_to_buffer(&buffers.positions, 0, &vertices, 0, n * 16);
         // ... a render pass drawing `vertices` as points would go here ...

@@ -93,13 +93,16 @@ pub fn stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool, fused: bool) -> [
         4 * starts,
         // bin_scatter: keys, ranks and a cell start in; the unordered slot out.
         n * 12 + n * 4,
-        // reorder: keys, starts, slots and the state (position with id, velocity) in; state out.
-        n * 12 + n * 32 + n * 32,
-        // density: positions and cell starts (and walls) in; density and pressure out.
-        n * 16 + starts + walls + n * 8,
-        // forces: positions, velocities, densities, pressures, starts (and walls) in;
-        // accelerations out, or with fusion the new positions and velocities.
-        n * 40 + starts + walls + if fused { n * 32 } else { n * 16 },
+        // reorder: the rank reads keys, starts and slots and writes each destination; the two
+        // gathers read the destinations and the state (position with id, velocity) and write it.
+        n * 12 + n * 4 + n * 8 + n * 32 + n * 32,
+        // density: positions and cell starts (and walls) in; density out (in the w of the
+        // velocities, or its array with the continuity equation).
+        n * 16 + starts + walls + n * 4,
+        // forces: positions, velocities with the density in w, starts (and walls) in (the
+        // pressure comes from the density; the continuity equation's density array is 4 bytes
+        // more); accelerations out, or with fusion the new positions and velocities.
+        n * 32 + starts + walls + if fused { n * 32 } else { n * 16 },
         // integrate: positions, velocities and accelerations in, positions and velocities out
         // (the accelerations and velocities read again by the adaptive reduction of |v|max and
         // |a|max); with fusion only the step's status words.

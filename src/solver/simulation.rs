@@ -480,12 +480,13 @@ impl Simulation {
 
     /// The storage buffers of the current particle state, when running on the GPU: positions
     /// and velocities as `array<vec4<f32>>` (w = 0), ids, densities and pressures, in the
-    /// solver's cell order (`ids[slot]` is the original index). The solver alternates between
-    /// two sets of buffers, so ask again after every [`Simulation::step`]; work submitted to
+    /// solver's cell order (`ids[slot]` is the original index). The solver's buffers change
+    /// roles as it steps, so ask again after every [`Simulation::step`]; work submitted to
     /// [`Simulation::queue`] afterwards sees the new state. Every buffer has `STORAGE`,
     /// `COPY_SRC` and `COPY_DST` usage: bind it read-only in a vertex or compute shader, or copy
-    /// from it.
-    pub fn particle_buffers(&self) -> Option<ParticleBuffers> {
+    /// from it. An error where the density and pressure arrays the solver makes on the first
+    /// request cannot be made.
+    pub fn particle_buffers(&self) -> Option<anyhow::Result<ParticleBuffers>> {
         match &self.solver {
             Solver::Gpu(s) => Some(s.particle_buffers()),
             _ => None,

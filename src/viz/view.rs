@@ -176,7 +176,7 @@ impl App {
             _ => return Ok(()),
         };
         let view = texture.texture.create_view(&Default::default());
-        let particles: crate::viz::render::ParticleBuffers = g.sim.particle_buffers().expect("the GPU solver has buffers").into();
+        let particles: crate::viz::render::ParticleBuffers = g.sim.particle_buffers().expect("the viewer runs the GPU solver")?.into();
         let mut encoder = g.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("view frame") });
         g.renderer.encode(&mut encoder, &view, &particles);
         self.frames += 1;

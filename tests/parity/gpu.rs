@@ -8,6 +8,7 @@ use wgsph::solver::compare::step_and_compare;
 use wgsph::solver::compare::MANY_STEPS;
 use wgsph::solver::compare::ONE_STEP;
 use wgsph::solver::cpu::prefix_sum::prefix_sum;
+use wgsph::solver::cpu::reorder;
 use wgsph::model::kernels::sort_by_cell;
 use wgsph::solver::gpu::prefix_sum::exclusive_scan;
 use wgsph::solver::gpu::GpuContext;
@@ -81,6 +82,49 @@ fn binning_matches_a_cpu_counting_sort_exactly() {
             let (sorted, cpu_starts) = sort_by_cell(&grid, &pos);
             assert_eq!(starts, cpu_starts);
             assert_eq!(ids, sorted);
+            // The twin of the GPU's two reorder entry points: sending each particle to its
+            // destination gathers the state as the sorted order does.
+            let mut dest = Vec::new();
+            reorder::reorder_rank(&sorted, &mut dest);
+            let mut scattered = vec![V3([0.0f32; 3]); pos.len()];
+            for (i, &d) in dest.iter().enumerate() {
+                scattered[d as usize] = pos[i];
+            }
+            let mut gathered = Vec::new();
+            reorder::reorder(&sorted, &pos, &mut gathered);
+            assert!(scattered == gathered);
+        }
+    }
+}
+
+#[test]
+fn the_density_and_pressure_arrays_handed_to_the_renderer_are_the_state_s_as_by_their_twin() {
+    use wgsph::solver::cpu::fields::output_fields;
+    use wgsph::solver::gpu::readback::read_buffers;
+    for ctx in common::contexts() {
+        // Summed density (in the w of the velocities), and the continuity equation's array.
+        for continuity in [false, true] {
+            let base = small_scene(Kernel::Mueller, EquationOfState::Tait, false);
+            let scene = if continuity { base.continuity() } else { base }.build();
+            let p = scene.params();
+            let mut gpu = common::gpu(ctx.clone(), &scene);
+            gpu.step(7).unwrap();
+            let snapshot = gpu.snapshot().unwrap();
+            let buffers = gpu.particle_buffers().unwrap();
+            let n = buffers.count as u64;
+            let data = read_buffers(&ctx, &[(&buffers.positions, n * 16), (&buffers.densities, n * 4), (&buffers.pressures, n * 4)]).unwrap();
+            let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
+            let (rho, pressure): (Vec<f32>, Vec<f32>) = (bytemuck::pod_collect_to_vec(&data[1]), bytemuck::pod_collect_to_vec(&data[2]));
+            // The snapshot's densities in slot order, through the CPU twin.
+            let slot_densities: Vec<f32> = pos.iter().map(|x| snapshot.densities[x[3].to_bits() as usize] as f32).collect();
+            let eos = |r: f32| wgsph::model::kernels::pressure::<f32>(r, p.rest_density as f32, p.stiffness as f32, p.eos, p.clamp_negative_pressure);
+            let (mut d, mut q) = (Vec::new(), Vec::new());
+            output_fields(&slot_densities, eos, &mut d, &mut q);
+            assert!(rho == d, "{}: densities differ", ctx.describe());
+            for (k, (&a, &b)) in pressure.iter().zip(&q).enumerate() {
+                assert!((a - b).abs() <= 1e-5 * p.stiffness as f32, "{}: pressure {k}: {a} against {b}", ctx.describe());
+            }
+            assert!(rho.iter().any(|&r| r != p.rest_density as f32));
         }
     }
 }

@@ -5,8 +5,7 @@ use crate::common;
 use crate::common::TestScene;
 
 use std::process::Command;
-use wgsph::solver::gpu::buffers::StateLayout;
-use wgsph::solver::gpu::memory::MemoryPlan;
+use wgsph::solver::gpu::memory::{MemoryPlan, StepArrays};
 use wgsph::model::scene::{EquationOfState, Kernel, Scene};
 
 #[test]
@@ -22,8 +21,7 @@ fn the_memory_figure_is_the_plan_and_matches_the_buffers_created() {
                 Some(initial.wall_positions.len() as u64),
                 params.grid.cell_count() as u64,
                 wgsph::solver::gpu::params::GpuParams::default().bytes().len() as u64,
-                if solver.fused() { StateLayout::PingPong } else { StateLayout::InPlace },
-                false,
+                StepArrays::new(false, false, false, solver.fused()),
             );
             assert_eq!(solver.memory_bytes(), plan.total(), "{name} on {}", ctx.describe());
             assert_eq!(solver.allocated_bytes(), plan.total(), "{name} on {}", ctx.describe());
@@ -36,8 +34,8 @@ fn a_plan_over_the_buffer_limit_is_refused_naming_adapter_particles_bytes_and_li
     for ctx in common::contexts() {
         // Arrays are bound in segments, so only max_buffer_size bounds one array.
         let fit = ctx.device.limits().max_buffer_size / 16;
-        assert!(MemoryPlan::new(fit, Some(0), 1000, 256, StateLayout::InPlace, false).check(&ctx).is_ok(), "{} particles fit {}", fit, ctx.describe());
-        let plan = MemoryPlan::new(fit + 1, Some(0), 1000, 256, StateLayout::InPlace, false);
+        assert!(MemoryPlan::new(fit, Some(0), 1000, 256, StepArrays::new(false, false, false, false)).check(&ctx).is_ok(), "{} particles fit {}", fit, ctx.describe());
+        let plan = MemoryPlan::new(fit + 1, Some(0), 1000, 256, StepArrays::new(false, false, false, false));
         let e = plan.check(&ctx).unwrap_err();
         let msg = e.to_string();
         assert_eq!((e.particles, e.total), (fit + 1, plan.total()));

@@ -16,8 +16,9 @@
 //! array wall_fields: vec2<f32>, read, optional
 //! array accelerations: vec4<f32>, read_write
 
-// The acceleration of fluid particle i (xyz) and, with CONTINUITY, its density (w, which the
-// integration carries to the next step; 0 otherwise).
+// The acceleration of fluid particle i (xyz) and its density (w), which the integration keeps
+// in the w of the velocity: with CONTINUITY the density the next step advances, otherwise the
+// one the outputs of this step read there (src/solver/gpu/solver.rs, `array_places`).
 fn particle_acceleration(i: u32) -> vec4<f32> {
     let cubic = KERNEL == 1u;
     let viscous = VISCOSITY && params.viscosity > 0.0;
@@ -112,7 +113,7 @@ fn particle_acceleration(i: u32) -> vec4<f32> {
     if (GRAVITY) {
         a += params.gravity.xyz;
     }
-    return vec4<f32>(a, select(0.0, rho_i, CONTINUITY));
+    return vec4<f32>(a, rho_i);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)

@@ -25,8 +25,9 @@ fn step_dt() -> f32 {
 // speed the forces gave it, before a plane took the velocity into it away (0 for a particle
 // that is not finite; a finite velocity whose length overflows counts as infinitely fast, which
 // orders above every finite speed). The w component of the position (the particle's original
-// index, as bits) is carried over untouched. With CONTINUITY the w of the velocity carries the
-// density of this step (a4.w) to the next, whose continuity stage advances it; otherwise it is 0.
+// index, as bits) is carried over untouched. The w of the velocity gets the density of this
+// step (a4.w): with CONTINUITY the next step's continuity stage advances it; otherwise it is
+// where the outputs read the density the step used.
 fn advance_particle(i: u32, a4: vec4<f32>, dt: f32) -> f32 {
     let a = a4.xyz;
     let old = positions_at(i);

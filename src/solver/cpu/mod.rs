@@ -16,6 +16,7 @@ pub mod dfsph_predict;
 pub mod dfsph_pressure;
 pub mod dfsph_shared;
 pub mod exchange;
+pub mod fields;
 pub mod forces;
 pub mod forces_integrate;
 pub mod integrate;

@@ -119,6 +119,11 @@ impl StateStore {
         }
     }
 
+    /// Particles each buffer holds.
+    pub fn capacity(&self) -> u64 {
+        self.buffers[0].size() / 16
+    }
+
     /// Bytes of every buffer.
     pub fn bytes(&self) -> u64 {
         self.buffers.iter().map(|b| b.size()).sum()

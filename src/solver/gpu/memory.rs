@@ -25,6 +25,36 @@ pub struct PlannedBuffer {
     pub single_binding: bool,
 }
 
+/// The particle arrays a step keeps besides the cell arrays and the walls (docs/performance.md,
+/// "GPU memory layout").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StepArrays {
+    /// How the positions and velocities are held.
+    pub layout: StateLayout,
+    /// A separate accelerations array (DFSPH with adaptive dt; in place the accelerations live
+    /// in the state's spare buffer, and the fused step keeps them in registers).
+    pub accelerations: bool,
+    /// A densities array (with the continuity equation, whose velocities carry the density of
+    /// the step before, and DFSPH); a summed density lives in the w of the velocities.
+    pub densities: bool,
+    /// A pressures array (DFSPH, whose pressure is no function of the density); elsewhere the
+    /// equation of state gives it where it is read.
+    pub pressures: bool,
+}
+
+impl StepArrays {
+    /// The arrays of a step: DFSPH or the weakly compressible step (fused or in place), with
+    /// the continuity equation or summed density, with adaptive or fixed dt.
+    pub fn new(dfsph: bool, continuity_density: bool, adaptive: bool, fused: bool) -> StepArrays {
+        StepArrays {
+            layout: if dfsph || fused { StateLayout::PingPong } else { StateLayout::InPlace },
+            accelerations: dfsph && adaptive,
+            densities: dfsph || continuity_density,
+            pressures: dfsph,
+        }
+    }
+}
+
 /// Every buffer the solver allocates for a scene.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MemoryPlan {
@@ -64,11 +94,9 @@ fn padded(bytes: u64) -> u64 {
 
 impl MemoryPlan {
     /// The buffers of a solver with `fluid` particles, `walls` wall particles and `cells` grid
-    /// cells; `uniform_bytes` is the size of the parameter block. `layout`: how the particle
-    /// state is held (see [`StateLayout`]); `accelerations`: whether a separate accelerations
-    /// array exists (DFSPH with adaptive dt; in place they live in the state's spare buffer, and
-    /// the fused step keeps them in registers).
-    pub fn new(fluid: u64, walls: Option<u64>, cells: u64, uniform_bytes: u64, layout: StateLayout, accelerations: bool) -> MemoryPlan {
+    /// cells; `uniform_bytes` is the size of the parameter block; `arrays`: the particle arrays
+    /// the step keeps.
+    pub fn new(fluid: u64, walls: Option<u64>, cells: u64, uniform_bytes: u64, arrays: StepArrays) -> MemoryPlan {
         let w = walls.unwrap_or(0);
         let per_fluid = |label, per: u64| PlannedBuffer { label, bytes: padded(fluid * per), bytes_per_fluid_particle: per, single_binding: false };
         let fixed = |label, bytes| PlannedBuffer { label, bytes, bytes_per_fluid_particle: 0, single_binding: false };
@@ -79,21 +107,23 @@ impl MemoryPlan {
             fixed("wall cell starts", padded(if w > 0 { (cells + 1) * 4 } else { 0 })),
         ];
         // The particles' ids ride in the w of the positions.
-        let state: &[&'static str] = match layout {
+        let state: &[&'static str] = match arrays.layout {
             StateLayout::PingPong => &["positions 0", "velocities 0", "positions 1", "velocities 1"],
             StateLayout::InPlace => &["particle state 0", "particle state 1", "particle state 2"],
         };
         buffers.extend(state.iter().map(|&label| per_fluid(label, 16)));
         buffers.extend([
             fixed("cell starts", padded((cells + 1) * 4)),
-            // Also the binning's unordered slots and cell keys, dead by the time density is
-            // written; its ranks live in the buffer the reorder gathers into last.
-            per_fluid("densities", 4),
-            per_fluid("pressures", 4),
             fixed("placeholder", 16),
             PlannedBuffer { label: "status", bytes: padded(status::BYTES), bytes_per_fluid_particle: 0, single_binding: true },
         ]);
-        if accelerations {
+        if arrays.densities {
+            buffers.push(per_fluid("densities", 4));
+        }
+        if arrays.pressures {
+            buffers.push(per_fluid("pressures", 4));
+        }
+        if arrays.accelerations {
             buffers.push(per_fluid("accelerations", 16));
         }
         buffers.extend(Scan::sum_buffer_bytes(cells + 1).into_iter().map(|bytes| fixed("scan block sums", bytes)));
@@ -126,9 +156,14 @@ impl MemoryPlan {
     pub fn for_scene(scene: &Scene) -> MemoryPlan {
         let uniform = GpuParams::default().bytes().len() as u64;
         let (n, cells) = (scene.fluid_particle_count(), scene.grid().cell_count() as u64);
-        match scene.physics.solver {
-            PressureSolver::Dfsph => MemoryPlan::new(n, None, cells, uniform, StateLayout::PingPong, scene.time.adaptive).with_dfsph(n),
-            PressureSolver::Wcsph => MemoryPlan::new(n, None, cells, uniform, StateLayout::InPlace, false),
+        let dfsph = scene.physics.solver == PressureSolver::Dfsph;
+        let continuity = scene.physics.density == crate::model::scene::DensityMethod::Continuity;
+        let arrays = StepArrays::new(dfsph, continuity, scene.time.adaptive, false);
+        let plan = MemoryPlan::new(n, None, cells, uniform, arrays);
+        if dfsph {
+            plan.with_dfsph(n)
+        } else {
+            plan
         }
     }
 

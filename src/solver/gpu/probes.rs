@@ -9,7 +9,7 @@ use super::buffers::{storage, storage_init};
 use super::device::GpuContext;
 use super::params::status;
 use super::readback::read_ranges;
-use super::shaders::{dispatch_size, stage, ArrayBuffers, ArrayLengths, Stage};
+use super::shaders::{dispatch_size, stage_with_aliases, Alias, ArrayBuffers, ArrayLengths, Stage};
 use crate::model::params::Params;
 use crate::model::probes::{ProbeGeometry, ProbeSample};
 
@@ -57,7 +57,8 @@ impl GpuProbes {
     /// The table, the buffers and the pipelines of `params.probes` for `fluid` particles;
     /// `wall_masks` is each sorted wall particle's mask of force probes; `lens` gives the
     /// lengths of the solver's arrays, `buffers[c]` their buffers when phase `c` of the state is read;
-    /// `dfsph`: DFSPH's stiffness sums in a DFSPH scene.
+    /// `places`: where arrays without buffers of their own live (the solver's
+    /// `array_places`); `dfsph`: DFSPH's stiffness sums in a DFSPH scene.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn new(
         ctx: &GpuContext,
@@ -68,8 +69,10 @@ impl GpuProbes {
         lens: ArrayLengths,
         uniform: &wgpu::Buffer,
         buffers: &[ArrayBuffers],
+        places: &[(&str, Alias)],
         dfsph: Option<DfsphSums>,
     ) -> anyhow::Result<Self> {
+        let stage = |ctx: &GpuContext, name: &str, entry: &str, lens: ArrayLengths, k: &[(&str, f64)]| stage_with_aliases(ctx, name, entry, lens, k, places);
         let probes = &params.probes;
         let max_dim = ctx.device.limits().max_compute_workgroups_per_dimension;
         let particle_groups = dispatch_size(fluid, PROBE_WORKGROUP, max_dim);

@@ -132,8 +132,6 @@ impl GpuRankStages {
         let data = read_buffers(&self.ctx, &[
             (&st.positions, bytes * 16),
             (&st.velocities, bytes * 16),
-            (&solver.densities, bytes * 4),
-            (&solver.pressures, bytes * 4),
             (&solver.starts, (cells + 1) * 4),
             (&solver.status, (status::DT as u64 + 1) * 4),
         ])?;
@@ -148,10 +146,9 @@ impl GpuRankStages {
         if !held.carried_densities.is_empty() {
             *held.carried_densities = vel.iter().map(|v| v[3]).collect();
         }
-        *held.densities = bytemuck::pod_collect_to_vec(&data[2]);
-        *held.pressures = bytemuck::pod_collect_to_vec(&data[3]);
-        *held.starts = bytemuck::pod_collect_to_vec(&data[4]);
-        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[5]);
+        (*held.densities, *held.pressures) = solver.read_fields(solver.current)?;
+        *held.starts = bytemuck::pod_collect_to_vec(&data[2]);
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[3]);
         Ok(match self.params.adaptive {
             Some(_) => f32::from_bits(words[status::DT]) as f64,
             None => self.params.dt,

@@ -4,8 +4,8 @@
 //!
 //! Snapshot rows list the particles in original order; the GPU keeps them in cell order, with
 //! each position's w holding the slot's original index (u32 bits). [`visit_rows`] hands them
-//! over in passes over ranges of original indices: each pass reads the four arrays (positions
-//! with ids, velocities, densities, pressures) back in pieces of `chunk` slots through small
+//! over in passes over ranges of original indices: each pass reads the arrays (positions
+//! with ids, velocities, and densities and pressures where they have arrays) back in pieces of `chunk` slots through small
 //! staging buffers, keeps the values whose id falls in the pass's range (32 bytes per particle
 //! of the range), and passes that range on. At most [`MAX_PASSES`] passes are made, so the host
 //! holds `32 * max(chunk, ceil(N / MAX_PASSES))` bytes of rows plus `2 * 40 * chunk` of readback
@@ -72,13 +72,16 @@ pub fn read_ranges(ctx: &GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> an
     Ok(out)
 }
 
-/// The four arrays of a snapshot, in slot (cell) order.
+/// The arrays of a snapshot, in slot (cell) order.
 pub struct RowArrays<'a> {
     /// `vec4<f32>` with the original index in w.
     pub positions: &'a wgpu::Buffer,
     pub velocities: &'a wgpu::Buffer,
-    pub densities: &'a wgpu::Buffer,
-    pub pressures: &'a wgpu::Buffer,
+    /// `None`: the densities are the w of the velocities.
+    pub densities: Option<&'a wgpu::Buffer>,
+    /// `None`: each pressure is `pressure_of` its density.
+    pub pressures: Option<&'a wgpu::Buffer>,
+    pub pressure_of: &'a dyn Fn(f32) -> f32,
     /// Particles.
     pub count: u64,
 }
@@ -90,7 +93,9 @@ pub fn visit_rows(ctx: &GpuContext, arrays: &RowArrays, chunk: u64, visit: &mut 
     let n = arrays.count;
     let chunk = chunk.max(1);
     let per_pass = chunk.max(n.div_ceil(MAX_PASSES)).max(1);
-    let buffers = [(arrays.positions, 16u64), (arrays.velocities, 16), (arrays.densities, 4), (arrays.pressures, 4)];
+    let mut buffers = vec![(arrays.positions, 16u64), (arrays.velocities, 16)];
+    buffers.extend(arrays.densities.map(|d| (d, 4)));
+    buffers.extend(arrays.pressures.map(|p| (p, 4)));
     let mut rows = vec![[0f32; 8]; per_pass.min(n) as usize];
     for first in (0..n).step_by(per_pass as usize) {
         let end = (first + per_pass).min(n);
@@ -100,7 +105,15 @@ pub fn visit_rows(ctx: &GpuContext, arrays: &RowArrays, chunk: u64, visit: &mut 
             let data = read_ranges(ctx, &ranges)?;
             let pos: &[[f32; 4]] = bytemuck::cast_slice(&data[0]);
             let vel: &[[f32; 4]] = bytemuck::cast_slice(&data[1]);
-            let (rho, p): (&[f32], &[f32]) = (bytemuck::cast_slice(&data[2]), bytemuck::cast_slice(&data[3]));
+            let stored = |k: usize| -> &[f32] { bytemuck::cast_slice(&data[k]) };
+            let rho: Vec<f32> = match arrays.densities {
+                Some(_) => stored(2).to_vec(),
+                None => vel.iter().map(|v| v[3]).collect(),
+            };
+            let p: Vec<f32> = match arrays.pressures {
+                Some(_) => stored(buffers.len() - 1).to_vec(),
+                None => rho.iter().map(|&r| (arrays.pressure_of)(r)).collect(),
+            };
             for (j, x) in pos.iter().enumerate() {
                 // The particle's original index rides in w as u32 bits.
                 let id = x[3].to_bits() as u64;

@@ -190,6 +190,7 @@ impl GpuSolver {
             rec.begin(ProfiledStage::BinScatter);
             self.dispatch_particles(rec, &self.pipelines.bin_scatter, &g.bin_scatter);
             rec.begin(ProfiledStage::Reorder);
+            self.dispatch_particles(rec, &self.pipelines.reorder_rank, &g.reorder_rank);
             for gather in &g.reorder {
                 self.dispatch_particles(rec, &self.pipelines.reorder, gather);
             }
@@ -477,6 +478,14 @@ impl GpuSolver {
         self.ctx.queue.submit([rec.finish()]);
     }
 
+    /// The density and pressure of the current state into the output arrays (`stage` and its
+    /// `group`, see `GpuSolver::particle_buffers`).
+    pub(super) fn record_output_fields(&self, stage: &Stage, group: &wgpu::BindGroup) {
+        let mut rec = PlainRecorder::new(&self.ctx.device, "output fields");
+        self.dispatch_particles(&mut rec, stage, group);
+        self.ctx.queue.submit([rec.finish()]);
+    }
+
     /// DFSPH: the accelerations of the last step, (v_end - v_start) / dt, into the accelerations
     /// array (made on first use with a fixed dt).
     pub(super) fn record_step_accelerations(&mut self) {
@@ -488,8 +497,8 @@ impl GpuSolver {
             let shared = SharedBuffers {
                 store: &self.store,
                 starts: &self.starts,
-                densities: &self.densities,
-                pressures: &self.pressures,
+                densities: self.densities.as_ref().expect("DFSPH keeps a densities array"),
+                pressures: self.pressures.as_ref().expect("DFSPH keeps a pressures array"),
                 status: &self.status,
                 wall_positions: &self.wall_positions,
                 wall_starts: &self.wall_starts,

@@ -32,6 +32,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/dfsph_integrate.wgsl", include_str!("../../../wgsl/sim/dfsph_integrate.wgsl")),
     ("sim/probes.wgsl", include_str!("../../../wgsl/sim/probes.wgsl")),
     ("sim/wall_pressure.wgsl", include_str!("../../../wgsl/sim/wall_pressure.wgsl")),
+    ("sim/fields.wgsl", include_str!("../../../wgsl/sim/fields.wgsl")),
 ];
 
 /// The text of a simulation file (`sim/density.wgsl`, `shared/common.wgsl`, ...).
@@ -276,6 +277,11 @@ pub fn array_bindings_wgsl(arrays: &[ArrayDecl], segments: &[u64], segment_bytes
                 accessor(&mut out, &format!("fn {n}_at(i: u32) -> {ty}"), &|s, k| format!("return {n}_{s}[{k}];"));
                 if a.access == Access::ReadWrite {
                     accessor(&mut out, &format!("fn {n}_set(i: u32, v: {ty})"), &|s, k| format!("{n}_{s}[{k}] = v;"));
+                    // One component of a vector element, stored alone (see `Alias::Lane`).
+                    if ty.starts_with("vec") {
+                        let scalar = scalar_of(&ty);
+                        accessor(&mut out, &format!("fn {n}_set_lane(i: u32, lane: u32, v: {scalar})"), &|s, k| format!("{n}_{s}[{k}][lane] = v;"));
+                    }
                 }
             }
             Access::Atomic => {
@@ -349,32 +355,86 @@ pub fn stage(ctx: &GpuContext, name: &str, entry: &str, lens: ArrayLengths, cons
     stage_with_aliases(ctx, name, entry, lens, constants, &[])
 }
 
-/// Drops the declaration of each `(alias, target)` array from `decls` and returns WGSL accessors
-/// of the alias that act on the target, which becomes read_write where the alias was: a stage
-/// that reads one array and writes another then works in place on one buffer (wgpu refuses one
-/// buffer bound both read-only and read_write in a dispatch).
-pub fn apply_aliases(decls: &mut Vec<ArrayDecl>, aliases: &[(&str, &str)]) -> String {
+/// Where an array a stage declares lives instead of a buffer of its own (see [`apply_aliases`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Alias {
+    /// The same elements as another array of the stage: a stage that reads one array and
+    /// writes another then works in place on one buffer (wgpu refuses one buffer bound both
+    /// read-only and read_write in one dispatch).
+    Same(&'static str),
+    /// One component (`lane`) of each element of a vector array `target` of type `ty`, which the
+    /// stage then binds even where it does not declare it; the values are bit casts where the
+    /// scalar types differ (a u32 in a float lane). Writes are component stores, so threads that
+    /// write one lane of their own element never touch a word that another thread reads.
+    Lane { target: &'static str, ty: &'static str, lane: u32 },
+    /// Computed from other arrays by the WGSL expression (in `i`) where it is read; writes are
+    /// dropped (the pressure from the density, with the equation of state).
+    Derived(&'static str),
+}
+
+/// The scalar type of a vector type (`vec4<f32>` -> `f32`), or the type itself.
+fn scalar_of(ty: &str) -> &str {
+    ty.split_once('<').map_or(ty, |(_, rest)| rest.trim_end_matches('>'))
+}
+
+/// Drops the declaration of each aliased array from `decls` (an alias the stage does not declare
+/// is skipped) and returns the WGSL accessors that act on where it lives instead. The target of
+/// a [`Alias::Same`] or [`Alias::Lane`] becomes read_write where the alias is, and a lane's
+/// target is declared if the stage does not declare it.
+pub fn apply_aliases(decls: &mut Vec<ArrayDecl>, aliases: &[(&str, Alias)]) -> String {
     use std::fmt::Write;
     let mut out = String::new();
-    for &(alias, target) in aliases {
+    for &(alias, place) in aliases {
         let Some(at) = decls.iter().position(|d| d.name == alias) else { continue };
         let a = decls.remove(at);
-        let t = decls.iter_mut().find(|d| d.name == target).unwrap_or_else(|| panic!("array '{alias}' aliases '{target}', which the stage does not declare"));
-        assert!(t.ty == a.ty && a.access != Access::Atomic && t.access != Access::Atomic, "array '{alias}' cannot alias '{target}'");
-        if a.access == Access::ReadWrite {
-            t.access = Access::ReadWrite;
-        }
+        assert!(a.access != Access::Atomic && !a.whole, "array '{alias}' cannot be an alias");
         let ty = &a.ty;
-        writeln!(out, "fn {alias}_at(i: u32) -> {ty} {{ return {target}_at(i); }}").unwrap();
-        if a.access == Access::ReadWrite {
-            writeln!(out, "fn {alias}_set(i: u32, v: {ty}) {{ {target}_set(i, v); }}").unwrap();
+        let writes = a.access == Access::ReadWrite;
+        let mut target = |name: &str, target_ty: &str| {
+            let t = match decls.iter_mut().position(|d| d.name == name) {
+                Some(k) => &mut decls[k],
+                None => {
+                    let decl = ArrayDecl { name: name.into(), ty: target_ty.into(), access: Access::Read, whole: false, optional: false };
+                    let k = at.min(decls.len());
+                    decls.insert(k, decl);
+                    &mut decls[k]
+                }
+            };
+            assert!(t.ty == target_ty && t.access != Access::Atomic, "array '{alias}' cannot live in '{name}'");
+            if writes {
+                t.access = Access::ReadWrite;
+            }
+        };
+        match place {
+            Alias::Same(name) => {
+                target(name, ty);
+                writeln!(out, "fn {alias}_at(i: u32) -> {ty} {{ return {name}_at(i); }}").unwrap();
+                if writes {
+                    writeln!(out, "fn {alias}_set(i: u32, v: {ty}) {{ {name}_set(i, v); }}").unwrap();
+                }
+            }
+            Alias::Lane { target: name, ty: target_ty, lane } => {
+                target(name, target_ty);
+                let lane_ty = scalar_of(target_ty);
+                let (read, write) = if lane_ty == ty.as_str() { (String::new(), String::new()) } else { (format!("bitcast<{ty}>"), format!("bitcast<{lane_ty}>")) };
+                writeln!(out, "fn {alias}_at(i: u32) -> {ty} {{ return {read}({name}_at(i)[{lane}u]); }}").unwrap();
+                if writes {
+                    writeln!(out, "fn {alias}_set(i: u32, v: {ty}) {{ {name}_set_lane(i, {lane}u, {write}(v)); }}").unwrap();
+                }
+            }
+            Alias::Derived(expr) => {
+                writeln!(out, "fn {alias}_at(i: u32) -> {ty} {{ return {expr}; }}").unwrap();
+                if writes {
+                    writeln!(out, "fn {alias}_set(i: u32, v: {ty}) {{}}").unwrap();
+                }
+            }
         }
     }
     out
 }
 
 /// [`stage`] with the arrays of `aliases` bound as others (see [`apply_aliases`]).
-pub fn stage_with_aliases(ctx: &GpuContext, name: &str, entry: &str, lens: ArrayLengths, constants: &[(&str, f64)], aliases: &[(&str, &str)]) -> Result<Stage, GpuError> {
+pub fn stage_with_aliases(ctx: &GpuContext, name: &str, entry: &str, lens: ArrayLengths, constants: &[(&str, f64)], aliases: &[(&str, Alias)]) -> Result<Stage, GpuError> {
     let device = &ctx.device;
     let segment_bytes = ctx.storage_segment_bytes();
     let text = stage_text(name);

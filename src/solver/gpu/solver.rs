@@ -5,12 +5,12 @@
 
 use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, ParticleBuffers, StateLayout, StateStore, STREAM_CHUNK};
 use super::device::GpuContext;
-use super::memory::MemoryPlan;
+use super::memory::{MemoryPlan, StepArrays};
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
 use super::probes::{DfsphSums, GpuProbes};
 use super::readback::{read_buffers, visit_array, visit_pairs, visit_rows, Element, RowArrays};
-use super::shaders::{constants, stage, stage_with_aliases, storage_bindings, Stage};
+use super::shaders::{constants, stage_with_aliases, storage_bindings, Alias, ArrayLengths, Stage};
 use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, SharedBuffers};
 use super::workgroups::{GpuOptions, SolverLoop};
 use crate::model::initial::InitialState;
@@ -28,14 +28,34 @@ pub const STEPS_PER_SUBMIT: u64 = 32;
 
 /// The integration with the state in place: it writes each particle's new state into the slot
 /// it read it from.
-const IN_PLACE: &[(&str, &str)] = &[("positions_out", "positions"), ("velocities_out", "velocities")];
+const IN_PLACE: &[(&str, Alias)] = &[("positions_out", Alias::Same("positions")), ("velocities_out", Alias::Same("velocities"))];
+
+/// Where the arrays the stages declare live when they have no buffer of their own
+/// (docs/performance.md, "GPU memory layout"): the binning's cell keys, ranks and unordered slots
+/// in lanes of `bins`, a buffer free while the binning runs (the spare, or the other state's
+/// velocities); a summed density, and the binning's destinations before it, in the w of the
+/// velocities; the weakly compressible step's pressure computed from the density where it is
+/// read.
+fn array_places(arrays: &StepArrays) -> Vec<(&'static str, Alias)> {
+    let bins = |lane| Alias::Lane { target: "bins", ty: "vec4<u32>", lane };
+    let mut places = vec![("keys", bins(0)), ("ranks", bins(1)), ("unordered", bins(2))];
+    if !arrays.densities {
+        let w = Alias::Lane { target: "velocities", ty: "vec4<f32>", lane: 3 };
+        places.extend([("densities", w), ("dest", w)]);
+    }
+    if !arrays.pressures {
+        places.push(("pressures", Alias::Derived("eos_pressure(densities_at(i))")));
+    }
+    places
+}
 
 /// Bind groups of one phase of the state (see [`StateStore`]): reading its buffers, and writing
 /// those of the phase after it where a stage writes another state.
 pub(super) struct ParityBindGroups {
     pub bin_count: wgpu::BindGroup,
     pub bin_scatter: wgpu::BindGroup,
-    /// The reorder gathering the positions, then the velocities.
+    /// The reorder's destinations, then its gathering of the positions and of the velocities.
+    pub reorder_rank: wgpu::BindGroup,
     pub reorder: [wgpu::BindGroup; 2],
     /// The weakly compressible step's (`None` with DFSPH).
     pub wcsph: Option<WcsphBindGroups>,
@@ -56,6 +76,7 @@ pub(super) struct WcsphBindGroups {
 pub(super) struct Pipelines {
     pub bin_count: Stage,
     pub bin_scatter: Stage,
+    pub reorder_rank: Stage,
     pub reorder: Stage,
     /// The weakly compressible step's stages (`None` with DFSPH, whose are in `GpuSolver::dfsph`).
     pub wcsph: Option<WcsphStages>,
@@ -107,10 +128,12 @@ pub struct GpuSolver {
     pub(super) accelerations_valid: bool,
     /// Cell counts, scanned in place into cell starts (cells + 1 values).
     pub(super) starts: wgpu::Buffer,
-    /// Also the binning's unordered cell slots (u32), which are dead once the state is reordered.
-    pub(super) densities: wgpu::Buffer,
-    /// Also the binning's cell keys (u32), which are dead once the state is reordered.
-    pub(super) pressures: wgpu::Buffer,
+    /// With the continuity equation and DFSPH (a summed density lives in the w of the
+    /// velocities); also the reorder's destinations (u32), dead once the state is reordered.
+    pub(super) densities: Option<wgpu::Buffer>,
+    /// DFSPH only (the weakly compressible step's pressure is its density's, through the
+    /// equation of state).
+    pub(super) pressures: Option<wgpu::Buffer>,
     /// The fused step's, created on the first `step_fields` (in place the accelerations live in
     /// the state's spare buffer).
     pub(super) accelerations: Option<Accelerations>,
@@ -152,6 +175,22 @@ pub struct GpuSolver {
     pub(super) rank_error: std::cell::RefCell<Option<String>>,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
+    /// The arrays the step keeps, and the specialisation constants of its stages (for stages
+    /// made later).
+    arrays: StepArrays,
+    constants: Vec<(&'static str, f64)>,
+    /// The density and pressure arrays handed to the renderer where the step keeps none of its
+    /// own, made on first request.
+    output_fields: std::cell::OnceCell<OutputFields>,
+}
+
+/// Arrays of every particle's density and pressure written from where the step keeps them
+/// (wgsl/sim/fields.wgsl), with the stage's bind group per phase of the state.
+pub(super) struct OutputFields {
+    pub stage: Stage,
+    densities: wgpu::Buffer,
+    pressures: wgpu::Buffer,
+    pub groups: Vec<wgpu::BindGroup>,
 }
 
 /// The element count of each array the stages declare, by name: every particle array holds
@@ -219,15 +258,20 @@ impl GpuSolver {
         // The two-pass step with its state in place is the default: 48 bytes of state per
         // particle instead of the fused step's 64 (docs/performance.md).
         let fused = can_fuse && options.fuse_forces_and_integration.unwrap_or(false);
-        // DFSPH predicts into a second state; so does the fused step.
-        let layout = if dfsph || fused { StateLayout::PingPong } else { StateLayout::InPlace };
-        // DFSPH keeps accelerations with adaptive dt only (fixed dt: in registers).
+        // DFSPH predicts into a second state, as does the fused step; DFSPH keeps accelerations
+        // with adaptive dt only (fixed dt: in registers).
+        let arrays = StepArrays::new(dfsph, params.continuity_density, params.adaptive.is_some(), fused);
+        let layout = arrays.layout;
         let plan = if dfsph {
-            MemoryPlan::new(n, Some(w), cells, uniform_bytes, layout, params.adaptive.is_some()).with_dfsph(n)
+            MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_dfsph(n)
         } else {
-            MemoryPlan::new(n, Some(w), cells, uniform_bytes, layout, false).with_wall_fields(counts.wall_fields)
+            MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_fields(counts.wall_fields)
         };
         plan.check(&ctx)?;
+        let aliases = array_places(&arrays);
+        let in_place: Vec<(&str, Alias)> = aliases.iter().copied().chain(if layout == StateLayout::InPlace { IN_PLACE.to_vec() } else { Vec::new() }).collect();
+        let stage = |name: &str, entry: &str, lens: ArrayLengths, constants: &[(&str, f64)]| stage_with_aliases(&ctx, name, entry, lens, constants, &aliases);
+        let stage_in_place = |name: &str, entry: &str, lens: ArrayLengths, constants: &[(&str, f64)]| stage_with_aliases(&ctx, name, entry, lens, constants, &in_place);
 
         // The pipelines come first: they check that the stages' bindings (one per segment of
         // each array) fit the adapter before any buffer exists.
@@ -244,38 +288,47 @@ impl GpuSolver {
             c
         };
         let pipelines = Pipelines {
-            bin_count: stage(&ctx, "bin_count", "bin_count", &len, &sized(ws.bin_count))?,
-            bin_scatter: stage(&ctx, "bin_scatter", "bin_scatter", &len, &sized(ws.bin_scatter))?,
-            reorder: stage(&ctx, "reorder", "reorder", &len, &sized(ws.reorder))?,
+            bin_count: stage("bin_count", "bin_count", &len, &sized(ws.bin_count))?,
+            bin_scatter: stage("bin_scatter", "bin_scatter", &len, &sized(ws.bin_scatter))?,
+            // The rank binds no state array, the gather no cell keys or slots (see reorder.wgsl).
+            reorder_rank: stage("reorder", "reorder_rank", &|name: &str| if name.starts_with("gathered") { 0 } else { len(name) }, &sized(ws.reorder))?,
+            reorder: stage_with_aliases(
+                &ctx,
+                "reorder",
+                "reorder",
+                &|name: &str| if matches!(name, "keys" | "unordered") { 0 } else { len(name) },
+                &sized(ws.reorder),
+                &aliases.iter().filter(|(name, _)| !matches!(*name, "keys" | "unordered")).copied().collect::<Vec<_>>(),
+            )?,
             wcsph: if dfsph {
                 None
             } else {
                 Some(WcsphStages {
                     // The density stage: summation, or with continuity density the carried density.
                     density: if params.continuity_density {
-                        stage(&ctx, "continuity", "continuity_density", &len, &sized(ws.density))?
+                        stage("continuity", "continuity_density", &len, &sized(ws.density))?
                     } else {
-                        stage(&ctx, "density", "density", &len, &sized(ws.density))?
+                        stage("density", "density", &len, &sized(ws.density))?
                     },
                     // One invocation per wall particle, at the density stage's workgroup size.
-                    wall_pressure: if adami { Some(stage(&ctx, "wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
-                    forces: stage(&ctx, "forces", "forces", &len, &sized(ws.forces))?,
+                    wall_pressure: if adami { Some(stage("wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
+                    forces: stage("forces", "forces", &len, &sized(ws.forces))?,
                     advance: if fused {
-                        stage(&ctx, "forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
+                        stage("forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
                     } else {
-                        stage_with_aliases(&ctx, "integrate", "integrate", &len, &sized(ws.integrate), IN_PLACE)?
+                        stage_in_place("integrate", "integrate", &len, &sized(ws.integrate))?
                     },
                     adaptive: match params.adaptive {
                         Some(_) => Some((
-                            stage_with_aliases(&ctx, "integrate", "reduce_maxima", &len, &sized(ws.integrate), IN_PLACE)?,
-                            stage_with_aliases(&ctx, "integrate", "choose_dt", &len, &k, IN_PLACE)?,
+                            stage_in_place("integrate", "reduce_maxima", &len, &sized(ws.integrate))?,
+                            stage_in_place("integrate", "choose_dt", &len, &k)?,
                         )),
                         None => None,
                     },
                 })
             },
             // One thread on the status words.
-            finish_step: stage_with_aliases(&ctx, "integrate", "finish_step", &without_accelerations, &k, if layout == StateLayout::InPlace { IN_PLACE } else { &[] })?,
+            finish_step: stage_in_place("integrate", "finish_step", &without_accelerations, &k)?,
             fused,
         };
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
@@ -311,8 +364,8 @@ impl GpuSolver {
         let carried = |i: usize| if params.continuity_density { initial.fluid_density(i, params.rest_density) as f32 } else { 0.0 };
         store.state(0).upload(&ctx, &initial.fluid_positions, &initial.fluid_velocities, |i| i as u32, &carried);
         let starts = storage(device, "cell starts", (cells + 1) * 4);
-        let densities = storage(device, "densities", n * 4);
-        let pressures = storage(device, "pressures", n * 4);
+        let densities = arrays.densities.then(|| storage(device, "densities", n * 4));
+        let pressures = arrays.pressures.then(|| storage(device, "pressures", n * 4));
         let placeholder = storage(device, "placeholder", 16);
         let accelerations = (dfsph && params.adaptive.is_some()).then(|| storage(device, "accelerations", n * 16));
         let status = storage_init(device, "status", bytemuck::cast_slice(&status::initial()));
@@ -321,16 +374,16 @@ impl GpuSolver {
         let u = &uniform;
         let p = &pipelines;
         // The buffer of every array name in phase `c` (writing the phase after it where a
-        // stage writes another state). The binning's arrays live in arrays that are dead while
-        // it runs: the cell keys and the unordered slots in the pressures and densities (written
-        // again only after the reorder), the ranks in the buffer the reorder gathers into last
-        // (the other state's velocities, or in place the spare), which the scatter has read by
-        // then. In place the accelerations live in the spare buffer.
+        // stage writes another state); `array_places` says which arrays live in others. The
+        // binning's `bins` are a buffer dead while it runs and read before the reorder's last
+        // gather writes it: the other state's velocities, or in place the spare, where the
+        // accelerations then live. The reorder's destinations go to the densities' array where
+        // there is one (it is written again only after the reorder).
         let buffers = |c: usize| {
             let (src, dst) = (store.state(c), store.state(store.after_binning(c)));
             let spare = (layout == StateLayout::InPlace).then(|| store.spare(c));
             let acc = spare.clone().or_else(|| accelerations.clone()).unwrap_or_else(|| placeholder.clone());
-            let ranks = spare.unwrap_or_else(|| dst.velocities.clone());
+            let bins = spare.unwrap_or_else(|| dst.velocities.clone());
             let (starts, densities, pressures, status, wall_positions, wall_starts, wall_fields) =
                 (&starts, &densities, &pressures, &status, &wall_positions, &wall_starts, &wall_fields);
             move |name: &str| -> wgpu::Buffer {
@@ -339,9 +392,9 @@ impl GpuSolver {
                     "velocities" => src.velocities.clone(),
                     "positions_out" => dst.positions.clone(),
                     "velocities_out" => dst.velocities.clone(),
-                    "ranks" => ranks.clone(),
-                    "keys" | "pressures" => pressures.clone(),
-                    "unordered" | "densities" => densities.clone(),
+                    "bins" => bins.clone(),
+                    "pressures" => pressures.clone().expect("a pressures array (DFSPH)"),
+                    "densities" | "dest" => densities.clone().expect("a densities array"),
                     "starts" | "counts" => starts.clone(),
                     "wall_positions" => wall_positions.clone(),
                     "wall_starts" => wall_starts.clone(),
@@ -376,6 +429,7 @@ impl GpuSolver {
             ParityBindGroups {
                 bin_count: p.bin_count.bind_group(device, "bin_count", u, &b),
                 bin_scatter: p.bin_scatter.bind_group(device, "bin_scatter", u, &b),
+                reorder_rank: p.reorder_rank.bind_group(device, "reorder_rank", u, &b),
                 reorder: [gather(c, 0), gather(c, 1)],
                 wcsph: p.wcsph.as_ref().map(|w| WcsphBindGroups {
                     density: w.density.bind_group(device, "density", u, &b),
@@ -396,8 +450,8 @@ impl GpuSolver {
             let shared = SharedBuffers {
                 store: &store,
                 starts: &starts,
-                densities: &densities,
-                pressures: &pressures,
+                densities: densities.as_ref().expect("DFSPH keeps a densities array"),
+                pressures: pressures.as_ref().expect("DFSPH keeps a pressures array"),
                 status: &status,
                 wall_positions: &wall_positions,
                 wall_starts: &wall_starts,
@@ -414,7 +468,7 @@ impl GpuSolver {
             let phases: Vec<_> = (0..store.phases()).map(buffers).collect();
             let phases: Vec<&dyn Fn(&str) -> wgpu::Buffer> = phases.iter().map(|b| b as &dyn Fn(&str) -> wgpu::Buffer).collect();
             let sums = dfsph.as_ref().map(|d| DfsphSums { pressure_sum: &d.buffers.pressure_sum, divergence_sum: &d.buffers.divergence_sum });
-            Some(GpuProbes::new(&ctx, params, n, &sorted_masks, &k, &len, u, &phases, sums)?)
+            Some(GpuProbes::new(&ctx, params, n, &sorted_masks, &k, &len, u, &phases, &aliases, sums)?)
         };
         let memory = plan.total() + probes.as_ref().map_or(0, |p| p.bytes());
         let mut solver = GpuSolver {
@@ -452,6 +506,9 @@ impl GpuSolver {
             probes,
             ranks,
             rank_error: std::cell::RefCell::new(None),
+            arrays,
+            constants: k,
+            output_fields: std::cell::OnceCell::new(),
             ctx,
         };
         if let Some(d) = &mut solver.dfsph {
@@ -469,8 +526,8 @@ impl GpuSolver {
                 match name {
                     "positions" => &st.positions,
                     "velocities" => &st.velocities,
-                    "densities" => &self.densities,
-                    "pressures" => &self.pressures,
+                    "densities" => self.densities.as_ref().expect("a densities array"),
+                    "pressures" => self.pressures.as_ref().expect("a pressures array"),
                     "starts" => &self.starts,
                     "wall_positions" => &self.wall_positions,
                     "wall_starts" => &self.wall_starts,
@@ -525,8 +582,8 @@ impl GpuSolver {
         let velocities = &self.store.state(if predicted { 1 - c } else { c }).velocities;
         let data = read_buffers(&self.ctx, &[
             (&self.store.state(c).positions, n * 16),
-            (&self.densities, n * 4),
-            (&self.pressures, n * 4),
+            (self.densities.as_ref().expect("DFSPH keeps a densities array"), n * 4),
+            (self.pressures.as_ref().expect("DFSPH keeps a pressures array"), n * 4),
             (&b.factors, n * 4),
             (&b.wall_gradients, n * 16),
             (&b.stiffness, n * 4),
@@ -618,16 +675,97 @@ impl GpuSolver {
     /// ask again after stepping). Particles are in cell order; the w component of
     /// each position holds the particle's original index as u32 bits. `densities` and
     /// `pressures` are in the same order after a snapshot.
-    pub fn particle_buffers(&self) -> ParticleBuffers {
+    ///
+    /// Where the step keeps no density or pressure array of its own (the weakly compressible
+    /// step sums density into the w of the velocities and computes pressure from it), both are
+    /// written into arrays made on the first call (8 bytes per fluid particle) and refreshed on
+    /// every call.
+    pub fn particle_buffers(&self) -> anyhow::Result<ParticleBuffers> {
         let st = self.store.state(self.current);
-        ParticleBuffers {
+        let (densities, pressures) = match (&self.densities, &self.pressures) {
+            (Some(d), Some(p)) => (d.clone(), p.clone()),
+            _ => {
+                let out = match self.output_fields.get() {
+                    Some(out) => out,
+                    None => {
+                        let made = self.make_output_fields()?;
+                        self.output_fields.get_or_init(|| made)
+                    }
+                };
+                self.record_output_fields(&out.stage, &out.groups[self.current]);
+                (out.densities.clone(), out.pressures.clone())
+            }
+        };
+        Ok(ParticleBuffers {
             context: self.ctx.clone(),
             positions: st.positions.clone(),
             velocities: st.velocities.clone(),
-            densities: self.densities.clone(),
-            pressures: self.pressures.clone(),
+            densities,
+            pressures,
             count: self.fluid_count,
-        }
+        })
+    }
+
+    /// The output fields' arrays, stage and bind groups (see [`GpuSolver::particle_buffers`]).
+    fn make_output_fields(&self) -> anyhow::Result<OutputFields> {
+        let n = self.store.capacity();
+        let places = array_places(&self.arrays);
+        let stage = stage_with_aliases(&self.ctx, "fields", "output_fields", &|_: &str| n, &self.constants_sized(super::shaders::WORKGROUP_SIZE), &places)?;
+        let device = &self.ctx.device;
+        let densities = storage(device, "output densities", n * 4);
+        let pressures = storage(device, "output pressures", n * 4);
+        let groups = (0..self.store.phases())
+            .map(|c| {
+                let st = self.store.state(c);
+                stage.bind_group(device, "output_fields", &self.uniform, &|name: &str| match name {
+                    "velocities" => st.velocities.clone(),
+                    "densities" => self.densities.clone().expect("a densities array"),
+                    "pressures" => self.pressures.clone().expect("a pressures array"),
+                    "density_out" => densities.clone(),
+                    "pressure_out" => pressures.clone(),
+                    other => panic!("no buffer holds the array '{other}'"),
+                })
+            })
+            .collect();
+        Ok(OutputFields { stage, densities, pressures, groups })
+    }
+
+    /// The stages' specialisation constants with `size` threads per workgroup.
+    fn constants_sized(&self, size: u32) -> Vec<(&'static str, f64)> {
+        let mut c = self.constants.clone();
+        c.push(("WORKGROUP_SIZE", size as f64));
+        c
+    }
+
+    /// The pressure the stages compute from a density (the equation of state in f32, as
+    /// `eos_pressure` in wgsl/shared/common.wgsl).
+    pub(super) fn pressure_of(&self, rho: f32) -> f32 {
+        let p = &self.params;
+        crate::model::kernels::pressure::<f32>(rho, p.rest_density as f32, p.stiffness as f32, p.eos, p.clamp_negative_pressure)
+    }
+
+    /// The densities and pressures of every particle of phase `c`'s state in slot order, read
+    /// where they live: their arrays, or the w of the velocities and the equation of state
+    /// (`array_places`).
+    pub(super) fn read_fields(&self, c: usize) -> anyhow::Result<(Vec<f32>, Vec<f32>)> {
+        let n = self.fluid_count as u64;
+        let velocities = self.store.state(c).velocities;
+        let density_source = match &self.densities {
+            Some(d) => (d, n * 4),
+            None => (&velocities, n * 16),
+        };
+        let mut sources = vec![density_source];
+        sources.extend(self.pressures.as_ref().map(|p| (p, n * 4)));
+        let data = read_buffers(&self.ctx, &sources)?;
+        let rho: Vec<f32> = match &self.densities {
+            Some(_) => bytemuck::pod_collect_to_vec(&data[0]),
+            None => bytemuck::pod_collect_to_vec::<u8, [f32; 4]>(&data[0]).iter().map(|v| v[3]).collect(),
+        };
+        let p = match &self.pressures {
+            Some(_) => bytemuck::pod_collect_to_vec(&data[1]),
+            None => rho.iter().map(|&r| self.pressure_of(r)).collect(),
+        };
+        Ok((rho, p))
     }
 
     /// The status words, checked to count as many steps as the host did (for saved states).
@@ -659,8 +797,10 @@ impl GpuSolver {
         // With the fused step (and DFSPH with a fixed dt) the accelerations exist only after
         // `step_fields` asked for them; in place they live in the state's spare buffer.
         let planned_accelerations = s.dfsph.as_ref().and_then(|d| d.accelerations.as_ref().filter(|_| s.params.adaptive.is_some()));
-        [&s.uniform, &s.starts, &s.densities, &s.pressures, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
+        [&s.uniform, &s.starts, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
             .into_iter()
+            .chain(s.densities.as_ref())
+            .chain(s.pressures.as_ref())
             .chain(planned_accelerations)
             .chain(s.wall_fields.as_ref())
             .map(|b| b.size())
@@ -669,6 +809,7 @@ impl GpuSolver {
             + s.scan.bytes()
             + s.dfsph.as_ref().map_or(0, |d| d.buffers.bytes())
             + s.probes.as_ref().map_or(0, |p| p.bytes())
+            + s.output_fields.get().map_or(0, |o| o.densities.size() + o.pressures.size())
     }
 
     /// The snapshot rows of the current state (after a refresh) in pieces of `chunk` slots: the
@@ -676,7 +817,15 @@ impl GpuSolver {
     pub fn visit_rows_in_pieces(&mut self, chunk: u64, visit: &mut dyn FnMut(u64, &[SnapshotRow]) -> anyhow::Result<()>) -> anyhow::Result<()> {
         self.refresh_fields();
         let st = self.store.state(self.current);
-        let arrays = RowArrays { positions: &st.positions, velocities: &st.velocities, densities: &self.densities, pressures: &self.pressures, count: self.fluid_count as u64 };
+        let pressure = |rho: f32| self.pressure_of(rho);
+        let arrays = RowArrays {
+            positions: &st.positions,
+            velocities: &st.velocities,
+            densities: self.densities.as_ref(),
+            pressures: self.pressures.as_ref(),
+            pressure_of: &pressure,
+            count: self.fluid_count as u64,
+        };
         visit_rows(&self.ctx, &arrays, chunk, visit)
     }
 
@@ -783,12 +932,11 @@ impl Backend for GpuSolver {
         self.refresh_fields();
         let n = self.fluid_count as u64;
         let st = self.store.state(self.current);
-        let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16), (&self.densities, n * 4), (&self.pressures, n * 4)])?;
+        let data = read_buffers(&self.ctx, &[(&st.positions, n * 16), (&st.velocities, n * 16)])?;
         let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
         let ids = ids_of(&pos);
         let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
-        let rho: Vec<f32> = bytemuck::pod_collect_to_vec(&data[2]);
-        let p: Vec<f32> = bytemuck::pod_collect_to_vec(&data[3]);
+        let (rho, p) = self.read_fields(self.current)?;
         Ok(Snapshot {
             step: self.steps,
             time: self.time(),
@@ -805,7 +953,14 @@ impl Backend for GpuSolver {
         self.visit_rows_in_pieces(STREAM_CHUNK, visit)
     }
     fn gpu_particles(&self) -> Option<ParticleBuffers> {
-        Some(self.particle_buffers())
+        match self.particle_buffers() {
+            Ok(p) => Some(p),
+            Err(e) => {
+                // The caller then draws from a snapshot uploaded from the host.
+                log::warn!("the GPU's density and pressure arrays for drawing could not be made: {e:#}");
+                None
+            }
+        }
     }
     fn save_state(&mut self) -> anyhow::Result<BackendState> {
         let mut state = self.save_state_header()?;
@@ -895,16 +1050,10 @@ impl Backend for GpuSolver {
         let n = self.fluid_count as u64;
         self.ensure_accelerations();
         let acc = self.accelerations_buffer();
-        let data = read_buffers(&self.ctx, &[
-            (&self.densities, n * 4),
-            (&self.pressures, n * 4),
-            (&acc, n * 16),
-            (&self.store.state(self.fields_state).positions, n * 16),
-        ])?;
-        let ids = ids_of(bytemuck::cast_slice(&data[3]));
-        let rho: Vec<f32> = bytemuck::pod_collect_to_vec(&data[0]);
-        let p: Vec<f32> = bytemuck::pod_collect_to_vec(&data[1]);
-        let acc: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[2]);
+        let data = read_buffers(&self.ctx, &[(&acc, n * 16), (&self.store.state(self.fields_state).positions, n * 16)])?;
+        let ids = ids_of(bytemuck::cast_slice(&data[1]));
+        let (rho, p) = self.read_fields(self.fields_state)?;
+        let acc: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
         Ok(StepFields {
             densities: unpermute(&ids, rho.iter().map(|&v| v as f64)),
             pressures: unpermute(&ids, p.iter().map(|&v| v as f64)),
