@@ -6,6 +6,9 @@ use crate::common::TestScene;
 
 use std::process::Command;
 use wgsph::solver::gpu::memory::{MemoryPlan, StepArrays};
+use wgsph::solver::gpu::buffers::WallCellIndex;
+use wgsph::model::kernels::sort_by_cell;
+use wgsph::model::real::V3;
 use wgsph::model::scene::{EquationOfState, Kernel, Scene};
 
 #[test]
@@ -23,8 +26,31 @@ fn the_memory_figure_is_the_plan_and_matches_the_buffers_created() {
                 wgsph::solver::gpu::params::GpuParams::default().bytes().len() as u64,
                 StepArrays::new(false, false, false, solver.fused()),
             );
+            // The wall cell starts are kept for the cells that hold walls.
+            let walls: Vec<V3<f32>> = initial.wall_positions.iter().map(|&x| V3::from64(x)).collect();
+            let (_, starts) = sort_by_cell(&params.grid.cast::<f32>(), &walls);
+            let kept = if walls.is_empty() { 0 } else { WallCellIndex::new(&starts).firsts.len() as u64 };
+            let plan = plan.with_wall_cell_starts(kept);
             assert_eq!(solver.memory_bytes(), plan.total(), "{name} on {}", ctx.describe());
             assert_eq!(solver.allocated_bytes(), plan.total(), "{name} on {}", ctx.describe());
+        }
+    }
+}
+
+#[test]
+fn the_wall_cell_index_gives_every_cell_start_of_the_dense_array() {
+    // Empty cells at the ends and between, a cell count on and off the block size, and more
+    // than one block.
+    for cells in [1usize, 31, 32, 33, 64, 100] {
+        let counts: Vec<u32> = (0..cells).map(|c| if c % 7 == 3 || c == cells - 1 { (c % 3 + 1) as u32 } else { 0 }).collect();
+        let mut starts = vec![0u32];
+        for &k in &counts {
+            starts.push(starts.last().unwrap() + k);
+        }
+        let index = WallCellIndex::new(&starts);
+        assert_eq!(index.firsts.len(), counts.iter().filter(|&&k| k > 0).count() + 1);
+        for (c, &start) in starts.iter().enumerate() {
+            assert_eq!(index.start(c), start, "cell {c} of {cells}");
         }
     }
 }

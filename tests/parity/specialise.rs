@@ -9,6 +9,9 @@ use wgsph::solver::compare::step_and_compare;
 use wgsph::solver::compare::MANY_STEPS;
 use wgsph::solver::compare::ONE_STEP;
 use wgsph::model::scene::Scene;
+use wgsph::model::kernels::sort_by_cell;
+use wgsph::model::real::V3;
+use wgsph::solver::gpu::buffers::WallCellIndex;
 
 /// dam_break at about 1000 particles with the chosen terms switched off.
 fn variant(viscosity: bool, walls: bool, planes: bool, gravity: bool) -> Scene {
@@ -52,14 +55,19 @@ fn a_scene_without_walls_allocates_no_wall_arrays() {
     let cells = with.params().grid.cell_count() as u64;
     let (cw, cwo) = (common::cpu::<f64>(&with), common::cpu::<f64>(&without));
     assert_eq!(cwo.walls().2.len(), 0);
-    // The per-cell wall starts (4 bytes a cell) and the wall particles are gone (on the GPU two
-    // 16-byte placeholders stay bound); on the CPU in f64 a wall particle is its position and
+    // The per-cell wall starts (4 bytes a cell) and the wall particles are gone; on the CPU in f64 a wall particle is its position and
     // mass (32 bytes) and their copy as one element for the lane path's loads (32 bytes).
     let walls = with.initial_state().wall_positions.len() as u64;
     assert_eq!(cw.memory_bytes() - cwo.memory_bytes(), (cells + 1) * 4 + walls * 64);
+    // On the GPU the wall cell index: a mask and a count per 32 cells, and the starts of the
+    // cells that hold walls (three 16-byte placeholders stay bound without walls).
+    let wall_f32: Vec<V3<f32>> = with.initial_state().wall_positions.iter().map(|&x| V3::from64(x)).collect();
+    let (_, starts) = sort_by_cell(&with.params().grid.cast::<f32>(), &wall_f32);
+    let index = WallCellIndex::new(&starts);
+    let gpu_walls = index.blocks.len() as u64 * 8 + index.firsts.len() as u64 * 4 + walls * 16;
     for ctx in common::contexts() {
         let g = common::gpu(wgsph::solver::gpu::GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &with);
         let go = common::gpu(ctx, &without);
-        assert!(g.memory_bytes() - go.memory_bytes() == (cells + 1) * 4 + walls * 16 - 32, "{} {}", g.memory_bytes(), go.memory_bytes());
+        assert!(g.memory_bytes() - go.memory_bytes() == gpu_walls - 48, "{} {}", g.memory_bytes(), go.memory_bytes());
     }
 }

@@ -150,6 +150,52 @@ impl StateBuffers {
     }
 }
 
+/// Cells per block of the wall cell index (one mask word).
+pub const WALL_CELL_BLOCK: usize = 32;
+
+/// The wall cell starts kept only for the cells that hold wall particles (walls cover a surface,
+/// so most cells hold none): per block of [`WALL_CELL_BLOCK`] cells a mask of the cells that
+/// hold walls and the number of such cells before the block (`blocks`), and the start of each
+/// such cell, then the wall count (`firsts`). The start of cell c is then
+/// `firsts[rank(c)]` with rank(c) the number of wall cells before c: the start of the first wall
+/// cell from c on, which is c's own start (wgsl: `Alias::Derived` of `wall_starts`).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct WallCellIndex {
+    pub blocks: Vec<[u32; 2]>,
+    pub firsts: Vec<u32>,
+}
+
+impl WallCellIndex {
+    /// The index of the dense starts `starts` (cells + 1 values, the last the wall count).
+    pub fn new(starts: &[u32]) -> Self {
+        let cells = starts.len().saturating_sub(1);
+        // Blocks cover index `cells` too (the end of the last cell).
+        let mut blocks = vec![[0u32; 2]; (cells + 1).div_ceil(WALL_CELL_BLOCK)];
+        let mut firsts = Vec::new();
+        for (c, pair) in starts.windows(2).enumerate() {
+            if c % WALL_CELL_BLOCK == 0 {
+                blocks[c / WALL_CELL_BLOCK][1] = firsts.len() as u32;
+            }
+            if pair[1] > pair[0] {
+                blocks[c / WALL_CELL_BLOCK][0] |= 1 << (c % WALL_CELL_BLOCK);
+                firsts.push(pair[0]);
+            }
+        }
+        if cells % WALL_CELL_BLOCK == 0 {
+            blocks[cells / WALL_CELL_BLOCK][1] = firsts.len() as u32;
+        }
+        firsts.push(starts.last().copied().unwrap_or(0));
+        WallCellIndex { blocks, firsts }
+    }
+
+    /// The start of cell `c` (0 ..= cells), as the shaders compute it.
+    pub fn start(&self, c: usize) -> u32 {
+        let [mask, before] = self.blocks[c / WALL_CELL_BLOCK];
+        let below = mask & ((1u32 << (c % WALL_CELL_BLOCK)) - 1);
+        self.firsts[(before + below.count_ones()) as usize]
+    }
+}
+
 /// The ids carried in the w components of positions read back from the GPU.
 pub fn ids_of(positions: &[[f32; 4]]) -> Vec<u32> {
     positions.iter().map(|p| p[3].to_bits()).collect()

@@ -9,7 +9,7 @@
 
 use super::buffers::{storage, StateStore};
 use super::device::{GpuContext, GpuError};
-use super::shaders::{dispatch_size, stage, ArrayLengths, Stage};
+use super::shaders::{dispatch_size, stage_with_aliases, Alias, ArrayLengths, Stage};
 use super::workgroups::WorkgroupSizes;
 use crate::model::params::Params;
 use crate::model::scene::DfsphSettings;
@@ -86,7 +86,8 @@ pub(super) struct SharedBuffers<'a> {
     pub pressures: &'a wgpu::Buffer,
     pub status: &'a wgpu::Buffer,
     pub wall_positions: &'a wgpu::Buffer,
-    pub wall_starts: &'a wgpu::Buffer,
+    pub wall_cell_blocks: &'a wgpu::Buffer,
+    pub wall_cell_firsts: &'a wgpu::Buffer,
     /// The accelerations (adaptive dt), or a placeholder.
     pub accelerations: &'a wgpu::Buffer,
 }
@@ -99,7 +100,7 @@ pub(super) fn solve_threads(sizes: &WorkgroupSizes) -> u32 {
 impl DfsphStages {
     /// Every DFSPH pipeline, with the scene's constants `k` and the workgroup sizes (density:
     /// the factors; forces: the prediction and the solves; integrate: the integration).
-    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths) -> Result<Self, GpuError> {
+    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths, places: &[(&str, Alias)]) -> Result<Self, GpuError> {
         let settings = params.dfsph.as_ref().expect("a DFSPH scene");
         let sized = |size: u32| {
             let mut c = k.to_vec();
@@ -114,7 +115,7 @@ impl DfsphStages {
             c
         };
         let warm = settings.warm_start;
-        let one = |entry: &str, consts: &[(&str, f64)]| stage(ctx, entry_file(entry), entry, lens, consts);
+        let one = |entry: &str, consts: &[(&str, f64)]| stage_with_aliases(ctx, entry_file(entry), entry, lens, consts, places);
         Ok(DfsphStages {
             factors: one("density_and_factor", &sized(sizes.density))?,
             divergence_warm_start: one("divergence_warm_start", &solve)?,
@@ -218,7 +219,8 @@ impl DfsphGpu {
                         "pressures" => s.pressures.clone(),
                         "status" => s.status.clone(),
                         "wall_positions" => s.wall_positions.clone(),
-                        "wall_starts" => s.wall_starts.clone(),
+                        "wall_cell_blocks" => s.wall_cell_blocks.clone(),
+                        "wall_cell_firsts" => s.wall_cell_firsts.clone(),
                         "accelerations" => s.accelerations.clone(),
                         "factors" => b.factors.clone(),
                         "wall_gradients" => b.wall_gradients.clone(),

@@ -7,7 +7,7 @@
 //! (`max_buffer_size`, `max_storage_buffer_binding_size`) are checked; an allocation beyond the
 //! device's memory still fails inside the driver.
 
-use super::buffers::StateLayout;
+use super::buffers::{StateLayout, WALL_CELL_BLOCK};
 use super::device::GpuContext;
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
@@ -103,8 +103,9 @@ impl MemoryPlan {
         let mut buffers = vec![
             PlannedBuffer { label: "params", bytes: uniform_bytes, bytes_per_fluid_particle: 0, single_binding: false },
             fixed("wall positions", padded(w * 16)),
-            // Without walls the shaders never read the per-cell wall array.
-            fixed("wall cell starts", padded(if w > 0 { (cells + 1) * 4 } else { 0 })),
+            // Without walls the shaders never read the wall cell index; its starts are planned
+            // once the walls are known (`with_wall_cell_starts`).
+            fixed("wall cell blocks", padded(if w > 0 { (cells + 1).div_ceil(WALL_CELL_BLOCK as u64) * 8 } else { 0 })),
         ];
         // The particles' ids ride in the w of the positions.
         let state: &[&'static str] = match arrays.layout {
@@ -128,6 +129,13 @@ impl MemoryPlan {
         }
         buffers.extend(Scan::sum_buffer_bytes(cells + 1).into_iter().map(|bytes| fixed("scan block sums", bytes)));
         MemoryPlan { fluid, walls, cells, buffers }
+    }
+
+    /// The plan with the wall cell index's starts: `entries` values (the cells that hold walls
+    /// and one more, or more room; see [`super::buffers::WallCellIndex`]; 0 without walls).
+    pub fn with_wall_cell_starts(mut self, entries: u64) -> MemoryPlan {
+        self.buffers.push(PlannedBuffer { label: "wall cell starts", bytes: padded(entries * 4), bytes_per_fluid_particle: 0, single_binding: false });
+        self
     }
 
     /// The plan with the Adami wall pressure's array (a pressure and a density per wall

@@ -5,7 +5,7 @@
 //! the stages bound to `fluid_count`, so a changing count costs no new pipelines unless it
 //! outgrows the capacity.
 
-use super::buffers::{ids_of, vec4s};
+use super::buffers::{ids_of, vec4s, WallCellIndex, WALL_CELL_BLOCK};
 use super::device::GpuContext;
 use super::readback::read_buffers;
 use super::{GpuOptions, GpuSolver};
@@ -165,18 +165,23 @@ impl GpuSolver {
     pub(super) fn load_walls(&mut self, walls: &InitialState) -> bool {
         let w = walls.wall_positions.len();
         let cells = self.params.grid.cell_count() as u64;
-        let made_with_walls = self.wall_starts.size() >= (cells + 1) * 4;
+        let made_with_walls = self.wall_cell_blocks.size() >= (cells + 1).div_ceil(WALL_CELL_BLOCK as u64) * 8;
         if w as u64 > self.wall_positions.size() / 16 || !made_with_walls || self.params.probes.force_count() > 0 {
             return false;
         }
         let grid = self.params.grid.cast::<f32>();
         let wall_f32: Vec<V3<f32>> = walls.wall_positions.iter().map(|&p| V3::from64(p)).collect();
         let (order, starts) = sort_by_cell(&grid, &wall_f32);
+        let index = WallCellIndex::new(&starts);
+        if index.firsts.len() as u64 > self.wall_cell_firsts.size() / 4 {
+            return false;
+        }
         let sorted: Vec<[f64; 3]> = order.iter().map(|&i| walls.wall_positions[i as usize]).collect();
         let positions = vec4s(&sorted, |k| walls.wall_masses[order[k] as usize] as f32);
         let queue = &self.ctx.queue;
         queue.write_buffer(&self.wall_positions, 0, bytemuck::cast_slice(&positions));
-        queue.write_buffer(&self.wall_starts, 0, bytemuck::cast_slice(&starts));
+        queue.write_buffer(&self.wall_cell_blocks, 0, bytemuck::cast_slice(&index.blocks));
+        queue.write_buffer(&self.wall_cell_firsts, 0, bytemuck::cast_slice(&index.firsts));
         if let Some(fields) = &self.wall_fields {
             // As at the start: no pressure, rest density (each step evaluates them first).
             let rest: Vec<[f32; 2]> = vec![[0.0, self.params.rest_density as f32]; w];

@@ -501,7 +501,8 @@ impl GpuSolver {
                 pressures: self.pressures.as_ref().expect("DFSPH keeps a pressures array"),
                 status: &self.status,
                 wall_positions: &self.wall_positions,
-                wall_starts: &self.wall_starts,
+                wall_cell_blocks: &self.wall_cell_blocks,
+                wall_cell_firsts: &self.wall_cell_firsts,
                 accelerations: &buffer,
             };
             self.step_accelerations_groups = Some([0, 1].map(|c| d.step_accelerations_group(&self.ctx, &shared, &self.uniform, c)));

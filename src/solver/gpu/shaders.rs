@@ -367,9 +367,10 @@ pub enum Alias {
     /// scalar types differ (a u32 in a float lane). Writes are component stores, so threads that
     /// write one lane of their own element never touch a word that another thread reads.
     Lane { target: &'static str, ty: &'static str, lane: u32 },
-    /// Computed from other arrays by the WGSL expression (in `i`) where it is read; writes are
-    /// dropped (the pressure from the density, with the equation of state).
-    Derived(&'static str),
+    /// Computed by the WGSL expression (in `i`) where it is read, from the arrays `arrays`
+    /// (name, element type; read-only, declared if the stage does not declare them); writes
+    /// are dropped (the pressure from the density, with the equation of state).
+    Derived { expr: &'static str, arrays: &'static [(&'static str, &'static str)] },
 }
 
 /// The scalar type of a vector type (`vec4<f32>` -> `f32`), or the type itself.
@@ -390,7 +391,7 @@ pub fn apply_aliases(decls: &mut Vec<ArrayDecl>, aliases: &[(&str, Alias)]) -> S
         assert!(a.access != Access::Atomic && !a.whole, "array '{alias}' cannot be an alias");
         let ty = &a.ty;
         let writes = a.access == Access::ReadWrite;
-        let mut target = |name: &str, target_ty: &str| {
+        let target = |decls: &mut Vec<ArrayDecl>, name: &str, target_ty: &str| {
             let t = match decls.iter_mut().position(|d| d.name == name) {
                 Some(k) => &mut decls[k],
                 None => {
@@ -407,14 +408,14 @@ pub fn apply_aliases(decls: &mut Vec<ArrayDecl>, aliases: &[(&str, Alias)]) -> S
         };
         match place {
             Alias::Same(name) => {
-                target(name, ty);
+                target(decls, name, ty);
                 writeln!(out, "fn {alias}_at(i: u32) -> {ty} {{ return {name}_at(i); }}").unwrap();
                 if writes {
                     writeln!(out, "fn {alias}_set(i: u32, v: {ty}) {{ {name}_set(i, v); }}").unwrap();
                 }
             }
             Alias::Lane { target: name, ty: target_ty, lane } => {
-                target(name, target_ty);
+                target(decls, name, target_ty);
                 let lane_ty = scalar_of(target_ty);
                 let (read, write) = if lane_ty == ty.as_str() { (String::new(), String::new()) } else { (format!("bitcast<{ty}>"), format!("bitcast<{lane_ty}>")) };
                 writeln!(out, "fn {alias}_at(i: u32) -> {ty} {{ return {read}({name}_at(i)[{lane}u]); }}").unwrap();
@@ -422,7 +423,13 @@ pub fn apply_aliases(decls: &mut Vec<ArrayDecl>, aliases: &[(&str, Alias)]) -> S
                     writeln!(out, "fn {alias}_set(i: u32, v: {ty}) {{ {name}_set_lane(i, {lane}u, {write}(v)); }}").unwrap();
                 }
             }
-            Alias::Derived(expr) => {
+            Alias::Derived { expr, arrays } => {
+                for &(name, array_ty) in arrays {
+                    if !decls.iter().any(|d| d.name == name) {
+                        let k = at.min(decls.len());
+                        decls.insert(k, ArrayDecl { name: name.into(), ty: array_ty.into(), access: Access::Read, whole: false, optional: false });
+                    }
+                }
                 writeln!(out, "fn {alias}_at(i: u32) -> {ty} {{ return {expr}; }}").unwrap();
                 if writes {
                     writeln!(out, "fn {alias}_set(i: u32, v: {ty}) {{}}").unwrap();

@@ -3,7 +3,7 @@
 //! which a step dispatches the stages is recorded in one place, `schedule.rs`; nothing is read
 //! back, waited for or created while steps are recorded.
 
-use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, ParticleBuffers, StateLayout, StateStore, STREAM_CHUNK};
+use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, ParticleBuffers, StateLayout, StateStore, WallCellIndex, STREAM_CHUNK};
 use super::device::GpuContext;
 use super::memory::{MemoryPlan, StepArrays};
 use super::params::{status, GpuParams};
@@ -35,7 +35,7 @@ const IN_PLACE: &[(&str, Alias)] = &[("positions_out", Alias::Same("positions"))
 /// in lanes of `bins`, a buffer free while the binning runs (the spare, or the other state's
 /// velocities); a summed density, and the binning's destinations before it, in the w of the
 /// velocities; the weakly compressible step's pressure computed from the density where it is
-/// read.
+/// read; the wall cell starts from the index of the cells that hold walls.
 fn array_places(arrays: &StepArrays) -> Vec<(&'static str, Alias)> {
     let bins = |lane| Alias::Lane { target: "bins", ty: "vec4<u32>", lane };
     let mut places = vec![("keys", bins(0)), ("ranks", bins(1)), ("unordered", bins(2))];
@@ -44,8 +44,12 @@ fn array_places(arrays: &StepArrays) -> Vec<(&'static str, Alias)> {
         places.extend([("densities", w), ("dest", w)]);
     }
     if !arrays.pressures {
-        places.push(("pressures", Alias::Derived("eos_pressure(densities_at(i))")));
+        places.push(("pressures", Alias::Derived { expr: "eos_pressure(densities_at(i))", arrays: &[] }));
     }
+    // The wall cell starts from the index of the cells that hold walls (`WallCellIndex`): the
+    // start of the first such cell from cell i on.
+    let wall_starts = "wall_cell_firsts_at(wall_cell_blocks_at(i >> 5u).y + countOneBits(wall_cell_blocks_at(i >> 5u).x & ((1u << (i & 31u)) - 1u)))";
+    places.push(("wall_starts", Alias::Derived { expr: wall_starts, arrays: &[("wall_cell_blocks", "vec2<u32>"), ("wall_cell_firsts", "u32")] }));
     places
 }
 
@@ -141,7 +145,10 @@ pub struct GpuSolver {
     pub(super) placeholder: wgpu::Buffer,
     pub(super) status: wgpu::Buffer,
     pub(super) wall_positions: wgpu::Buffer,
-    pub(super) wall_starts: wgpu::Buffer,
+    /// The wall cell index (`WallCellIndex`): per block of cells a mask and a count, and the
+    /// starts of the cells that hold walls, with room for more across ranks.
+    pub(super) wall_cell_blocks: wgpu::Buffer,
+    pub(super) wall_cell_firsts: wgpu::Buffer,
     /// With the Adami wall pressure: each sorted wall particle's pressure and density
     /// (`vec2<f32>`).
     pub(super) wall_fields: Option<wgpu::Buffer>,
@@ -200,7 +207,9 @@ struct ArrayCounts {
     fluid: u64,
     cells_plus_one: u64,
     walls: u64,
-    wall_cells_plus_one: u64,
+    /// The wall cell index's blocks and starts (see `WallCellIndex`), 0 without walls.
+    wall_cell_blocks: u64,
+    wall_cell_firsts: u64,
     /// The wall particles with the Adami wall pressure, else 0 (the array is then not bound).
     wall_fields: u64,
 }
@@ -210,7 +219,8 @@ impl ArrayCounts {
         match name {
             "starts" | "counts" => self.cells_plus_one,
             "wall_positions" => self.walls,
-            "wall_starts" => self.wall_cells_plus_one,
+            "wall_cell_blocks" => self.wall_cell_blocks,
+            "wall_cell_firsts" => self.wall_cell_firsts,
             "wall_fields" => self.wall_fields,
             "status" | "solve_dispatch" => 0,
             _ => self.fluid,
@@ -237,11 +247,20 @@ impl GpuSolver {
         // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
         let has_walls = w > 0;
         let adami = params.boundary_pressure == BoundaryPressure::Adami && has_walls && params.dfsph.is_none();
+        // Walls never move: sorted by cell once, on the host, with the same counting sort, and
+        // their cell starts kept for the cells that hold walls. Across ranks the walls near a
+        // slab change as it moves (`load_walls`): room for as many wall cells as wall particles.
+        let grid = params.grid.cast::<f32>();
+        let wall_f32: Vec<V3<f32>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
+        let (wall_order, wall_starts) = sort_by_cell(&grid, &wall_f32);
+        let wall_index = if has_walls { WallCellIndex::new(&wall_starts) } else { WallCellIndex::default() };
+        let wall_cell_room = if ranks.is_some() { (w + 1).min(cells + 1) } else { wall_index.firsts.len() as u64 };
         let counts = ArrayCounts {
             fluid: n,
             cells_plus_one: cells + 1,
             walls: w,
-            wall_cells_plus_one: if has_walls { cells + 1 } else { 0 },
+            wall_cell_blocks: wall_index.blocks.len() as u64,
+            wall_cell_firsts: if has_walls { wall_cell_room } else { 0 },
             wall_fields: if adami { w } else { 0 },
         };
         // The fused stage binds a placeholder for the accelerations it declares but never uses,
@@ -262,11 +281,8 @@ impl GpuSolver {
         // with adaptive dt only (fixed dt: in registers).
         let arrays = StepArrays::new(dfsph, params.continuity_density, params.adaptive.is_some(), fused);
         let layout = arrays.layout;
-        let plan = if dfsph {
-            MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_dfsph(n)
-        } else {
-            MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_fields(counts.wall_fields)
-        };
+        let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_cell_starts(counts.wall_cell_firsts);
+        let plan = if dfsph { plan.with_dfsph(n) } else { plan.with_wall_fields(counts.wall_fields) };
         plan.check(&ctx)?;
         let aliases = array_places(&arrays);
         let in_place: Vec<(&str, Alias)> = aliases.iter().copied().chain(if layout == StateLayout::InPlace { IN_PLACE.to_vec() } else { Vec::new() }).collect();
@@ -334,7 +350,7 @@ impl GpuSolver {
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
         // placeholder (until `step_fields` asks for them).
         let dfsph_len = |name: &str| if name == "accelerations" && params.adaptive.is_none() { 0 } else { counts.len(name) };
-        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len)?) } else { None };
+        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &aliases)?) } else { None };
 
         let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -343,16 +359,15 @@ impl GpuSolver {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
 
-        // Walls never move: sorted by cell once, on the host, with the same counting sort.
-        let grid = params.grid.cast::<f32>();
-        let wall_f32: Vec<V3<f32>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
-        let (wall_order, wall_starts) = sort_by_cell(&grid, &wall_f32);
         let walls_sorted: Vec<[f64; 3]> = wall_order.iter().map(|&i| initial.wall_positions[i as usize]).collect();
         let wall_masses: Vec<f32> = wall_order.iter().map(|&i| initial.wall_masses[i as usize] as f32).collect();
         // The w of a wall position holds its mass.
         let wall_positions = storage_init(device, "wall positions", bytemuck::cast_slice(&vec4s(&walls_sorted, |i| wall_masses[i])));
-        let wall_starts = if has_walls { wall_starts } else { Vec::new() };
-        let wall_starts = storage_init(device, "wall cell starts", bytemuck::cast_slice(&wall_starts));
+        let wall_cell_blocks = storage_init(device, "wall cell blocks", bytemuck::cast_slice(&wall_index.blocks));
+        let wall_cell_firsts = storage(device, "wall cell starts", counts.wall_cell_firsts * 4);
+        if has_walls {
+            ctx.queue.write_buffer(&wall_cell_firsts, 0, bytemuck::cast_slice(&wall_index.firsts));
+        }
         // Before the first step (a snapshot at t = 0 evaluates them too): no pressure, rest density.
         let wall_fields = adami.then(|| {
             let rest: Vec<[f32; 2]> = vec![[0.0, params.rest_density as f32]; w as usize];
@@ -384,8 +399,8 @@ impl GpuSolver {
             let spare = (layout == StateLayout::InPlace).then(|| store.spare(c));
             let acc = spare.clone().or_else(|| accelerations.clone()).unwrap_or_else(|| placeholder.clone());
             let bins = spare.unwrap_or_else(|| dst.velocities.clone());
-            let (starts, densities, pressures, status, wall_positions, wall_starts, wall_fields) =
-                (&starts, &densities, &pressures, &status, &wall_positions, &wall_starts, &wall_fields);
+            let (starts, densities, pressures, status, wall_positions, wall_cell_blocks, wall_cell_firsts, wall_fields) =
+                (&starts, &densities, &pressures, &status, &wall_positions, &wall_cell_blocks, &wall_cell_firsts, &wall_fields);
             move |name: &str| -> wgpu::Buffer {
                 match name {
                     "positions" => src.positions.clone(),
@@ -397,7 +412,8 @@ impl GpuSolver {
                     "densities" | "dest" => densities.clone().expect("a densities array"),
                     "starts" | "counts" => starts.clone(),
                     "wall_positions" => wall_positions.clone(),
-                    "wall_starts" => wall_starts.clone(),
+                    "wall_cell_blocks" => wall_cell_blocks.clone(),
+                    "wall_cell_firsts" => wall_cell_firsts.clone(),
                     "wall_fields" => wall_fields.clone().expect("bound only with the Adami wall pressure"),
                     "status" => status.clone(),
                     "accelerations" => acc.clone(),
@@ -454,7 +470,8 @@ impl GpuSolver {
                 pressures: pressures.as_ref().expect("DFSPH keeps a pressures array"),
                 status: &status,
                 wall_positions: &wall_positions,
-                wall_starts: &wall_starts,
+                wall_cell_blocks: &wall_cell_blocks,
+                wall_cell_firsts: &wall_cell_firsts,
                 accelerations: accelerations.as_ref().unwrap_or(&placeholder),
             };
             let buffers = DfsphBuffers::new(&ctx, n, solve_threads(&ws), max_groups_per_dim);
@@ -488,7 +505,8 @@ impl GpuSolver {
             placeholder,
             status,
             wall_positions,
-            wall_starts,
+            wall_cell_blocks,
+            wall_cell_firsts,
             wall_fields,
             wall_order,
             scan,
@@ -530,7 +548,8 @@ impl GpuSolver {
                     "pressures" => self.pressures.as_ref().expect("a pressures array"),
                     "starts" => &self.starts,
                     "wall_positions" => &self.wall_positions,
-                    "wall_starts" => &self.wall_starts,
+                    "wall_cell_blocks" => &self.wall_cell_blocks,
+                    "wall_cell_firsts" => &self.wall_cell_firsts,
                     "wall_fields" => self.wall_fields.as_ref().expect("bound only with the Adami wall pressure"),
                     "accelerations" => &buffer,
                     other => panic!("no buffer holds the array '{other}'"),
@@ -797,7 +816,7 @@ impl GpuSolver {
         // With the fused step (and DFSPH with a fixed dt) the accelerations exist only after
         // `step_fields` asked for them; in place they live in the state's spare buffer.
         let planned_accelerations = s.dfsph.as_ref().and_then(|d| d.accelerations.as_ref().filter(|_| s.params.adaptive.is_some()));
-        [&s.uniform, &s.starts, &s.placeholder, &s.status, &s.wall_positions, &s.wall_starts]
+        [&s.uniform, &s.starts, &s.placeholder, &s.status, &s.wall_positions, &s.wall_cell_blocks, &s.wall_cell_firsts]
             .into_iter()
             .chain(s.densities.as_ref())
             .chain(s.pressures.as_ref())
