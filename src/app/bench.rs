@@ -180,7 +180,7 @@ pub fn table(rows: &[BenchRow]) -> String {
         "path", "adapter", "fluid", "steps", "seconds", "p-steps/s", "B/fluid", "x SPH", "iterations", "CPU s", "p-steps/CPUs", "load"
     );
     for r in rows {
-        let bytes = r.bytes_per_fluid_particle.map_or("-".into(), |b| format!("{b:.1}"));
+        let bytes = r.bytes_per_fluid_particle.map_or("-".into(), |b| format!("{b:.2}"));
         let ratio = r.ratio_to_splishsplash.map_or("-".into(), |x| format!("{x:.2}"));
         let iterations = match (r.pressure_iterations_per_step, r.divergence_iterations_per_step) {
             (Some(p), Some(d)) => format!("{p:.2} + {d:.2}"),

@@ -302,7 +302,7 @@ impl Profile {
         s += &format!("host wall-clock per step with a wait after every step: {:.1} µs\n", self.host_step_time_with_waits_us);
         s += &format!("particle-steps/s: {:.3e}\n", self.particle_steps_per_second);
         s += &format!("neighbour pairs per step: {}; interactions/s (PIPS): {:.3e}\n", self.neighbour_pairs, self.interactions_per_second);
-        s += &format!("GPU memory: {} bytes, {:.1} bytes per particle\n", self.gpu_memory_bytes, self.gpu_bytes_per_particle);
+        s += &format!("GPU memory: {} bytes, {:.2} bytes per fluid particle\n", self.gpu_memory_bytes, self.gpu_bytes_per_particle);
         if let (Some(p), Some(d)) = (self.pressure_iterations_per_step, self.divergence_iterations_per_step) {
             s += &format!("DFSPH iterations per step: constant density {p:.2}, divergence {d:.2}\n");
         }

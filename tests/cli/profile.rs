@@ -99,7 +99,7 @@ fn profile_command_prints_the_table_and_writes_json() {
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("interactions/s (PIPS)") && text.contains("bytes per particle"), "{text}");
+    assert!(text.contains("interactions/s (PIPS)") && text.contains("bytes per fluid particle"), "{text}");
     let p: Profile = serde_json::from_str(&std::fs::read_to_string(dir.path().join("p/profile.json")).unwrap()).unwrap();
     assert_eq!(p.scene, "dam_break");
     assert_eq!(p.steps, 2);
