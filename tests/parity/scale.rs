@@ -7,6 +7,7 @@ use crate::common::TestScene;
 use std::process::Command;
 use wgsph::solver::gpu::memory::{MemoryPlan, StepArrays};
 use wgsph::solver::gpu::buffers::WallCellIndex;
+use wgsph::solver::gpu::GpuOptions;
 use wgsph::model::kernels::sort_by_cell;
 use wgsph::model::real::V3;
 use wgsph::model::scene::{EquationOfState, Kernel, Scene};
@@ -14,23 +15,32 @@ use wgsph::model::scene::{EquationOfState, Kernel, Scene};
 #[test]
 fn the_memory_figure_is_the_plan_and_matches_the_buffers_created() {
     for ctx in common::contexts() {
-        // With walls (dam_break's tank) and without (the seed scene's planes).
-        for name in ["dam_break", "seed"] {
-            let scene = Scene::load(name).unwrap().with_fluid_particles(600);
+        // With walls (dam_break's tank) and without (the seed scene's planes); the weakly
+        // compressible step in place and fused, and DFSPH (in place, with its own arrays).
+        let dam_break = Scene::load("dam_break").unwrap().with_fluid_particles(600);
+        let mut dfsph = TestScene::small_tank().dfsph().build();
+        dfsph.name = "dfsph".into();
+        for (scene, fused) in [(dam_break.clone(), false), (dam_break, true), (Scene::load("seed").unwrap().with_fluid_particles(600), false), (dfsph, false)] {
             let (params, initial) = (scene.params(), scene.initial_state());
-            let solver = common::gpu(ctx.clone(), &scene);
+            let options = GpuOptions { fuse_forces_and_integration: Some(fused), ..Default::default() };
+            let solver = common::gpu_with(ctx.clone(), &scene, None, options).unwrap();
+            let n = initial.fluid_positions.len() as u64;
+            let is_dfsph = params.dfsph.is_some();
             let plan = MemoryPlan::new(
-                initial.fluid_positions.len() as u64,
+                n,
                 Some(initial.wall_positions.len() as u64),
                 params.grid.cell_count() as u64,
                 wgsph::solver::gpu::params::GpuParams::default().bytes().len() as u64,
-                StepArrays::new(false, false, false, solver.fused()),
+                StepArrays::new(is_dfsph, false, false, fused),
             );
             // The wall cell starts are kept for the cells that hold walls.
             let walls: Vec<V3<f32>> = initial.wall_positions.iter().map(|&x| V3::from64(x)).collect();
             let (_, starts) = sort_by_cell(&params.grid.cast::<f32>(), &walls);
             let kept = if walls.is_empty() { 0 } else { WallCellIndex::new(&starts).firsts.len() as u64 };
             let plan = plan.with_wall_cell_starts(kept);
+            let plan = if is_dfsph { plan.with_dfsph(n) } else { plan };
+            let name = &scene.name;
+            assert_eq!(solver.fused(), fused);
             assert_eq!(solver.memory_bytes(), plan.total(), "{name} on {}", ctx.describe());
             assert_eq!(solver.allocated_bytes(), plan.total(), "{name} on {}", ctx.describe());
         }

@@ -44,47 +44,49 @@ pub struct StateBuffers {
 pub enum StateLayout {
     /// Two states of positions and velocities (32 bytes each per particle): the binning gathers
     /// one into the other, and the step writes the new state back into the first while other
-    /// threads still read the old one. The fused forces-and-integration pass and DFSPH's
-    /// prediction need this.
+    /// threads still read the old one. The fused forces-and-integration pass needs this.
     PingPong,
-    /// Three `vec4` buffers (48 bytes per particle) whose roles rotate: positions, velocities
-    /// and a spare that holds the binning's ranks and then the accelerations. The binning
-    /// gathers the positions into the spare and the velocities into the old positions' buffer;
-    /// the integration, which reads only a particle's own slot of every array, writes the new
-    /// state in place. The two-pass weakly compressible step uses it.
+    /// Three `vec4` buffers (48 bytes per particle) whose roles change: positions, velocities
+    /// and a spare. The binning keeps its ranks in the spare and gathers the positions into it
+    /// and the velocities into the old positions' buffer; the weakly compressible step writes
+    /// the accelerations into the spare and its integration, which reads only a particle's own
+    /// slot of every array, writes the new state in place; DFSPH predicts the velocities into
+    /// the spare, which then holds the velocities.
     InPlace,
 }
 
+/// In place, the buffers of each phase's roles: [positions, velocities, spare]. The rotations
+/// first (the binning turns one into the next; the weakly compressible step reaches only
+/// these), then the phases where DFSPH's prediction swapped velocities and spare.
+const ROLES: [[usize; 3]; 6] = [[0, 1, 2], [2, 0, 1], [1, 2, 0], [0, 2, 1], [1, 0, 2], [2, 1, 0]];
+
 /// The buffers of the particle state and which of them holds what in each phase: a phase is
-/// an assignment of the roles to the buffers, and the binning moves the state to the next.
+/// an assignment of the roles to the buffers; the binning moves the state to another, and so do
+/// the fused step's integration and DFSPH's prediction.
 pub struct StateStore {
     pub layout: StateLayout,
     /// Ping-pong: positions 0, velocities 0, positions 1, velocities 1. In place: three buffers.
     buffers: Vec<wgpu::Buffer>,
+    /// Whether a step predicts the velocities into a second buffer (DFSPH): in place all six
+    /// assignments of the roles are then reached, else the three rotations.
+    predicts: bool,
 }
 
 impl StateStore {
-    pub fn new(device: &wgpu::Device, layout: StateLayout, fluid: u64) -> Self {
+    pub fn new(device: &wgpu::Device, layout: StateLayout, fluid: u64, predicts: bool) -> Self {
         let labels: &[&str] = match layout {
             StateLayout::PingPong => &["positions 0", "velocities 0", "positions 1", "velocities 1"],
             StateLayout::InPlace => &["particle state 0", "particle state 1", "particle state 2"],
         };
-        StateStore { layout, buffers: labels.iter().map(|l| storage(device, l, fluid * 16)).collect() }
+        StateStore { layout, buffers: labels.iter().map(|l| storage(device, l, fluid * 16)).collect(), predicts }
     }
 
-    /// Bytes per particle of the state's buffers.
-    pub fn bytes_per_particle(layout: StateLayout) -> u64 {
-        match layout {
-            StateLayout::PingPong => 64,
-            StateLayout::InPlace => 48,
-        }
-    }
-
-    /// The number of phases (2 or 3).
+    /// The number of phases.
     pub fn phases(&self) -> usize {
-        match self.layout {
-            StateLayout::PingPong => 2,
-            StateLayout::InPlace => 3,
+        match (self.layout, self.predicts) {
+            (StateLayout::PingPong, _) => 2,
+            (StateLayout::InPlace, false) => 3,
+            (StateLayout::InPlace, true) => 6,
         }
     }
 
@@ -92,14 +94,29 @@ impl StateStore {
     pub fn state(&self, c: usize) -> StateBuffers {
         match self.layout {
             StateLayout::PingPong => StateBuffers { positions: self.buffers[2 * c].clone(), velocities: self.buffers[2 * c + 1].clone() },
-            StateLayout::InPlace => StateBuffers { positions: self.buffers[c].clone(), velocities: self.buffers[(c + 1) % 3].clone() },
+            StateLayout::InPlace => StateBuffers { positions: self.buffers[ROLES[c][0]].clone(), velocities: self.buffers[ROLES[c][1]].clone() },
         }
     }
 
-    /// In place: the spare buffer of phase `c` (the binning's ranks, then the accelerations).
+    /// In place: the spare buffer of phase `c` (the binning's ranks, then the accelerations or
+    /// DFSPH's predicted velocities).
     pub fn spare(&self, c: usize) -> wgpu::Buffer {
         debug_assert_eq!(self.layout, StateLayout::InPlace);
-        self.buffers[(c + 2) % 3].clone()
+        self.buffers[ROLES[c][2]].clone()
+    }
+
+    /// The state a step of phase `c` writes where it does not write in place: the other pair,
+    /// or in place the same positions with the spare as velocities (DFSPH's prediction).
+    pub fn next(&self, c: usize) -> StateBuffers {
+        match self.layout {
+            StateLayout::PingPong => self.state(1 - c),
+            StateLayout::InPlace => StateBuffers { positions: self.state(c).positions, velocities: self.spare(c) },
+        }
+    }
+
+    /// In place, the phase with the roles `roles`.
+    fn phase_of(roles: [usize; 3]) -> usize {
+        ROLES.iter().position(|&r| r == roles).expect("every assignment of the roles is a phase")
     }
 
     /// The phase after the binning of phase `c`: the other pair, or in place the phase whose
@@ -107,15 +124,31 @@ impl StateStore {
     pub fn after_binning(&self, c: usize) -> usize {
         match self.layout {
             StateLayout::PingPong => 1 - c,
-            StateLayout::InPlace => (c + 2) % 3,
+            StateLayout::InPlace => {
+                let [p, v, s] = ROLES[c];
+                Self::phase_of([s, p, v])
+            }
         }
     }
 
-    /// The phase after the integration of phase `c`: the other pair, or in place the same.
+    /// The phase after the integration of phase `c`: the other pair (the fused step), or in
+    /// place the same.
     pub fn after_integration(&self, c: usize) -> usize {
         match self.layout {
             StateLayout::PingPong => 1 - c,
             StateLayout::InPlace => c,
+        }
+    }
+
+    /// The phase after a DFSPH step of phase `c`, whose velocities are the ones predicted into
+    /// [`StateStore::next`].
+    pub fn after_prediction(&self, c: usize) -> usize {
+        match self.layout {
+            StateLayout::PingPong => 1 - c,
+            StateLayout::InPlace => {
+                let [p, v, s] = ROLES[c];
+                Self::phase_of([p, s, v])
+            }
         }
     }
 

@@ -68,7 +68,8 @@ pub(super) struct DfsphGpu {
     pub settings: DfsphSettings,
     pub stages: DfsphStages,
     pub buffers: DfsphBuffers,
-    pub groups: [DfsphGroups; 2],
+    /// Per phase of the state.
+    pub groups: Vec<DfsphGroups>,
     /// The bind groups of `begin_solve` and `check_convergence` of the divergence solve (0) and
     /// the constant-density solve (1).
     pub control: [(wgpu::BindGroup, wgpu::BindGroup); 2],
@@ -200,9 +201,10 @@ impl DfsphBuffers {
 impl DfsphGpu {
     pub fn new(ctx: &GpuContext, settings: &DfsphSettings, stages: DfsphStages, buffers: DfsphBuffers, shared: &SharedBuffers, uniform: &wgpu::Buffer) -> Self {
         let device = &ctx.device;
-        let groups = [0, 1].map(|c| {
-            let lookup = |velocities_of: usize| {
-                let (read, write) = (shared.store.state(c), shared.store.state(1 - c));
+        let groups: Vec<DfsphGroups> = (0..shared.store.phases()).map(|c| {
+            // `predicted`: the velocities a stage works on are the predicted ones.
+            let lookup = |predicted: bool| {
+                let (read, write) = (shared.store.state(c), shared.store.next(c));
                 let (b, s) = (&buffers, shared);
                 move |name: &str| -> wgpu::Buffer {
                     match name {
@@ -210,7 +212,7 @@ impl DfsphGpu {
                         // The velocities a stage works on: the state's own (the divergence
                         // solve, the prediction) or the predicted ones (the constant-density
                         // solve, the integration).
-                        "velocities" => shared.store.state(velocities_of).velocities.clone(),
+                        "velocities" => if predicted { write.velocities.clone() } else { read.velocities.clone() },
                         "velocities_out" => write.velocities.clone(),
                         "velocities_start" => read.velocities.clone(),
                         "positions_out" => write.positions.clone(),
@@ -233,8 +235,8 @@ impl DfsphGpu {
                     }
                 }
             };
-            let own = lookup(c);
-            let predicted = lookup(1 - c);
+            let own = lookup(false);
+            let predicted = lookup(true);
             let st = &stages;
             DfsphGroups {
                 factors: st.factors.bind_group(device, "density_and_factor", uniform, &own),
@@ -254,7 +256,7 @@ impl DfsphGpu {
                 pressure_apply: st.pressure_apply.bind_group(device, "pressure_apply", uniform, &predicted),
                 integrate: st.integrate.bind_group(device, "integrate", uniform, &predicted),
             }
-        });
+        }).collect();
         let control_buffers = |name: &str| match name {
             "status" => shared.status.clone(),
             "solve_dispatch" => buffers.solve_dispatch.clone(),
@@ -269,7 +271,7 @@ impl DfsphGpu {
     /// The bind groups of `step_accelerations` for the state pair read from `c` (made on
     /// request, with the accelerations array then in use).
     pub fn step_accelerations_group(&self, ctx: &GpuContext, shared: &SharedBuffers, uniform: &wgpu::Buffer, c: usize) -> wgpu::BindGroup {
-        let (read, write) = (shared.store.state(c), shared.store.state(1 - c));
+        let (read, write) = (shared.store.state(c), shared.store.next(c));
         let b = &self.buffers;
         self.stages.step_accelerations.bind_group(&ctx.device, "step_accelerations", uniform, &|name: &str| {
             match name {

@@ -43,11 +43,12 @@ pub struct StepArrays {
 }
 
 impl StepArrays {
-    /// The arrays of a step: DFSPH or the weakly compressible step (fused or in place), with
+    /// The arrays of a step: DFSPH (in place) or the weakly compressible step (fused, or in
+    /// place), with
     /// the continuity equation or summed density, with adaptive or fixed dt.
     pub fn new(dfsph: bool, continuity_density: bool, adaptive: bool, fused: bool) -> StepArrays {
         StepArrays {
-            layout: if dfsph || fused { StateLayout::PingPong } else { StateLayout::InPlace },
+            layout: if fused && !dfsph { StateLayout::PingPong } else { StateLayout::InPlace },
             accelerations: dfsph && adaptive,
             densities: dfsph || continuity_density,
             pressures: dfsph,

@@ -354,7 +354,7 @@ impl GpuSolver {
         rec.begin(ProfiledStage::DfsphIntegrate);
         self.dispatch_particles(rec, &d.stages.integrate, &g.integrate);
         dispatch_one(rec, &self.pipelines.finish_step, &self.finish_group);
-        self.current = self.store.after_integration(read);
+        self.current = self.store.after_prediction(read);
         self.fields_state = read;
         self.accelerations_valid = false;
     }
@@ -505,7 +505,7 @@ impl GpuSolver {
                 wall_cell_firsts: &self.wall_cell_firsts,
                 accelerations: &buffer,
             };
-            self.step_accelerations_groups = Some([0, 1].map(|c| d.step_accelerations_group(&self.ctx, &shared, &self.uniform, c)));
+            self.step_accelerations_groups = Some((0..self.store.phases()).map(|c| d.step_accelerations_group(&self.ctx, &shared, &self.uniform, c)).collect());
         }
         let d = self.dfsph.as_ref().expect("DFSPH");
         let group = &self.step_accelerations_groups.as_ref().expect("made above")[self.fields_state];

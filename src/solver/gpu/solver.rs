@@ -166,8 +166,8 @@ pub struct GpuSolver {
     /// DFSPH with [`SolverLoop::Adaptive`]: the iterations each solve (0: divergence, 1:
     /// constant density) recorded past its warm start in the last step that read them back.
     pub(super) last_iterations: std::cell::Cell<[u32; 2]>,
-    /// DFSPH: the bind groups of `step_accelerations` of each parity, made on request.
-    pub(super) step_accelerations_groups: Option<[wgpu::BindGroup; 2]>,
+    /// DFSPH: the bind groups of `step_accelerations` of each phase, made on request.
+    pub(super) step_accelerations_groups: Option<Vec<wgpu::BindGroup>>,
     pub(super) steps: u64,
     /// The adapter's `max_compute_workgroups_per_dimension`.
     pub(super) max_groups_per_dim: u32,
@@ -277,8 +277,8 @@ impl GpuSolver {
         // The two-pass step with its state in place is the default: 48 bytes of state per
         // particle instead of the fused step's 64 (docs/performance.md).
         let fused = can_fuse && options.fuse_forces_and_integration.unwrap_or(false);
-        // DFSPH predicts into a second state, as does the fused step; DFSPH keeps accelerations
-        // with adaptive dt only (fixed dt: in registers).
+        // The fused step writes a second state; DFSPH keeps accelerations with adaptive dt only
+        // (fixed dt: in registers).
         let arrays = StepArrays::new(dfsph, params.continuity_density, params.adaptive.is_some(), fused);
         let layout = arrays.layout;
         let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_cell_starts(counts.wall_cell_firsts);
@@ -350,7 +350,9 @@ impl GpuSolver {
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
         // placeholder (until `step_fields` asks for them).
         let dfsph_len = |name: &str| if name == "accelerations" && params.adaptive.is_none() { 0 } else { counts.len(name) };
-        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &aliases)?) } else { None };
+        // In place DFSPH's integration writes the positions it reads.
+        let dfsph_places: Vec<(&str, Alias)> = aliases.iter().copied().chain((layout == StateLayout::InPlace).then_some(IN_PLACE[0])).collect();
+        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places)?) } else { None };
 
         let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -374,7 +376,7 @@ impl GpuSolver {
             storage_init(device, "wall fields", bytemuck::cast_slice(&rest))
         });
 
-        let store = StateStore::new(device, layout, n);
+        let store = StateStore::new(device, layout, n, dfsph);
         // With continuity density the w of each velocity carries the particle's density.
         let carried = |i: usize| if params.continuity_density { initial.fluid_density(i, params.rest_density) as f32 } else { 0.0 };
         store.state(0).upload(&ctx, &initial.fluid_positions, &initial.fluid_velocities, |i| i as u32, &carried);
@@ -598,7 +600,7 @@ impl GpuSolver {
         let n = self.fluid_count as u64;
         let b = &d.buffers;
         let c = self.current;
-        let velocities = &self.store.state(if predicted { 1 - c } else { c }).velocities;
+        let velocities = &if predicted { self.store.next(c) } else { self.store.state(c) }.velocities;
         let data = read_buffers(&self.ctx, &[
             (&self.store.state(c).positions, n * 16),
             (self.densities.as_ref().expect("DFSPH keeps a densities array"), n * 4),
