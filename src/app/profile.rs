@@ -41,6 +41,13 @@ pub struct StageProfile {
     pub bandwidth_gb_s: f64,
 }
 
+/// One buffer of the GPU memory (or all buffers of one label).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct BufferMemory {
+    pub buffer: String,
+    pub bytes: u64,
+}
+
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct Profile {
     pub scene: String,
@@ -68,6 +75,10 @@ pub struct Profile {
     pub interactions_per_second: f64,
     pub gpu_memory_bytes: u64,
     pub gpu_bytes_per_particle: f64,
+    /// The GPU memory by buffer (the memory plan's labels, buffers of one label summed), in
+    /// the plan's order; the probes' buffers are in the total only.
+    #[serde(default)]
+    pub gpu_memory_by_buffer: Vec<BufferMemory>,
     /// DFSPH: iterations per step of the constant-density and the divergence solve over the
     /// profiled steps (absent for WCSPH).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -261,6 +272,13 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
         })
         .collect();
     let memory = gpu.memory_bytes();
+    let mut by_buffer: Vec<BufferMemory> = Vec::new();
+    for b in &gpu.memory_plan().buffers {
+        match by_buffer.iter_mut().find(|m| m.buffer == b.label) {
+            Some(m) => m.bytes += b.bytes,
+            None => by_buffer.push(BufferMemory { buffer: b.label.into(), bytes: b.bytes }),
+        }
+    }
     Ok(Profile {
         scene: scene.name.clone(),
         adapter: gpu.adapter(),
@@ -278,6 +296,7 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
         interactions_per_second: neighbour_pairs as f64 / (step_ns * 1e-9),
         gpu_memory_bytes: memory,
         gpu_bytes_per_particle: memory as f64 / n as f64,
+        gpu_memory_by_buffer: by_buffer,
         pressure_iterations_per_step: iterations.map(|i| i.0),
         divergence_iterations_per_step: iterations.map(|i| i.1),
     })
@@ -303,6 +322,17 @@ impl Profile {
         s += &format!("particle-steps/s: {:.3e}\n", self.particle_steps_per_second);
         s += &format!("neighbour pairs per step: {}; interactions/s (PIPS): {:.3e}\n", self.neighbour_pairs, self.interactions_per_second);
         s += &format!("GPU memory: {} bytes, {:.2} bytes per fluid particle\n", self.gpu_memory_bytes, self.gpu_bytes_per_particle);
+        // The buffers' share per fluid particle, the larger ones (the rest summed).
+        let n = self.fluid_particles.max(1) as f64;
+        let (large, small): (Vec<&BufferMemory>, Vec<&BufferMemory>) = self.gpu_memory_by_buffer.iter().partition(|b| b.bytes as f64 / n >= 0.01);
+        let mut parts: Vec<String> = large.iter().map(|b| format!("{} {:.2}", b.buffer, b.bytes as f64 / n)).collect();
+        let rest: u64 = small.iter().map(|b| b.bytes).sum();
+        if rest > 0 {
+            parts.push(format!("the rest {rest} bytes"));
+        }
+        if !parts.is_empty() {
+            s += &format!("  by buffer, bytes per fluid particle: {}\n", parts.join(", "));
+        }
         if let (Some(p), Some(d)) = (self.pressure_iterations_per_step, self.divergence_iterations_per_step) {
             s += &format!("DFSPH iterations per step: constant density {p:.2}, divergence {d:.2}\n");
         }

@@ -42,6 +42,10 @@ fn stage_times_are_positive_and_shares_sum_to_100() {
         assert!((p.particle_steps_per_second - n / (p.step_time_us * 1e-6)).abs() <= 1e-6 * p.particle_steps_per_second);
         assert!(p.neighbour_pairs > p.fluid_particles, "{adapter}: {} pairs", p.neighbour_pairs);
         assert!(p.gpu_memory_bytes > 0 && (p.gpu_bytes_per_particle - p.gpu_memory_bytes as f64 / n).abs() < 1e-9);
+        // The buffers add up to the total (no probes here), the particle state the largest part.
+        assert_eq!(p.gpu_memory_by_buffer.iter().map(|b| b.bytes).sum::<u64>(), p.gpu_memory_bytes, "{adapter}");
+        let state: u64 = p.gpu_memory_by_buffer.iter().filter(|b| b.buffer.starts_with("particle state") || b.buffer.starts_with("positions") || b.buffer.starts_with("velocities")).map(|b| b.bytes).sum();
+        assert!(state >= 48 * p.fluid_particles, "{adapter}: {state} bytes of state");
     }
 }
 

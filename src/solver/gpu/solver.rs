@@ -182,6 +182,8 @@ pub struct GpuSolver {
     pub(super) rank_error: std::cell::RefCell<Option<String>>,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
+    /// The buffers the solver planned and allocated (the probes' besides, in `memory`).
+    plan: MemoryPlan,
     /// The arrays the step keeps, and the specialisation constants of its stages (for stages
     /// made later).
     arrays: StepArrays,
@@ -523,6 +525,7 @@ impl GpuSolver {
             max_groups_per_dim,
             steps_per_submit: if options.steps_per_submit == 0 { STEPS_PER_SUBMIT } else { options.steps_per_submit },
             memory,
+            plan,
             probes,
             ranks,
             rank_error: std::cell::RefCell::new(None),
@@ -810,6 +813,11 @@ impl GpuSolver {
     /// Bytes of every buffer the solver allocated on the device (its [`MemoryPlan`]'s total).
     pub fn memory_bytes(&self) -> u64 {
         self.memory
+    }
+
+    /// Every buffer of the memory plan the solver was made with.
+    pub fn memory_plan(&self) -> &MemoryPlan {
+        &self.plan
     }
 
     /// Bytes of the buffers as created, summed from the buffers themselves (to check the plan).
