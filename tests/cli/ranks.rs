@@ -150,6 +150,29 @@ fn the_dam_break_with_dfsph_on_one_two_and_four_ranks_writes_the_same_snapshots(
     }
 }
 
+/// DFSPH across two GPU ranks under mpirun (the host runs the solves' loops and exchanges the
+/// ghosts' velocities after every iteration): the last snapshot is byte for byte one GPU's and
+/// the ranks iterate as one GPU does.
+#[test]
+fn the_dam_break_with_dfsph_on_two_gpu_ranks_writes_one_gpus_snapshot() {
+    let Some(m) = mpi() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/dam_break.toml")).unwrap();
+    let dfsph = base.replace("speed_of_sound = 40.0", "solver = \"dfsph\"").replace("dt = 0.00025", "dt = 0.001");
+    let path = tmp.path().join("dam_break_dfsph.toml");
+    std::fs::write(&path, dfsph).unwrap();
+    let scene = path.to_str().unwrap();
+    let args = |out: &'static str| ["run", scene, "--particles", "800", "--backend", "gpu", "--quiet", "--steps", "30", "--snapshot-every", "30", "--format", "csv", "--out", out];
+    run_ok(mpirun(&m, 1, &args("one"), tmp.path()));
+    run_ok(mpirun(&m, 2, &args("two"), tmp.path()));
+    let (one, two) = (summary(&tmp.path().join("one")), summary(&tmp.path().join("two")));
+    assert_eq!(two.status, RunStatus::Completed);
+    assert_eq!(two.ranks.as_ref().map(|r| r.count), Some(2));
+    let counts = |s: &Summary| s.dfsph.as_ref().map(|d| (d.pressure_iterations_mean, d.pressure_iterations_max, d.divergence_iterations_mean, d.divergence_iterations_max));
+    assert!(counts(&one).is_some() && counts(&one) == counts(&two), "the ranks iterate as one GPU: {:?} against {:?}", counts(&two), counts(&one));
+    assert!(last_snapshot(&tmp.path().join("one")) == last_snapshot(&tmp.path().join("two")), "2 GPU ranks with DFSPH write one GPU's last snapshot");
+}
+
 #[test]
 fn the_hydrostatic_tank_on_one_two_and_four_ranks_writes_the_same_snapshots() {
     same_on_every_rank_count("hydrostatic", &["--particles", "800", "--steps", "100", "--snapshot-every", "50"]);

@@ -260,11 +260,13 @@ fn a_state_saved_on_some_ranks_continues_on_another_count() {
 
 #[test]
 fn what_does_not_run_across_ranks_yet_is_refused_by_name() {
-    let dfsph = TestScene::small_tank().dfsph().build();
+    let mut dfsph = TestScene::small_tank().dfsph().build();
+    use wgsph::model::scene::{ProbeSpec, ProbeType};
+    dfsph.probe.push(ProbeSpec { boundary: Some(0), every_steps: Some(10), ..ProbeSpec::of("load", ProbeType::Force) });
     let [comm, _other]: [_; 2] = LocalGroup::new(2).try_into().ok().expect("two ranks");
     let ranks = Ranks::new(Arc::new(comm));
     let e = open(&dfsph, &BackendChoice::gpu().on_ranks(ranks.clone())).err().expect("refused").to_string();
-    assert!(e.contains("physics.solver") && e.contains("CPU path only"), "{e}");
+    assert!(e.contains("probe") && e.contains("force probe with DFSPH across GPU ranks"), "{e}");
 }
 
 /// DFSPH across ranks: the ghosts take their owners' velocities after every velocity change
@@ -590,4 +592,52 @@ fn probes_on_gpu_ranks_read_what_one_gpu_reads() {
         }
     }
     eprintln!("probes on GPU ranks against one GPU: largest relative difference {largest:.2e}");
+}
+
+/// DFSPH on GPU ranks: the host runs each solve's loop, the ghosts take their owners' velocities
+/// after every velocity change (read back, exchanged, written again), the shaders leave the
+/// ghosts out of the error sums and the adaptive step's maxima, which the ranks add or compare,
+/// and the warm starts travel with the particles; so N ranks run one GPU's iterations with its
+/// dt and compute its bits, through migration and moving bounds.
+#[test]
+fn dfsph_on_gpu_ranks_computes_bit_for_bit_what_one_gpu_computes() {
+    let Some(ctx) = common::contexts().into_iter().next() else { return };
+    let fixed = dfsph_tank().build();
+    let adaptive = dfsph_tank().adaptive().dt_max(0.004).build();
+    let mut dam = dam_break(1000);
+    dam.physics.solver = wgsph::model::scene::PressureSolver::Dfsph;
+    dam.physics.stiffness = None;
+    dam.physics.speed_of_sound = None;
+    dam.time.dt = 0.001;
+    for (scene, ranks) in [(fixed, 2), (adaptive, 3), (dam, 3), (moving_block_dfsph(), 3)] {
+        let device = GpuContext::from_adapter(ctx.adapter.clone()).expect("device");
+        let mut single = open(&scene, &BackendChoice::gpu_on(device)).expect("opens");
+        single.step(40).expect("steps");
+        let health = single.health().expect("health");
+        assert!(health.is_ok(), "{}: one GPU stays healthy: {health:?}", scene.name);
+        let one = single.snapshot().expect("snapshot");
+        let iterations = health.iterations.expect("DFSPH counts its iterations");
+        assert!(iterations.pressure.total > 40, "{}: the solves iterate ({iterations:?})", scene.name);
+        let dt = single.backend().dt_stats().expect("dt");
+        let all = gpu_on_ranks(&ctx, &scene, ranks, 10, &|b: &mut dyn Backend| {
+            b.step(40)?;
+            Ok((b.snapshot()?, b.health()?, b.dt_stats()?, b.rank_report().expect("across ranks")))
+        });
+        // The counts, not the average error, which one GPU divides in f32 and the host in f64.
+        let counts = |s: &wgsph::model::state::SolveStats| (s.total, s.max, s.last, s.unconverged);
+        for (rank, (_, h, d, _)) in all.iter().enumerate() {
+            assert!(h.is_ok(), "{}: rank {rank} healthy: {h:?}", scene.name);
+            let its = h.iterations.expect("DFSPH counts its iterations");
+            assert_eq!((counts(&its.pressure), counts(&its.divergence)), (counts(&iterations.pressure), counts(&iterations.divergence)), "{}: rank {rank} of {ranks} iterates as one GPU", scene.name);
+            assert_eq!((d.min, d.max, d.last), (dt.min, dt.max, dt.last), "{}: rank {rank} of {ranks} steps with one GPU's dt", scene.name);
+        }
+        assert!(all.iter().any(|r| r.3.stats.ghosts > 0), "{}: ranks hold ghosts", scene.name);
+        // With adaptive dt the time is summed on the host in f64 across ranks, a compensated
+        // f32 sum on one GPU: the same to rounding.
+        let many = &all[0].0;
+        assert!((many.time - one.time).abs() <= 1e-6 * one.time.max(1e-30), "{}: time {} against {}", scene.name, many.time, one.time);
+        let many = Snapshot { time: one.time, ..many.clone() };
+        let (dx, drho) = largest_difference(&one, &many);
+        assert!(many == one, "{}: {ranks} GPU ranks against one GPU, bit for bit (largest differences: position {dx:e}, density {drho:e})", scene.name);
+    }
 }

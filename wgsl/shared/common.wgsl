@@ -19,9 +19,21 @@ override SOLID_BOXES: bool = false;             // the scene has box obstacles, 
 override GRAVITY: bool = true;                  // gravity is not zero
 override ADAPTIVE_DT: bool = false;             // dt chosen on the GPU every step (integrate.wgsl)
 // Across ranks: the top bit of a position's w marks a ghost (a neighbour rank's particle), which
-// the adaptive step's maxima leave out; the rest of w is the particle's place in the upload.
+// the adaptive step's maxima and DFSPH's error sums leave out; the rest of w is the particle's
+// place in the upload.
 override GHOSTS: bool = false;
 const GHOST_BIT: u32 = 0x80000000u;
+
+// Whether a particle (the w of its position) is a ghost: never alone.
+fn is_ghost(w: f32) -> bool {
+    return GHOSTS && (bitcast<u32>(w) & GHOST_BIT) != 0u;
+}
+
+// A particle's id (the w of its position): across ranks its place in the upload, without the
+// ghost bit.
+fn particle_id(w: f32) -> u32 {
+    return select(bitcast<u32>(w), bitcast<u32>(w) & ~GHOST_BIT, GHOSTS);
+}
 // Density carried by the continuity equation (in each velocity's w) instead of summed.
 override CONTINUITY: bool = false;
 override DENSITY_DIFFUSION: bool = false;       // delta-SPH diffusion (with CONTINUITY only)

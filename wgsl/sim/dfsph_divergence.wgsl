@@ -31,7 +31,7 @@ fn divergence_warm_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin
     if (i < params.fluid_count) {
         let p = positions_at(i);
         let d = density_rate(i, p.xyz, velocities_at(i).xyz);
-        stiffness_set(i, select(0.0, params.warm_start_share * warm_divergence_at(bitcast<u32>(p.w)), d > 0.0));
+        stiffness_set(i, select(0.0, params.warm_start_share * warm_divergence_at(particle_id(p.w)), d > 0.0));
     }
 }
 
@@ -46,9 +46,13 @@ fn divergence_rate(
     error_begin(lid);
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let d = max(density_rate(i, positions_at(i).xyz, velocities_at(i).xyz), 0.0);
+        let p = positions_at(i);
+        let d = max(density_rate(i, p.xyz, velocities_at(i).xyz), 0.0);
         stiffness_set(i, d * factors_at(i));
-        error_offer(d * divergence_dt());
+        // A ghost's error is its owner's to count (across ranks).
+        if (!is_ghost(p.w)) {
+            error_offer(d * divergence_dt());
+        }
     }
     error_end(lid);
 }

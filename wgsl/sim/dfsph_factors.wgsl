@@ -78,7 +78,7 @@ fn density_and_factor(
             dt = bitcast<f32>(atomicLoad(&status[STATUS_DT]));
         }
         let scale = select(0.0, 1.0 / (params.rest_density * dt * dt), dt > 0.0);
-        pressures_set(i, rho * rho * warm_pressure_at(bitcast<u32>(p.w)) * scale);
+        pressures_set(i, rho * rho * warm_pressure_at(particle_id(p.w)) * scale);
         if (is_finite_f32(rho) && rho > 0.0) {
             reduce_offer(0u, bitcast<u32>(rho));
         }

@@ -63,7 +63,7 @@ fn integrate(
         }
         positions_out_set(i, vec4<f32>(x, old.w));
         velocities_set(i, vec4<f32>(v, 0.0));
-        let id = bitcast<u32>(old.w);
+        let id = particle_id(old.w);
         warm_pressure_set(id, pressure_sum_at(i));
         warm_divergence_set(id, divergence_sum_at(i));
         let finite = is_finite_vec3(x) && is_finite_vec3(v);

@@ -100,10 +100,12 @@ fn non_pressure_accelerations(
         accelerations_set(i, vec4<f32>(a, 0.0));
         let speed = length(velocities_at(i).xyz);
         let accel = length(a);
-        if (is_finite_f32(speed)) {
+        // A ghost is its own rank's to count; the host takes the largest over the ranks.
+        let own = !is_ghost(positions_at(i).w);
+        if (own && is_finite_f32(speed)) {
             reduce_offer(0u, bitcast<u32>(speed));
         }
-        if (is_finite_f32(accel)) {
+        if (own && is_finite_f32(accel)) {
             reduce_offer(1u, bitcast<u32>(accel));
         }
     }

@@ -34,7 +34,7 @@ fn pressure_warm_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(n
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
         let p = positions_at(i);
-        stiffness_set(i, select(0.0, params.warm_start_share * warm_pressure_at(bitcast<u32>(p.w)), predicted_density(i, p) > 1.0));
+        stiffness_set(i, select(0.0, params.warm_start_share * warm_pressure_at(particle_id(p.w)), predicted_density(i, p) > 1.0));
     }
 }
 
@@ -49,9 +49,13 @@ fn predict_density(
     error_begin(lid);
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let error = max(predicted_density(i, positions_at(i)), 1.0) - 1.0;
+        let p = positions_at(i);
+        let error = max(predicted_density(i, p), 1.0) - 1.0;
         stiffness_set(i, error * factors_at(i));
-        error_offer(error);
+        // A ghost's error is its owner's to count (across ranks).
+        if (!is_ghost(p.w)) {
+            error_offer(error);
+        }
     }
     error_end(lid);
 }

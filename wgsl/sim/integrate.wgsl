@@ -108,7 +108,7 @@ fn reduce_maxima(
     let i = thread_index(gid, groups);
     // A ghost is its own rank's to count: each rank offers its own particles, and the host
     // takes the largest over the ranks before choose_dt.
-    if (i < params.fluid_count && !(GHOSTS && (bitcast<u32>(positions_at(i).w) & GHOST_BIT) != 0u)) {
+    if (i < params.fluid_count && !is_ghost(positions_at(i).w)) {
         let speed = length(velocities_at(i).xyz);
         let accel = length(accelerations_at(i).xyz);
         if (is_finite_f32(speed)) {

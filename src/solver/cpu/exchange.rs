@@ -167,6 +167,33 @@ impl GhostLink {
         }
     }
 
+    /// The link of the same particles after a device has binned them: `uploaded[k]` is the slot
+    /// (in this link's order) of the particle the device holds at slot k. The device's binning
+    /// is stable and both sides of a face hold their shared particles in the same order (the
+    /// one-process order), so the lists stay in step with the neighbours'.
+    pub fn reordered(&self, uploaded: &[usize]) -> GhostLink {
+        const SEND: [u8; 2] = [1, 2];
+        const RECEIVE: [u8; 2] = [4, 8];
+        let mut role = vec![0u8; self.ghosts.len()];
+        for side in 0..2 {
+            for &i in &self.send[side] {
+                role[i] |= SEND[side];
+            }
+            for &i in &self.receive[side] {
+                role[i] |= RECEIVE[side];
+            }
+        }
+        let slots = |bit: u8| (0..uploaded.len()).filter(|&k| role[uploaded[k]] & bit != 0).collect::<Vec<usize>>();
+        GhostLink {
+            comm: self.comm.clone(),
+            send: SEND.map(slots),
+            receive: RECEIVE.map(slots),
+            ghosts: uploaded.iter().map(|&u| self.ghosts[u]).collect(),
+            failure: self.failure.clone(),
+            seconds: self.seconds,
+        }
+    }
+
     /// The ranks' largest of each value (NaN where a message failed).
     pub fn max(&mut self, values: &[f64]) -> Vec<f64> {
         let t0 = Instant::now();
@@ -347,6 +374,28 @@ pub struct HeldArrays<'a, R: Real> {
     pub starts: &'a mut Vec<u32>,
     /// Which of the particles handed over are ghosts (a neighbour's particles), in their order.
     pub ghosts: &'a [bool],
+    /// DFSPH: what the host keeps of the solves between steps.
+    pub dfsph: Option<DfsphHeld<'a, R>>,
+}
+
+/// DFSPH across ranks on a device: what the host keeps of the solves, lent with the held
+/// particles.
+pub struct DfsphHeld<'a, R: Real> {
+    /// The warm-start stiffnesses (constant density, divergence), at `warm_keys[slot]` for each
+    /// held slot; given back by the place of each particle in the upload, with `warm_keys` set
+    /// to that place.
+    pub warm_pressure: &'a mut Vec<R>,
+    pub warm_divergence: &'a mut Vec<R>,
+    pub warm_keys: &'a mut Vec<u32>,
+    /// The solves' iterations so far (a step adds its own).
+    pub stats: &'a mut crate::model::state::IterationStats,
+    /// The last step's dt (adaptive dt: the divergence solve and the output pressure read it).
+    pub last_dt: f64,
+    /// The step's ghosts in the solves ([`GhostLink`], in the held order); a step leaves it in
+    /// the device's order, with its messages' seconds and failure. `None` for the fields.
+    pub link: Option<&'a mut GhostLink>,
+    /// The fluid particles of the whole simulation (the solves' average error is over them).
+    pub particles: usize,
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -362,10 +411,25 @@ impl<R: Real> CpuSolver<R> {
         part.walls.near(&self.grid, part.axis, part.slabs.layers_of(part.comm.rank()), part.slabs.halo)
     }
 
-    /// The held arrays, lent to the device stages, with which of them are `ghosts`.
-    fn held_arrays<'a>(&'a mut self, ghosts: &'a [bool]) -> HeldArrays<'a, R> {
+    /// The held arrays, lent to the device stages, with which of them are `ghosts` (and with
+    /// DFSPH, the step's ghost `link`).
+    fn held_arrays<'a>(&'a mut self, ghosts: &'a [bool], with_link: bool) -> HeldArrays<'a, R> {
+        let particles = self.ranks.as_ref().map_or(self.positions.len(), |part| part.total_fluid);
+        let link = match with_link {
+            true => self.ranks.as_deref_mut().and_then(|part| part.link.as_mut()),
+            false => None,
+        };
         HeldArrays {
             ghosts,
+            dfsph: self.dfsph.as_mut().map(|d| DfsphHeld {
+                warm_pressure: &mut d.warm_pressure,
+                warm_divergence: &mut d.warm_divergence,
+                warm_keys: &mut self.warm_keys,
+                stats: &mut d.stats,
+                last_dt: d.last_dt,
+                link,
+                particles,
+            }),
             positions: &mut self.positions,
             velocities: &mut self.velocities,
             ids: &mut self.ids,
@@ -382,7 +446,7 @@ impl<R: Real> CpuSolver<R> {
         self.lists.clear();
         let step = self.step;
         let ghosts = self.ghost_flags();
-        let ran = lock(&device).run_fields(step, self.held_arrays(&ghosts));
+        let ran = lock(&device).run_fields(step, self.held_arrays(&ghosts, false));
         if let Err(e) = ran {
             if let Some(part) = &mut self.ranks {
                 part.failure.get_or_insert(format!("rank {} of {}: the device's density stage failed: {e:#}", part.comm.rank(), part.comm.size()));
@@ -407,7 +471,15 @@ impl<R: Real> CpuSolver<R> {
         self.lists.clear();
         let step = self.step;
         let ghosts = self.ghost_flags();
-        let dt = match lock(&device).run_step(step, self.held_arrays(&ghosts)) {
+        // DFSPH: the ghosts' part in the solves, in the held order (the device follows its own
+        // binning with it).
+        let dfsph = self.dfsph.is_some();
+        if dfsph {
+            self.link_ghosts();
+        }
+        let ran = lock(&device).run_step(step, self.held_arrays(&ghosts, dfsph));
+        self.unlink_ghosts();
+        let dt = match ran {
             Ok(dt) => dt,
             Err(e) => {
                 if let Some(part) = &mut self.ranks {
@@ -416,6 +488,10 @@ impl<R: Real> CpuSolver<R> {
                 return;
             }
         };
+        if let Some(d) = &mut self.dfsph {
+            d.last_dt = dt;
+            d.dt = dt;
+        }
         let n = self.positions.len();
         self.accelerations.resize(n, V3::zero());
         let domain = (V3::<R>::from64(self.params.domain_min), V3::<R>::from64(self.params.domain_max));

@@ -13,6 +13,23 @@ use super::shaders::{dispatch_size, stage_with_aliases, Alias, ArrayLengths, Sta
 use super::workgroups::WorkgroupSizes;
 use crate::model::params::Params;
 use crate::model::scene::DfsphSettings;
+use crate::model::state::IterationStats;
+use crate::solver::cpu::exchange::GhostLink;
+
+/// DFSPH across ranks (src/solver/gpu/ranks.rs): the solves' loops run from the host, which
+/// gives the ghosts their owners' velocities after every velocity change and adds the error
+/// sums of the ranks before each check (docs/scale-out.md).
+pub struct RankSolves {
+    /// The ghosts in the solves: in the upload's order until the binning, in the device's
+    /// after it. `None` for the fields alone.
+    pub link: Option<GhostLink>,
+    /// The solves' iterations so far (each solve adds its own).
+    pub stats: IterationStats,
+    /// The fluid particles of the whole simulation.
+    pub particles: usize,
+    /// The first failed read or message, for the rank's failure.
+    pub failure: Option<String>,
+}
 
 /// The pipelines of DFSPH's stages.
 pub(super) struct DfsphStages {

@@ -4,6 +4,7 @@
 pub mod buffers;
 pub mod device;
 pub mod dfsph;
+pub mod dfsph_ranks;
 pub mod memory;
 pub mod params;
 pub mod prefix_sum;

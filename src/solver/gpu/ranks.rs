@@ -5,7 +5,7 @@
 //! the stages bound to `fluid_count`, so a changing count costs no new pipelines unless it
 //! outgrows the capacity.
 
-use super::buffers::{ids_of, vec4s, WallCellIndex, WALL_CELL_BLOCK};
+use super::buffers::{ids_of, vec4s, WallCellIndex, GHOST_BIT, WALL_CELL_BLOCK};
 use super::device::GpuContext;
 use super::readback::read_buffers;
 use super::{GpuOptions, GpuSolver};
@@ -14,12 +14,10 @@ use crate::model::params::Params;
 use crate::model::kernels::sort_by_cell;
 use crate::model::real::V3;
 use crate::solver::communicator::Communicator;
-use crate::solver::cpu::exchange::{DeviceStages, HeldArrays};
+use crate::solver::cpu::exchange::{DeviceStages, DfsphHeld, HeldArrays};
+use super::dfsph::RankSolves;
 use super::params::status;
 use std::sync::Arc;
-
-/// The top bit of a position's w marks a ghost (`GHOST_BIT` in wgsl/shared/common.wgsl).
-const GHOST_BIT: u32 = 0x8000_0000;
 
 /// Room made above the held count when the buffers are (re)made: migration and moving bounds
 /// change the count a little from step to step.
@@ -106,8 +104,9 @@ impl GpuRankStages {
     /// Uploads `held`, runs one step (`advance`) or only the binning and density stage, and
     /// reads the cell-sorted result back into `held`. Returns the step's dt (the GPU's choice
     /// with adaptive dt).
-    fn run(&mut self, step: u64, held: HeldArrays<'_, f32>, advance: bool) -> anyhow::Result<f64> {
+    fn run(&mut self, step: u64, mut held: HeldArrays<'_, f32>, advance: bool) -> anyhow::Result<f64> {
         let n = held.positions.len();
+        let mut dfsph = held.dfsph.take();
         if self.solver.is_none() || n > self.capacity {
             let capacity = ((n.max(1) as f64) * CAPACITY_MARGIN).ceil() as usize;
             self.solver = Some(self.make_solver(capacity)?);
@@ -118,10 +117,23 @@ impl GpuRankStages {
         let positions: Vec<[f64; 3]> = held.positions.iter().map(wide).collect();
         let velocities: Vec<[f64; 3]> = held.velocities.iter().map(wide).collect();
         solver.load_held(&positions, &velocities, held.carried_densities, held.ghosts, step);
+        if let Some(d) = &dfsph {
+            solver.load_dfsph_held(d);
+        }
         if advance {
             solver.advance(1);
         } else {
             solver.refresh_fields();
+        }
+        let solves = solver.rank_solves.borrow_mut().take();
+        if let (Some(d), Some(solves)) = (dfsph.as_mut(), solves) {
+            *d.stats = solves.stats;
+            if let (Some(link), Some(moved)) = (d.link.as_deref_mut(), solves.link) {
+                *link = moved;
+            }
+            if let Some(e) = solves.failure {
+                anyhow::bail!("DFSPH's solves across ranks: {e}");
+            }
         }
         if let Some(e) = solver.rank_error.borrow_mut().take() {
             anyhow::bail!("the adaptive step's maxima across ranks: {e}");
@@ -145,6 +157,15 @@ impl GpuRankStages {
         *held.velocities = vel.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
         if !held.carried_densities.is_empty() {
             *held.carried_densities = vel.iter().map(|v| v[3]).collect();
+        }
+        if let (Some(d), Some(gpu)) = (dfsph, &solver.dfsph) {
+            // The warm starts by place in the upload, where the step left them; each slot's key
+            // is its particle's place.
+            let b = &gpu.buffers;
+            let data = read_buffers(&self.ctx, &[(&b.warm_pressure, n as u64 * 4), (&b.warm_divergence, n as u64 * 4)])?;
+            *d.warm_pressure = bytemuck::pod_collect_to_vec(&data[0]);
+            *d.warm_divergence = bytemuck::pod_collect_to_vec(&data[1]);
+            *d.warm_keys = ids_of(&pos).iter().map(|&slot| slot & !GHOST_BIT).collect();
         }
         (*held.densities, *held.pressures) = solver.read_fields(solver.current)?;
         *held.starts = bytemuck::pod_collect_to_vec(&data[2]);
@@ -193,6 +214,24 @@ impl GpuSolver {
         let p = super::params::GpuParams::new(&self.params, self.fluid_count, self.wall_count, self.uniform_viscosity);
         queue.write_buffer(&self.uniform, 0, &p.bytes());
         true
+    }
+
+    /// DFSPH across ranks, after [`GpuSolver::load_held`]: the held particles' warm starts in the
+    /// order of the upload (the shaders find them by that place), the last step's dt (adaptive
+    /// dt: the divergence solve and the output pressure read it from the status words, which a
+    /// solver made again does not hold), and for a step the solves' ghosts and iterations.
+    pub(super) fn load_dfsph_held(&mut self, held: &DfsphHeld<'_, f32>) {
+        let Some(gpu) = &self.dfsph else { return };
+        let n = self.fluid_count as usize;
+        let key = |k: usize| held.warm_keys.get(k).map_or(k, |&key| key as usize);
+        let (pressure, divergence): (Vec<f32>, Vec<f32>) = (0..n).map(|k| (held.warm_pressure[key(k)], held.warm_divergence[key(k)])).unzip();
+        let queue = &self.ctx.queue;
+        queue.write_buffer(&gpu.buffers.warm_pressure, 0, bytemuck::cast_slice(&pressure));
+        queue.write_buffer(&gpu.buffers.warm_divergence, 0, bytemuck::cast_slice(&divergence));
+        if self.params.adaptive.is_some() {
+            queue.write_buffer(&self.status, status::DT as u64 * 4, bytemuck::bytes_of(&(held.last_dt as f32)));
+        }
+        *self.rank_solves.borrow_mut() = Some(RankSolves { link: held.link.as_deref().cloned(), stats: *held.stats, particles: held.particles, failure: None });
     }
 
     /// Puts `positions`, `velocities` (and with continuity density `carried` densities) in the

@@ -195,6 +195,8 @@ impl GpuSolver {
                 self.dispatch_particles(rec, &self.pipelines.reorder, gather);
             }
             self.current = self.store.after_binning(self.current);
+            // DFSPH across ranks: the ghosts of the solves follow the binning.
+            self.link_in_device_order(rec);
         }
         if self.dfsph.is_some() {
             self.schedule_dfsph(work, rec);
@@ -339,10 +341,15 @@ impl GpuSolver {
         match (&d.stages.adaptive, &g.adaptive) {
             (Some([accelerations, choose, predict]), Some([ga, gc, gp])) => {
                 self.dispatch_particles(rec, accelerations, ga);
+                self.maxima_across_ranks(rec);
                 dispatch_one(rec, choose, gc);
                 self.dispatch_particles(rec, predict, gp);
             }
             _ => self.dispatch_particles(rec, &d.stages.predict, &g.predict),
+        }
+        if self.solves_across_ranks() {
+            // The ghosts take their owners' predicted velocities.
+            self.sync_ghost_velocities(rec, &self.store.next(read).velocities);
         }
         rec.begin(ProfiledStage::PressureSolve);
         self.record_solve(rec, 1, read);
@@ -366,6 +373,10 @@ impl GpuSolver {
     /// make those after the last empty; with [`SolverLoop::Readback`] blocks of them are recorded
     /// while the solve goes on, its state read back after each.
     fn record_solve(&self, rec: &mut dyn Recorder, solve: usize, read: usize) {
+        if self.solves_across_ranks() {
+            self.record_solve_across_ranks(rec, solve, read);
+            return;
+        }
         let d = self.dfsph.as_ref().expect("a DFSPH scene");
         let (g, st) = (&d.groups[read], &d.stages);
         let (warm, rate, apply, gw, gr, ga) = if solve == 0 {

@@ -11,7 +11,7 @@ use super::prefix_sum::Scan;
 use super::probes::{DfsphSums, GpuProbes};
 use super::readback::{read_buffers, visit_array, visit_pairs, visit_rows, Element, RowArrays};
 use super::shaders::{constants, stage_with_aliases, storage_bindings, Alias, ArrayLengths, Stage};
-use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, SharedBuffers};
+use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, RankSolves, SharedBuffers};
 use super::workgroups::{GpuOptions, SolverLoop};
 use crate::model::initial::InitialState;
 use crate::model::kernels::sort_by_cell;
@@ -47,7 +47,8 @@ fn array_places(arrays: &StepArrays) -> Vec<(&'static str, Alias)> {
         places.push(("pressures", Alias::Derived { expr: "eos_pressure(densities_at(i))", arrays: &[] }));
     }
     // The wall cell starts from the index of the cells that hold walls (`WallCellIndex`): the
-    // start of the first such cell from cell i on.
+    // start of the first such cell from cell i on (blocks of 32 cells: `i >> 5u`, `i & 31u`).
+    const _: () = assert!(super::buffers::WALL_CELL_BLOCK == 32);
     let wall_starts = "wall_cell_firsts_at(wall_cell_blocks_at(i >> 5u).y + countOneBits(wall_cell_blocks_at(i >> 5u).x & ((1u << (i & 31u)) - 1u)))";
     places.push(("wall_starts", Alias::Derived { expr: wall_starts, arrays: &[("wall_cell_blocks", "vec2<u32>"), ("wall_cell_firsts", "u32")] }));
     places
@@ -180,6 +181,9 @@ pub struct GpuSolver {
     pub(super) ranks: Option<std::sync::Arc<dyn crate::solver::communicator::Communicator>>,
     /// Why the last step's collective failed (across ranks), until the rank reads it.
     pub(super) rank_error: std::cell::RefCell<Option<String>>,
+    /// DFSPH across ranks: the ghosts and iterations of the solves under way (set by the rank
+    /// for each step or refresh).
+    pub(super) rank_solves: std::cell::RefCell<Option<RankSolves>>,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
     /// The buffers the solver planned and allocated (the probes' besides, in `memory`).
@@ -529,6 +533,7 @@ impl GpuSolver {
             probes,
             ranks,
             rank_error: std::cell::RefCell::new(None),
+            rank_solves: std::cell::RefCell::new(None),
             arrays,
             constants: k,
             output_fields: std::cell::OnceCell::new(),

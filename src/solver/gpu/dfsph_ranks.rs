@@ -1,0 +1,158 @@
+//! DFSPH's solves across ranks on the GPU (docs/scale-out.md). A Jacobi step changes every
+//! velocity from the neighbours' stiffnesses, and the outer layer of ghosts lacks the neighbours
+//! beyond it, so after every velocity change the ghosts must take their owners' velocities, and
+//! each check must see the error of every rank's own particles. One GPU decides both on the
+//! device (`dfsph_convergence.wgsl`); across ranks the host runs the loop instead: the work so
+//! far is submitted and waited for, the velocities read back, the ghosts' replaced through the
+//! rank's [`GhostLink`] and written again; the error sum of the own particles (the shaders
+//! leave the ghosts out) is read back, added over the ranks and checked with the CPU's twin of
+//! the GPU's check. Every rank then runs the iterations one GPU runs, on the same numbers.
+//!
+//! The recorder of the profile cannot wait, so a profile never takes this path.
+
+use super::buffers::{ids_of, GHOST_BIT};
+use super::params::status;
+use super::readback::read_ranges;
+use super::schedule::Recorder;
+use super::solver::GpuSolver;
+use crate::model::real::V3;
+use crate::solver::cpu::dfsph_convergence::{begin_solve, check_convergence, SolveLimits};
+use crate::solver::cpu::dfsph_shared::error_threshold;
+
+impl GpuSolver {
+    /// Whether the DFSPH step under way runs its solves across ranks.
+    pub(super) fn solves_across_ranks(&self) -> bool {
+        self.rank_solves.borrow().as_ref().is_some_and(|r| r.link.is_some())
+    }
+
+    /// Keeps the first failure of the solves across ranks (the rank reads it after the step).
+    fn solves_failed(&self, e: anyhow::Error) {
+        if let Some(r) = self.rank_solves.borrow_mut().as_mut() {
+            r.failure.get_or_insert(format!("{e:#}"));
+        }
+    }
+
+    /// The work recorded so far submitted and waited for, then `bytes` of `buffer` from `offset`
+    /// read back.
+    fn wait_and_read(&self, rec: &mut dyn Recorder, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> anyhow::Result<Vec<u8>> {
+        anyhow::ensure!(rec.submit_and_wait(&self.ctx), "DFSPH across ranks cannot run in timed passes");
+        if bytes == 0 {
+            return Ok(Vec::new());
+        }
+        Ok(read_ranges(&self.ctx, &[(buffer, offset, bytes)])?.remove(0))
+    }
+
+    /// After the binning: the ghost link, made in the order of the upload, put in the device's
+    /// cell order (each position's w holds its particle's place in the upload).
+    pub(super) fn link_in_device_order(&self, rec: &mut dyn Recorder) {
+        if !self.solves_across_ranks() {
+            return;
+        }
+        let n = self.fluid_count as usize;
+        let positions = self.store.state(self.current).positions;
+        let uploaded = self.wait_and_read(rec, &positions, 0, n as u64 * 16).and_then(|data| {
+            let places: Vec<usize> = ids_of(&bytemuck::pod_collect_to_vec(&data)).iter().map(|&w| (w & !GHOST_BIT) as usize).collect();
+            anyhow::ensure!(places.iter().all(|&u| u < n), "the binned positions do not hold places in the upload of {n} particles");
+            Ok(places)
+        });
+        match uploaded {
+            Ok(places) => {
+                let mut solves = self.rank_solves.borrow_mut();
+                if let Some(link) = solves.as_mut().and_then(|r| r.link.as_mut()) {
+                    *link = link.reordered(&places);
+                }
+            }
+            Err(e) => self.solves_failed(e),
+        }
+    }
+
+    /// The ghosts' velocities in `buffer` replaced by their owners' (one message per
+    /// neighbour). Every rank takes part even where its read failed, so that none waits.
+    pub(super) fn sync_ghost_velocities(&self, rec: &mut dyn Recorder, buffer: &wgpu::Buffer) {
+        let n = self.fluid_count as u64;
+        let read = self.wait_and_read(rec, buffer, 0, n * 16);
+        let mut solves = self.rank_solves.borrow_mut();
+        let Some(r) = solves.as_mut() else { return };
+        let Some(link) = r.link.as_mut() else { return };
+        let (mut values, ok): (Vec<[f32; 4]>, bool) = match read {
+            Ok(data) => (bytemuck::pod_collect_to_vec(&data), true),
+            Err(e) => {
+                r.failure.get_or_insert(format!("{e:#}"));
+                (vec![[0.0; 4]; n as usize], false)
+            }
+        };
+        let mut xyz: Vec<V3<f32>> = values.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
+        link.sync(&mut xyz);
+        if ok && n > 0 {
+            for (v, x) in values.iter_mut().zip(&xyz) {
+                v[..3].copy_from_slice(&x.0);
+            }
+            self.ctx.queue.write_buffer(buffer, 0, bytemuck::cast_slice(&values));
+        }
+    }
+
+    /// The error sum of the rate pass just recorded, this rank's own particles', added over the
+    /// ranks (the largest sum where a read failed: the solve then runs to its limit, and the
+    /// failure stops the run).
+    fn error_sum_across_ranks(&self, rec: &mut dyn Recorder) -> u64 {
+        let words = self.wait_and_read(rec, &self.status, status::DFSPH_ERROR_LO as u64 * 4, 8).map(|data| {
+            let word = |k: usize| u32::from_le_bytes(data[4 * k..4 * k + 4].try_into().expect("4 bytes"));
+            word(0) as u64 | (word(1) as u64) << 32
+        });
+        let mine = words.unwrap_or_else(|e| {
+            self.solves_failed(e);
+            u32::MAX as u64
+        });
+        let mut solves = self.rank_solves.borrow_mut();
+        match solves.as_mut().and_then(|r| r.link.as_mut()) {
+            Some(link) => link.sum_units(mine),
+            None => mine,
+        }
+    }
+
+    /// One DFSPH solve (0: divergence, 1: constant density) across ranks, on the state pair read
+    /// from `read`: the warm start and its velocity change, then the first error and its check,
+    /// then velocity changes, errors and checks until the check ends the solve (the order of
+    /// `record_solve`, with the check on the host).
+    pub(super) fn record_solve_across_ranks(&self, rec: &mut dyn Recorder, solve: usize, read: usize) {
+        debug_assert_eq!(status::DFSPH_ERROR_HI, status::DFSPH_ERROR_LO + 1);
+        let d = self.dfsph.as_ref().expect("a DFSPH scene");
+        let (g, st, s) = (&d.groups[read], &d.stages, &d.settings);
+        let (warm, rate, apply, gw, gr, ga) = if solve == 0 {
+            (&st.divergence_warm_start, &st.divergence_rate, &st.divergence_apply, &g.divergence_warm_start, &g.divergence_rate, &g.divergence_apply)
+        } else {
+            (&st.pressure_warm_start, &st.predict_density, &st.pressure_apply, &g.pressure_warm_start, &g.predict_density, &g.pressure_apply)
+        };
+        // The velocities the solve changes: the state's own (divergence) or the predicted ones.
+        let velocities = if solve == 0 { self.store.state(read).velocities } else { self.store.next(read).velocities };
+        let (min_iterations, max_iterations, tolerance) = match solve {
+            0 => (s.min_divergence_iterations, s.max_divergence_iterations, s.divergence_error),
+            _ => (s.min_iterations, s.max_iterations, s.density_error),
+        };
+        let particles = self.rank_solves.borrow().as_ref().map_or(self.fluid_count as usize, |r| r.particles);
+        let limits = SolveLimits { min_iterations, max_iterations, threshold: error_threshold(tolerance, particles), particles };
+        if s.warm_start {
+            self.dispatch_particles(rec, warm, gw);
+            self.dispatch_particles(rec, apply, ga);
+            self.sync_ghost_velocities(rec, &velocities);
+        }
+        let mut state = begin_solve(s.warm_start);
+        loop {
+            rec.clear(&self.status, status::DFSPH_ERROR_LO as u64 * 4, Some(8));
+            self.dispatch_particles(rec, rate, gr);
+            let error = self.error_sum_across_ranks(rec);
+            match self.rank_solves.borrow_mut().as_mut() {
+                Some(r) => {
+                    let stats = if solve == 0 { &mut r.stats.divergence } else { &mut r.stats.pressure };
+                    check_convergence(&limits, &mut state, error, stats);
+                }
+                None => state.solving = false,
+            }
+            if !state.solving {
+                break;
+            }
+            self.dispatch_particles(rec, apply, ga);
+            self.sync_ghost_velocities(rec, &velocities);
+        }
+    }
+}
