@@ -225,9 +225,6 @@ fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choi
     let refuse = |field: &str, message: String| -> anyhow::Result<Simulation> {
         Err(SceneError { origin: scene.name.clone(), field: field.into(), message }.into())
     };
-    if params.dfsph.is_some() && choice.device == Device::Gpu && params.probes.force_count() > 0 {
-        return refuse("probe", format!("a force probe with DFSPH across GPU ranks ({size}) is not sampled yet (its force is the solves' wall push, which the GPU keeps on the device); use --backend cpu, or run it on one GPU"));
-    }
     if params.rebuild_every != 1 {
         return refuse("time.neighbour_rebuild_every", format!("is {}; across ranks ({size}) the exchange runs with every rebuild of the grid, so it must be 1", params.rebuild_every));
     }

@@ -260,13 +260,13 @@ fn a_state_saved_on_some_ranks_continues_on_another_count() {
 
 #[test]
 fn what_does_not_run_across_ranks_yet_is_refused_by_name() {
-    let mut dfsph = TestScene::small_tank().dfsph().build();
-    use wgsph::model::scene::{ProbeSpec, ProbeType};
-    dfsph.probe.push(ProbeSpec { boundary: Some(0), every_steps: Some(10), ..ProbeSpec::of("load", ProbeType::Force) });
+    let every2 = TestScene::small_tank().dfsph().neighbour_rebuild_every(2).build();
     let [comm, _other]: [_; 2] = LocalGroup::new(2).try_into().ok().expect("two ranks");
     let ranks = Ranks::new(Arc::new(comm));
-    let e = open(&dfsph, &BackendChoice::gpu().on_ranks(ranks.clone())).err().expect("refused").to_string();
-    assert!(e.contains("probe") && e.contains("force probe with DFSPH across GPU ranks"), "{e}");
+    for choice in [BackendChoice::cpu(Precision::F64), BackendChoice::gpu()] {
+        let e = open(&every2, &choice.on_ranks(ranks.clone())).err().expect("refused").to_string();
+        assert!(e.contains("time.neighbour_rebuild_every") && e.contains("must be 1"), "{e}");
+    }
 }
 
 /// DFSPH across ranks: the ghosts take their owners' velocities after every velocity change
@@ -563,35 +563,57 @@ fn total_walls(scene: &Scene) -> usize {
 fn probes_on_gpu_ranks_read_what_one_gpu_reads() {
     let Some(ctx) = common::contexts().into_iter().next() else { return };
     let (every, steps) = (20, 120);
-    let scene = with_probes(dam_break(1500), every, [[0.2, 0.2, 0.05], [0.38, 0.1, 0.05]], [[0.1, 0.0, 0.05], [0.3, 0.0, 0.05]]);
-    let columns = probe_columns(&scene);
+    let dam = with_probes(dam_break(1500), every, [[0.2, 0.2, 0.05], [0.38, 0.1, 0.05]], [[0.1, 0.0, 0.05], [0.3, 0.0, 0.05]]);
+    // DFSPH: the points on the step's first state, the rest after the solves (the force from the
+    // wall push of the solves' stiffness sums, which the device gives back), in a tank whose
+    // slabs cut the vertical and whose floor carries the water.
+    let mut tank = with_probes(Scene::builtin("hydrostatic").expect("built in").with_fluid_particles(2000), every, [[0.2, 0.2, 0.05], [0.1, 0.05, 0.05]], [[0.1, 0.0, 0.05], [0.3, 0.0, 0.05]]);
+    tank.name = "hydrostatic, DFSPH".into();
+    tank.physics.solver = wgsph::model::scene::PressureSolver::Dfsph;
+    tank.physics.stiffness = None;
+    tank.physics.speed_of_sound = None;
+    tank.time.dt = 0.001;
+    for scene in [dam, tank] {
+        probes_on_gpu_ranks_against_one_gpu(&ctx, &scene, steps);
+    }
+}
+
+fn probes_on_gpu_ranks_against_one_gpu(ctx: &GpuContext, scene: &Scene, steps: u64) {
+    let columns = probe_columns(scene);
     let device = GpuContext::from_adapter(ctx.adapter.clone()).expect("device");
-    let mut sim = open(&scene, &BackendChoice::gpu_on(device)).expect("opens");
+    let mut sim = open(scene, &BackendChoice::gpu_on(device)).expect("opens");
     sim.step(steps).expect("steps");
     let one = sim.backend().take_probe_samples().expect("samples");
     let one_state = sim.snapshot().expect("snapshot");
     assert_eq!(one.len(), 6, "the states of steps 0, 20, ..., 100");
-    let all = gpu_on_ranks(&ctx, &scene, 2, 0, &|b: &mut dyn Backend| {
+    let all = gpu_on_ranks(ctx, scene, 2, 0, &|b: &mut dyn Backend| {
         b.step(steps)?;
         Ok((b.take_probe_samples()?, b.snapshot()?))
     });
     let (_, state) = &all[0];
-    assert_eq!(largest_difference(&one_state, state), (0.0, 0.0), "sampling probes leaves the steps' bits alone");
+    assert_eq!(largest_difference(&one_state, state), (0.0, 0.0), "{}: sampling probes leaves the steps' bits alone", scene.name);
+    let last = &one.last().expect("samples").values;
+    if scene.name.starts_with("hydrostatic") {
+        assert!(last.iter().zip(&columns).any(|(v, c)| *c == "force" && v.abs() > 1.0), "{}: the tank carries the fluid: {last:?}", scene.name);
+    }
     let mut largest: f64 = 0.0;
     for (rank, (samples, _)) in all.iter().enumerate() {
-        assert_eq!(samples.len(), one.len(), "rank {rank}");
+        assert_eq!(samples.len(), one.len(), "{}: rank {rank}", scene.name);
         for (a, b) in one.iter().zip(samples) {
             assert_eq!((a.step, a.time), (b.step, b.time));
+            // A force's components against the largest of them (a small one is a difference of
+            // large terms).
+            let force = a.values.iter().zip(&columns).filter(|(_, c)| **c == "force").map(|(v, _)| v.abs()).fold(1.0, f64::max);
             for ((x, y), c) in a.values.iter().zip(&b.values).zip(&columns) {
                 // f32 rounding of the probes' sums, relative to the column's size (a pressure or
                 // density near zero is compared at the scale of rho0 and rho0 g times 0.1 m).
-                let scale = match *c { "pressure_Pa" | "density_kg_m3" => 1000.0, _ => 1.0 };
+                let scale = match *c { "pressure_Pa" | "density_kg_m3" => 1000.0, "force" => force, _ => 1.0 };
                 largest = largest.max((x - y).abs() / x.abs().max(scale));
-                assert!((x - y).abs() <= 1e-5 * x.abs().max(scale), "rank {rank}, step {}, {c}: one GPU {x}, GPU ranks {y}", a.step);
+                assert!((x - y).abs() <= 1e-5 * x.abs().max(scale), "{}: rank {rank}, step {}, {c}: one GPU {x}, GPU ranks {y}", scene.name, a.step);
             }
         }
     }
-    eprintln!("probes on GPU ranks against one GPU: largest relative difference {largest:.2e}");
+    eprintln!("{}: probes on GPU ranks against one GPU: largest relative difference {largest:.2e}", scene.name);
 }
 
 /// DFSPH on GPU ranks: the host runs each solve's loop, the ghosts take their owners' velocities

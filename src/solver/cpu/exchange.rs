@@ -396,6 +396,9 @@ pub struct DfsphHeld<'a, R: Real> {
     pub link: Option<&'a mut GhostLink>,
     /// The fluid particles of the whole simulation (the solves' average error is over them).
     pub particles: usize,
+    /// Given by a step that samples the probes, for the velocities the prediction started from
+    /// (after the divergence solve), in the device's order (the force probes' viscous part).
+    pub prediction_start: Option<&'a mut Vec<V3<R>>>,
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -412,8 +415,9 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// The held arrays, lent to the device stages, with which of them are `ghosts` (and with
-    /// DFSPH, the step's ghost `link`).
-    fn held_arrays<'a>(&'a mut self, ghosts: &'a [bool], with_link: bool) -> HeldArrays<'a, R> {
+    /// DFSPH, the step's ghost link, and the room for the velocities the prediction started
+    /// from where the step samples probes).
+    fn held_arrays<'a>(&'a mut self, ghosts: &'a [bool], with_link: bool, prediction_start: bool) -> HeldArrays<'a, R> {
         let particles = self.ranks.as_ref().map_or(self.positions.len(), |part| part.total_fluid);
         let link = match with_link {
             true => self.ranks.as_deref_mut().and_then(|part| part.link.as_mut()),
@@ -429,6 +433,7 @@ impl<R: Real> CpuSolver<R> {
                 last_dt: d.last_dt,
                 link,
                 particles,
+                prediction_start: if prediction_start { Some(&mut self.scratch_v3) } else { None },
             }),
             positions: &mut self.positions,
             velocities: &mut self.velocities,
@@ -446,7 +451,7 @@ impl<R: Real> CpuSolver<R> {
         self.lists.clear();
         let step = self.step;
         let ghosts = self.ghost_flags();
-        let ran = lock(&device).run_fields(step, self.held_arrays(&ghosts, false));
+        let ran = lock(&device).run_fields(step, self.held_arrays(&ghosts, false, false));
         if let Err(e) = ran {
             if let Some(part) = &mut self.ranks {
                 part.failure.get_or_insert(format!("rank {} of {}: the device's density stage failed: {e:#}", part.comm.rank(), part.comm.size()));
@@ -463,21 +468,30 @@ impl<R: Real> CpuSolver<R> {
         // reads the result with its own particles counted (probes_across_ranks). A device that
         // failed here has recorded its rank's failure; the collectives below still run, so no
         // rank waits for it, and the step's health stops every rank.
+        // With DFSPH, as on the CPU path, the point probes (and the rest, to be sampled again) now,
+        // the force and front probes after the solves, on the step's first positions.
+        let dfsph = self.dfsph.is_some();
+        let mut dfsph_points = None;
         if self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some()) {
             self.fields_on_device();
             self.compute_wall_pressure();
-            self.sample_probes();
+            match dfsph {
+                true => dfsph_points = Some(self.sample_probe_points()),
+                false => self.sample_probes(),
+            }
         }
+        // The binned state's positions: the step bins them again in the same order (its binning
+        // is stable and they are sorted), so its slots are these.
+        let first_positions = dfsph_points.is_some().then(|| self.positions.clone());
         self.lists.clear();
         let step = self.step;
         let ghosts = self.ghost_flags();
         // DFSPH: the ghosts' part in the solves, in the held order (the device follows its own
         // binning with it).
-        let dfsph = self.dfsph.is_some();
         if dfsph {
             self.link_ghosts();
         }
-        let ran = lock(&device).run_step(step, self.held_arrays(&ghosts, dfsph));
+        let ran = lock(&device).run_step(step, self.held_arrays(&ghosts, dfsph, first_positions.is_some()));
         self.unlink_ghosts();
         let dt = match ran {
             Ok(dt) => dt,
@@ -491,6 +505,9 @@ impl<R: Real> CpuSolver<R> {
         if let Some(d) = &mut self.dfsph {
             d.last_dt = dt;
             d.dt = dt;
+        }
+        if let (Some(values), Some(mut positions)) = (dfsph_points, first_positions) {
+            self.sample_dfsph_forces_on_device(values, dt, &mut positions);
         }
         let n = self.positions.len();
         self.accelerations.resize(n, V3::zero());
@@ -509,6 +526,27 @@ impl<R: Real> CpuSolver<R> {
         let (found, max_density) = self.all_step_health(found, max_density);
         self.health.max_density = self.health.max_density.max(max_density);
         self.record_step(dt, found, max_density);
+    }
+
+    /// DFSPH on device ranks, after a step that samples the probes: the force and front probes
+    /// from the step's first `positions` (the binned state's, in the same slots), the solves'
+    /// stiffness sums (which the device gave back as the warm starts) and the velocities the
+    /// prediction started from (given back for this step).
+    fn sample_dfsph_forces_on_device(&mut self, values: Vec<f64>, dt: f64, positions: &mut Vec<V3<R>>) {
+        let n = self.positions.len();
+        let Some(d) = self.dfsph.as_mut() else { return };
+        if positions.len() != n || self.scratch_v3.len() != n || self.warm_keys.len() != n {
+            // The step failed part way (its failure stops the run); the probes' collectives
+            // still run, on the state there is.
+            self.scratch_v3.resize(n, V3::zero());
+            positions.resize(n, V3::zero());
+        }
+        let key = |slot: usize| self.warm_keys.get(slot).map_or(slot, |&k| k as usize);
+        d.pressure_sum = (0..n).map(|slot| d.warm_pressure.get(key(slot)).copied().unwrap_or(R::zero())).collect();
+        d.divergence_sum = (0..n).map(|slot| d.warm_divergence.get(key(slot)).copied().unwrap_or(R::zero())).collect();
+        std::mem::swap(&mut self.positions, positions);
+        self.sample_dfsph_forces(values, dt);
+        std::mem::swap(&mut self.positions, positions);
     }
 
     /// DFSPH across ranks, after the binning: this step's [`GhostLink`] (which slots to send

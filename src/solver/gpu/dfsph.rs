@@ -29,6 +29,10 @@ pub struct RankSolves {
     pub particles: usize,
     /// The first failed read or message, for the rank's failure.
     pub failure: Option<String>,
+    /// Whether the step reads back the velocities the prediction starts from (a step that
+    /// samples the force probes on the host), and those velocities once read.
+    pub wants_prediction_start: bool,
+    pub prediction_start: Option<Vec<[f32; 4]>>,
 }
 
 /// The pipelines of DFSPH's stages.

@@ -66,6 +66,23 @@ impl GpuSolver {
         }
     }
 
+    /// Where the step asks for them (force probes sampled on the host), the velocities the
+    /// prediction starts from, read back after the divergence solve.
+    pub(super) fn keep_prediction_start(&self, rec: &mut dyn Recorder, read: usize) {
+        if !self.rank_solves.borrow().as_ref().is_some_and(|r| r.wants_prediction_start) {
+            return;
+        }
+        let velocities = self.store.state(read).velocities;
+        match self.wait_and_read(rec, &velocities, 0, self.fluid_count as u64 * 16) {
+            Ok(data) => {
+                if let Some(r) = self.rank_solves.borrow_mut().as_mut() {
+                    r.prediction_start = Some(bytemuck::pod_collect_to_vec(&data));
+                }
+            }
+            Err(e) => self.solves_failed(e),
+        }
+    }
+
     /// The ghosts' velocities in `buffer` replaced by their owners' (one message per
     /// neighbour). Every rank takes part even where its read failed, so that none waits.
     pub(super) fn sync_ghost_velocities(&self, rec: &mut dyn Recorder, buffer: &wgpu::Buffer) {

@@ -128,6 +128,9 @@ impl GpuRankStages {
         let solves = solver.rank_solves.borrow_mut().take();
         if let (Some(d), Some(solves)) = (dfsph.as_mut(), solves) {
             *d.stats = solves.stats;
+            if let (Some(out), Some(v)) = (d.prediction_start.as_deref_mut(), solves.prediction_start) {
+                *out = v.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
+            }
             if let (Some(link), Some(moved)) = (d.link.as_deref_mut(), solves.link) {
                 *link = moved;
             }
@@ -231,7 +234,14 @@ impl GpuSolver {
         if self.params.adaptive.is_some() {
             queue.write_buffer(&self.status, status::DT as u64 * 4, bytemuck::bytes_of(&(held.last_dt as f32)));
         }
-        *self.rank_solves.borrow_mut() = Some(RankSolves { link: held.link.as_deref().cloned(), stats: *held.stats, particles: held.particles, failure: None });
+        *self.rank_solves.borrow_mut() = Some(RankSolves {
+            link: held.link.as_deref().cloned(),
+            stats: *held.stats,
+            particles: held.particles,
+            failure: None,
+            wants_prediction_start: held.prediction_start.is_some(),
+            prediction_start: None,
+        });
     }
 
     /// Puts `positions`, `velocities` (and with continuity density `carried` densities) in the

@@ -337,6 +337,9 @@ impl GpuSolver {
             rec.begin(ProfiledStage::DivergenceSolve);
             self.record_solve(rec, 0, read);
         }
+        if self.solves_across_ranks() {
+            self.keep_prediction_start(rec, read);
+        }
         rec.begin(ProfiledStage::DfsphPredict);
         match (&d.stages.adaptive, &g.adaptive) {
             (Some([accelerations, choose, predict]), Some([ga, gc, gp])) => {
