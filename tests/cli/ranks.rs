@@ -1,6 +1,7 @@
 //! `mpirun -np N wgsph run ...` as a user launches it: 1, 2 and 4 ranks on the dam break and the
-//! hydrostatic tank give the same snapshots byte for byte, particles migrate, a rank may hold
-//! no particle, a checkpoint of 2 ranks continues on 4 or 1, a killed rank stops the run within
+//! hydrostatic tank give the same snapshots byte for byte (on the CPU path and on a software GPU
+//! adapter), particles migrate, a rank may hold no particle, a checkpoint of 2 ranks continues
+//! on 4 or 1, a killed rank stops the run within
 //! seconds with a resumable checkpoint, an error on one rank stops all of them naming it, and a
 //! build without MPI refuses a multi-rank launch.
 //!
@@ -65,15 +66,23 @@ fn last_snapshot(dir: &Path) -> Vec<u8> {
     std::fs::read(dir.parent().expect("a parent").join(path)).unwrap()
 }
 
-/// The same run on 1, 2 and 4 ranks: the last snapshots are byte for byte the same.
+/// The same run on 1, 2 and 4 ranks: the last snapshots are byte for byte the same, on the CPU
+/// path and on the GPU (a software adapter shared by the ranks), whose ranks compute one GPU's
+/// bits. The summaries are the CPU path's.
 fn same_on_every_rank_count(scene: &str, extra: &[&str]) -> Vec<Summary> {
+    let summaries = same_on_every_rank_count_on("cpu", scene, extra);
+    same_on_every_rank_count_on("gpu", scene, extra);
+    summaries
+}
+
+fn same_on_every_rank_count_on(backend: &str, scene: &str, extra: &[&str]) -> Vec<Summary> {
     let Some(m) = mpi() else { return Vec::new() };
     let tmp = tempfile::tempdir().unwrap();
     let mut summaries = Vec::new();
     let mut first: Option<Vec<u8>> = None;
     for ranks in [1, 2, 4] {
         let out = format!("r{ranks}");
-        let mut args = vec!["run", scene, "--backend", "cpu", "--quiet", "--out", &out];
+        let mut args = vec!["run", scene, "--backend", backend, "--quiet", "--out", &out];
         args.extend_from_slice(extra);
         run_ok(mpirun(&m, ranks, &args, tmp.path()));
         let dir = tmp.path().join(&out);
@@ -82,7 +91,7 @@ fn same_on_every_rank_count(scene: &str, extra: &[&str]) -> Vec<Summary> {
         let snapshot = last_snapshot(&dir);
         match &first {
             None => first = Some(snapshot),
-            Some(f) => assert!(f == &snapshot, "{scene}: the last snapshot on {ranks} ranks differs from one rank's"),
+            Some(f) => assert!(f == &snapshot, "{scene}, {backend}: the last snapshot on {ranks} ranks differs from one rank's"),
         }
         assert_eq!(s.ranks.as_ref().map_or(1, |r| r.count), ranks);
         summaries.push(s);
@@ -197,35 +206,37 @@ fn a_rank_without_particles_takes_part() {
         max = [1.2, 0.2, 0.2]
     "#;
     std::fs::write(tmp.path().join("puddle.toml"), scene).unwrap();
-    let args = ["run", "puddle.toml", "--backend", "cpu", "--quiet", "--steps", "40"];
-    run_ok(mpirun(&m, 1, &[&args[..], &["--out", "one"]].concat(), tmp.path()));
-    run_ok(mpirun(&m, 4, &[&args[..], &["--out", "four"]].concat(), tmp.path()));
-    let four = summary(&tmp.path().join("four"));
-    let ranks = four.ranks.clone().expect("across ranks");
-    assert!(ranks.per_rank.iter().any(|r| r.particles == 0), "an empty rank: {ranks:?}");
-    assert!(last_snapshot(&tmp.path().join("one")) == last_snapshot(&tmp.path().join("four")), "4 ranks, some empty, against one");
+    for backend in ["cpu", "gpu"] {
+        let args = ["run", "puddle.toml", "--backend", backend, "--quiet", "--steps", "40"];
+        let (one, four) = (format!("one-{backend}"), format!("four-{backend}"));
+        run_ok(mpirun(&m, 1, &[&args[..], &["--out", &one]].concat(), tmp.path()));
+        run_ok(mpirun(&m, 4, &[&args[..], &["--out", &four]].concat(), tmp.path()));
+        let ranks = summary(&tmp.path().join(&four)).ranks.expect("across ranks");
+        assert!(ranks.per_rank.iter().any(|r| r.particles == 0), "{backend}: an empty rank: {ranks:?}");
+        assert!(last_snapshot(&tmp.path().join(&one)) == last_snapshot(&tmp.path().join(&four)), "{backend}: 4 ranks, some empty, against one");
+    }
 }
 
 #[test]
-fn a_checkpoint_of_two_ranks_continues_on_four_and_on_one() {
+fn a_checkpoint_of_two_ranks_continues_on_four_and_on_one_and_one_of_one_rank_on_two() {
     let Some(m) = mpi() else { return };
     let tmp = tempfile::tempdir().unwrap();
     // WCSPH, and DFSPH (whose warm starts travel with the particles and are read per rank).
     let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/dam_break.toml")).unwrap();
     let dfsph = tmp.path().join("dam_break_dfsph.toml");
     std::fs::write(&dfsph, base.replace("speed_of_sound = 40.0", "solver = \"dfsph\"").replace("dt = 0.00025", "dt = 0.001")).unwrap();
-    for scene in ["dam_break", dfsph.to_str().unwrap()] {
-        let common = ["run", scene, "--particles", "800", "--backend", "cpu", "--quiet"];
-        let out = |name: &str| format!("{name}-{}", scene.len());
+    for (scene, backend) in [("dam_break", "cpu"), (dfsph.to_str().unwrap(), "cpu"), ("dam_break", "gpu"), (dfsph.to_str().unwrap(), "gpu")] {
+        let common = ["run", scene, "--particles", "800", "--backend", backend, "--quiet"];
+        let out = |name: &str| format!("{name}-{}-{backend}", scene.len());
         run_ok(mpirun(&m, 1, &[&common[..], &["--steps", "60", "--out", &out("straight")]].concat(), tmp.path()));
         let straight = last_snapshot(&tmp.path().join(out("straight")));
-        for (name, ranks) in [("four", 4), ("one", 1)] {
+        for (name, saved_on, ranks) in [("four", 2, 4), ("one", 2, 1), ("two", 1, 2)] {
             let name = out(name);
-            run_ok(mpirun(&m, 2, &[&common[..], &["--steps", "30", "--checkpoint-every", "30", "--out", &name]].concat(), tmp.path()));
+            run_ok(mpirun(&m, saved_on, &[&common[..], &["--steps", "30", "--checkpoint-every", "30", "--out", &name]].concat(), tmp.path()));
             run_ok(mpirun(&m, ranks, &["run", "--resume", &name, "--steps", "30", "--quiet"], tmp.path()));
             let s = summary(&tmp.path().join(&name));
             assert_eq!(s.status, RunStatus::Completed);
-            assert!(last_snapshot(&tmp.path().join(&name)) == straight, "{scene}: saved on 2 ranks, continued on {ranks}: not the uninterrupted run");
+            assert!(last_snapshot(&tmp.path().join(&name)) == straight, "{scene}, {backend}: saved on {saved_on} ranks, continued on {ranks}: not the uninterrupted run");
         }
     }
 }

@@ -1180,7 +1180,8 @@ impl<R: Real> CpuSolver<R> {
         let slabs = Slabs::balanced(&counts, part.comm.size(), part.slabs.halo)?;
         let mine = slabs.layers_of(part.comm.rank());
         let (local, chosen) = source.read_kept(&mut |_, p| mine.contains(&layer_of(p)))?;
-        anyhow::ensure!(local.kind == Self::state_kind(), "the state was saved by the {} backend, not {}", local.kind, Self::state_kind());
+        let kind = self.saved_kind();
+        anyhow::ensure!(local.kind == kind, "the state was saved by the {} backend, not {kind}", local.kind);
         anyhow::ensure!(local.velocities.len() == chosen.len() && local.ids.len() == chosen.len(), "the state's arrays differ in length");
         anyhow::ensure!(local.ids.iter().all(|&id| (id as usize) < total), "the state's particle ids are not a permutation");
         let state = &local;

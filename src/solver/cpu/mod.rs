@@ -789,11 +789,20 @@ impl<R: Real> CpuSolver<R> {
         format!("cpu f{}", 8 * std::mem::size_of::<R>())
     }
 
+    /// The kind of state this solver saves and restores: a rank whose stages run on a GPU
+    /// saves a GPU's state (its bits are a GPU's), which one GPU or GPU ranks continue.
+    fn saved_kind(&self) -> String {
+        match self.device {
+            Some(_) => "gpu".into(),
+            None => Self::state_kind(),
+        }
+    }
+
     /// The particles in their current internal order, the step and the health: all the next
     /// step reads (densities, pressures and accelerations are recomputed before use).
     pub fn save_state(&self) -> BackendState {
         BackendState {
-            kind: Self::state_kind(),
+            kind: self.saved_kind(),
             step: self.step,
             positions: self.positions.iter().map(|p| p.to64()).collect(),
             velocities: self.velocities.iter().map(|v| v.to64()).collect(),
@@ -817,7 +826,7 @@ impl<R: Real> CpuSolver<R> {
     }
 
     pub fn restore_state(&mut self, state: &BackendState) -> anyhow::Result<()> {
-        state.check_fits(&Self::state_kind(), self.positions.len())?;
+        state.check_fits(&self.saved_kind(), self.positions.len())?;
         self.lists.clear();
         self.positions = state.positions.iter().map(|&p| V3::from64(p)).collect();
         self.velocities = state.velocities.iter().map(|&v| V3::from64(v)).collect();

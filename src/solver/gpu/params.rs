@@ -317,6 +317,41 @@ pub mod status {
         s
     }
 
+    /// The status words of a state saved without them (by GPU ranks, whose hosts keep the
+    /// health, time, dt range and iterations): what one GPU reads of them made from the state's
+    /// header; the per-step words start from zero as at any step's start.
+    pub fn from_header(state: &crate::model::state::BackendState) -> [u32; WORDS] {
+        let mut s = initial();
+        let f = |v: f64| (v as f32).to_bits();
+        s[STEPS] = state.step as u32;
+        s[MAX_DENSITY] = f(state.max_density);
+        s[TOP_SPEED] = f(state.max_speed);
+        s[TIME] = f(state.time);
+        let [min, max, last] = state.dt_min_max_last;
+        if state.step > 0 {
+            (s[DT_MIN], s[DT_MAX], s[DT]) = (f(min), f(max), f(last));
+        }
+        if let Some(bad) = &state.bad_step {
+            let m = &bad.measured;
+            s[FIRST_BAD_STEP] = bad.step as u32;
+            s[BAD_CAUSES] = if m.non_finite > 0 { CAUSE_NON_FINITE } else { 0 }
+                | if m.escaped > 0 { CAUSE_ESCAPED } else { 0 }
+                | if bad.too_dense { CAUSE_TOO_DENSE } else { 0 }
+                | if bad.too_fast { CAUSE_TOO_FAST } else { 0 };
+            (s[BAD_NON_FINITE], s[BAD_ESCAPED]) = (m.non_finite as u32, m.escaped as u32);
+            (s[BAD_MAX_DENSITY], s[BAD_MAX_SPEED], s[BAD_DT], s[BAD_TIME]) = (f(m.max_density), f(m.max_speed), f(m.dt), f(m.time));
+        }
+        let it = &state.iterations;
+        for (solve, first) in [(&it.pressure, PRESSURE_ITERATIONS), (&it.divergence, DIVERGENCE_ITERATIONS)] {
+            s[first] = solve.total as u32;
+            s[first + 1] = solve.max;
+            s[first + 2] = solve.last;
+            s[first + 3] = f(solve.last_error);
+            s[first + 4] = solve.unconverged as u32;
+        }
+        s
+    }
+
     /// DFSPH's iterations in the status words.
     pub fn iterations(s: &[u32]) -> crate::model::state::IterationStats {
         use crate::model::state::{IterationStats, SolveStats};
@@ -393,6 +428,38 @@ mod tests {
                 (name.trim().to_string(), ty.trim().to_string())
             })
             .collect()
+    }
+
+    /// A state saved by GPU ranks (no status words) gives one GPU the words whose health,
+    /// time, dt range and iterations are the state's.
+    #[test]
+    fn status_words_made_from_a_header_read_back_as_the_header() {
+        use crate::model::state::{BackendState, BadStep, IterationStats, SolveStats, StepMeasures};
+        let bad = BadStep { step: 7, measured: StepMeasures { non_finite: 2, escaped: 0, max_density: 1500.0, max_speed: 3.5, dt: 0.0009765625, time: 0.25 }, too_dense: true, too_fast: false };
+        let solve = |k: u64| SolveStats { total: 40 * k, max: 5 * k as u32, last: 3, last_error: 0.5, unconverged: k };
+        let state = BackendState {
+            kind: "gpu".into(),
+            step: 40,
+            max_density: 1020.0,
+            max_speed: 2.0,
+            first_bad_step: Some(7),
+            bad_step: Some(bad),
+            time: 0.125,
+            dt_min_max_last: [0.001, 0.004, 0.0025],
+            iterations: IterationStats { pressure: solve(1), divergence: solve(2) },
+            ..BackendState::default()
+        };
+        let words = status::from_header(&state);
+        assert_eq!(words[status::STEPS], 40);
+        let h = status::health(&words, None);
+        assert_eq!((h.max_density, h.max_speed, h.first_bad_step), (1020.0, 2.0, Some(7)));
+        assert_eq!(h.bad_step, Some(bad));
+        assert_eq!(status::iterations(&words), state.iterations);
+        let f = |i: usize| status::float(&words, i);
+        assert_eq!((f(status::TIME), f(status::DT_MIN), f(status::DT_MAX), f(status::DT)), (0.125, 0.001f32 as f64, 0.004f32 as f64, 0.0025f32 as f64));
+        // Before the first step the dt range is empty, as one GPU starts it.
+        let start = status::from_header(&BackendState { step: 0, ..state });
+        assert_eq!((start[status::DT_MIN], start[status::DT]), (f32::INFINITY.to_bits(), 0));
     }
 
     #[test]

@@ -1016,6 +1016,14 @@ impl Backend for GpuSolver {
     fn save_state_header(&mut self) -> anyhow::Result<BackendState> {
         let words = self.counted_status()?;
         let h = status::health(&words, self.fixed_dt());
+        // The time, dt range and iterations as the CPU path keeps them, for GPU ranks resuming
+        // this state (one GPU restores the status words whole).
+        let f = |i: usize| status::float(&words, i);
+        let (time, dt_min_max_last) = match self.params.adaptive {
+            None => (self.steps as f64 * self.params.dt, [self.params.dt; 3]),
+            Some(_) if self.steps == 0 => (0.0, [0.0; 3]),
+            Some(_) => (f(status::TIME) - f(status::TIME_COMPENSATION), [f(status::DT_MIN), f(status::DT_MAX), f(status::DT)]),
+        };
         Ok(BackendState {
             kind: "gpu".into(),
             step: self.steps,
@@ -1028,12 +1036,12 @@ impl Backend for GpuSolver {
             max_density: h.max_density,
             max_speed: h.max_speed,
             bad_step: h.bad_step,
-            // The GPU keeps its time and dt range in the status words, restored whole.
-            time: 0.0,
-            dt_min_max_last: [0.0; 3],
+            // One GPU keeps its time and dt range in the status words, restored whole.
+            time,
+            dt_min_max_last,
             gpu_status: words.to_vec(),
             warm_start: Vec::new(),
-            iterations: Default::default(),
+            iterations: if self.dfsph.is_some() { status::iterations(&words) } else { Default::default() },
             densities: Vec::new(),
         })
     }
@@ -1049,12 +1057,12 @@ impl Backend for GpuSolver {
         if let Some(p) = &mut self.probes {
             p.reset(&self.ctx);
         }
-        anyhow::ensure!(
-            state.gpu_status.len() == status::WORDS,
-            "the state holds {} status words; this solver has {}",
-            state.gpu_status.len(),
-            status::WORDS
-        );
+        // GPU ranks save no status words: made from the state's header.
+        let words = match state.gpu_status.len() {
+            0 => status::from_header(state).to_vec(),
+            _ => state.gpu_status.clone(),
+        };
+        anyhow::ensure!(words.len() == status::WORDS, "the state holds {} status words; this solver has {}", words.len(), status::WORDS);
         let continuity = self.params.continuity_density;
         anyhow::ensure!(
             state.densities.len() == if continuity { state.positions.len() } else { 0 },
@@ -1072,7 +1080,7 @@ impl Backend for GpuSolver {
             self.ctx.queue.write_buffer(&d.buffers.warm_divergence, 0, bytemuck::cast_slice(&v));
         }
         let q = &self.ctx.queue;
-        q.write_buffer(&self.status, 0, bytemuck::cast_slice(&state.gpu_status));
+        q.write_buffer(&self.status, 0, bytemuck::cast_slice(&words));
         q.submit([]);
         self.current = 0;
         self.fields_state = 0;
