@@ -278,8 +278,9 @@ fn dfsph_tank() -> TestScene {
     TestScene::small_tank().dfsph().dt(0.001)
 }
 
-#[test]
-fn dfsph_on_ranks_computes_bit_for_bit_what_one_rank_computes() {
+/// The DFSPH scenes run on ranks, with their rank counts: the still tank (2), with adaptive dt
+/// (3), the dam break (3) and the moving block with migration and moving bounds (3).
+fn dfsph_scenes() -> [(Scene, usize); 4] {
     let fixed = dfsph_tank().build();
     let adaptive = dfsph_tank().adaptive().dt_max(0.004).build();
     let mut dam = dam_break(1000);
@@ -287,15 +288,26 @@ fn dfsph_on_ranks_computes_bit_for_bit_what_one_rank_computes() {
     dam.physics.stiffness = None;
     dam.physics.speed_of_sound = None;
     dam.time.dt = 0.001;
-    for (scene, ranks, precision) in [(fixed, 2, Precision::F64), (adaptive, 3, Precision::F64), (dam, 3, Precision::F32), (moving_block_dfsph(), 3, Precision::F64)] {
+    [(fixed, 2), (adaptive, 3), (dam, 3), (moving_block_dfsph(), 3)]
+}
+
+/// 40 DFSPH steps of `sim` (one process): its snapshot, iterations and dt, checked healthy and
+/// iterating.
+fn forty_dfsph_steps(sim: &mut wgsph::solver::Simulation, name: &str) -> (Snapshot, wgsph::model::state::IterationStats, wgsph::model::state::DtStats) {
+    sim.step(40).expect("steps");
+    let health = sim.health().expect("health");
+    assert!(health.is_ok(), "{name}: one process stays healthy: {health:?}");
+    let iterations = health.iterations.expect("DFSPH counts its iterations");
+    assert!(iterations.pressure.total > 40, "{name}: the solves iterate ({iterations:?})");
+    (sim.snapshot().expect("snapshot"), iterations, sim.backend().dt_stats().expect("dt"))
+}
+
+#[test]
+fn dfsph_on_ranks_computes_bit_for_bit_what_one_rank_computes() {
+    let precisions = [Precision::F64, Precision::F64, Precision::F32, Precision::F64];
+    for ((scene, ranks), precision) in dfsph_scenes().into_iter().zip(precisions) {
         let mut single = open(&scene, &BackendChoice::cpu(precision)).expect("opens");
-        single.step(40).expect("steps");
-        let health = single.health().expect("health");
-        assert!(health.is_ok(), "{}: one rank stays healthy: {health:?}", scene.name);
-        let one = single.snapshot().expect("snapshot");
-        let iterations = health.iterations.expect("DFSPH counts its iterations");
-        assert!(iterations.pressure.total > 40, "{}: the solves iterate ({iterations:?})", scene.name);
-        let dt = single.backend().dt_stats().expect("dt");
+        let (one, iterations, dt) = forty_dfsph_steps(&mut single, &scene.name);
         let all = on_ranks(&scene, ranks, 10, precision, &|b: &mut dyn Backend| {
             b.step(40)?;
             Ok((b.snapshot()?, b.health()?, b.dt_stats()?, b.rank_report().expect("across ranks")))
@@ -624,23 +636,10 @@ fn probes_on_gpu_ranks_against_one_gpu(ctx: &GpuContext, scene: &Scene, steps: u
 #[test]
 fn dfsph_on_gpu_ranks_computes_bit_for_bit_what_one_gpu_computes() {
     let Some(ctx) = common::contexts().into_iter().next() else { return };
-    let fixed = dfsph_tank().build();
-    let adaptive = dfsph_tank().adaptive().dt_max(0.004).build();
-    let mut dam = dam_break(1000);
-    dam.physics.solver = wgsph::model::scene::PressureSolver::Dfsph;
-    dam.physics.stiffness = None;
-    dam.physics.speed_of_sound = None;
-    dam.time.dt = 0.001;
-    for (scene, ranks) in [(fixed, 2), (adaptive, 3), (dam, 3), (moving_block_dfsph(), 3)] {
+    for (scene, ranks) in dfsph_scenes() {
         let device = GpuContext::from_adapter(ctx.adapter.clone()).expect("device");
         let mut single = open(&scene, &BackendChoice::gpu_on(device)).expect("opens");
-        single.step(40).expect("steps");
-        let health = single.health().expect("health");
-        assert!(health.is_ok(), "{}: one GPU stays healthy: {health:?}", scene.name);
-        let one = single.snapshot().expect("snapshot");
-        let iterations = health.iterations.expect("DFSPH counts its iterations");
-        assert!(iterations.pressure.total > 40, "{}: the solves iterate ({iterations:?})", scene.name);
-        let dt = single.backend().dt_stats().expect("dt");
+        let (one, iterations, dt) = forty_dfsph_steps(&mut single, &scene.name);
         let all = gpu_on_ranks(&ctx, &scene, ranks, 10, &|b: &mut dyn Backend| {
             b.step(40)?;
             Ok((b.snapshot()?, b.health()?, b.dt_stats()?, b.rank_report().expect("across ranks")))
