@@ -535,9 +535,9 @@ impl<R: Real> CpuSolver<R> {
     fn sample_dfsph_forces_on_device(&mut self, values: Vec<f64>, dt: f64, positions: &mut Vec<V3<R>>) {
         let n = self.positions.len();
         let Some(d) = self.dfsph.as_mut() else { return };
-        if positions.len() != n || self.scratch_v3.len() != n || self.warm_keys.len() != n {
-            // The step failed part way (its failure stops the run); the probes' collectives
-            // still run, on the state there is.
+        if positions.len() != n || self.scratch_v3.len() != n {
+            // Only where the device gave back less than it was asked for (its failure stops the
+            // run): the probes' collectives still run, so that no rank waits.
             self.scratch_v3.resize(n, V3::zero());
             positions.resize(n, V3::zero());
         }
@@ -549,8 +549,9 @@ impl<R: Real> CpuSolver<R> {
         std::mem::swap(&mut self.positions, positions);
     }
 
-    /// DFSPH across ranks, after the binning: this step's [`GhostLink`] (which slots to send
-    /// to each neighbour and which to receive), checked once by the particles' ids.
+    /// DFSPH across ranks: this step's [`GhostLink`] (which slots to send to each neighbour and
+    /// which to receive), checked once by the particles' ids; on the CPU path after the binning,
+    /// with device stages in the order of the upload (the device puts it in its own cell order).
     pub(super) fn link_ghosts(&mut self) {
         let Some(part) = self.ranks.as_deref() else { return };
         let (rank, size) = (part.comm.rank(), part.comm.size());
