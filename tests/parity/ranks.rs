@@ -662,3 +662,31 @@ fn dfsph_on_gpu_ranks_computes_bit_for_bit_what_one_gpu_computes() {
         assert!(many == one, "{}: {ranks} GPU ranks against one GPU, bit for bit (largest differences: position {dx:e}, density {drho:e})", scene.name);
     }
 }
+
+/// The ghost velocities stage (wgsl/sim/ghost_velocities.wgsl), with which DFSPH's solves on
+/// GPU ranks exchange only the face layers, against its CPU twin: the velocities of some slots
+/// gathered (one slot twice, as a particle of a thin slab goes to both neighbours), others
+/// replaced by given values.
+#[test]
+fn the_ghost_velocities_stage_agrees_with_its_cpu_twin() {
+    use wgsph::model::real::V3;
+    use wgsph::solver::cpu::ghost_velocities::{gather_ghost_velocities, scatter_ghost_velocities};
+    for ctx in common::contexts() {
+        let scene = TestScene::small_tank().dfsph().build();
+        let mut gpu = common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene);
+        gpu.step(3).unwrap();
+        let n = Backend::fluid_count(&gpu) as u32;
+        let mut sent: Vec<u32> = (0..n).step_by(7).collect();
+        sent.push(sent[1]);
+        let received: Vec<u32> = (3..n).step_by(11).collect();
+        let values: Vec<[f32; 3]> = received.iter().map(|&i| [i as f32, -0.5 * i as f32, 0.25]).collect();
+        let (before, gathered, after) = gpu.ghost_velocities_alone(&sent, &received, &values).unwrap();
+        let xyz = |v: &[[f32; 4]]| v.iter().map(|v| V3([v[0], v[1], v[2]])).collect::<Vec<V3<f32>>>();
+        let mut twin = xyz(&before);
+        assert!(twin.iter().any(|v| v.0 != [0.0; 3]), "the tank moves after 3 steps");
+        let slots = |s: &[u32]| s.iter().map(|&i| i as usize).collect::<Vec<usize>>();
+        assert!(xyz(&gathered) == gather_ghost_velocities(&twin, &slots(&sent)), "{}: gathered", ctx.describe());
+        scatter_ghost_velocities(&mut twin, &slots(&received), &values.iter().map(|&v| V3(v)).collect::<Vec<_>>());
+        assert!(xyz(&after) == twin, "{}: scattered", ctx.describe());
+    }
+}

@@ -10,6 +10,7 @@
 //! same particles in the same order as one process: the neighbour sums add the same terms in
 //! the same order, and N ranks compute bit for bit what one computes.
 
+use super::ghost_velocities::{gather_ghost_velocities, scatter_ghost_velocities};
 use super::CpuSolver;
 use crate::model::initial::{FluidParticle, InitialState};
 use crate::model::real::{Real, V3};
@@ -129,19 +130,46 @@ pub struct GhostLink {
 impl GhostLink {
     /// The ghosts' velocities (or any per-particle vector) replaced by their owners'.
     pub fn sync<R: Real>(&mut self, values: &mut [V3<R>]) {
+        let sent = gather_ghost_velocities(values, &self.sent_slots());
+        let received = self.exchange_gathered(&sent);
+        scatter_ghost_velocities(values, &self.received_slots(), &received);
+    }
+
+    /// How many values go to the neighbours, and how many ghosts take theirs.
+    pub fn counts(&self) -> [usize; 2] {
+        [self.send[0].len() + self.send[1].len(), self.receive[0].len() + self.receive[1].len()]
+    }
+
+    /// The slots whose values go to the lower neighbour, then those to the upper one.
+    pub fn sent_slots(&self) -> Vec<usize> {
+        [&self.send[0][..], &self.send[1][..]].concat()
+    }
+
+    /// The ghosts' slots, those of the lower neighbour's particles first.
+    pub fn received_slots(&self) -> Vec<usize> {
+        [&self.receive[0][..], &self.receive[1][..]].concat()
+    }
+
+    /// The values of [`GhostLink::sent_slots`], in that order, sent to the neighbours; returns
+    /// those of [`GhostLink::received_slots`] (a ghost keeps zero where a message failed, and
+    /// the failure stops the run).
+    pub fn exchange_gathered<R: Real>(&mut self, sent: &[V3<R>]) -> Vec<V3<R>> {
         let t0 = Instant::now();
-        let encode = |slots: &[usize]| slots.iter().flat_map(|&i| values[i].to64()).collect::<Vec<f64>>();
-        let (down, up) = (encode(&self.send[0]), encode(&self.send[1]));
-        match self.comm.exchange(&down, &up) {
+        let encode = |values: &[V3<R>]| values.iter().flat_map(|v| v.to64()).collect::<Vec<f64>>();
+        let (down, up) = sent.split_at(self.send[0].len().min(sent.len()));
+        let mut received = vec![V3::zero(); self.receive[0].len() + self.receive[1].len()];
+        match self.comm.exchange(&encode(down), &encode(up)) {
             Ok((lower, upper)) => {
+                let mut at = 0;
                 for (slots, words) in self.receive.iter().zip([lower, upper]) {
                     if words.len() != 3 * slots.len() {
                         self.failure.get_or_insert(format!("a neighbour sent {} values for {} ghosts in a DFSPH solve", words.len() / 3, slots.len()));
-                        continue;
+                    } else {
+                        for (k, w) in words.chunks_exact(3).enumerate() {
+                            received[at + k] = V3::from64([w[0], w[1], w[2]]);
+                        }
                     }
-                    for (&i, w) in slots.iter().zip(words.chunks_exact(3)) {
-                        values[i] = V3::from64([w[0], w[1], w[2]]);
-                    }
+                    at += slots.len();
                 }
             }
             Err(e) => {
@@ -149,6 +177,7 @@ impl GhostLink {
             }
         }
         self.seconds += t0.elapsed().as_secs_f64();
+        received
     }
 
     /// The ranks' sum of an error sum in fixed-point units, exact: the high and low 32 bits

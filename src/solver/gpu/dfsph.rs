@@ -35,6 +35,50 @@ pub struct RankSolves {
     pub prediction_start: Option<Vec<[f32; 4]>>,
 }
 
+/// DFSPH across ranks: the stage that gathers the velocities a rank sends to its neighbours
+/// and scatters those it receives onto its ghosts (wgsl/sim/ghost_velocities.wgsl), with its
+/// slots and values, made on the first solve across ranks for the solver's capacity.
+pub struct GhostVelocities {
+    pub gather: Stage,
+    pub scatter: Stage,
+    /// The counts of slots to gather and to scatter, then those slots.
+    pub slots: wgpu::Buffer,
+    pub values: wgpu::Buffer,
+}
+
+impl GhostVelocities {
+    /// For `n` held particles at most (a particle of a thin slab may go to both neighbours).
+    pub fn new(ctx: &GpuContext, n: u64, constants: &[(&'static str, f64)]) -> Result<Self, GpuError> {
+        let (slots, values) = (3 * n + 2, 2 * n);
+        let lens = move |name: &str| match name {
+            "ghost_slots" => slots,
+            "ghost_values" => values,
+            _ => n,
+        };
+        let stage = |entry: &str| stage_with_aliases(ctx, "ghost_velocities", entry, &lens, constants, &[]);
+        Ok(GhostVelocities {
+            gather: stage("gather_ghost_velocities")?,
+            scatter: stage("scatter_ghost_velocities")?,
+            slots: storage(&ctx.device, "ghost slots", slots * 4),
+            values: storage(&ctx.device, "ghost values", values * 16),
+        })
+    }
+
+    /// The bind group of `stage` (gather or scatter) on the velocities in `velocities`.
+    pub fn group(&self, ctx: &GpuContext, stage: &Stage, uniform: &wgpu::Buffer, velocities: &wgpu::Buffer) -> wgpu::BindGroup {
+        stage.bind_group(&ctx.device, "ghost velocities", uniform, &|name: &str| match name {
+            "velocities" => velocities.clone(),
+            "ghost_slots" => self.slots.clone(),
+            "ghost_values" => self.values.clone(),
+            other => panic!("no buffer holds the array '{other}'"),
+        })
+    }
+
+    pub fn bytes(&self) -> u64 {
+        self.slots.size() + self.values.size()
+    }
+}
+
 /// The pipelines of DFSPH's stages.
 pub(super) struct DfsphStages {
     pub factors: Stage,

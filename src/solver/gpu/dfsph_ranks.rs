@@ -11,6 +11,7 @@
 //! The recorder of the profile cannot wait, so a profile never takes this path.
 
 use super::buffers::{ids_of, GHOST_BIT};
+use super::dfsph::GhostVelocities;
 use super::params::status;
 use super::readback::read_ranges;
 use super::schedule::Recorder;
@@ -55,15 +56,30 @@ impl GpuSolver {
             anyhow::ensure!(places.iter().all(|&u| u < n), "the binned positions do not hold places in the upload of {n} particles");
             Ok(places)
         });
-        match uploaded {
-            Ok(places) => {
-                let mut solves = self.rank_solves.borrow_mut();
-                if let Some(link) = solves.as_mut().and_then(|r| r.link.as_mut()) {
-                    *link = link.reordered(&places);
-                }
-            }
-            Err(e) => self.solves_failed(e),
+        let made = uploaded.and_then(|places| {
+            let mut solves = self.rank_solves.borrow_mut();
+            let Some(link) = solves.as_mut().and_then(|r| r.link.as_mut()) else { return Ok(()) };
+            *link = link.reordered(&places);
+            // The slots of the gather and the scatter, for every sync of the step.
+            let [sent, received] = link.counts();
+            let words: Vec<u32> = [sent, received].into_iter().chain(link.sent_slots()).chain(link.received_slots()).map(|v| v as u32).collect();
+            let ghosts = self.ghost_velocities_stage()?;
+            self.ctx.queue.write_buffer(&ghosts.slots, 0, bytemuck::cast_slice(&words));
+            Ok(())
+        });
+        if let Err(e) = made {
+            self.solves_failed(e);
         }
+    }
+
+    /// The gather and scatter of the ghosts' velocities, made on first use for the solver's
+    /// capacity.
+    fn ghost_velocities_stage(&self) -> anyhow::Result<&GhostVelocities> {
+        if let Some(made) = self.ghost_velocities.get() {
+            return Ok(made);
+        }
+        let made = GhostVelocities::new(&self.ctx, self.store.capacity(), &self.constants_sized(super::shaders::WORKGROUP_SIZE))?;
+        Ok(self.ghost_velocities.get_or_init(|| made))
     }
 
     /// Where the step asks for them (force probes sampled on the host), the velocities the
@@ -84,27 +100,37 @@ impl GpuSolver {
     }
 
     /// The ghosts' velocities in `buffer` replaced by their owners' (one message per
-    /// neighbour). Every rank takes part even where its read failed, so that none waits.
+    /// neighbour): the sent ones gathered on the device and read back, the received ones
+    /// written and scattered onto the ghosts (`ghost_velocities.wgsl`), so that only the face
+    /// layers cross the bus. Every rank takes part in the messages even where its read failed,
+    /// so that none waits.
     pub(super) fn sync_ghost_velocities(&self, rec: &mut dyn Recorder, buffer: &wgpu::Buffer) {
-        let n = self.fluid_count as u64;
-        let read = self.wait_and_read(rec, buffer, 0, n * 16);
+        let Some([sent, received]) = self.rank_solves.borrow().as_ref().and_then(|r| r.link.as_ref()).map(|l| l.counts()) else { return };
+        let gathered = self.ghost_velocities_stage().and_then(|g| {
+            if sent > 0 {
+                let group = g.group(&self.ctx, &g.gather, &self.uniform, buffer);
+                self.dispatch_threads(rec, &g.gather, &group, sent as u64);
+            }
+            let data = self.wait_and_read(rec, &g.values, 0, sent as u64 * 16)?;
+            Ok(bytemuck::pod_collect_to_vec::<u8, [f32; 4]>(&data).iter().map(|v| V3([v[0], v[1], v[2]])).collect::<Vec<V3<f32>>>())
+        });
         let mut solves = self.rank_solves.borrow_mut();
         let Some(r) = solves.as_mut() else { return };
         let Some(link) = r.link.as_mut() else { return };
-        let (mut values, ok): (Vec<[f32; 4]>, bool) = match read {
-            Ok(data) => (bytemuck::pod_collect_to_vec(&data), true),
+        let (values, ok) = match gathered {
+            Ok(v) => (v, true),
             Err(e) => {
                 r.failure.get_or_insert(format!("{e:#}"));
-                (vec![[0.0; 4]; n as usize], false)
+                (vec![V3([0.0; 3]); sent], false)
             }
         };
-        let mut xyz: Vec<V3<f32>> = values.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
-        link.sync(&mut xyz);
-        if ok && n > 0 {
-            for (v, x) in values.iter_mut().zip(&xyz) {
-                v[..3].copy_from_slice(&x.0);
-            }
-            self.ctx.queue.write_buffer(buffer, 0, bytemuck::cast_slice(&values));
+        let values = link.exchange_gathered(&values);
+        drop(solves);
+        if let (true, true, Some(g)) = (ok, received > 0, self.ghost_velocities.get()) {
+            let words: Vec<[f32; 4]> = values.iter().map(|v| [v.0[0], v.0[1], v.0[2], 0.0]).collect();
+            self.ctx.queue.write_buffer(&g.values, 0, bytemuck::cast_slice(&words));
+            let group = g.group(&self.ctx, &g.scatter, &self.uniform, buffer);
+            self.dispatch_threads(rec, &g.scatter, &group, received as u64);
         }
     }
 
@@ -171,5 +197,36 @@ impl GpuSolver {
             self.dispatch_particles(rec, apply, ga);
             self.sync_ghost_velocities(rec, &velocities);
         }
+    }
+}
+
+impl GpuSolver {
+    /// The ghost velocities stage alone on the current state's velocities (for the stage
+    /// tests): the velocities of the slots `sent` gathered, then `values` scattered onto the
+    /// slots `received`. Returns the velocities before, the gathered ones, and the velocities
+    /// after, in slot order (w included).
+    #[allow(clippy::type_complexity)]
+    pub fn ghost_velocities_alone(&mut self, sent: &[u32], received: &[u32], values: &[[f32; 3]]) -> anyhow::Result<(Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<[f32; 4]>)> {
+        let n = self.fluid_count as u64;
+        anyhow::ensure!(values.len() == received.len() && sent.len() as u64 <= 2 * n && received.len() as u64 <= n, "the slots and values do not fit the stage");
+        let velocities = self.store.state(self.current).velocities;
+        let g = self.ghost_velocities_stage()?;
+        let words: Vec<u32> = [sent.len() as u32, received.len() as u32].into_iter().chain(sent.iter().copied()).chain(received.iter().copied()).collect();
+        self.ctx.queue.write_buffer(&g.slots, 0, bytemuck::cast_slice(&words));
+        let read = |buffer: &wgpu::Buffer, bytes: u64| -> anyhow::Result<Vec<[f32; 4]>> { Ok(bytemuck::pod_collect_to_vec(&read_ranges(&self.ctx, &[(buffer, 0, bytes.max(16))])?.remove(0))) };
+        let before = read(&velocities, n * 16)?;
+        let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "ghost velocities");
+        let group = g.group(&self.ctx, &g.gather, &self.uniform, &velocities);
+        self.dispatch_threads(&mut rec, &g.gather, &group, sent.len() as u64);
+        self.ctx.queue.submit([rec.finish()]);
+        let gathered = read(&g.values, sent.len() as u64 * 16)?;
+        let words: Vec<[f32; 4]> = values.iter().map(|v| [v[0], v[1], v[2], 0.0]).collect();
+        self.ctx.queue.write_buffer(&g.values, 0, bytemuck::cast_slice(&words));
+        let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "ghost velocities");
+        let group = g.group(&self.ctx, &g.scatter, &self.uniform, &velocities);
+        self.dispatch_threads(&mut rec, &g.scatter, &group, received.len() as u64);
+        self.ctx.queue.submit([rec.finish()]);
+        let after = read(&velocities, n * 16)?;
+        Ok((before[..n as usize].to_vec(), gathered[..sent.len()].to_vec(), after[..n as usize].to_vec()))
     }
 }

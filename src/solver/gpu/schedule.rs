@@ -293,7 +293,7 @@ impl GpuSolver {
         self.dispatch_threads(rec, stage, group, self.wall_count as u64);
     }
 
-    fn dispatch_threads(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup, threads: u64) {
+    pub(super) fn dispatch_threads(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup, threads: u64) {
         let pass = rec.pass();
         pass.set_pipeline(&stage.pipeline);
         pass.set_bind_group(0, group, &[]);

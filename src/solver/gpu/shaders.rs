@@ -33,6 +33,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/probes.wgsl", include_str!("../../../wgsl/sim/probes.wgsl")),
     ("sim/wall_pressure.wgsl", include_str!("../../../wgsl/sim/wall_pressure.wgsl")),
     ("sim/fields.wgsl", include_str!("../../../wgsl/sim/fields.wgsl")),
+    ("sim/ghost_velocities.wgsl", include_str!("../../../wgsl/sim/ghost_velocities.wgsl")),
 ];
 
 /// The text of a simulation file (`sim/density.wgsl`, `shared/common.wgsl`, ...).

@@ -11,7 +11,7 @@ use super::prefix_sum::Scan;
 use super::probes::{DfsphSums, GpuProbes};
 use super::readback::{read_buffers, visit_array, visit_pairs, visit_rows, Element, RowArrays};
 use super::shaders::{constants, stage_with_aliases, storage_bindings, Alias, ArrayLengths, Stage};
-use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, RankSolves, SharedBuffers};
+use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, GhostVelocities, RankSolves, SharedBuffers};
 use super::workgroups::{GpuOptions, SolverLoop};
 use crate::model::initial::InitialState;
 use crate::model::kernels::sort_by_cell;
@@ -184,6 +184,8 @@ pub struct GpuSolver {
     /// DFSPH across ranks: the ghosts and iterations of the solves under way (set by the rank
     /// for each step or refresh).
     pub(super) rank_solves: std::cell::RefCell<Option<RankSolves>>,
+    /// DFSPH across ranks: the gather and scatter of the ghosts' velocities, made on first use.
+    pub(super) ghost_velocities: std::cell::OnceCell<GhostVelocities>,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
     /// The buffers the solver planned and allocated (the probes' besides, in `memory`).
@@ -534,6 +536,7 @@ impl GpuSolver {
             ranks,
             rank_error: std::cell::RefCell::new(None),
             rank_solves: std::cell::RefCell::new(None),
+            ghost_velocities: std::cell::OnceCell::new(),
             arrays,
             constants: k,
             output_fields: std::cell::OnceCell::new(),
@@ -760,7 +763,7 @@ impl GpuSolver {
     }
 
     /// The stages' specialisation constants with `size` threads per workgroup.
-    fn constants_sized(&self, size: u32) -> Vec<(&'static str, f64)> {
+    pub(super) fn constants_sized(&self, size: u32) -> Vec<(&'static str, f64)> {
         let mut c = self.constants.clone();
         c.push(("WORKGROUP_SIZE", size as f64));
         c
@@ -844,6 +847,7 @@ impl GpuSolver {
             + s.dfsph.as_ref().map_or(0, |d| d.buffers.bytes())
             + s.probes.as_ref().map_or(0, |p| p.bytes())
             + s.output_fields.get().map_or(0, |o| o.densities.size() + o.pressures.size())
+            + s.ghost_velocities.get().map_or(0, |g| g.bytes())
     }
 
     /// The snapshot rows of the current state (after a refresh) in pieces of `chunk` slots: the
