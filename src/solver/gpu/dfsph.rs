@@ -44,34 +44,36 @@ pub struct GhostVelocities {
     /// The counts of slots to gather and to scatter, then those slots.
     pub slots: wgpu::Buffer,
     pub values: wgpu::Buffer,
+    /// Per phase of the state read, on its own velocities (0) and on the predicted ones (1):
+    /// the bind groups of the gather and of the scatter.
+    pub groups: Vec<[[wgpu::BindGroup; 2]; 2]>,
 }
 
 impl GhostVelocities {
     /// For `n` held particles at most (a particle of a thin slab may go to both neighbours).
-    pub fn new(ctx: &GpuContext, n: u64, constants: &[(&'static str, f64)]) -> Result<Self, GpuError> {
-        let (slots, values) = (3 * n + 2, 2 * n);
+    pub fn new(ctx: &GpuContext, n: u64, constants: &[(&'static str, f64)], store: &StateStore, uniform: &wgpu::Buffer) -> Result<Self, GpuError> {
+        let (slot_count, value_count) = (3 * n + 2, 2 * n);
         let lens = move |name: &str| match name {
-            "ghost_slots" => slots,
-            "ghost_values" => values,
+            "ghost_slots" => slot_count,
+            "ghost_values" => value_count,
             _ => n,
         };
         let stage = |entry: &str| stage_with_aliases(ctx, "ghost_velocities", entry, &lens, constants, &[]);
-        Ok(GhostVelocities {
-            gather: stage("gather_ghost_velocities")?,
-            scatter: stage("scatter_ghost_velocities")?,
-            slots: storage(&ctx.device, "ghost slots", slots * 4),
-            values: storage(&ctx.device, "ghost values", values * 16),
-        })
-    }
-
-    /// The bind group of `stage` (gather or scatter) on the velocities in `velocities`.
-    pub fn group(&self, ctx: &GpuContext, stage: &Stage, uniform: &wgpu::Buffer, velocities: &wgpu::Buffer) -> wgpu::BindGroup {
-        stage.bind_group(&ctx.device, "ghost velocities", uniform, &|name: &str| match name {
-            "velocities" => velocities.clone(),
-            "ghost_slots" => self.slots.clone(),
-            "ghost_values" => self.values.clone(),
-            other => panic!("no buffer holds the array '{other}'"),
-        })
+        let (gather, scatter) = (stage("gather_ghost_velocities")?, stage("scatter_ghost_velocities")?);
+        let slots = storage(&ctx.device, "ghost slots", slot_count * 4);
+        let values = storage(&ctx.device, "ghost values", value_count * 16);
+        let group = |stage: &Stage, velocities: &wgpu::Buffer| {
+            stage.bind_group(&ctx.device, "ghost velocities", uniform, &|name: &str| match name {
+                "velocities" => velocities.clone(),
+                "ghost_slots" => slots.clone(),
+                "ghost_values" => values.clone(),
+                other => panic!("no buffer holds the array '{other}'"),
+            })
+        };
+        let groups = (0..store.phases())
+            .map(|c| [store.state(c).velocities, store.next(c).velocities].map(|v| [group(&gather, &v), group(&scatter, &v)]))
+            .collect();
+        Ok(GhostVelocities { gather, scatter, slots, values, groups })
     }
 
     pub fn bytes(&self) -> u64 {

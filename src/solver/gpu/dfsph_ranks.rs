@@ -78,7 +78,7 @@ impl GpuSolver {
         if let Some(made) = self.ghost_velocities.get() {
             return Ok(made);
         }
-        let made = GhostVelocities::new(&self.ctx, self.store.capacity(), &self.constants_sized(super::shaders::WORKGROUP_SIZE))?;
+        let made = GhostVelocities::new(&self.ctx, self.store.capacity(), &self.constants_sized(super::shaders::WORKGROUP_SIZE), &self.store, &self.uniform)?;
         Ok(self.ghost_velocities.get_or_init(|| made))
     }
 
@@ -104,12 +104,11 @@ impl GpuSolver {
     /// written and scattered onto the ghosts (`ghost_velocities.wgsl`), so that only the face
     /// layers cross the bus. Every rank takes part in the messages even where its read failed,
     /// so that none waits.
-    pub(super) fn sync_ghost_velocities(&self, rec: &mut dyn Recorder, buffer: &wgpu::Buffer) {
+    pub(super) fn sync_ghost_velocities(&self, rec: &mut dyn Recorder, read: usize, predicted: bool) {
         let Some([sent, received]) = self.rank_solves.borrow().as_ref().and_then(|r| r.link.as_ref()).map(|l| l.counts()) else { return };
         let gathered = self.ghost_velocities_stage().and_then(|g| {
             if sent > 0 {
-                let group = g.group(&self.ctx, &g.gather, &self.uniform, buffer);
-                self.dispatch_threads(rec, &g.gather, &group, sent as u64);
+                self.dispatch_threads(rec, &g.gather, &g.groups[read][predicted as usize][0], sent as u64);
             }
             let data = self.wait_and_read(rec, &g.values, 0, sent as u64 * 16)?;
             Ok(bytemuck::pod_collect_to_vec::<u8, [f32; 4]>(&data).iter().map(|v| V3([v[0], v[1], v[2]])).collect::<Vec<V3<f32>>>())
@@ -129,8 +128,7 @@ impl GpuSolver {
         if let (true, true, Some(g)) = (ok, received > 0, self.ghost_velocities.get()) {
             let words: Vec<[f32; 4]> = values.iter().map(|v| [v.0[0], v.0[1], v.0[2], 0.0]).collect();
             self.ctx.queue.write_buffer(&g.values, 0, bytemuck::cast_slice(&words));
-            let group = g.group(&self.ctx, &g.scatter, &self.uniform, buffer);
-            self.dispatch_threads(rec, &g.scatter, &group, received as u64);
+            self.dispatch_threads(rec, &g.scatter, &g.groups[read][predicted as usize][1], received as u64);
         }
     }
 
@@ -167,7 +165,7 @@ impl GpuSolver {
             (&st.pressure_warm_start, &st.predict_density, &st.pressure_apply, &g.pressure_warm_start, &g.predict_density, &g.pressure_apply)
         };
         // The velocities the solve changes: the state's own (divergence) or the predicted ones.
-        let velocities = if solve == 0 { self.store.state(read).velocities } else { self.store.next(read).velocities };
+        let predicted = solve == 1;
         let (min_iterations, max_iterations, tolerance) = match solve {
             0 => (s.min_divergence_iterations, s.max_divergence_iterations, s.divergence_error),
             _ => (s.min_iterations, s.max_iterations, s.density_error),
@@ -177,7 +175,7 @@ impl GpuSolver {
         if s.warm_start {
             self.dispatch_particles(rec, warm, gw);
             self.dispatch_particles(rec, apply, ga);
-            self.sync_ghost_velocities(rec, &velocities);
+            self.sync_ghost_velocities(rec, read, predicted);
         }
         let mut state = begin_solve(s.warm_start);
         loop {
@@ -195,7 +193,7 @@ impl GpuSolver {
                 break;
             }
             self.dispatch_particles(rec, apply, ga);
-            self.sync_ghost_velocities(rec, &velocities);
+            self.sync_ghost_velocities(rec, read, predicted);
         }
     }
 }
@@ -216,15 +214,14 @@ impl GpuSolver {
         let read = |buffer: &wgpu::Buffer, bytes: u64| -> anyhow::Result<Vec<[f32; 4]>> { Ok(bytemuck::pod_collect_to_vec(&read_ranges(&self.ctx, &[(buffer, 0, bytes.max(16))])?.remove(0))) };
         let before = read(&velocities, n * 16)?;
         let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "ghost velocities");
-        let group = g.group(&self.ctx, &g.gather, &self.uniform, &velocities);
-        self.dispatch_threads(&mut rec, &g.gather, &group, sent.len() as u64);
+        let groups = &g.groups[self.current][0];
+        self.dispatch_threads(&mut rec, &g.gather, &groups[0], sent.len() as u64);
         self.ctx.queue.submit([rec.finish()]);
         let gathered = read(&g.values, sent.len() as u64 * 16)?;
         let words: Vec<[f32; 4]> = values.iter().map(|v| [v[0], v[1], v[2], 0.0]).collect();
         self.ctx.queue.write_buffer(&g.values, 0, bytemuck::cast_slice(&words));
         let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "ghost velocities");
-        let group = g.group(&self.ctx, &g.scatter, &self.uniform, &velocities);
-        self.dispatch_threads(&mut rec, &g.scatter, &group, received.len() as u64);
+        self.dispatch_threads(&mut rec, &g.scatter, &groups[1], received.len() as u64);
         self.ctx.queue.submit([rec.finish()]);
         let after = read(&velocities, n * 16)?;
         Ok((before[..n as usize].to_vec(), gathered[..sent.len()].to_vec(), after[..n as usize].to_vec()))

@@ -352,7 +352,7 @@ impl GpuSolver {
         }
         if self.solves_across_ranks() {
             // The ghosts take their owners' predicted velocities.
-            self.sync_ghost_velocities(rec, &self.store.next(read).velocities);
+            self.sync_ghost_velocities(rec, read, true);
         }
         rec.begin(ProfiledStage::PressureSolve);
         self.record_solve(rec, 1, read);
