@@ -536,16 +536,18 @@ fn probes_across_ranks_read_what_one_rank_reads() {
 #[test]
 fn gpu_ranks_with_empty_ones_compute_what_one_gpu_computes() {
     let Some(ctx) = common::contexts().into_iter().next() else { return };
-    // 4 ranks on the moving block: the upper ones start with no particle (and no ghost).
-    let scene = moving_block();
-    let one = one_gpu(&ctx, &scene, 60);
-    let runs = gpu_on_ranks(&ctx, &scene, 4, 0, &|b: &mut dyn Backend| {
-        let before = b.rank_report().expect("across ranks").own_particles;
-        b.step(60)?;
-        Ok((before, b.snapshot()?))
-    });
-    assert!(runs.iter().any(|r| r.0 == 0), "a rank starts empty: {:?}", runs.iter().map(|r| r.0).collect::<Vec<_>>());
-    assert!(runs[0].1 == one, "4 GPU ranks, some empty, against one GPU, bit for bit");
+    // 4 ranks on the moving block: the upper ones start with no particle (and no ghost); with
+    // DFSPH an empty rank takes part in every solve's messages and checks.
+    for scene in [moving_block(), moving_block_dfsph()] {
+        let one = one_gpu(&ctx, &scene, 60);
+        let runs = gpu_on_ranks(&ctx, &scene, 4, 0, &|b: &mut dyn Backend| {
+            let before = b.rank_report().expect("across ranks").own_particles;
+            b.step(60)?;
+            Ok((before, b.snapshot()?))
+        });
+        assert!(runs.iter().any(|r| r.0 == 0), "{}: a rank starts empty: {:?}", scene.name, runs.iter().map(|r| r.0).collect::<Vec<_>>());
+        assert!(runs[0].1 == one, "{}: 4 GPU ranks, some empty, against one GPU, bit for bit", scene.name);
+    }
 }
 
 #[test]
