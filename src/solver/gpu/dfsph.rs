@@ -16,7 +16,7 @@ use crate::model::scene::DfsphSettings;
 use crate::model::state::IterationStats;
 use crate::solver::cpu::exchange::GhostLink;
 
-/// DFSPH across ranks (src/solver/gpu/ranks.rs): the solves' loops run from the host, which
+/// DFSPH across ranks (src/solver/gpu/dfsph_ranks.rs): the solves' loops run from the host, which
 /// gives the ghosts their owners' velocities after every velocity change and adds the error
 /// sums of the ranks before each check (docs/scale-out.md).
 pub struct RankSolves {
@@ -265,7 +265,32 @@ impl DfsphBuffers {
     }
 }
 
+/// The three passes of a solve, each with its bind group: the warm start, the error (rate) and
+/// the velocity change (apply).
+pub(super) struct SolvePasses<'a> {
+    pub warm: (&'a Stage, &'a wgpu::BindGroup),
+    pub rate: (&'a Stage, &'a wgpu::BindGroup),
+    pub apply: (&'a Stage, &'a wgpu::BindGroup),
+}
+
 impl DfsphGpu {
+    /// The passes of solve `solve` (0: divergence, 1: constant density) on the state pair read
+    /// from `read`.
+    pub(super) fn solve_passes(&self, solve: usize, read: usize) -> SolvePasses<'_> {
+        let (g, st) = (&self.groups[read], &self.stages);
+        match solve {
+            0 => SolvePasses {
+                warm: (&st.divergence_warm_start, &g.divergence_warm_start),
+                rate: (&st.divergence_rate, &g.divergence_rate),
+                apply: (&st.divergence_apply, &g.divergence_apply),
+            },
+            _ => SolvePasses {
+                warm: (&st.pressure_warm_start, &g.pressure_warm_start),
+                rate: (&st.predict_density, &g.predict_density),
+                apply: (&st.pressure_apply, &g.pressure_apply),
+            },
+        }
+    }
     pub fn new(ctx: &GpuContext, settings: &DfsphSettings, stages: DfsphStages, buffers: DfsphBuffers, shared: &SharedBuffers, uniform: &wgpu::Buffer) -> Self {
         let device = &ctx.device;
         let groups: Vec<DfsphGroups> = (0..shared.store.phases()).map(|c| {

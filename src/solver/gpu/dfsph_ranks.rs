@@ -2,16 +2,17 @@
 //! velocity from the neighbours' stiffnesses, and the outer layer of ghosts lacks the neighbours
 //! beyond it, so after every velocity change the ghosts must take their owners' velocities, and
 //! each check must see the error of every rank's own particles. One GPU decides both on the
-//! device (`dfsph_convergence.wgsl`); across ranks the host runs the loop instead: the work so
-//! far is submitted and waited for, the velocities read back, the ghosts' replaced through the
-//! rank's [`GhostLink`] and written again; the error sum of the own particles (the shaders
-//! leave the ghosts out) is read back, added over the ranks and checked with the CPU's twin of
-//! the GPU's check. Every rank then runs the iterations one GPU runs, on the same numbers.
+//! device (`dfsph_convergence.wgsl`); across ranks the host runs the loop instead: the
+//! velocities the rank sends are gathered on the device and read back, exchanged through the
+//! rank's [`GhostLink`](crate::solver::cpu::exchange::GhostLink), and those received written
+//! and scattered onto the ghosts (`ghost_velocities.wgsl`); the error sum of the own particles (the shaders leave the ghosts
+//! out) is read back, added over the ranks and checked with the CPU's twin of the GPU's check.
+//! Every rank then runs the iterations one GPU runs, on the same numbers.
 //!
 //! The recorder of the profile cannot wait, so a profile never takes this path.
 
 use super::buffers::{ids_of, GHOST_BIT};
-use super::dfsph::GhostVelocities;
+use super::dfsph::{GhostVelocities, SolvePasses};
 use super::params::status;
 use super::readback::read_ranges;
 use super::schedule::Recorder;
@@ -158,12 +159,8 @@ impl GpuSolver {
     pub(super) fn record_solve_across_ranks(&self, rec: &mut dyn Recorder, solve: usize, read: usize) {
         debug_assert_eq!(status::DFSPH_ERROR_HI, status::DFSPH_ERROR_LO + 1);
         let d = self.dfsph.as_ref().expect("a DFSPH scene");
-        let (g, st, s) = (&d.groups[read], &d.stages, &d.settings);
-        let (warm, rate, apply, gw, gr, ga) = if solve == 0 {
-            (&st.divergence_warm_start, &st.divergence_rate, &st.divergence_apply, &g.divergence_warm_start, &g.divergence_rate, &g.divergence_apply)
-        } else {
-            (&st.pressure_warm_start, &st.predict_density, &st.pressure_apply, &g.pressure_warm_start, &g.predict_density, &g.pressure_apply)
-        };
+        let s = &d.settings;
+        let SolvePasses { warm: (warm, gw), rate: (rate, gr), apply: (apply, ga) } = d.solve_passes(solve, read);
         // The velocities the solve changes: the state's own (divergence) or the predicted ones.
         let predicted = solve == 1;
         let (min_iterations, max_iterations, tolerance) = match solve {

@@ -7,7 +7,7 @@ use super::shaders::{dispatch_size, Stage};
 use super::solver::GpuSolver;
 use super::readback::{read_buffers, read_ranges};
 use super::buffers::storage;
-use super::dfsph::SharedBuffers;
+use super::dfsph::{SharedBuffers, SolvePasses};
 use super::workgroups::{SolverLoop, ADAPTIVE_BLOCK};
 use super::params::status;
 
@@ -337,9 +337,8 @@ impl GpuSolver {
             rec.begin(ProfiledStage::DivergenceSolve);
             self.record_solve(rec, 0, read);
         }
-        if self.solves_across_ranks() {
-            self.keep_prediction_start(rec, read);
-        }
+        // Across ranks, where the host samples force probes this step.
+        self.keep_prediction_start(rec, read);
         rec.begin(ProfiledStage::DfsphPredict);
         match (&d.stages.adaptive, &g.adaptive) {
             (Some([accelerations, choose, predict]), Some([ga, gc, gp])) => {
@@ -381,12 +380,8 @@ impl GpuSolver {
             return;
         }
         let d = self.dfsph.as_ref().expect("a DFSPH scene");
-        let (g, st) = (&d.groups[read], &d.stages);
-        let (warm, rate, apply, gw, gr, ga) = if solve == 0 {
-            (&st.divergence_warm_start, &st.divergence_rate, &st.divergence_apply, &g.divergence_warm_start, &g.divergence_rate, &g.divergence_apply)
-        } else {
-            (&st.pressure_warm_start, &st.predict_density, &st.pressure_apply, &g.pressure_warm_start, &g.predict_density, &g.pressure_apply)
-        };
+        let st = &d.stages;
+        let SolvePasses { warm: (warm, gw), rate: (rate, gr), apply: (apply, ga) } = d.solve_passes(solve, read);
         let (begin_group, check_group) = &d.control[solve];
         dispatch_one(rec, &st.begin[solve], begin_group);
         if d.settings.warm_start {
