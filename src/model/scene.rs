@@ -252,7 +252,8 @@ pub struct Physics {
     /// Changes of viscosity over time, applied from their time on.
     #[serde(default)]
     pub viscosity_schedule: Vec<ViscosityChange>,
-    /// Scales the viscosity term between fluid and wall particles: 1 = no-slip, 0 = free slip.
+    /// Scales the viscosity and artificial viscosity terms between fluid and wall particles:
+    /// 1 = no-slip, 0 = free slip.
     #[serde(default = "default_boundary_friction")]
     pub boundary_friction: f64,
     /// The wall particles' pressure term (see `BoundaryPressure`).

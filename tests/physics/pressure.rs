@@ -142,6 +142,40 @@ fn artificial_viscosity_acts_on_approaching_pairs_only() {
 }
 
 #[test]
+fn boundary_friction_scales_the_artificial_viscosity_of_wall_particles() {
+    // A block of fluid sliding along the floor of a tank at one velocity, without gravity: no
+    // fluid pair approaches another, so all the artificial viscosity there is comes from the
+    // wall particles ahead of each particle, and boundary_friction scales it as it scales the
+    // viscosity between fluid and walls (free slip: none).
+    let accelerations = |alpha: f64, friction: f64| {
+        let s = TestScene::new()
+            .gravity([0.0; 3])
+            .fluid([0.0; 3], [0.2, 0.1, 0.2])
+            .jitter(0.0)
+            .moving_at([0.5, 0.0, 0.0])
+            .container([0.0; 3], [0.6, 0.5, 0.2])
+            .without_planes()
+            .artificial_viscosity(alpha)
+            .boundary_friction(friction)
+            .build();
+        let mut cpu = common::cpu_from::<f64>(&s, &s.initial_state());
+        cpu.bin();
+        cpu.compute_density();
+        cpu.compute_forces();
+        cpu.step_fields().accelerations
+    };
+    let without = accelerations(0.0, 1.0);
+    assert_eq!(accelerations(0.1, 0.0), without, "free-slip walls add artificial viscosity");
+    let drag = |friction: f64| -> Vec<f64> { accelerations(0.1, friction).iter().zip(&without).map(|(a, b)| a[0] - b[0]).collect() };
+    let (full, half) = (drag(1.0), drag(0.5));
+    let braked = full.iter().filter(|d| **d < 0.0).count();
+    assert!(braked > 0 && full.iter().all(|d| *d <= 0.0), "the walls' artificial viscosity does not brake the sliding block: {full:?}");
+    for (f, h) in full.iter().zip(&half) {
+        assert!((h - 0.5 * f).abs() <= 1e-9 * f.abs().max(1e-9), "friction 0.5 gives {h}, friction 1 gives {f}");
+    }
+}
+
+#[test]
 fn the_new_physics_fields_refuse_bad_values_with_the_field_the_value_and_the_range() {
     let e = TestScene::small_tank().continuity().density_diffusion(-0.1).validation_error();
     assert!(e.contains("physics.density_diffusion") && e.contains("-0.1") && e.contains("between 0"), "{e}");

@@ -108,7 +108,7 @@ fn particle_acceleration(i: u32) -> vec4<f32> {
     var a = fluid_pressure * params.fluid_mass + wall_pressure * wall_p_over + visc;
     if (ARTIFICIAL_VISCOSITY) {
         let av = params.artificial_viscosity_factor;
-        a += fluid_artificial * (2.0 * av * params.fluid_mass) + wall_artificial * av;
+        a += fluid_artificial * (2.0 * av * params.fluid_mass) + wall_artificial * (av * params.boundary_friction);
     }
     if (GRAVITY) {
         a += params.gravity.xyz;

@@ -192,7 +192,7 @@ fn add_wall_forces(i: u32, forces: u32) {
     let wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), pi_over, CONSISTENT_WALL_PRESSURE);
     let nu = select(params.viscosity, 10.0 * params.viscosity, cubic);
     let visc_factor = nu * params.boundary_friction / rho_i;
-    let artificial_factor = params.artificial_viscosity_factor / rho_i;
+    let artificial_factor = params.artificial_viscosity_factor * params.boundary_friction / rho_i;
     let c = cell_coords(xi);
     for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);

@@ -237,7 +237,7 @@ fn finish<R: Real>(input: &ForcesInput<R>, i: usize, sums: &ForceSums<R>) -> V3<
     let mut a = sums.fluid_pressure * input.fluid_mass + sums.wall_pressure * wall_p_over + visc;
     if terms.artificial {
         let av = input.artificial_viscosity_factor;
-        a += sums.fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + sums.wall_artificial * av;
+        a += sums.fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + sums.wall_artificial * (av * input.boundary_friction);
     }
     if input.gravity != V3::zero() {
         a += input.gravity;

@@ -286,7 +286,7 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
     let nu = if cubic { R::of(10.0) * input.viscosity } else { input.viscosity };
     let visc_factor = nu * input.boundary_friction / rho_i;
     let artificial = input.artificial_viscosity_factor > R::zero();
-    let artificial_factor = input.artificial_viscosity_factor / rho_i;
+    let artificial_factor = input.artificial_viscosity_factor * input.boundary_friction / rho_i;
     let mut out = vec![R::zero(); FORCE_SLOTS * centres.len()];
     if input.wall_masses.is_empty() {
         return out;
