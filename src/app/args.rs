@@ -269,6 +269,14 @@ pub struct GpuTuning {
     /// less, but two copies of it: 16 bytes more per fluid particle).
     #[arg(long)]
     pub fused: bool,
+    /// Walk the neighbour stencils of a subgroup's particles together in the density and the
+    /// two-pass forces (the default where the adapter's subgroups have exactly 8 invocations, as
+    /// a software adapter's do; an error elsewhere). The same values.
+    #[arg(long, conflicts_with = "no_subgroup_tiles")]
+    pub subgroup_tiles: bool,
+    /// Give every particle its own walk of its stencil, even where subgroup tiles are possible.
+    #[arg(long)]
+    pub no_subgroup_tiles: bool,
     /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes
     /// (`density=64,forces=256`; stages: bin_count, bin_scatter, reorder, density, forces,
     /// integrate). Default 128.
@@ -294,6 +302,7 @@ impl GpuTuning {
             steps_per_submit: self.steps_per_submit.unwrap_or(0),
             single_cells: false,
             solver_loop: self.solver_loop.unwrap_or_default(),
+            subgroup_tiles: if self.subgroup_tiles { Some(true) } else if self.no_subgroup_tiles { Some(false) } else { None },
         }
     }
 }

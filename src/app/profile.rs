@@ -13,6 +13,7 @@ use crate::model::scene::Scene;
 use crate::solver::gpu::memory::MemoryPlan;
 use crate::solver::gpu::schedule::{DFSPH_PROFILED_STAGES, PROFILED_STAGES};
 use crate::solver::gpu::{GpuContext, GpuOptions};
+use crate::solver::gpu::device::TILE_LANES;
 use crate::solver::{open_with, Backend, BackendChoice};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -54,6 +55,10 @@ pub struct Profile {
     pub adapter: String,
     /// "timestamp queries" or "host (whole steps, submit and wait)".
     pub timing: String,
+    /// How the density and forces walk the neighbours: "subgroup tiles of 8" or "one particle
+    /// per invocation".
+    #[serde(default)]
+    pub neighbour_loops: String,
     pub fluid_particles: u64,
     pub wall_particles: u64,
     pub grid_cells: u64,
@@ -283,6 +288,7 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
         scene: scene.name.clone(),
         adapter: gpu.adapter(),
         timing: timing.into(),
+        neighbour_loops: if gpu.subgroup_tiles() { format!("subgroup tiles of {TILE_LANES}") } else { "one particle per invocation".to_string() },
         fluid_particles: n,
         wall_particles: w,
         grid_cells: cells,
@@ -306,8 +312,8 @@ impl Profile {
     /// The table `wgsph profile` prints.
     pub fn table(&self) -> String {
         let mut s = format!(
-            "{}: {} fluid + {} wall particles, {} cells, {} steps on {}\ntiming: {}\n",
-            self.scene, self.fluid_particles, self.wall_particles, self.grid_cells, self.steps, self.adapter, self.timing
+            "{}: {} fluid + {} wall particles, {} cells, {} steps on {}\ntiming: {}\nneighbour loops: {}\n",
+            self.scene, self.fluid_particles, self.wall_particles, self.grid_cells, self.steps, self.adapter, self.timing, self.neighbour_loops
         );
         s += &format!("{:<16} {:>12} {:>8} {:>14} {:>10}\n", "stage", "µs/step", "share %", "bytes/step", "GB/s");
         for st in &self.stages {

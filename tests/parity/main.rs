@@ -15,3 +15,4 @@ mod probes;
 mod pressure;
 mod lanes;
 mod ranks;
+mod tiles;

@@ -189,28 +189,24 @@ fn cell_key(c: vec3<u32>) -> u32 {
     return c.x + params.grid_dims.x * (c.y + params.grid_dims.y * c.z);
 }
 
+// The kernels below have no branches: each piece is computed and the one that applies selected
+// (the same values, a NaN included), since on a SIMD software adapter a branch in a neighbour loop costs more
+// than the arithmetic it skips (docs/performance.md).
+
 // W(r) from r^2: poly6 (Mueller 2003 Eq. 20) or the cubic spline (Monaghan 1992).
 fn kernel_w(r2: f32) -> f32 {
-    if (r2 >= params.h2) {
-        return 0.0;
-    }
     if (KERNEL == 0u) {
         let d = params.h2 - r2;
-        return params.w_coef * d * d * d;
+        return select(params.w_coef * d * d * d, 0.0, r2 >= params.h2);
     }
     let q = sqrt(r2) / params.h;
-    if (q <= 0.5) {
-        return params.w_coef * (6.0 * (q * q * q - q * q) + 1.0);
-    }
     let d = 1.0 - q;
-    return params.w_coef * 2.0 * d * d * d;
+    let w = select(params.w_coef * 2.0 * d * d * d, params.w_coef * (6.0 * (q * q * q - q * q) + 1.0), q <= 0.5);
+    return select(w, 0.0, r2 >= params.h2);
 }
 
 // grad W at r_ij = x_i - x_j with |r_ij| = r; zero at r = 0 where the direction is undefined.
 fn kernel_grad(rij: vec3<f32>, r: f32) -> vec3<f32> {
-    if (r >= params.h || r <= 1e-12 * params.h) {
-        return vec3<f32>(0.0);
-    }
     var dwdr: f32;
     if (KERNEL == 0u) {
         // Spiky (Mueller 2003 Eq. 21).
@@ -218,22 +214,15 @@ fn kernel_grad(rij: vec3<f32>, r: f32) -> vec3<f32> {
         dwdr = params.grad_coef * d * d;
     } else {
         let q = r / params.h;
-        if (q <= 0.5) {
-            dwdr = params.grad_coef * q * (3.0 * q - 2.0);
-        } else {
-            let d = 1.0 - q;
-            dwdr = -params.grad_coef * d * d;
-        }
+        let d = 1.0 - q;
+        dwdr = select(-params.grad_coef * d * d, params.grad_coef * q * (3.0 * q - 2.0), q <= 0.5);
     }
-    return rij * (dwdr / r);
+    return select(rij * (dwdr / r), vec3<f32>(0.0), r >= params.h || r <= 1e-12 * params.h);
 }
 
 // Laplacian of the viscosity kernel (Mueller 2003 Eq. 22).
 fn kernel_laplacian(r: f32) -> f32 {
-    if (r >= params.h) {
-        return 0.0;
-    }
-    return params.lap_coef * (params.h - r);
+    return select(params.lap_coef * (params.h - r), 0.0, r >= params.h);
 }
 
 // Report Eq. 8 (linear) or Eq. 9 (Tait, exponent 7).

@@ -1,5 +1,6 @@
 // Density by kernel summation over fluid and wall neighbours (report Eq. 5) and pressure from
-// the equation of state (Eq. 8 or 9). Twin of src/solver/cpu/density.rs.
+// the equation of state (Eq. 8 or 9). Twin of src/solver/cpu/density.rs. One invocation walks
+// one particle's stencil; density_tiled.wgsl walks a subgroup's together.
 
 //! include shared/common.wgsl
 //! include shared/reduce.wgsl
@@ -39,13 +40,21 @@ fn density(
                 }
             }
         }
-        let rho = params.fluid_mass * fluid_sum + wall_sum;
-        densities_set(i, rho);
-        pressures_set(i, eos_pressure(rho));
-        if (is_finite_f32(rho) && rho > 0.0) {
-            reduce_offer(0u, bitcast<u32>(rho));
-        }
+        set_density(i, params.fluid_mass * fluid_sum + wall_sum);
     }
+    finish_densities(lid);
+}
+
+fn set_density(i: u32, rho: f32) {
+    densities_set(i, rho);
+    pressures_set(i, eos_pressure(rho));
+    if (is_finite_f32(rho) && rho > 0.0) {
+        reduce_offer(0u, bitcast<u32>(rho));
+    }
+}
+
+// The workgroup's largest density into the status words.
+fn finish_densities(lid: u32) {
     reduce_end();
     if (lid == 0u) {
         let largest = reduce_result(0u);

@@ -37,6 +37,8 @@ pub enum GpuError {
     NoAdapter(String),
     #[error("adapter '{adapter}' ({backend}): {what} needs {need} but the adapter's {limit} is {have}")]
     Limit { adapter: String, backend: String, what: String, limit: &'static str, need: u64, have: u64 },
+    #[error("adapter '{adapter}' ({backend}): subgroup tiles were asked for, but {why}; run without --subgroup-tiles")]
+    NoSubgroupTiles { adapter: String, backend: String, why: String },
 }
 
 pub fn backends() -> wgpu::Backends {
@@ -159,7 +161,25 @@ pub fn first_that_opens<A, C>(candidates: Vec<A>, mut open: impl FnMut(A) -> any
     Err(failures)
 }
 
+/// Invocations of a neighbour tile (TILE in wgsl/shared/tiles.wgsl).
+pub const TILE_LANES: u32 = 8;
+
 impl GpuContext {
+    /// Why the neighbour stages cannot walk a subgroup's stencils together on this device
+    /// (wgsl/shared/tiles.wgsl), or `None` where they can: that needs subgroup operations, and
+    /// subgroups of exactly [`TILE_LANES`] invocations (a software adapter's 8-wide SIMD;
+    /// hardware GPUs have 32 or 64 and use the one-particle-per-invocation stages).
+    pub fn subgroup_tiles_unavailable(&self) -> Option<String> {
+        if !self.device.features().contains(wgpu::Features::SUBGROUP) {
+            return Some("the device has no subgroup operations".to_string());
+        }
+        let (min, max) = (self.info.subgroup_min_size, self.info.subgroup_max_size);
+        if (min, max) != (TILE_LANES, TILE_LANES) {
+            return Some(format!("its subgroups have {min} to {max} invocations, not exactly {TILE_LANES}"));
+        }
+        None
+    }
+
     /// Opens the best adapter that can open a device, with all of its limits, so big scenes can
     /// use big buffers. An adapter that is listed with compute shaders but fails to open a device
     /// (a driver that lists an OpenGL context it cannot create, say) is passed over for the next.
@@ -175,7 +195,8 @@ impl GpuContext {
 
     pub fn from_adapter(adapter: wgpu::Adapter) -> anyhow::Result<Self> {
         let info = adapter.get_info();
-        let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+        // Subgroups for the neighbour tiles (GpuContext::subgroup_tiles).
+        let features = adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SUBGROUP);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("wgsph"),
             required_features: features,
@@ -256,7 +277,7 @@ pub fn describe_adapters() -> Vec<String> {
                 }
             };
             format!(
-                "{} | backend {:?} | type {:?} | driver {} {} | compute {} | opens a device {opens} | max_storage_buffer_binding_size {} MiB | max_buffer_size {} MiB | storage buffers per stage {} | workgroups per dimension {} | timestamps {}",
+                "{} | backend {:?} | type {:?} | driver {} {} | compute {} | opens a device {opens} | max_storage_buffer_binding_size {} MiB | max_buffer_size {} MiB | storage buffers per stage {} | workgroups per dimension {} | timestamps {} | subgroups {}",
                 i.name,
                 i.backend,
                 i.device_type,
@@ -268,6 +289,13 @@ pub fn describe_adapters() -> Vec<String> {
                 l.max_storage_buffers_per_shader_stage,
                 l.max_compute_workgroups_per_dimension,
                 if a.features().contains(wgpu::Features::TIMESTAMP_QUERY) { "yes" } else { "no" },
+                if !a.features().contains(wgpu::Features::SUBGROUP) {
+                    "no".to_string()
+                } else if i.subgroup_min_size == i.subgroup_max_size {
+                    format!("{} invocations", i.subgroup_min_size)
+                } else {
+                    format!("{} to {} invocations", i.subgroup_min_size, i.subgroup_max_size)
+                },
             )
         })
         .collect()

@@ -4,7 +4,7 @@
 //! back, waited for or created while steps are recorded.
 
 use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, ParticleBuffers, StateLayout, StateStore, WallCellIndex, STREAM_CHUNK};
-use super::device::GpuContext;
+use super::device::{GpuContext, GpuError, TILE_LANES};
 use super::memory::{MemoryPlan, StepArrays};
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
@@ -89,6 +89,29 @@ pub(super) struct Pipelines {
     /// Forces and integration in one pass (fixed dt only; see `GpuOptions`): no accelerations
     /// array.
     pub fused: bool,
+    /// The weakly compressible neighbour stages walk a subgroup's stencils together (see
+    /// [`subgroup_tiles`]).
+    pub subgroup_tiles: bool,
+}
+
+/// Whether the summation density and the two-pass forces walk the stencils of a subgroup
+/// together (wgsl/shared/tiles.wgsl): by default where the device has subgroups of exactly
+/// [`TILE_LANES`] invocations and both stages' workgroups are whole subgroups, and the stencil is
+/// walked as runs; asked for where it cannot, an error that says why.
+fn subgroup_tiles(ctx: &GpuContext, options: &GpuOptions) -> Result<bool, GpuError> {
+    let ws = options.workgroup_sizes;
+    let why = ctx.subgroup_tiles_unavailable().or_else(|| {
+        [("density", ws.density), ("forces", ws.forces)]
+            .iter()
+            .find(|(_, size)| size % TILE_LANES != 0)
+            .map(|(stage, size)| format!("the {stage} stage's workgroups of {size} are not whole subgroups of {TILE_LANES}"))
+    });
+    match (options.subgroup_tiles, why) {
+        (Some(false), _) => Ok(false),
+        (None, why) => Ok(why.is_none() && !options.single_cells),
+        (Some(true), None) => Ok(true),
+        (Some(true), Some(why)) => Err(GpuError::NoSubgroupTiles { adapter: ctx.info.name.clone(), backend: format!("{:?}", ctx.info.backend), why }),
+    }
 }
 
 /// The weakly compressible step's own stages.
@@ -305,6 +328,7 @@ impl GpuSolver {
         k.push(("GHOSTS", if ranks.is_some() { 1.0 } else { 0.0 }));
         let ws = options.workgroup_sizes;
         ws.check(&ctx)?;
+        let tiles = subgroup_tiles(&ctx, &options)?;
         // The constants of a stage with `size` threads per workgroup.
         let sized = |size: u32| {
             let mut c = k.clone();
@@ -332,11 +356,11 @@ impl GpuSolver {
                     density: if params.continuity_density {
                         stage("continuity", "continuity_density", &len, &sized(ws.density))?
                     } else {
-                        stage("density", "density", &len, &sized(ws.density))?
+                        if tiles { stage("density_tiled", "density_tiled", &len, &sized(ws.density))? } else { stage("density", "density", &len, &sized(ws.density))? }
                     },
                     // One invocation per wall particle, at the density stage's workgroup size.
                     wall_pressure: if adami { Some(stage("wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
-                    forces: stage("forces", "forces", &len, &sized(ws.forces))?,
+                    forces: if tiles { stage("forces_tiled", "forces_tiled", &len, &sized(ws.forces))? } else { stage("forces", "forces", &len, &sized(ws.forces))? },
                     advance: if fused {
                         stage("forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
                     } else {
@@ -354,6 +378,7 @@ impl GpuSolver {
             // One thread on the status words.
             finish_step: stage_in_place("integrate", "finish_step", &without_accelerations, &k)?,
             fused,
+            subgroup_tiles: tiles && !dfsph,
         };
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
         // placeholder (until `step_fields` asks for them).
@@ -674,6 +699,11 @@ impl GpuSolver {
     /// Whether forces and integration run as one pass.
     pub fn fused(&self) -> bool {
         self.pipelines.fused
+    }
+
+    /// Whether the summation density and the two-pass forces walk a subgroup's stencils together.
+    pub fn subgroup_tiles(&self) -> bool {
+        self.pipelines.subgroup_tiles
     }
     /// Blocks until the GPU has finished everything submitted (for timing).
     pub fn wait(&self) -> anyhow::Result<()> {

@@ -1,0 +1,58 @@
+//! The neighbour tiles (wgsl/shared/tiles.wgsl): where the adapter's subgroups have 8
+//! invocations, the tiled density and forces give the one-particle-per-invocation stages' bits
+//! for every term they carry; elsewhere asking for them is refused with the reason.
+
+use crate::common;
+use crate::common::TestScene;
+
+use wgsph::model::scene::{BoundaryPressure, EquationOfState, Kernel, Scene};
+use wgsph::solver::gpu::{GpuOptions, WorkgroupSizes};
+use wgsph::solver::Backend;
+
+fn scenes() -> Vec<(&'static str, Scene)> {
+    let tank = || TestScene::small_tank();
+    vec![
+        ("small tank (walls, plane, viscosity)", tank().build()),
+        ("cubic spline, linear, unclamped", tank().kernel(Kernel::CubicSpline).equation_of_state(EquationOfState::Linear).clamp_negative_pressure(false).build()),
+        ("Adami wall pressure, artificial viscosity", tank().boundary_pressure(BoundaryPressure::Adami).viscosity(0.0).artificial_viscosity(0.1).build()),
+        ("continuity, diffusion, hydrostatic start", tank().continuity().density_diffusion(0.1).hydrostatic_start().build()),
+        ("planes only", tank().without_walls().plane([0.0; 3], [0.0, 1.0, 0.0], 0.5).build()),
+        ("solid box", tank().solid_box([0.3, 0.0, 0.05], [0.4, 0.1, 0.15]).build()),
+        ("dam break", Scene::load("dam_break").unwrap().with_fluid_particles(2000)),
+    ]
+}
+
+#[test]
+fn subgroup_tiles_change_no_value() {
+    for ctx in common::contexts() {
+        let tiles = |on: bool| GpuOptions { subgroup_tiles: Some(on), ..GpuOptions::default() };
+        if let Some(why) = ctx.subgroup_tiles_unavailable() {
+            let scene = TestScene::small_tank().build();
+            let e = common::gpu_with(ctx.clone(), &scene, None, tiles(true)).err().expect("refused");
+            let msg = format!("{e:#}");
+            assert!(msg.contains(&why) && msg.contains("--subgroup-tiles") && msg.contains(&ctx.info.name), "{msg}");
+            assert!(!common::gpu_with(ctx.clone(), &scene, None, GpuOptions::default()).unwrap().subgroup_tiles());
+            continue;
+        }
+        for (name, scene) in scenes() {
+            let run = |options: GpuOptions| {
+                let mut solver = common::gpu_with(ctx.clone(), &scene, None, options).unwrap();
+                solver.step(60).unwrap();
+                (solver.subgroup_tiles(), solver.snapshot().unwrap(), solver.step_fields().unwrap())
+            };
+            let (used, tiled_state, tiled_fields) = run(GpuOptions::default());
+            assert!(used, "{name} on {}: subgroup tiles are the default here", ctx.describe());
+            let (used, state, fields) = run(tiles(false));
+            assert!(!used);
+            assert!(state.positions != scene.initial_state().fluid_positions, "{name}: the particles moved");
+            assert!(tiled_state == state && tiled_fields == fields, "{name} on {}: the tiles changed a value", ctx.describe());
+        }
+        // Workgroups that are not whole subgroups: per particle by default, refused when asked.
+        let scene = TestScene::small_tank().build();
+        let odd = WorkgroupSizes { forces: 100, ..WorkgroupSizes::default() };
+        let solver = common::gpu_with(ctx.clone(), &scene, None, GpuOptions { workgroup_sizes: odd, ..GpuOptions::default() }).unwrap();
+        assert!(!solver.subgroup_tiles());
+        let e = common::gpu_with(ctx.clone(), &scene, None, GpuOptions { workgroup_sizes: odd, ..tiles(true) }).err().expect("refused");
+        assert!(format!("{e:#}").contains("workgroups of 100"), "{e:#}");
+    }
+}

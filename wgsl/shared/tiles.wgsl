@@ -1,0 +1,50 @@
+// Neighbour tiles, the `_tiled` entry points of density.wgsl and forces.wgsl: the TILE
+// invocations of a subgroup, consecutive particles in cell order, walk their stencils together.
+// Each chunk of TILE candidates is read once, one candidate per invocation, and handed to every
+// invocation by subgroup shuffles with constant lanes, instead of every invocation reading every
+// candidate. Each invocation counts only the candidates of its own runs of cells, in the order
+// of the per-particle loop, so the sums are those of the per-particle entry points bit for bit.
+// Chosen by the host where the adapter's subgroups are exactly TILE invocations (a software
+// adapter's 8-wide SIMD; docs/performance.md says why and what it gains).
+
+const TILE: u32 = 8u;
+
+// The row of cells (y, z) that the subgroup's pending invocations take next (the smallest of
+// their rows), whether this invocation is in it, and the x range of their cells in that row.
+struct TileRow {
+    mine: bool,
+    y: u32,
+    z: u32,
+    x_lo: u32,
+    x_hi: u32,
+}
+
+fn tile_row(c: vec3<u32>, pending: bool) -> TileRow {
+    let my_row = c.y + params.grid_dims.y * c.z;
+    let row = subgroupMin(select(0xffffffffu, my_row, pending));
+    let mine = pending && my_row == row;
+    let x_lo = subgroupMin(select(0xffffffffu, c.x, mine));
+    let x_hi = subgroupMax(select(0u, c.x, mine));
+    return TileRow(mine, row % params.grid_dims.y, row / params.grid_dims.y, x_lo, x_hi);
+}
+
+// Run `run` (0 to 8) of the row's stencil as cell keys: the union of the invocations' runs from
+// x to y (exclusive) and this invocation's own run (stencil_run's) from z to w; empty outside
+// the grid, and the own run empty for an invocation not in the row.
+fn tile_run_cells(t: TileRow, cx: u32, run: u32) -> vec4<u32> {
+    let y = i32(t.y) + i32(run % 3u) - 1;
+    let z = i32(t.z) + i32(run / 3u) - 1;
+    if (y < 0 || z < 0 || y >= i32(params.grid_dims.y) || z >= i32(params.grid_dims.z)) {
+        return vec4<u32>(0u);
+    }
+    let base = params.grid_dims.x * (u32(y) + params.grid_dims.y * u32(z));
+    let last = params.grid_dims.x - 1u;
+    let together = vec2<u32>(base + select(t.x_lo - 1u, 0u, t.x_lo == 0u), base + min(t.x_hi + 1u, last) + 1u);
+    let own = vec2<u32>(base + select(cx - 1u, 0u, cx == 0u), base + min(cx + 1u, last) + 1u);
+    return vec4<u32>(together, select(vec2<u32>(0u), own, t.mine));
+}
+
+// Whether candidate j is in the span [own.x, own.y).
+fn in_span(j: u32, own: vec2<u32>) -> bool {
+    return j >= own.x && j < own.y;
+}
