@@ -44,6 +44,17 @@ fn tile_run_cells(t: TileRow, cx: u32, run: u32) -> vec4<u32> {
     return vec4<u32>(together, select(vec2<u32>(0u), own, t.mine));
 }
 
+// Run `run` of the row's stencil as spans of the cell-sorted fluid arrays (or, with `walls`, of
+// the wall arrays): the subgroup's candidates from x to y (exclusive), this invocation's own
+// from z to w. The including stage declares `starts` and `wall_starts`.
+fn tile_spans(t: TileRow, cx: u32, run: u32, walls: bool) -> vec4<u32> {
+    let cells = tile_run_cells(t, cx, run);
+    if (walls) {
+        return vec4<u32>(wall_starts_at(cells.x), wall_starts_at(cells.y), wall_starts_at(cells.z), wall_starts_at(cells.w));
+    }
+    return vec4<u32>(starts_at(cells.x), starts_at(cells.y), starts_at(cells.z), starts_at(cells.w));
+}
+
 // Whether candidate j is in the span [own.x, own.y).
 fn in_span(j: u32, own: vec2<u32>) -> bool {
     return j >= own.x && j < own.y;

@@ -6,42 +6,25 @@
 //! include sim/density.wgsl
 //! include shared/tiles.wgsl
 
-// W of a fluid candidate at xj, zero unless j is in the invocation's own span.
-fn tile_w(xi: vec3<f32>, xj: vec3<f32>, j: u32, own: vec2<u32>) -> f32 {
-    let d = xi - xj;
-    return select(0.0, kernel_w(dot(d, d)), in_span(j, own));
-}
-
-// The fluid sum over a chunk: the candidates b to b + TILE - 1, one per lane in xj, in order.
-fn fluid_chunk(sum: f32, xi: vec3<f32>, xj: vec3<f32>, b: u32, own: vec2<u32>) -> f32 {
-    var s = sum;
-    s += tile_w(xi, subgroupShuffle(xj, 0u), b, own);
-    s += tile_w(xi, subgroupShuffle(xj, 1u), b + 1u, own);
-    s += tile_w(xi, subgroupShuffle(xj, 2u), b + 2u, own);
-    s += tile_w(xi, subgroupShuffle(xj, 3u), b + 3u, own);
-    s += tile_w(xi, subgroupShuffle(xj, 4u), b + 4u, own);
-    s += tile_w(xi, subgroupShuffle(xj, 5u), b + 5u, own);
-    s += tile_w(xi, subgroupShuffle(xj, 6u), b + 6u, own);
-    s += tile_w(xi, subgroupShuffle(xj, 7u), b + 7u, own);
-    return s;
-}
-
-// m W of a wall candidate (w: position and mass), zero unless j is in the own span.
-fn tile_wall_w(xi: vec3<f32>, w: vec4<f32>, j: u32, own: vec2<u32>) -> f32 {
+// W of candidate j at w.xyz, times its mass w.w where `weighed` (a wall particle), zero unless
+// j is in the invocation's own span.
+fn tile_w(xi: vec3<f32>, w: vec4<f32>, weighed: bool, j: u32, own: vec2<u32>) -> f32 {
     let d = xi - w.xyz;
-    return select(0.0, w.w * kernel_w(dot(d, d)), in_span(j, own));
+    let kernel = kernel_w(dot(d, d));
+    return select(0.0, select(kernel, w.w * kernel, weighed), in_span(j, own));
 }
 
-fn wall_chunk(sum: f32, xi: vec3<f32>, w: vec4<f32>, b: u32, own: vec2<u32>) -> f32 {
+// The sum over a chunk: the candidates b to b + TILE - 1, one per lane in w, in order.
+fn chunk_sum(sum: f32, xi: vec3<f32>, w: vec4<f32>, weighed: bool, b: u32, own: vec2<u32>) -> f32 {
     var s = sum;
-    s += tile_wall_w(xi, subgroupShuffle(w, 0u), b, own);
-    s += tile_wall_w(xi, subgroupShuffle(w, 1u), b + 1u, own);
-    s += tile_wall_w(xi, subgroupShuffle(w, 2u), b + 2u, own);
-    s += tile_wall_w(xi, subgroupShuffle(w, 3u), b + 3u, own);
-    s += tile_wall_w(xi, subgroupShuffle(w, 4u), b + 4u, own);
-    s += tile_wall_w(xi, subgroupShuffle(w, 5u), b + 5u, own);
-    s += tile_wall_w(xi, subgroupShuffle(w, 6u), b + 6u, own);
-    s += tile_wall_w(xi, subgroupShuffle(w, 7u), b + 7u, own);
+    s += tile_w(xi, subgroupShuffle(w, 0u), weighed, b, own);
+    s += tile_w(xi, subgroupShuffle(w, 1u), weighed, b + 1u, own);
+    s += tile_w(xi, subgroupShuffle(w, 2u), weighed, b + 2u, own);
+    s += tile_w(xi, subgroupShuffle(w, 3u), weighed, b + 3u, own);
+    s += tile_w(xi, subgroupShuffle(w, 4u), weighed, b + 4u, own);
+    s += tile_w(xi, subgroupShuffle(w, 5u), weighed, b + 5u, own);
+    s += tile_w(xi, subgroupShuffle(w, 6u), weighed, b + 6u, own);
+    s += tile_w(xi, subgroupShuffle(w, 7u), weighed, b + 7u, own);
     return s;
 }
 
@@ -65,17 +48,14 @@ fn density_tiled(
     while (subgroupAny(pending)) {
         let t = tile_row(c, pending);
         for (var run = 0u; run < 9u; run++) {
-            let cells = tile_run_cells(t, c.x, run);
-            let e = starts_at(cells.y);
-            let own = vec2<u32>(starts_at(cells.z), starts_at(cells.w));
-            for (var b = starts_at(cells.x); b < e; b += TILE) {
-                fluid_sum = fluid_chunk(fluid_sum, xi, positions_at(min(b + lane, e - 1u)).xyz, b, own);
+            let fluid = tile_spans(t, c.x, run, false);
+            for (var b = fluid.x; b < fluid.y; b += TILE) {
+                fluid_sum = chunk_sum(fluid_sum, xi, positions_at(min(b + lane, fluid.y - 1u)), false, b, fluid.zw);
             }
             if (WALLS) {
-                let e = wall_starts_at(cells.y);
-                let own = vec2<u32>(wall_starts_at(cells.z), wall_starts_at(cells.w));
-                for (var b = wall_starts_at(cells.x); b < e; b += TILE) {
-                    wall_sum = wall_chunk(wall_sum, xi, wall_positions_at(min(b + lane, e - 1u)), b, own);
+                let walls = tile_spans(t, c.x, run, true);
+                for (var b = walls.x; b < walls.y; b += TILE) {
+                    wall_sum = chunk_sum(wall_sum, xi, wall_positions_at(min(b + lane, walls.y - 1u)), true, b, walls.zw);
                 }
             }
         }

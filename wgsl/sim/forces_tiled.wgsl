@@ -63,19 +63,16 @@ fn forces_tiled(
     while (subgroupAny(pending)) {
         let t = tile_row(c, pending);
         for (var run = 0u; run < 9u; run++) {
-            let cells = tile_run_cells(t, c.x, run);
-            let e = starts_at(cells.y);
-            let span = vec2<u32>(starts_at(cells.z), starts_at(cells.w));
-            for (var b = starts_at(cells.x); b < e; b += TILE) {
-                let j = min(b + lane, e - 1u);
-                fluid_chunk(&sums, own, fluid_candidate(j, positions_at(j).xyz), b, span);
+            let fluid = tile_spans(t, c.x, run, false);
+            for (var b = fluid.x; b < fluid.y; b += TILE) {
+                let j = min(b + lane, fluid.y - 1u);
+                fluid_chunk(&sums, own, fluid_candidate(j, positions_at(j).xyz), b, fluid.zw);
             }
             if (WALLS) {
-                let e = wall_starts_at(cells.y);
-                let span = vec2<u32>(wall_starts_at(cells.z), wall_starts_at(cells.w));
-                for (var b = wall_starts_at(cells.x); b < e; b += TILE) {
-                    let j = min(b + lane, e - 1u);
-                    wall_chunk(&sums, own, wall_candidate(j, wall_positions_at(j)), b, span);
+                let walls = tile_spans(t, c.x, run, true);
+                for (var b = walls.x; b < walls.y; b += TILE) {
+                    let j = min(b + lane, walls.y - 1u);
+                    wall_chunk(&sums, own, wall_candidate(j, wall_positions_at(j)), b, walls.zw);
                 }
             }
         }
