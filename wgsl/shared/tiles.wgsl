@@ -7,6 +7,7 @@
 // Chosen by the host where the adapter's subgroups are exactly TILE invocations (a software
 // adapter's 8-wide SIMD; docs/performance.md says why and what it gains).
 
+// The `//! unroll 8` lines of the tiled stages hand out one chunk of TILE candidates.
 const TILE: u32 = 8u;
 
 // The row of cells (y, z) that the subgroup's pending invocations take next (the smallest of
@@ -58,4 +59,38 @@ fn tile_spans(t: TileRow, cx: u32, run: u32, walls: bool) -> vec4<u32> {
 // Whether candidate j is in the span [own.x, own.y).
 fn in_span(j: u32, own: vec2<u32>) -> bool {
     return j >= own.x && j < own.y;
+}
+
+// The sums of one particle over its stencil, walked with the subgroup. The including stage
+// defines the types TileOwn (what a particle brings to its pairs) and TileSums, no_tile_sums(),
+// and tile_fluid_chunk and tile_wall_chunk(sums, own, j, b, span): this invocation reads
+// candidate j, and the chunk's candidates b to b + TILE - 1 (one per lane) that lie in `span`
+// are added to the sums, in order. Every invocation of the subgroup must call it (the shuffles
+// need all TILE lanes); `pending` is false for one without a particle.
+fn tile_walk(own: TileOwn, c: vec3<u32>, lane: u32, pending_at_start: bool) -> TileSums {
+    var sums = no_tile_sums();
+    var pending = pending_at_start;
+    while (subgroupAny(pending)) {
+        let t = tile_row(c, pending);
+        for (var run = 0u; run < 9u; run++) {
+            let fluid = tile_spans(t, c.x, run, false);
+            for (var b = fluid.x; b < fluid.y; b += TILE) {
+                tile_fluid_chunk(&sums, own, min(b + lane, fluid.y - 1u), b, fluid.zw);
+            }
+            if (WALLS) {
+                let walls = tile_spans(t, c.x, run, true);
+                for (var b = walls.x; b < walls.y; b += TILE) {
+                    tile_wall_chunk(&sums, own, min(b + lane, walls.y - 1u), b, walls.zw);
+                }
+            }
+        }
+        pending = pending && !t.mine;
+    }
+    return sums;
+}
+
+// The particle an invocation takes: its own, or for one past the last the last one (whose
+// sums it computes for the shuffles' sake and drops).
+fn tile_particle(i: u32) -> u32 {
+    return min(i, max(params.fluid_count, 1u) - 1u);
 }

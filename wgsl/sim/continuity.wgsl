@@ -9,7 +9,9 @@
 // the last integration produced, so density and velocity advance alternately (symplectic
 // Euler); a rate taken with the forces, from the velocities before their update, would make the
 // pair an explicit Euler step that amplifies sound waves. Pressure from the equation of state
-// (report Eq. 8 or 9). Twin of src/solver/cpu/continuity.rs.
+// (report Eq. 8 or 9). Twin of src/solver/cpu/continuity.rs. One invocation walks one
+// particle's stencil; continuity_tiled.wgsl walks a subgroup's together, with the pair terms
+// below.
 
 //! include shared/common.wgsl
 //! include shared/reduce.wgsl
@@ -23,49 +25,81 @@
 // STATUS_MAX_DENSITY: the largest density so far; STATUS_STEP_MAX_DENSITY: of this step.
 //! array status: u32, atomic, whole
 
-// The density rate of fluid particle i.
+// What a fluid particle brings to its pairs: position, velocity and carried density.
+struct RateOwn {
+    x: vec3<f32>,
+    u: vec3<f32>,
+    rho: f32,
+}
+
+fn rate_own(i: u32) -> RateOwn {
+    let v = velocities_at(i);
+    return RateOwn(positions_at(i).xyz, v.xyz, v.w);
+}
+
+// The sums of the rate, without their constant factors (applied by finish_rate).
+struct RateSums {
+    fluid: f32,
+    wall: f32,
+    diffusive: f32,
+}
+
+// The terms of the fluid neighbour at xj with velocity and carried density vj, added where
+// `counted` (its own stencil's candidate) and it is closer than h.
+fn add_fluid_rate(sums: ptr<function, RateSums>, own: RateOwn, xj: vec3<f32>, vj: vec4<f32>, counted: bool) {
+    let rij = own.x - xj;
+    let r2 = dot(rij, rij);
+    let counts = counted && !(r2 >= params.h2);
+    let grad = kernel_grad(rij, sqrt(r2));
+    (*sums).fluid += select(0.0, dot(own.u - vj.xyz, grad), counts);
+    if (DENSITY_DIFFUSION) {
+        var drho = vj.w - own.rho;
+        if (GRAVITY) {
+            drho -= density_above_rest(-params.rest_density * dot(params.gravity.xyz, rij));
+        }
+        // r2 = 0 only for i itself, whose gradient is zero.
+        (*sums).diffusive += select(0.0, dot(rij, grad) * (drho / (vj.w * r2)), counts && r2 > 0.0);
+    }
+}
+
+// The term of the wall neighbour w (position, mass), at rest.
+fn add_wall_rate(sums: ptr<function, RateSums>, own: RateOwn, w: vec4<f32>, counted: bool) {
+    let rij = own.x - w.xyz;
+    let r2 = dot(rij, rij);
+    (*sums).wall += select(0.0, dot(own.u, kernel_grad(rij, sqrt(r2))) * w.w, counted && !(r2 >= params.h2));
+}
+
+fn finish_rate(sums: RateSums) -> f32 {
+    return (sums.fluid - params.diffusion_factor * sums.diffusive) * params.fluid_mass + sums.wall;
+}
+
+// The density rate of fluid particle i, one particle over its stencil.
 fn density_rate(i: u32) -> f32 {
-    let xi = positions_at(i).xyz;
-    let vi = velocities_at(i);
-    let ui = vi.xyz;
-    let rho_i = vi.w;
-    let c = cell_coords(xi);
-    var fluid_rate = 0.0;
-    var wall_rate = 0.0;
-    var diffusive = 0.0;
+    let own = rate_own(i);
+    let c = cell_coords(own.x);
+    var sums = RateSums(0.0, 0.0, 0.0);
     for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);
         for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
-            let rij = xi - positions_at(j).xyz;
-            let r2 = dot(rij, rij);
-            if (r2 >= params.h2) {
+            let xj = positions_at(j).xyz;
+            let rij = own.x - xj;
+            if (dot(rij, rij) >= params.h2) {
                 continue;
             }
-            let grad = kernel_grad(rij, sqrt(r2));
-            let vj = velocities_at(j);
-            fluid_rate += dot(ui - vj.xyz, grad);
-            // r2 = 0 only for i itself, whose gradient is zero.
-            if (DENSITY_DIFFUSION && r2 > 0.0) {
-                var drho = vj.w - rho_i;
-                if (GRAVITY) {
-                    drho -= density_above_rest(-params.rest_density * dot(params.gravity.xyz, rij));
-                }
-                diffusive += dot(rij, grad) * (drho / (vj.w * r2));
-            }
+            add_fluid_rate(&sums, own, xj, velocities_at(j), true);
         }
         if (WALLS) {
             for (var j = wall_starts_at(cells.x); j < wall_starts_at(cells.y); j++) {
                 let w = wall_positions_at(j);  // w: mass
-                let rij = xi - w.xyz;
-                let r2 = dot(rij, rij);
-                if (r2 >= params.h2) {
+                let rij = own.x - w.xyz;
+                if (dot(rij, rij) >= params.h2) {
                     continue;
                 }
-                wall_rate += dot(ui, kernel_grad(rij, sqrt(r2))) * w.w;
+                add_wall_rate(&sums, own, w, true);
             }
         }
     }
-    return (fluid_rate - params.diffusion_factor * diffusive) * params.fluid_mass + wall_rate;
+    return finish_rate(sums);
 }
 
 // The dt the density advances by: the fixed dt, or with adaptive dt the last step's (the one
@@ -89,13 +123,23 @@ fn continuity_density(
     reduce_begin(lid);
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let rho = velocities_at(i).w + continuity_dt() * density_rate(i);
-        densities_set(i, rho);
-        pressures_set(i, eos_pressure(rho));
-        if (is_finite_f32(rho) && rho > 0.0) {
-            reduce_offer(0u, bitcast<u32>(rho));
-        }
+        set_carried_density(i, density_rate(i));
     }
+    finish_carried_densities(lid);
+}
+
+// The carried density advanced with `rate`, and its pressure.
+fn set_carried_density(i: u32, rate: f32) {
+    let rho = velocities_at(i).w + continuity_dt() * rate;
+    densities_set(i, rho);
+    pressures_set(i, eos_pressure(rho));
+    if (is_finite_f32(rho) && rho > 0.0) {
+        reduce_offer(0u, bitcast<u32>(rho));
+    }
+}
+
+// The workgroup's largest density into the status words.
+fn finish_carried_densities(lid: u32) {
     reduce_end();
     if (lid == 0u) {
         let largest = reduce_result(0u);

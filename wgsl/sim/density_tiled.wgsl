@@ -6,30 +6,37 @@
 //! include sim/density.wgsl
 //! include shared/tiles.wgsl
 
-// W of candidate j at w.xyz, times its mass w.w where `weighed` (a wall particle), zero unless
-// j is in the invocation's own span.
-fn tile_w(xi: vec3<f32>, w: vec4<f32>, weighed: bool, j: u32, own: vec2<u32>) -> f32 {
-    let d = xi - w.xyz;
-    let kernel = kernel_w(dot(d, d));
-    return select(0.0, select(kernel, w.w * kernel, weighed), in_span(j, own));
+// A particle's position; the fluid sum of W (x) and the walls' sum of m W (y).
+alias TileOwn = vec3<f32>;
+alias TileSums = vec2<f32>;
+
+fn no_tile_sums() -> TileSums {
+    return vec2<f32>(0.0);
 }
 
-// The sum over a chunk: the candidates b to b + TILE - 1, one per lane in w, in order.
-fn chunk_sum(sum: f32, xi: vec3<f32>, w: vec4<f32>, weighed: bool, b: u32, own: vec2<u32>) -> f32 {
+// W of candidate j at w.xyz, times its mass w.w where `weighed` (a wall particle), zero unless
+// j is in the invocation's own span.
+fn tile_w(xi: vec3<f32>, w: vec4<f32>, weighed: bool, j: u32, span: vec2<u32>) -> f32 {
+    let d = xi - w.xyz;
+    let kernel = kernel_w(dot(d, d));
+    return select(0.0, select(kernel, w.w * kernel, weighed), in_span(j, span));
+}
+
+// The chunk's sum: the candidates b to b + TILE - 1, one per lane in w, in order.
+fn chunk_sum(sum: f32, xi: vec3<f32>, w: vec4<f32>, weighed: bool, b: u32, span: vec2<u32>) -> f32 {
     var s = sum;
-    s += tile_w(xi, subgroupShuffle(w, 0u), weighed, b, own);
-    s += tile_w(xi, subgroupShuffle(w, 1u), weighed, b + 1u, own);
-    s += tile_w(xi, subgroupShuffle(w, 2u), weighed, b + 2u, own);
-    s += tile_w(xi, subgroupShuffle(w, 3u), weighed, b + 3u, own);
-    s += tile_w(xi, subgroupShuffle(w, 4u), weighed, b + 4u, own);
-    s += tile_w(xi, subgroupShuffle(w, 5u), weighed, b + 5u, own);
-    s += tile_w(xi, subgroupShuffle(w, 6u), weighed, b + 6u, own);
-    s += tile_w(xi, subgroupShuffle(w, 7u), weighed, b + 7u, own);
+    //! unroll 8 s += tile_w(xi, subgroupShuffle(w, {k}u), weighed, b + {k}u, span);
     return s;
 }
 
-// `density` with the subgroup's stencils walked together (shared/tiles.wgsl): every invocation
-// of a subgroup runs every loop, since the shuffles need all TILE lanes.
+fn tile_fluid_chunk(sums: ptr<function, TileSums>, xi: TileOwn, j: u32, b: u32, span: vec2<u32>) {
+    (*sums).x = chunk_sum((*sums).x, xi, positions_at(j), false, b, span);
+}
+
+fn tile_wall_chunk(sums: ptr<function, TileSums>, xi: TileOwn, j: u32, b: u32, span: vec2<u32>) {
+    (*sums).y = chunk_sum((*sums).y, xi, wall_positions_at(j), true, b, span);
+}
+
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn density_tiled(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -39,30 +46,10 @@ fn density_tiled(
 ) {
     reduce_begin(lid);
     let i = thread_index(gid, groups);
-    let is_fluid = i < params.fluid_count;
-    let xi = positions_at(min(i, max(params.fluid_count, 1u) - 1u)).xyz;
-    let c = cell_coords(xi);
-    var fluid_sum = 0.0;
-    var wall_sum = 0.0;
-    var pending = is_fluid;
-    while (subgroupAny(pending)) {
-        let t = tile_row(c, pending);
-        for (var run = 0u; run < 9u; run++) {
-            let fluid = tile_spans(t, c.x, run, false);
-            for (var b = fluid.x; b < fluid.y; b += TILE) {
-                fluid_sum = chunk_sum(fluid_sum, xi, positions_at(min(b + lane, fluid.y - 1u)), false, b, fluid.zw);
-            }
-            if (WALLS) {
-                let walls = tile_spans(t, c.x, run, true);
-                for (var b = walls.x; b < walls.y; b += TILE) {
-                    wall_sum = chunk_sum(wall_sum, xi, wall_positions_at(min(b + lane, walls.y - 1u)), true, b, walls.zw);
-                }
-            }
-        }
-        pending = pending && !t.mine;
-    }
-    if (is_fluid) {
-        set_density(i, params.fluid_mass * fluid_sum + wall_sum);
+    let xi = positions_at(tile_particle(i)).xyz;
+    let sums = tile_walk(xi, cell_coords(xi), lane, i < params.fluid_count);
+    if (i < params.fluid_count) {
+        set_density(i, params.fluid_mass * sums.x + sums.y);
     }
     finish_densities(lid);
 }

@@ -15,16 +15,17 @@ fn shuffled_fluid(n: FluidCandidate, k: u32) -> FluidCandidate {
     return FluidCandidate(subgroupShuffle(n.x, k), u, subgroupShuffle(n.rho, k), subgroupShuffle(n.p, k));
 }
 
-// The fluid candidates b to b + TILE - 1 (one per lane in n), in order.
-fn fluid_chunk(sums: ptr<function, ForceSums>, own: OwnParticle, n: FluidCandidate, b: u32, span: vec2<u32>) {
-    add_fluid_pair(sums, own, shuffled_fluid(n, 0u), in_span(b, span));
-    add_fluid_pair(sums, own, shuffled_fluid(n, 1u), in_span(b + 1u, span));
-    add_fluid_pair(sums, own, shuffled_fluid(n, 2u), in_span(b + 2u, span));
-    add_fluid_pair(sums, own, shuffled_fluid(n, 3u), in_span(b + 3u, span));
-    add_fluid_pair(sums, own, shuffled_fluid(n, 4u), in_span(b + 4u, span));
-    add_fluid_pair(sums, own, shuffled_fluid(n, 5u), in_span(b + 5u, span));
-    add_fluid_pair(sums, own, shuffled_fluid(n, 6u), in_span(b + 6u, span));
-    add_fluid_pair(sums, own, shuffled_fluid(n, 7u), in_span(b + 7u, span));
+alias TileOwn = OwnParticle;
+alias TileSums = ForceSums;
+
+fn no_tile_sums() -> TileSums {
+    return no_sums();
+}
+
+// The fluid candidates b to b + TILE - 1 (this lane's: j), in order.
+fn tile_fluid_chunk(sums: ptr<function, ForceSums>, own: OwnParticle, j: u32, b: u32, span: vec2<u32>) {
+    let n = fluid_candidate(j, positions_at(j).xyz);
+    //! unroll 8 add_fluid_pair(sums, own, shuffled_fluid(n, {k}u), in_span(b + {k}u, span));
 }
 
 fn shuffled_wall(n: WallCandidate, k: u32) -> WallCandidate {
@@ -35,19 +36,11 @@ fn shuffled_wall(n: WallCandidate, k: u32) -> WallCandidate {
     return WallCandidate(subgroupShuffle(n.w, k), fields);
 }
 
-fn wall_chunk(sums: ptr<function, ForceSums>, own: OwnParticle, n: WallCandidate, b: u32, span: vec2<u32>) {
-    add_wall_pair(sums, own, shuffled_wall(n, 0u), in_span(b, span));
-    add_wall_pair(sums, own, shuffled_wall(n, 1u), in_span(b + 1u, span));
-    add_wall_pair(sums, own, shuffled_wall(n, 2u), in_span(b + 2u, span));
-    add_wall_pair(sums, own, shuffled_wall(n, 3u), in_span(b + 3u, span));
-    add_wall_pair(sums, own, shuffled_wall(n, 4u), in_span(b + 4u, span));
-    add_wall_pair(sums, own, shuffled_wall(n, 5u), in_span(b + 5u, span));
-    add_wall_pair(sums, own, shuffled_wall(n, 6u), in_span(b + 6u, span));
-    add_wall_pair(sums, own, shuffled_wall(n, 7u), in_span(b + 7u, span));
+fn tile_wall_chunk(sums: ptr<function, ForceSums>, own: OwnParticle, j: u32, b: u32, span: vec2<u32>) {
+    let n = wall_candidate(j, wall_positions_at(j));
+    //! unroll 8 add_wall_pair(sums, own, shuffled_wall(n, {k}u), in_span(b + {k}u, span));
 }
 
-// `forces` with the subgroup's stencils walked together (shared/tiles.wgsl): every invocation
-// of a subgroup runs every loop, since the shuffles need all TILE lanes.
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn forces_tiled(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -55,30 +48,9 @@ fn forces_tiled(
     @builtin(subgroup_invocation_id) lane: u32,
 ) {
     let i = thread_index(gid, groups);
-    let is_fluid = i < params.fluid_count;
-    let own = own_particle(min(i, max(params.fluid_count, 1u) - 1u));
-    let c = cell_coords(own.x);
-    var sums = no_sums();
-    var pending = is_fluid;
-    while (subgroupAny(pending)) {
-        let t = tile_row(c, pending);
-        for (var run = 0u; run < 9u; run++) {
-            let fluid = tile_spans(t, c.x, run, false);
-            for (var b = fluid.x; b < fluid.y; b += TILE) {
-                let j = min(b + lane, fluid.y - 1u);
-                fluid_chunk(&sums, own, fluid_candidate(j, positions_at(j).xyz), b, fluid.zw);
-            }
-            if (WALLS) {
-                let walls = tile_spans(t, c.x, run, true);
-                for (var b = walls.x; b < walls.y; b += TILE) {
-                    let j = min(b + lane, walls.y - 1u);
-                    wall_chunk(&sums, own, wall_candidate(j, wall_positions_at(j)), b, walls.zw);
-                }
-            }
-        }
-        pending = pending && !t.mine;
-    }
-    if (is_fluid) {
+    let own = own_particle(tile_particle(i));
+    let sums = tile_walk(own, cell_coords(own.x), lane, i < params.fluid_count);
+    if (i < params.fluid_count) {
         accelerations_set(i, finish_acceleration(own, sums));
     }
 }

@@ -1,7 +1,9 @@
 //! Shader assembly and compute pipelines, built once per scene.
 //!
 //! WGSL has no include: a stage file names the files it needs with `//! include PATH` lines
-//! (paths under wgsl/), which [`assemble`] replaces by their text, each file once. A stage
+//! (paths under wgsl/), which [`assemble`] replaces by their text, each file once. Nor does it
+//! unroll: `//! unroll N STATEMENT` stands for N copies of STATEMENT with `{k}` replaced by 0 to
+//! N - 1 (a subgroup shuffle's lane must be a constant to compile to a register permutation). A stage
 //! declares its storage arrays with `//! array NAME: TYPE, ACCESS` lines, from which the host
 //! generates the bindings and accessors ([`ArrayDecl`]); the arrays' lengths and buffers are
 //! then given by name.
@@ -22,6 +24,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/density.wgsl", include_str!("../../../wgsl/sim/density.wgsl")),
     ("sim/density_tiled.wgsl", include_str!("../../../wgsl/sim/density_tiled.wgsl")),
     ("sim/continuity.wgsl", include_str!("../../../wgsl/sim/continuity.wgsl")),
+    ("sim/continuity_tiled.wgsl", include_str!("../../../wgsl/sim/continuity_tiled.wgsl")),
     ("sim/forces.wgsl", include_str!("../../../wgsl/sim/forces.wgsl")),
     ("sim/forces_tiled.wgsl", include_str!("../../../wgsl/sim/forces_tiled.wgsl")),
     ("sim/integrate.wgsl", include_str!("../../../wgsl/sim/integrate.wgsl")),
@@ -55,6 +58,17 @@ pub fn assemble(text: &str, lookup: &dyn Fn(&str) -> Option<&'static str>) -> St
 
 fn include_into(text: &str, lookup: &dyn Fn(&str) -> Option<&'static str>, done: &mut Vec<String>, out: &mut String) {
     for line in text.lines() {
+        if let Some(rest) = line.trim().strip_prefix("//! unroll ") {
+            let (count, statement) = rest.split_once(' ').unwrap_or_else(|| panic!("WGSL unroll without a statement: '{line}'"));
+            let count: u32 = count.parse().unwrap_or_else(|_| panic!("WGSL unroll count '{count}' is not a number"));
+            let indent = &line[..line.len() - line.trim_start().len()];
+            for k in 0..count {
+                out.push_str(indent);
+                out.push_str(&statement.replace("{k}", &k.to_string()));
+                out.push('\n');
+            }
+            continue;
+        }
         match line.trim().strip_prefix("//! include ") {
             Some(path) => {
                 let path = path.trim();
@@ -523,5 +537,20 @@ pub fn dispatch_size(threads: u64, per_group: u32, max_per_dim: u32) -> (u32, u3
     } else {
         let y = groups.div_ceil(max_per_dim as u64);
         (max_per_dim, y as u32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn includes_come_once_and_unrolls_count_their_lanes() {
+        let lookup = |path: &str| match path {
+            "a.wgsl" => Some("fn a() {}\n"),
+            _ => None,
+        };
+        let text = "//! include a.wgsl\n//! include a.wgsl\nfn f() {\n    //! unroll 3 s += g({k}u, b + {k}u);\n}\n";
+        assert_eq!(assemble(text, &lookup), "fn a() {}\nfn f() {\n    s += g(0u, b + 0u);\n    s += g(1u, b + 1u);\n    s += g(2u, b + 2u);\n}\n");
     }
 }

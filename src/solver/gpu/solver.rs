@@ -354,7 +354,7 @@ impl GpuSolver {
                 Some(WcsphStages {
                     // The density stage: summation, or with continuity density the carried density.
                     density: if params.continuity_density {
-                        stage("continuity", "continuity_density", &len, &sized(ws.density))?
+                        if tiles { stage("continuity_tiled", "continuity_tiled", &len, &sized(ws.density))? } else { stage("continuity", "continuity_density", &len, &sized(ws.density))? }
                     } else {
                         if tiles { stage("density_tiled", "density_tiled", &len, &sized(ws.density))? } else { stage("density", "density", &len, &sized(ws.density))? }
                     },
