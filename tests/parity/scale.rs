@@ -340,7 +340,7 @@ fn run_tuning_flags_change_no_output_and_bad_sizes_exit_2() {
         (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned())
     };
     assert_eq!(run("plain", &[]).0, Some(0));
-    for (i, flags) in [&["--fused", "--workgroup-size", "64", "--steps-per-submit", "2"][..], &["--unfused", "--workgroup-size", "density=32,forces=256"][..]]
+    for (i, flags) in [&["--fused", "--workgroup-size", "64", "--steps-per-submit", "2"][..], &["--unfused", "--workgroup-size", "density=32,forces=256"][..], &["--no-subgroup-tiles"][..]]
         .into_iter()
         .enumerate()
     {
@@ -349,7 +349,15 @@ fn run_tuning_flags_change_no_output_and_bad_sizes_exit_2() {
         let file = "snapshots/step_000006.csv";
         assert!(std::fs::read(dir.path().join("plain").join(file)).unwrap() == std::fs::read(dir.path().join(&out).join(file)).unwrap(), "{flags:?}");
     }
-    for (flags, names) in [(&["--workgroup-size", "pressure=64"][..], "'pressure'"), (&["--workgroup-size", "0"][..], "'0'"), (&["--fused", "--unfused"][..], "--unfused")] {
+    for (flags, names) in [
+        (&["--workgroup-size", "pressure=64"][..], "'pressure'"),
+        (&["--workgroup-size", "0"][..], "'0'"),
+        (&["--fused", "--unfused"][..], "--unfused"),
+        (&["--subgroup-tiles", "--no-subgroup-tiles"][..], "--no-subgroup-tiles"),
+        // Tiles asked for where they cannot run: forces workgroups that are not whole subgroups
+        // (or, on an adapter without subgroups of 8, for that reason).
+        (&["--subgroup-tiles", "--workgroup-size", "forces=100"][..], "--subgroup-tiles"),
+    ] {
         let (code, err) = run("bad", flags);
         assert_eq!(code, Some(2), "{flags:?}: {err}");
         assert!(err.contains(names), "{flags:?}: {err}");
