@@ -1,5 +1,5 @@
 //! The neighbour tiles (wgsl/shared/tiles.wgsl): where the adapter's subgroups have 8
-//! invocations, the tiled density and forces give the one-particle-per-invocation stages' bits
+//! invocations, the tiled density, continuity density and forces give the one-particle-per-invocation stages' bits
 //! for every term they carry; elsewhere asking for them is refused with the reason.
 
 use crate::common;

@@ -190,8 +190,8 @@ fn cell_key(c: vec3<u32>) -> u32 {
 }
 
 // The kernels below have no branches: each piece is computed and the one that applies selected
-// (the same values, a NaN included), since on a SIMD software adapter a branch in a neighbour loop costs more
-// than the arithmetic it skips (docs/performance.md).
+// (the same values, a NaN included), since on a SIMD software adapter a branch in a neighbour
+// loop costs more than the arithmetic it skips (docs/performance.md).
 
 // W(r) from r^2: poly6 (Mueller 2003 Eq. 20) or the cubic spline (Monaghan 1992).
 fn kernel_w(r2: f32) -> f32 {

@@ -1,5 +1,6 @@
-// Neighbour tiles, the `_tiled` entry points of density.wgsl and forces.wgsl: the TILE
-// invocations of a subgroup, consecutive particles in cell order, walk their stencils together.
+// Neighbour tiles, the walk of the tiled stages (density_tiled.wgsl, continuity_tiled.wgsl,
+// forces_tiled.wgsl): the TILE invocations of a subgroup, consecutive particles in cell order,
+// walk their stencils together.
 // Each chunk of TILE candidates is read once, one candidate per invocation, and handed to every
 // invocation by subgroup shuffles with constant lanes, instead of every invocation reading every
 // candidate. Each invocation counts only the candidates of its own runs of cells, in the order
@@ -66,7 +67,7 @@ fn in_span(j: u32, own: vec2<u32>) -> bool {
 // and tile_fluid_chunk and tile_wall_chunk(sums, own, j, b, span): this invocation reads
 // candidate j, and the chunk's candidates b to b + TILE - 1 (one per lane) that lie in `span`
 // are added to the sums, in order. Every invocation of the subgroup must call it (the shuffles
-// need all TILE lanes); `pending` is false for one without a particle.
+// need all TILE lanes); `pending_at_start` is false for one without a particle.
 fn tile_walk(own: TileOwn, c: vec3<u32>, lane: u32, pending_at_start: bool) -> TileSums {
     var sums = no_tile_sums();
     var pending = pending_at_start;

@@ -94,8 +94,8 @@ pub(super) struct Pipelines {
     pub subgroup_tiles: bool,
 }
 
-/// Whether the summation density and the two-pass forces walk the stencils of a subgroup
-/// together (wgsl/shared/tiles.wgsl): by default where the device has subgroups of exactly
+/// Whether the density (summation or continuity) and the two-pass forces walk the stencils of a
+/// subgroup together (wgsl/shared/tiles.wgsl): by default where the device has subgroups of exactly
 /// [`TILE_LANES`] invocations and both stages' workgroups are whole subgroups, and the stencil is
 /// walked as runs; asked for where it cannot, an error that says why.
 fn subgroup_tiles(ctx: &GpuContext, options: &GpuOptions) -> Result<bool, GpuError> {
@@ -335,6 +335,15 @@ impl GpuSolver {
             c.push(("WORKGROUP_SIZE", size as f64));
             c
         };
+        // A neighbour stage: stage file NAME's `entry`, or with subgroup tiles NAME_tiled's.
+        let neighbour_stage = |name: &str, entry: &str, size: u32| {
+            if tiles {
+                let tiled = format!("{name}_tiled");
+                stage(&tiled, &tiled, &len, &sized(size))
+            } else {
+                stage(name, entry, &len, &sized(size))
+            }
+        };
         let pipelines = Pipelines {
             bin_count: stage("bin_count", "bin_count", &len, &sized(ws.bin_count))?,
             bin_scatter: stage("bin_scatter", "bin_scatter", &len, &sized(ws.bin_scatter))?,
@@ -354,13 +363,13 @@ impl GpuSolver {
                 Some(WcsphStages {
                     // The density stage: summation, or with continuity density the carried density.
                     density: if params.continuity_density {
-                        if tiles { stage("continuity_tiled", "continuity_tiled", &len, &sized(ws.density))? } else { stage("continuity", "continuity_density", &len, &sized(ws.density))? }
+                        neighbour_stage("continuity", "continuity_density", ws.density)?
                     } else {
-                        if tiles { stage("density_tiled", "density_tiled", &len, &sized(ws.density))? } else { stage("density", "density", &len, &sized(ws.density))? }
+                        neighbour_stage("density", "density", ws.density)?
                     },
                     // One invocation per wall particle, at the density stage's workgroup size.
                     wall_pressure: if adami { Some(stage("wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
-                    forces: if tiles { stage("forces_tiled", "forces_tiled", &len, &sized(ws.forces))? } else { stage("forces", "forces", &len, &sized(ws.forces))? },
+                    forces: neighbour_stage("forces", "forces", ws.forces)?,
                     advance: if fused {
                         stage("forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
                     } else {
@@ -701,7 +710,8 @@ impl GpuSolver {
         self.pipelines.fused
     }
 
-    /// Whether the summation density and the two-pass forces walk a subgroup's stencils together.
+    /// Whether the density (summation or continuity) and the two-pass forces walk a subgroup's
+    /// stencils together.
     pub fn subgroup_tiles(&self) -> bool {
         self.pipelines.subgroup_tiles
     }

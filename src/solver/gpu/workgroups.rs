@@ -181,8 +181,8 @@ pub struct GpuOptions {
     pub single_cells: bool,
     /// How a DFSPH solve's loop ends on the GPU.
     pub solver_loop: SolverLoop,
-    /// Walk the neighbour stencils of a subgroup together in the summation density and the
-    /// forces (wgsl/shared/tiles.wgsl; the same values): `None` (the default) where the device
+    /// Walk the neighbour stencils of a subgroup together in the density (summation or
+    /// continuity) and the two-pass forces (wgsl/shared/tiles.wgsl; the same values): `None` (the default) where the device
     /// can, `Some(true)` or an error where it cannot, `Some(false)` never.
     pub subgroup_tiles: Option<bool>,
 }
