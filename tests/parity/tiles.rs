@@ -1,6 +1,6 @@
 //! The neighbour tiles (wgsl/shared/tiles.wgsl): where the adapter's subgroups have 8
-//! invocations, the tiled density, continuity density and forces give the one-particle-per-invocation stages' bits
-//! for every term they carry; elsewhere asking for them is refused with the reason.
+//! invocations, the tiled density, continuity density, forces and DFSPH solve passes give the
+//! one-particle-per-invocation stages' bits for every term they carry; elsewhere asking for them is refused with the reason.
 
 use crate::common;
 use crate::common::TestScene;
@@ -19,6 +19,8 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         ("planes only", tank().without_walls().plane([0.0; 3], [0.0, 1.0, 0.0], 0.5).build()),
         ("solid box", tank().solid_box([0.3, 0.0, 0.05], [0.4, 0.1, 0.15]).build()),
         ("dam break", Scene::load("dam_break").unwrap().with_fluid_particles(2000)),
+        ("DFSPH", tank().dfsph().build()),
+        ("DFSPH, adaptive dt", tank().dfsph().adaptive().build()),
     ]
 }
 

@@ -15,15 +15,30 @@ fn density_rate(i: u32, xi: vec3<f32>, vi: vec3<f32>) -> f32 {
     for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);
         for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
-            let rij = xi - positions_at(j).xyz;
-            let r2 = dot(rij, rij);
-            if (r2 >= params.h2) {
+            let xj = positions_at(j).xyz;
+            let rij = xi - xj;
+            if (dot(rij, rij) >= params.h2) {
                 continue;
             }
-            sum += dot(vi - velocities_at(j).xyz, kernel_grad(rij, sqrt(r2)));
+            sum += rate_pair(xi, vi, xj, velocities_at(j).xyz, true);
         }
     }
     return sum * params.fluid_volume + dot(vi, wall_gradients_at(i).xyz);
+}
+
+// The pair terms of density_rate and stiffness_push: (v_i - v_j) . grad W_ij and
+// (K_i + K_j) grad W_ij, where `counted` (a tile's candidate in the own span) and j is closer than
+// h (NaN distances included).
+fn rate_pair(xi: vec3<f32>, vi: vec3<f32>, xj: vec3<f32>, vj: vec3<f32>, counted: bool) -> f32 {
+    let rij = xi - xj;
+    let r2 = dot(rij, rij);
+    return select(0.0, dot(vi - vj, kernel_grad(rij, sqrt(r2))), counted && !(r2 >= params.h2));
+}
+
+fn push_pair(xi: vec3<f32>, ki: f32, xj: vec3<f32>, kj: f32, counted: bool) -> vec3<f32> {
+    let rij = xi - xj;
+    let r2 = dot(rij, rij);
+    return select(vec3<f32>(0.0), kernel_grad(rij, sqrt(r2)) * (ki + kj), counted && !(r2 >= params.h2));
 }
 
 // V sum_j (K_i + K_j) grad W_ij + K_i g_i^w: the velocity change of the stiffness K, before its
@@ -34,12 +49,12 @@ fn stiffness_push(i: u32, xi: vec3<f32>, ki: f32) -> vec3<f32> {
     for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);
         for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
-            let rij = xi - positions_at(j).xyz;
-            let r2 = dot(rij, rij);
-            if (r2 >= params.h2) {
+            let xj = positions_at(j).xyz;
+            let rij = xi - xj;
+            if (dot(rij, rij) >= params.h2) {
                 continue;
             }
-            sum += kernel_grad(rij, sqrt(r2)) * (ki + stiffness_at(j));
+            sum += push_pair(xi, ki, xj, stiffness_at(j), true);
         }
     }
     return sum * params.fluid_volume + wall_gradients_at(i).xyz * ki;

@@ -1,5 +1,5 @@
 // Neighbour tiles, the walk of the tiled stages (density_tiled.wgsl, continuity_tiled.wgsl,
-// forces_tiled.wgsl): the TILE invocations of a subgroup, consecutive particles in cell order,
+// forces_tiled.wgsl, and DFSPH's solve passes, shared/dfsph_tiles.wgsl): the TILE invocations of a subgroup, consecutive particles in cell order,
 // walk their stencils together.
 // Each chunk of TILE candidates is read once, one candidate per invocation, and handed to every
 // invocation by subgroup shuffles with constant lanes, instead of every invocation reading every
@@ -46,14 +46,10 @@ fn tile_run_cells(t: TileRow, cx: u32, run: u32) -> vec4<u32> {
     return vec4<u32>(together, select(vec2<u32>(0u), own, t.mine));
 }
 
-// Run `run` of the row's stencil as spans of the cell-sorted fluid arrays (or, with `walls`, of
-// the wall arrays): the subgroup's candidates from x to y (exclusive), this invocation's own
-// from z to w. The including stage declares `starts` and `wall_starts`.
-fn tile_spans(t: TileRow, cx: u32, run: u32, walls: bool) -> vec4<u32> {
+// Run `run` of the row's stencil as spans of the cell-sorted fluid arrays: the subgroup's
+// candidates from x to y (exclusive), this invocation's own from z to w.
+fn tile_fluid_spans(t: TileRow, cx: u32, run: u32) -> vec4<u32> {
     let cells = tile_run_cells(t, cx, run);
-    if (walls) {
-        return vec4<u32>(wall_starts_at(cells.x), wall_starts_at(cells.y), wall_starts_at(cells.z), wall_starts_at(cells.w));
-    }
     return vec4<u32>(starts_at(cells.x), starts_at(cells.y), starts_at(cells.z), starts_at(cells.w));
 }
 
@@ -64,7 +60,8 @@ fn in_span(j: u32, own: vec2<u32>) -> bool {
 
 // The sums of one particle over its stencil, walked with the subgroup. The including stage
 // defines the types TileOwn (what a particle brings to its pairs) and TileSums, no_tile_sums(),
-// and tile_fluid_chunk and tile_wall_chunk(sums, own, j, b, span): this invocation reads
+// tile_wall_spans (the wall arrays' spans, as tile_fluid_spans; shared/tiles_walls.wgsl), and
+// tile_fluid_chunk and tile_wall_chunk(sums, own, j, b, span): this invocation reads
 // candidate j, and the chunk's candidates b to b + TILE - 1 (one per lane) that lie in `span`
 // are added to the sums, in order. Every invocation of the subgroup must call it (the shuffles
 // need all TILE lanes); `pending_at_start` is false for one without a particle.
@@ -74,12 +71,12 @@ fn tile_walk(own: TileOwn, c: vec3<u32>, lane: u32, pending_at_start: bool) -> T
     while (subgroupAny(pending)) {
         let t = tile_row(c, pending);
         for (var run = 0u; run < 9u; run++) {
-            let fluid = tile_spans(t, c.x, run, false);
+            let fluid = tile_fluid_spans(t, c.x, run);
             for (var b = fluid.x; b < fluid.y; b += TILE) {
                 tile_fluid_chunk(&sums, own, min(b + lane, fluid.y - 1u), b, fluid.zw);
             }
             if (WALLS) {
-                let walls = tile_spans(t, c.x, run, true);
+                let walls = tile_wall_spans(t, c.x, run);
                 for (var b = walls.x; b < walls.y; b += TILE) {
                     tile_wall_chunk(&sums, own, min(b + lane, walls.y - 1u), b, walls.zw);
                 }

@@ -5,6 +5,7 @@
 
 //! include sim/continuity.wgsl
 //! include shared/tiles.wgsl
+//! include shared/tiles_walls.wgsl
 
 alias TileOwn = RateOwn;
 alias TileSums = RateSums;

@@ -5,6 +5,7 @@
 
 //! include sim/density.wgsl
 //! include shared/tiles.wgsl
+//! include shared/tiles_walls.wgsl
 
 // A particle's position; the fluid sum of W (x) and the walls' sum of m W (y).
 alias TileOwn = vec3<f32>;

@@ -47,14 +47,19 @@ fn divergence_rate(
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
         let p = positions_at(i);
-        let d = max(density_rate(i, p.xyz, velocities_at(i).xyz), 0.0);
-        stiffness_set(i, d * factors_at(i));
-        // A ghost's error is its owner's to count (across ranks).
-        if (!is_ghost(p.w)) {
-            error_offer(d * divergence_dt());
-        }
+        set_divergence_stiffness(i, p.w, density_rate(i, p.xyz, velocities_at(i).xyz));
     }
     error_end(lid);
+}
+
+// K_i and the error of particle i (w: its position's w) from its rate of density change.
+fn set_divergence_stiffness(i: u32, w: f32, rate: f32) {
+    let d = max(rate, 0.0);
+    stiffness_set(i, d * factors_at(i));
+    // A ghost's error is its owner's to count (across ranks).
+    if (!is_ghost(w)) {
+        error_offer(d * divergence_dt());
+    }
 }
 
 // One Jacobi step: v_i -= V sum_j (K_i + K_j) grad W_ij + K_i g_i^w; K_i added to the step's sum.
@@ -62,9 +67,12 @@ fn divergence_rate(
 fn divergence_apply(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let ki = stiffness_at(i);
-        let v = velocities_at(i);
-        velocities_set(i, vec4<f32>(v.xyz - stiffness_push(i, positions_at(i).xyz, ki), v.w));
-        divergence_sum_set(i, divergence_sum_at(i) + ki);
+        apply_divergence_push(i, stiffness_push(i, positions_at(i).xyz, stiffness_at(i)));
     }
+}
+
+fn apply_divergence_push(i: u32, push: vec3<f32>) {
+    let v = velocities_at(i);
+    velocities_set(i, vec4<f32>(v.xyz - push, v.w));
+    divergence_sum_set(i, divergence_sum_at(i) + stiffness_at(i));
 }

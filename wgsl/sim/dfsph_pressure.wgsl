@@ -22,9 +22,9 @@ fn step_dt() -> f32 {
     return params.dt;
 }
 
-// rho_i / rho0 + dt D_i: the density the velocities give after dt.
-fn predicted_density(i: u32, p: vec4<f32>) -> f32 {
-    return densities_at(i) / params.rest_density + step_dt() * density_rate(i, p.xyz, velocities_at(i).xyz);
+// rho_i / rho0 + dt D_i: the density the velocities give after dt, from the rate D_i.
+fn predicted_density(i: u32, rate: f32) -> f32 {
+    return densities_at(i) / params.rest_density + step_dt() * rate;
 }
 
 // The stiffness the solve starts from: a share of the last step's (by particle id) where the
@@ -34,7 +34,8 @@ fn pressure_warm_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(n
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
         let p = positions_at(i);
-        stiffness_set(i, select(0.0, params.warm_start_share * warm_pressure_at(particle_id(p.w)), predicted_density(i, p) > 1.0));
+        let rate = density_rate(i, p.xyz, velocities_at(i).xyz);
+        stiffness_set(i, select(0.0, params.warm_start_share * warm_pressure_at(particle_id(p.w)), predicted_density(i, rate) > 1.0));
     }
 }
 
@@ -50,14 +51,19 @@ fn predict_density(
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
         let p = positions_at(i);
-        let error = max(predicted_density(i, p), 1.0) - 1.0;
-        stiffness_set(i, error * factors_at(i));
-        // A ghost's error is its owner's to count (across ranks).
-        if (!is_ghost(p.w)) {
-            error_offer(error);
-        }
+        set_pressure_stiffness(i, p.w, density_rate(i, p.xyz, velocities_at(i).xyz));
     }
     error_end(lid);
+}
+
+// K_i and the error of particle i (w: its position's w) from its rate of density change.
+fn set_pressure_stiffness(i: u32, w: f32, rate: f32) {
+    let error = max(predicted_density(i, rate), 1.0) - 1.0;
+    stiffness_set(i, error * factors_at(i));
+    // A ghost's error is its owner's to count (across ranks).
+    if (!is_ghost(w)) {
+        error_offer(error);
+    }
 }
 
 // One Jacobi step: v_i -= (V sum_j (K_i + K_j) grad W_ij + K_i g_i^w) / dt; K_i added to the sum.
@@ -65,9 +71,12 @@ fn predict_density(
 fn pressure_apply(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let ki = stiffness_at(i);
-        let v = velocities_at(i);
-        velocities_set(i, vec4<f32>(v.xyz - stiffness_push(i, positions_at(i).xyz, ki) * (1.0 / step_dt()), v.w));
-        pressure_sum_set(i, pressure_sum_at(i) + ki);
+        apply_pressure_push(i, stiffness_push(i, positions_at(i).xyz, stiffness_at(i)));
     }
+}
+
+fn apply_pressure_push(i: u32, push: vec3<f32>) {
+    let v = velocities_at(i);
+    velocities_set(i, vec4<f32>(v.xyz - push * (1.0 / step_dt()), v.w));
+    pressure_sum_set(i, pressure_sum_at(i) + stiffness_at(i));
 }

@@ -5,6 +5,7 @@
 
 //! include sim/forces.wgsl
 //! include shared/tiles.wgsl
+//! include shared/tiles_walls.wgsl
 
 // Lane k's candidate, for every invocation.
 fn shuffled_fluid(n: FluidCandidate, k: u32) -> FluidCandidate {

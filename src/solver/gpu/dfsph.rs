@@ -167,8 +167,10 @@ pub(super) fn solve_threads(sizes: &WorkgroupSizes) -> u32 {
 
 impl DfsphStages {
     /// Every DFSPH pipeline, with the scene's constants `k` and the workgroup sizes (density:
-    /// the factors; forces: the prediction and the solves; integrate: the integration).
-    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths, places: &[(&str, Alias)]) -> Result<Self, GpuError> {
+    /// the factors; forces: the prediction and the solves; integrate: the integration); with
+    /// `tiles`, the solves' iterations walk a subgroup's stencils together
+    /// (wgsl/shared/dfsph_tiles.wgsl).
+    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths, places: &[(&str, Alias)], tiles: bool) -> Result<Self, GpuError> {
         let settings = params.dfsph.as_ref().expect("a DFSPH scene");
         let sized = |size: u32| {
             let mut c = k.to_vec();
@@ -184,19 +186,27 @@ impl DfsphStages {
         };
         let warm = settings.warm_start;
         let one = |entry: &str, consts: &[(&str, f64)]| stage_with_aliases(ctx, entry_file(entry), entry, lens, consts, places);
+        // A solve iteration's pass: ENTRY, or with tiles ENTRY_tiled in its file's _tiled twin.
+        let iteration = |entry: &str| {
+            if tiles {
+                stage_with_aliases(ctx, &format!("{}_tiled", entry_file(entry)), &format!("{entry}_tiled"), lens, &solve, places)
+            } else {
+                one(entry, &solve)
+            }
+        };
         Ok(DfsphStages {
             factors: one("density_and_factor", &sized(sizes.density))?,
             divergence_warm_start: one("divergence_warm_start", &solve)?,
-            divergence_rate: one("divergence_rate", &solve)?,
-            divergence_apply: one("divergence_apply", &solve)?,
+            divergence_rate: iteration("divergence_rate")?,
+            divergence_apply: iteration("divergence_apply")?,
             predict: one("predict_velocities", &solve)?,
             adaptive: match params.adaptive {
                 Some(_) => Some([one("non_pressure_accelerations", &solve)?, one("choose_dt", k)?, one("predict_from_accelerations", &solve)?]),
                 None => None,
             },
             pressure_warm_start: one("pressure_warm_start", &solve)?,
-            predict_density: one("predict_density", &solve)?,
-            pressure_apply: one("pressure_apply", &solve)?,
+            predict_density: iteration("predict_density")?,
+            pressure_apply: iteration("pressure_apply")?,
             begin: [one("begin_solve", &control(0, warm))?, one("begin_solve", &control(1, warm))?],
             check: [one("check_convergence", &control(0, warm))?, one("check_convergence", &control(1, warm))?],
             integrate: one("integrate", &sized(sizes.integrate))?,

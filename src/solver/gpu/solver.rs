@@ -94,8 +94,8 @@ pub(super) struct Pipelines {
     pub subgroup_tiles: bool,
 }
 
-/// Whether the density (summation or continuity) and the two-pass forces walk the stencils of a
-/// subgroup together (wgsl/shared/tiles.wgsl): by default where the device has subgroups of exactly
+/// Whether the density (summation or continuity), the two-pass forces and DFSPH's solve
+/// iterations walk the stencils of a subgroup together (wgsl/shared/tiles.wgsl): by default where the device has subgroups of exactly
 /// [`TILE_LANES`] invocations and both stages' workgroups are whole subgroups, and the stencil is
 /// walked as runs; asked for where it cannot, an error that says why.
 fn subgroup_tiles(ctx: &GpuContext, options: &GpuOptions) -> Result<bool, GpuError> {
@@ -387,14 +387,14 @@ impl GpuSolver {
             // One thread on the status words.
             finish_step: stage_in_place("integrate", "finish_step", &without_accelerations, &k)?,
             fused,
-            subgroup_tiles: tiles && !dfsph,
+            subgroup_tiles: tiles,
         };
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
         // placeholder (until `step_fields` asks for them).
         let dfsph_len = |name: &str| if name == "accelerations" && params.adaptive.is_none() { 0 } else { counts.len(name) };
         // In place DFSPH's integration writes the positions it reads.
         let dfsph_places: Vec<(&str, Alias)> = aliases.iter().copied().chain((layout == StateLayout::InPlace).then_some(IN_PLACE[0])).collect();
-        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places)?) } else { None };
+        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places, tiles)?) } else { None };
 
         let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -710,8 +710,8 @@ impl GpuSolver {
         self.pipelines.fused
     }
 
-    /// Whether the density (summation or continuity) and the two-pass forces walk a subgroup's
-    /// stencils together.
+    /// Whether the density (summation or continuity), the two-pass forces and DFSPH's solve
+    /// iterations walk a subgroup's stencils together.
     pub fn subgroup_tiles(&self) -> bool {
         self.pipelines.subgroup_tiles
     }

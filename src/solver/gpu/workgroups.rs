@@ -182,7 +182,8 @@ pub struct GpuOptions {
     /// How a DFSPH solve's loop ends on the GPU.
     pub solver_loop: SolverLoop,
     /// Walk the neighbour stencils of a subgroup together in the density (summation or
-    /// continuity) and the two-pass forces (wgsl/shared/tiles.wgsl; the same values): `None` (the default) where the device
+    /// continuity), the two-pass forces and DFSPH's solve iterations (wgsl/shared/tiles.wgsl;
+    /// the same values): `None` (the default) where the device
     /// can, `Some(true)` or an error where it cannot, `Some(false)` never.
     pub subgroup_tiles: Option<bool>,
 }
