@@ -1,7 +1,9 @@
-// The walk of DFSPH's tiled solve passes (dfsph_divergence_tiled.wgsl, dfsph_pressure_tiled.wgsl;
+// DFSPH's tiled solve passes (dfsph_divergence_tiled.wgsl, dfsph_pressure_tiled.wgsl;
 // shared/tiles.wgsl): the rate of density change and the velocity change of a stiffness, over
 // fluid neighbours only (the walls enter through each particle's wall gradient), with the pair
-// terms of shared/dfsph.wgsl in the order of its per-particle loops.
+// terms of shared/dfsph.wgsl in the order of its per-particle loops. The entry points
+// `rate_tiled` and `apply_tiled` end as the including solve's `set_stiffness_from_rate` and
+// `apply_stiffness_push` do.
 
 // A particle's position, velocity and stiffness, and which sum the walk takes (the same for the
 // whole dispatch): the push of the stiffness, or the rate.
@@ -58,4 +60,33 @@ fn tiled_stiffness_push(i: u32, lane: u32) -> vec3<f32> {
     let own = SolveOwn(positions_at(p).xyz, vec3<f32>(0.0), stiffness_at(p), true);
     let sums = tile_walk(own, cell_coords(own.x), lane, i < params.fluid_count);
     return sums.push * params.fluid_volume + wall_gradients_at(p).xyz * own.k;
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn rate_tiled(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+    @builtin(subgroup_invocation_id) lane: u32,
+) {
+    error_begin(lid);
+    let i = thread_index(gid, groups);
+    let rate = tiled_density_rate(i, lane);
+    if (i < params.fluid_count) {
+        set_stiffness_from_rate(i, positions_at(i).w, rate);
+    }
+    error_end(lid);
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn apply_tiled(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(subgroup_invocation_id) lane: u32,
+) {
+    let i = thread_index(gid, groups);
+    let push = tiled_stiffness_push(i, lane);
+    if (i < params.fluid_count) {
+        apply_stiffness_push(i, push);
+    }
 }

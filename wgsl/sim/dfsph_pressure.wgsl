@@ -51,13 +51,13 @@ fn predict_density(
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
         let p = positions_at(i);
-        set_pressure_stiffness(i, p.w, density_rate(i, p.xyz, velocities_at(i).xyz));
+        set_stiffness_from_rate(i, p.w, density_rate(i, p.xyz, velocities_at(i).xyz));
     }
     error_end(lid);
 }
 
 // K_i and the error of particle i (w: its position's w) from its rate of density change.
-fn set_pressure_stiffness(i: u32, w: f32, rate: f32) {
+fn set_stiffness_from_rate(i: u32, w: f32, rate: f32) {
     let error = max(predicted_density(i, rate), 1.0) - 1.0;
     stiffness_set(i, error * factors_at(i));
     // A ghost's error is its owner's to count (across ranks).
@@ -71,11 +71,11 @@ fn set_pressure_stiffness(i: u32, w: f32, rate: f32) {
 fn pressure_apply(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        apply_pressure_push(i, stiffness_push(i, positions_at(i).xyz, stiffness_at(i)));
+        apply_stiffness_push(i, stiffness_push(i, positions_at(i).xyz, stiffness_at(i)));
     }
 }
 
-fn apply_pressure_push(i: u32, push: vec3<f32>) {
+fn apply_stiffness_push(i: u32, push: vec3<f32>) {
     let v = velocities_at(i);
     velocities_set(i, vec4<f32>(v.xyz - push * (1.0 / step_dt()), v.w));
     pressure_sum_set(i, pressure_sum_at(i) + stiffness_at(i));

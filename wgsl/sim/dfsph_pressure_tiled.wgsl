@@ -1,37 +1,8 @@
-// DFSPH's constant-density solve passes with the stencils of a subgroup walked together
-// (shared/dfsph_tiles.wgsl): the same sums in the same order as dfsph_pressure.wgsl's, so the twin is the
-// same, src/solver/cpu/dfsph_pressure.rs. A file of its own since its subgroup operations need an adapter
-// with subgroups, which the other stages do not.
+// DFSPH's constant-density solve iterations with the stencils of a subgroup walked together
+// (`rate_tiled`, `apply_tiled`: shared/dfsph_tiles.wgsl): the same sums in the same order as
+// dfsph_pressure.wgsl's, so the twin is the same, src/solver/cpu/dfsph_pressure.rs. A file of its own since its
+// subgroup operations need an adapter with subgroups, which the other stages do not.
 
 //! include sim/dfsph_pressure.wgsl
 //! include shared/tiles.wgsl
 //! include shared/dfsph_tiles.wgsl
-
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn predict_density_tiled(
-    @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-    @builtin(subgroup_invocation_id) lane: u32,
-) {
-    error_begin(lid);
-    let i = thread_index(gid, groups);
-    let rate = tiled_density_rate(i, lane);
-    if (i < params.fluid_count) {
-        set_pressure_stiffness(i, positions_at(i).w, rate);
-    }
-    error_end(lid);
-}
-
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn pressure_apply_tiled(
-    @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(subgroup_invocation_id) lane: u32,
-) {
-    let i = thread_index(gid, groups);
-    let push = tiled_stiffness_push(i, lane);
-    if (i < params.fluid_count) {
-        apply_pressure_push(i, push);
-    }
-}

@@ -186,10 +186,10 @@ impl DfsphStages {
         };
         let warm = settings.warm_start;
         let one = |entry: &str, consts: &[(&str, f64)]| stage_with_aliases(ctx, entry_file(entry), entry, lens, consts, places);
-        // A solve iteration's pass: ENTRY, or with tiles ENTRY_tiled in its file's _tiled twin.
-        let iteration = |entry: &str| {
+        // A solve iteration's pass: `entry`, or with tiles `tiled` in its file's _tiled twin.
+        let iteration = |entry: &str, tiled: &str| {
             if tiles {
-                stage_with_aliases(ctx, &format!("{}_tiled", entry_file(entry)), &format!("{entry}_tiled"), lens, &solve, places)
+                stage_with_aliases(ctx, &format!("{}_tiled", entry_file(entry)), tiled, lens, &solve, places)
             } else {
                 one(entry, &solve)
             }
@@ -197,16 +197,16 @@ impl DfsphStages {
         Ok(DfsphStages {
             factors: one("density_and_factor", &sized(sizes.density))?,
             divergence_warm_start: one("divergence_warm_start", &solve)?,
-            divergence_rate: iteration("divergence_rate")?,
-            divergence_apply: iteration("divergence_apply")?,
+            divergence_rate: iteration("divergence_rate", "rate_tiled")?,
+            divergence_apply: iteration("divergence_apply", "apply_tiled")?,
             predict: one("predict_velocities", &solve)?,
             adaptive: match params.adaptive {
                 Some(_) => Some([one("non_pressure_accelerations", &solve)?, one("choose_dt", k)?, one("predict_from_accelerations", &solve)?]),
                 None => None,
             },
             pressure_warm_start: one("pressure_warm_start", &solve)?,
-            predict_density: iteration("predict_density")?,
-            pressure_apply: iteration("pressure_apply")?,
+            predict_density: iteration("predict_density", "rate_tiled")?,
+            pressure_apply: iteration("pressure_apply", "apply_tiled")?,
             begin: [one("begin_solve", &control(0, warm))?, one("begin_solve", &control(1, warm))?],
             check: [one("check_convergence", &control(0, warm))?, one("check_convergence", &control(1, warm))?],
             integrate: one("integrate", &sized(sizes.integrate))?,
