@@ -1,8 +1,8 @@
 // Neighbour tiles, the walk of the tiled stages (density_tiled.wgsl, continuity_tiled.wgsl,
-// forces_tiled.wgsl, and DFSPH's solve passes, shared/dfsph_tiles.wgsl): the TILE invocations of a subgroup, consecutive particles in cell order,
-// walk their stencils together.
-// Each chunk of TILE candidates is read once, one candidate per invocation, and handed to every
-// invocation by subgroup shuffles with constant lanes, instead of every invocation reading every
+// forces_tiled.wgsl, and DFSPH's solve passes, shared/dfsph_tiles.wgsl): the TILE invocations
+// of a subgroup, consecutive particles in cell order, walk their stencils together. Each chunk
+// of TILE candidates is read once, one candidate per invocation, and handed to every invocation
+// by subgroup shuffles with constant lanes, instead of every invocation reading every
 // candidate. Each invocation counts only the candidates of its own runs of cells, in the order
 // of the per-particle loop, so the sums are those of the per-particle entry points bit for bit.
 // Chosen by the host where the adapter's subgroups are exactly TILE invocations (a software
