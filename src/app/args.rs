@@ -415,6 +415,10 @@ pub struct BenchArgs {
     /// `readback:K` (see `wgsph run --help`), to measure one against another.
     #[arg(long, value_name = "LOOP")]
     pub solver_loop: Option<SolverLoop>,
+    /// Give every particle its own walk of its stencil on the GPU paths, even where subgroup
+    /// tiles are possible (to measure what the tiles gain; see `wgsph run --help`).
+    #[arg(long)]
+    pub no_subgroup_tiles: bool,
     /// Also write the figures to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,

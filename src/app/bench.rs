@@ -214,7 +214,11 @@ pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
             BenchPath::CpuF32 | BenchPath::DfsphCpuF32 => rows.push(measure(name, scene, &BackendChoice::cpu(Precision::F32), args.steps, args.n)?),
             BenchPath::CpuF64 | BenchPath::DfsphCpuF64 => rows.push(measure(name, scene, &BackendChoice::cpu(Precision::F64), args.steps, args.n)?),
             BenchPath::Gpu | BenchPath::DfsphGpu => {
-                let options = GpuOptions { solver_loop: args.solver_loop.unwrap_or_default(), ..Default::default() };
+                let options = GpuOptions {
+                    solver_loop: args.solver_loop.unwrap_or_default(),
+                    subgroup_tiles: if args.no_subgroup_tiles { Some(false) } else { None },
+                    ..Default::default()
+                };
                 let adapters = if args.every_adapter { compute_adapters() } else { Vec::new() };
                 if adapters.is_empty() {
                     rows.push(measure(name, scene, &BackendChoice::gpu().with_gpu_options(options), args.steps, args.n)?);

@@ -63,3 +63,16 @@ fn bench_times_each_path_asked_for_and_writes_the_figures() {
     let bad = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["bench", "--paths", "cpu-f16"]).output().unwrap();
     assert_eq!(bad.status.code(), Some(2));
 }
+
+#[test]
+fn the_gpu_path_runs_with_and_without_subgroup_tiles() {
+    if crate::common::contexts().is_empty() {
+        return;
+    }
+    for extra in [&[][..], &["--no-subgroup-tiles"][..]] {
+        let out = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["bench", "--n", "6", "--steps", "3", "--paths", "gpu"]).args(extra).output().unwrap();
+        assert!(out.status.success(), "{extra:?}: {}", String::from_utf8_lossy(&out.stderr));
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(stdout.lines().any(|l| l.starts_with("gpu ")), "{extra:?}: {stdout}");
+    }
+}
