@@ -55,8 +55,8 @@ pub struct Profile {
     pub adapter: String,
     /// "timestamp queries" or "host (whole steps, submit and wait)".
     pub timing: String,
-    /// How the density and forces walk the neighbours: "subgroup tiles of 8" or "one particle
-    /// per invocation".
+    /// How the neighbour stages walk the neighbours: "subgroup tiles of 8" or "one particle per
+    /// invocation".
     #[serde(default)]
     pub neighbour_loops: String,
     pub fluid_particles: u64,

@@ -15,6 +15,7 @@
 
 //! include shared/common.wgsl
 //! include shared/reduce.wgsl
+//! include shared/density_write.wgsl
 //! array positions: vec4<f32>, read
 //! array velocities: vec4<f32>, read
 //! array starts: u32, read
@@ -125,25 +126,10 @@ fn continuity_density(
     if (i < params.fluid_count) {
         set_carried_density(i, density_rate(i));
     }
-    finish_carried_densities(lid);
+    finish_densities(lid);
 }
 
 // The carried density advanced with `rate`, and its pressure.
 fn set_carried_density(i: u32, rate: f32) {
-    let rho = velocities_at(i).w + continuity_dt() * rate;
-    densities_set(i, rho);
-    pressures_set(i, eos_pressure(rho));
-    if (is_finite_f32(rho) && rho > 0.0) {
-        reduce_offer(0u, bitcast<u32>(rho));
-    }
-}
-
-// The workgroup's largest density into the status words.
-fn finish_carried_densities(lid: u32) {
-    reduce_end();
-    if (lid == 0u) {
-        let largest = reduce_result(0u);
-        atomicMax(&status[STATUS_MAX_DENSITY], largest);
-        atomicMax(&status[STATUS_STEP_MAX_DENSITY], largest);
-    }
+    set_density(i, velocities_at(i).w + continuity_dt() * rate);
 }

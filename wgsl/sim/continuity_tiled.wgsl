@@ -40,5 +40,5 @@ fn continuity_tiled(
     if (i < params.fluid_count) {
         set_carried_density(i, finish_rate(sums));
     }
-    finish_carried_densities(lid);
+    finish_densities(lid);
 }

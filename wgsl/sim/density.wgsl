@@ -4,6 +4,7 @@
 
 //! include shared/common.wgsl
 //! include shared/reduce.wgsl
+//! include shared/density_write.wgsl
 //! array positions: vec4<f32>, read
 //! array starts: u32, read
 //! array wall_positions: vec4<f32>, read
@@ -43,22 +44,4 @@ fn density(
         set_density(i, params.fluid_mass * fluid_sum + wall_sum);
     }
     finish_densities(lid);
-}
-
-fn set_density(i: u32, rho: f32) {
-    densities_set(i, rho);
-    pressures_set(i, eos_pressure(rho));
-    if (is_finite_f32(rho) && rho > 0.0) {
-        reduce_offer(0u, bitcast<u32>(rho));
-    }
-}
-
-// The workgroup's largest density into the status words.
-fn finish_densities(lid: u32) {
-    reduce_end();
-    if (lid == 0u) {
-        let largest = reduce_result(0u);
-        atomicMax(&status[STATUS_MAX_DENSITY], largest);
-        atomicMax(&status[STATUS_STEP_MAX_DENSITY], largest);
-    }
 }

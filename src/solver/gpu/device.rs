@@ -195,7 +195,7 @@ impl GpuContext {
 
     pub fn from_adapter(adapter: wgpu::Adapter) -> anyhow::Result<Self> {
         let info = adapter.get_info();
-        // Subgroups for the neighbour tiles (GpuContext::subgroup_tiles).
+        // Subgroups for the neighbour tiles (GpuContext::subgroup_tiles_unavailable).
         let features = adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SUBGROUP);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("wgsph"),

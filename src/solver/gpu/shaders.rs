@@ -3,8 +3,8 @@
 //! WGSL has no include: a stage file names the files it needs with `//! include PATH` lines
 //! (paths under wgsl/), which [`assemble`] replaces by their text, each file once. Nor does it
 //! unroll: `//! unroll N STATEMENT` stands for N copies of STATEMENT with `{k}` replaced by 0 to
-//! N - 1 (a subgroup shuffle's lane must be a constant to compile to a register permutation). A stage
-//! declares its storage arrays with `//! array NAME: TYPE, ACCESS` lines, from which the host
+//! N - 1 (a subgroup shuffle's lane must be a constant to compile to a register permutation).
+//! A stage declares its storage arrays with `//! array NAME: TYPE, ACCESS` lines, from which the host
 //! generates the bindings and accessors ([`ArrayDecl`]); the arrays' lengths and buffers are
 //! then given by name.
 
@@ -16,6 +16,7 @@ use crate::model::scene::{BoundaryPressure, EquationOfState, Kernel};
 pub const SOURCES: &[(&str, &str)] = &[
     ("shared/common.wgsl", include_str!("../../../wgsl/shared/common.wgsl")),
     ("shared/reduce.wgsl", include_str!("../../../wgsl/shared/reduce.wgsl")),
+    ("shared/density_write.wgsl", include_str!("../../../wgsl/shared/density_write.wgsl")),
     ("shared/tiles.wgsl", include_str!("../../../wgsl/shared/tiles.wgsl")),
     ("shared/tiles_walls.wgsl", include_str!("../../../wgsl/shared/tiles_walls.wgsl")),
     ("shared/dfsph_tiles.wgsl", include_str!("../../../wgsl/shared/dfsph_tiles.wgsl")),

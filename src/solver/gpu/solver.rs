@@ -89,14 +89,14 @@ pub(super) struct Pipelines {
     /// Forces and integration in one pass (fixed dt only; see `GpuOptions`): no accelerations
     /// array.
     pub fused: bool,
-    /// The weakly compressible neighbour stages walk a subgroup's stencils together (see
-    /// [`subgroup_tiles`]).
+    /// The neighbour stages walk a subgroup's stencils together (see [`subgroup_tiles`]).
     pub subgroup_tiles: bool,
 }
 
 /// Whether the density (summation or continuity), the two-pass forces and DFSPH's solve
-/// iterations walk the stencils of a subgroup together (wgsl/shared/tiles.wgsl): by default where the device has subgroups of exactly
-/// [`TILE_LANES`] invocations and both stages' workgroups are whole subgroups, and the stencil is
+/// iterations walk the stencils of a subgroup together (wgsl/shared/tiles.wgsl): by default where
+/// the device has subgroups of exactly [`TILE_LANES`] invocations, the density and forces
+/// workgroups (DFSPH's solves run at the forces' size) are whole subgroups, and the stencil is
 /// walked as runs; asked for where it cannot, an error that says why.
 fn subgroup_tiles(ctx: &GpuContext, options: &GpuOptions) -> Result<bool, GpuError> {
     let ws = options.workgroup_sizes;

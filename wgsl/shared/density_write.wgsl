@@ -1,0 +1,23 @@
+// What the density stages (density.wgsl, continuity.wgsl and their tiled twins) write: a
+// particle's density and its pressure from the equation of state, and the workgroup's largest
+// density into the status words (STATUS_MAX_DENSITY: of the run; STATUS_STEP_MAX_DENSITY: of
+// this step). The including stage declares `densities`, `pressures` and `status` and includes
+// shared/reduce.wgsl; every invocation of a workgroup calls reduce_begin before and
+// finish_densities after.
+
+fn set_density(i: u32, rho: f32) {
+    densities_set(i, rho);
+    pressures_set(i, eos_pressure(rho));
+    if (is_finite_f32(rho) && rho > 0.0) {
+        reduce_offer(0u, bitcast<u32>(rho));
+    }
+}
+
+fn finish_densities(lid: u32) {
+    reduce_end();
+    if (lid == 0u) {
+        let largest = reduce_result(0u);
+        atomicMax(&status[STATUS_MAX_DENSITY], largest);
+        atomicMax(&status[STATUS_STEP_MAX_DENSITY], largest);
+    }
+}
