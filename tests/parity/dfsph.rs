@@ -138,10 +138,13 @@ fn every_dfsph_stage_agrees_with_its_cpu_twin() {
                 check(&gf, &f32s.dfsph_fields().unwrap(), 1e-4, stiffness_tol, &format!("{what}, against cpu f32"));
                 check(&gf, &f64s.dfsph_fields().unwrap(), 1e-4, stiffness_tol, &format!("{what}, against cpu f64"));
                 if matches!(stage, S::DivergenceRate | S::PredictDensity) {
-                    // The error sums: each particle's error truncated to 2^-30, the same or one
-                    // unit apart.
+                    // The error sums: each particle's error truncated to 2^-30. A predicted
+                    // density near rho0 is an f32 whose last place is 2^-23 of rho0, 128 units
+                    // of 2^-30: where one compiler fuses a multiply-add and the other does not,
+                    // a particle's error moves by that unit (measured on an NVIDIA H200: the sums
+                    // 3.7e-4 apart, 12,672 units). A wrong stage moves the sum by its whole size.
                     let n = gf.densities.len() as f64;
-                    assert!(c32 > 0.0 && ((g as f64) - c32).abs() <= 1e-4 * c32 + n, "{what}: error sum gpu {g} cpu f32 {c32}");
+                    assert!(c32 > 0.0 && ((g as f64) - c32).abs() <= 1e-4 * c32 + 128.0 * n, "{what}: error sum gpu {g} cpu f32 {c32}");
                     assert!(((g as f64) - c64).abs() <= 1e-3 * c64 + n, "{what}: error sum gpu {g} cpu f64 {c64}");
                 }
             }
