@@ -1,7 +1,8 @@
 //! Scenes that cannot work are refused at load, naming the field, the value (huge values in
 //! short form) and what is allowed: fluid inside solids, behind a plane or on top of other
-//! fluid, a smoothing length below the spacing, constants beyond any liquid, too few particles;
-//! and what the documentation promises is accepted (a camera with only a field of view).
+//! fluid, a smoothing length below the spacing, constants beyond any liquid, too few particles,
+//! more particles than the host's memory holds; and what the documentation promises is accepted
+//! (a camera with only a field of view).
 //! SPlisHSPlasH scenes are refused by their JSON keys.
 
 use crate::common::TestScene;
@@ -150,4 +151,36 @@ fn a_splishsplash_scene_wgsph_refuses_is_refused_by_its_json_keys() {
             assert!(!e.contains(internal), "{to}: names a wgsph field: {e}");
         }
     }
+}
+
+/// The host memory a scene needs is checked before any particle exists: building any scene asks
+/// `SCENE_BYTES_PER_PARTICLE` per particle (fluid and walls), the CPU backend its own, larger
+/// figure when it opens; each refusal names the counts and the memory. (Before, the scene check
+/// asked the CPU backend's figure of every backend, and refused GPU runs that fit.)
+#[test]
+fn the_host_memory_a_scene_needs_is_checked_before_any_particle_exists() {
+    use wgsph::model::check::{available_memory_bytes, CPU_BYTES_PER_PARTICLE, MAX_PARTICLES, SCENE_BYTES_PER_PARTICLE};
+    use wgsph::solver::{open, BackendChoice, Precision};
+    let Some(available) = available_memory_bytes() else {
+        eprintln!("this platform gives no figure of available memory: nothing to check");
+        return;
+    };
+    let dam_break = Scene::load("dam_break").unwrap();
+    // Between the two figures (the walls add a fifth or so to the fluid): a scene to build, too
+    // big for the CPU backend, which refuses it before generating a particle.
+    let between = dam_break.with_fluid_particles(available / ((SCENE_BYTES_PER_PARTICLE + CPU_BYTES_PER_PARTICLE) / 2));
+    let count = between.estimated_particle_count();
+    assert!(count * SCENE_BYTES_PER_PARTICLE < available && count * CPU_BYTES_PER_PARTICLE > available, "{count} particles");
+    between.validate(&SceneOrigin::Text).expect("a scene that fits the host is accepted");
+    let e = open(&between, &BackendChoice::cpu(Precision::F32)).err().expect("the CPU backend refuses it");
+    let e = format!("{e:#}");
+    assert!(e.contains("of host memory on the cpu backend") && e.contains(&format!("{count} particles")) && e.contains("MiB are available"), "{e}");
+    // Twice what the host has, at the scene's own figure: refused at load, naming the field.
+    let over = dam_break.with_fluid_particles(2 * available / SCENE_BYTES_PER_PARTICLE);
+    if over.estimated_particle_count() > MAX_PARTICLES {
+        eprintln!("this host's memory is beyond {MAX_PARTICLES} particles: that limit refuses first");
+        return;
+    }
+    let e = over.validate(&SceneOrigin::File("big.toml".into())).expect_err("refused").to_string();
+    assert!(e.contains("big.toml") && e.contains("fluid") && e.contains("of host memory") && e.contains("MiB are available"), "{e}");
 }
