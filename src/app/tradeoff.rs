@@ -103,17 +103,17 @@ pub fn configs(base: &Scene) -> Vec<Config> {
         ),
         c("particles x0.5", "resolution", base.with_fluid_particles((fluid / 2).max(1)), Engine::Gpu),
         c("particles x2", "resolution", base.with_fluid_particles(fluid * 2), Engine::Gpu),
-        c(
-            "cubic spline kernel",
-            "kernel",
-            with(&|s| {
-                s.physics.kernel = match base.physics.kernel {
-                    Kernel::Mueller => Kernel::CubicSpline,
-                    Kernel::CubicSpline => Kernel::Mueller,
-                }
-            }),
-            Engine::Gpu,
-        ),
+    ];
+    // Each other kernel, with the same support h.
+    all.extend(Kernel::ALL.into_iter().filter(|&k| k != base.physics.kernel).map(|kernel| {
+        let name = match kernel {
+            Kernel::Mueller => "Mueller kernels",
+            Kernel::CubicSpline => "cubic spline kernel",
+            Kernel::Wendland => "Wendland kernel",
+        };
+        c(name, "kernel", with(&|s| s.physics.kernel = kernel), Engine::Gpu)
+    }));
+    all.extend([
         c(
             "other EOS (same c0)",
             "equation of state",
@@ -198,7 +198,7 @@ pub fn configs(base: &Scene) -> Vec<Config> {
             }),
             Engine::Gpu,
         ),
-        ];
+    ]);
     if !weakly_compressible {
         // DFSPH has no equation of state, and carries no density by the continuity equation.
         all.retain(|c| {

@@ -17,9 +17,10 @@ pub struct KernelCoefficients<R> {
     pub h: R,
     pub h2: R,
     pub kind: Kernel,
-    /// poly6: 315 / (64 pi h^9); cubic: 8 / (pi h^3).
+    /// poly6: 315 / (64 pi h^9); cubic: 8 / (pi h^3); Wendland: 21 / (2 pi h^3).
     pub w: R,
-    /// spiky: -45 / (pi h^6); cubic: 48 / (pi h^4), the derivative's factor.
+    /// spiky: -45 / (pi h^6); cubic: 48 / (pi h^4); Wendland: -210 / (pi h^4), the
+    /// derivative's factor.
     pub grad: R,
     /// viscosity Laplacian: 45 / (pi h^6).
     pub lap: R,
@@ -30,11 +31,14 @@ impl<R: Real> KernelCoefficients<R> {
         let (w, grad, lap) = match kind {
             Kernel::Mueller => (315.0 / (64.0 * PI * h.powi(9)), -45.0 / (PI * h.powi(6)), 45.0 / (PI * h.powi(6))),
             Kernel::CubicSpline => (8.0 / (PI * h.powi(3)), 48.0 / (PI * h.powi(4)), 0.0),
+            // W = 21 / (2 pi h^3) (1 - q)^4 (1 + 4 q), so dW/dr = -210 / (pi h^4) q (1 - q)^3.
+            Kernel::Wendland => (21.0 / (2.0 * PI * h.powi(3)), -210.0 / (PI * h.powi(4)), 0.0),
         };
         KernelCoefficients { h: R::of(h), h2: R::of(h * h), kind, w: R::of(w), grad: R::of(grad), lap: R::of(lap) }
     }
 
-    /// W(r) from r^2 (Mueller 2003 Eq. 20 poly6, or Monaghan 1992 cubic spline).
+    /// W(r) from r^2 (Mueller 2003 Eq. 20 poly6, Monaghan 1992 cubic spline, or Wendland 1995
+    /// C2).
     pub fn w(&self, r2: R) -> R {
         if r2 >= self.h2 {
             return R::zero();
@@ -53,6 +57,12 @@ impl<R: Real> KernelCoefficients<R> {
                     let d = one - q;
                     self.w * R::of(2.0) * d * d * d
                 }
+            }
+            Kernel::Wendland => {
+                let q = r2.sqrt() / self.h;
+                let d = R::one() - q;
+                let d2 = d * d;
+                self.w * d2 * d2 * (R::one() + R::of(4.0) * q)
             }
         }
     }
@@ -77,6 +87,11 @@ impl<R: Real> KernelCoefficients<R> {
                     let d = one - q;
                     -self.grad * d * d
                 }
+            }
+            Kernel::Wendland => {
+                let q = r / self.h;
+                let d = R::one() - q;
+                self.grad * q * d * d * d
             }
         };
         rij * (dwdr / r)
@@ -114,6 +129,13 @@ impl<R: Real> KernelCoefficients<R> {
                 let far = w * Pack::splat(R::of(2.0)) * d * d * d;
                 Pack::select(q.le(Pack::splat(R::of(0.5))), near, far)
             }
+            Kernel::Wendland => {
+                let q = r2.sqrt() / Pack::splat(self.h);
+                let one = Pack::splat(R::one());
+                let d = one - q;
+                let d2 = d * d;
+                w * d2 * d2 * (one + Pack::splat(R::of(4.0)) * q)
+            }
         };
         Pack::select(outside, Pack::zero(), inside)
     }
@@ -136,6 +158,11 @@ impl<R: Real> KernelCoefficients<R> {
                 let d = one - q;
                 let far = Pack::splat(-self.grad) * d * d;
                 Pack::select(q.le(Pack::splat(R::of(0.5))), near, far)
+            }
+            Kernel::Wendland => {
+                let q = r / h;
+                let d = Pack::splat(R::one()) - q;
+                grad * q * d * d * d
             }
         };
         PackV3::select(degenerate, PackV3::zero(), rij.scale(dwdr / r))

@@ -209,6 +209,20 @@ pub enum Kernel {
     Mueller,
     /// Monaghan's cubic spline (support h) with the Morris/Monaghan viscosity term.
     CubicSpline,
+    /// Wendland's C2 function (support h; the 3D normalisation of Dehnen & Aly 2012), free of
+    /// the pairing instability, with the Morris/Monaghan viscosity term.
+    Wendland,
+}
+
+impl Kernel {
+    /// Every kernel, in the order of its number on the GPU (`KERNEL` in wgsl/shared/common.wgsl).
+    pub const ALL: [Kernel; 3] = [Kernel::Mueller, Kernel::CubicSpline, Kernel::Wendland];
+
+    /// Whether viscosity is the Morris/Monaghan term built on grad W (the cubic spline's and
+    /// Wendland's: their Laplacians change sign) rather than Mueller's viscosity Laplacian.
+    pub fn gradient_viscosity(self) -> bool {
+        self != Kernel::Mueller
+    }
 }
 
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]

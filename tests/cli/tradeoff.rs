@@ -41,7 +41,7 @@ fn a_small_study_writes_the_table_and_the_plot() {
     let md = std::fs::read_to_string(dir.path().join("study/tradeoff.md")).unwrap();
     let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| configuration")).collect();
     // The reference and one row per configuration, each with its knob.
-    assert_eq!(rows.len(), 29, "{md}");
+    assert_eq!(rows.len(), 30, "{md}");
     for knob in [
         "reference",
         "baseline",

@@ -117,6 +117,8 @@ fn everything_unsupported_is_named_in_one_clear_error() {
     assert!(import(&DAM_BREAK.replacen(r#""exponent": 7"#, r#""exponent": 1"#, 1)).unwrap().physics.equation_of_state == EquationOfState::Linear);
     let mueller = DAM_BREAK.replacen(r#""pause": true"#, r#""kernel": 2, "gradKernel": 3"#, 1);
     assert_eq!(import(&mueller).unwrap().physics.kernel, Kernel::Mueller);
+    let wendland = DAM_BREAK.replacen(r#""pause": true"#, r#""kernel": 1, "gradKernel": 1"#, 1);
+    assert_eq!(import(&wendland).unwrap().physics.kernel, Kernel::Wendland);
     // From the command line: exit 2 before any work.
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("bad.json"), text).unwrap();

@@ -37,6 +37,7 @@ fn one_step_agrees_with_the_f64_cpu_path_to_f32_precision() {
             (Kernel::Mueller, EquationOfState::Tait, true),
             (Kernel::Mueller, EquationOfState::Linear, false),
             (Kernel::CubicSpline, EquationOfState::Tait, false),
+            (Kernel::Wendland, EquationOfState::Tait, true),
         ] {
             let device = GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
             let c = gpu_against_cpu(device, &small_scene(kernel, eos, clamp).build(), 1, &ONE_STEP);

@@ -17,6 +17,7 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         ("poly6/spiky, Tait, mirror walls, viscosity", tank().kernel(Kernel::Mueller).viscosity(0.005).boundary_pressure(BoundaryPressure::Mirror).build()),
         ("poly6/spiky, linear, no viscosity", tank().kernel(Kernel::Mueller).equation_of_state(EquationOfState::Linear).viscosity(0.0).build()),
         ("cubic, Tait, viscosity", tank().kernel(Kernel::CubicSpline).viscosity(0.005).boundary_pressure(BoundaryPressure::Consistent).build()),
+        ("Wendland, Tait, viscosity, Adami walls", tank().kernel(Kernel::Wendland).viscosity(0.005).boundary_pressure(BoundaryPressure::Adami).build()),
         ("cubic, artificial viscosity, continuity", tank().viscosity(0.0).continuity().density_diffusion(0.1).artificial_viscosity(0.05).build()),
         ("cubic, grid rebuilt every 2nd step", tank().kernel(Kernel::CubicSpline).neighbour_rebuild_every(2).build()),
         ("planes only, no wall particles", tank().without_walls().build()),

@@ -96,6 +96,7 @@ fn kernels_equations_of_state_and_cells_agree_function_by_function() {
             (Kernel::Mueller, EquationOfState::Tait, true),
             (Kernel::CubicSpline, EquationOfState::Tait, false),
             (Kernel::CubicSpline, EquationOfState::Linear, true),
+            (Kernel::Wendland, EquationOfState::Tait, true),
         ] {
             let scene = TestScene::small_tank().kernel(kernel).equation_of_state(eos).clamp_negative_pressure(clamp).build();
             let p = scene.params();
@@ -170,6 +171,7 @@ fn variants() -> Vec<Scene> {
         scene_with(Kernel::Mueller, EquationOfState::Tait, BoundaryPressure::Mirror, 0.005),
         scene_with(Kernel::Mueller, EquationOfState::Linear, BoundaryPressure::Consistent, 0.0),
         scene_with(Kernel::CubicSpline, EquationOfState::Tait, BoundaryPressure::Consistent, 0.005),
+        scene_with(Kernel::Wendland, EquationOfState::Linear, BoundaryPressure::Mirror, 0.005),
         // Continuity density with diffusion, artificial viscosity and a hydrostatic start.
         TestScene::small_tank().viscosity(0.0).continuity().density_diffusion(0.1).artificial_viscosity(0.05).hydrostatic_start().build(),
         // The Adami wall pressure, with summation and with continuity density.

@@ -14,6 +14,7 @@ fn scenes() -> Vec<(&'static str, Scene)> {
     vec![
         ("small tank (walls, plane, viscosity)", tank().build()),
         ("cubic spline, linear, unclamped", tank().kernel(Kernel::CubicSpline).equation_of_state(EquationOfState::Linear).clamp_negative_pressure(false).build()),
+        ("Wendland, viscosity", tank().kernel(Kernel::Wendland).viscosity(0.005).build()),
         ("Adami wall pressure, artificial viscosity", tank().boundary_pressure(BoundaryPressure::Adami).viscosity(0.0).artificial_viscosity(0.1).build()),
         ("continuity, diffusion, hydrostatic start", tank().continuity().density_diffusion(0.1).hydrostatic_start().build()),
         ("planes only", tank().without_walls().plane([0.0; 3], [0.0, 1.0, 0.0], 0.5).build()),

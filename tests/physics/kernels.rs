@@ -4,7 +4,7 @@ use wgsph::model::kernels::KernelCoefficients;
 use wgsph::model::real::V3;
 use wgsph::model::scene::Kernel;
 
-const KERNELS: [Kernel; 2] = [Kernel::Mueller, Kernel::CubicSpline];
+const KERNELS: [Kernel; 3] = Kernel::ALL;
 
 /// Points of a simple cubic lattice of spacing s within distance `reach` of the origin.
 fn lattice(s: f64, reach: f64) -> Vec<V3<f64>> {
@@ -118,5 +118,25 @@ fn density_inside_a_rest_lattice_is_near_rest_density() {
         let k = KernelCoefficients::<f64>::new(kind, h);
         let rho: f64 = lattice(s, h).iter().map(|p| m * k.w(p.length_squared())).sum();
         assert!((rho / rho0 - 1.0).abs() < 0.05, "{kind:?}: rho = {rho}");
+    }
+}
+
+#[test]
+fn the_gradient_is_the_derivative_of_w_for_the_one_function_kernels() {
+    // The cubic spline and Wendland's function take W and grad W from one function (Mueller's
+    // pair does not: poly6 and the spiky gradient): grad W . r/|r| = dW/dr, by central
+    // differences over the whole support.
+    for kind in KERNELS.into_iter().filter(|&k| k != Kernel::Mueller) {
+        let h = 0.3;
+        let k = KernelCoefficients::<f64>::new(kind, h);
+        let dir = V3::new(2.0, -1.0, 2.0) * (1.0 / 3.0);
+        let scale = k.w(0.0) / h;
+        for i in 1..40 {
+            let r = h * i as f64 / 40.0;
+            let e = 1e-6 * h;
+            let numeric = (k.w((r + e) * (r + e)) - k.w((r - e) * (r - e))) / (2.0 * e);
+            let analytic = k.grad_w(dir * r, r).dot(dir);
+            assert!((numeric - analytic).abs() < 1e-6 * scale, "{kind:?} at r = {r}: dW/dr {numeric}, grad W . r/|r| {analytic}");
+        }
     }
 }

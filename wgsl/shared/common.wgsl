@@ -5,7 +5,7 @@
 // h is the kernel's support radius: every kernel is zero for r >= h.
 
 // Specialisation constants, set per scene when the pipelines are built.
-override KERNEL: u32 = 0u;                      // 0: Mueller et al. 2003, 1: cubic spline
+override KERNEL: u32 = 0u;                      // 0: Mueller et al. 2003, 1: cubic spline, 2: Wendland C2
 override EOS: u32 = 0u;                         // 0: linear (report Eq. 8), 1: Tait (Eq. 9)
 override CLAMP_NEGATIVE_PRESSURE: bool = false;
 override CONSISTENT_WALL_PRESSURE: bool = false; // walls push with p_i/rho_i^2, not 2 max(p_i,0)/rho_i^2
@@ -62,7 +62,7 @@ struct Params {
     stiffness: f32,
     viscosity: f32,
     boundary_friction: f32,
-    // poly6 or cubic normalisation, gradient factor, Laplacian factor (see src/model/kernels.rs).
+    // the kernel's normalisation, gradient factor, Laplacian factor (see src/model/kernels.rs).
     w_coef: f32,
     grad_coef: f32,
     lap_coef: f32,
@@ -193,11 +193,18 @@ fn cell_key(c: vec3<u32>) -> u32 {
 // (the same values, a NaN included), since on a SIMD software adapter a branch in a neighbour
 // loop costs more than the arithmetic it skips (docs/performance.md).
 
-// W(r) from r^2: poly6 (Mueller 2003 Eq. 20) or the cubic spline (Monaghan 1992).
+// W(r) from r^2: poly6 (Mueller 2003 Eq. 20), the cubic spline (Monaghan 1992) or Wendland's
+// C2 function (Wendland 1995; 3D normalisation as in Dehnen & Aly 2012).
 fn kernel_w(r2: f32) -> f32 {
     if (KERNEL == 0u) {
         let d = params.h2 - r2;
         return select(params.w_coef * d * d * d, 0.0, r2 >= params.h2);
+    }
+    if (KERNEL == 2u) {
+        let q = sqrt(r2) / params.h;
+        let d = 1.0 - q;
+        let d2 = d * d;
+        return select(params.w_coef * d2 * d2 * (1.0 + 4.0 * q), 0.0, r2 >= params.h2);
     }
     let q = sqrt(r2) / params.h;
     let d = 1.0 - q;
@@ -212,6 +219,11 @@ fn kernel_grad(rij: vec3<f32>, r: f32) -> vec3<f32> {
         // Spiky (Mueller 2003 Eq. 21).
         let d = params.h - r;
         dwdr = params.grad_coef * d * d;
+    } else if (KERNEL == 2u) {
+        // Wendland: dW/dr = -210 / (pi h^4) q (1 - q)^3 (grad_coef holds the negative factor).
+        let q = r / params.h;
+        let d = 1.0 - q;
+        dwdr = params.grad_coef * q * d * d * d;
     } else {
         let q = r / params.h;
         let d = 1.0 - q;

@@ -242,15 +242,17 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             ),
         );
     }
-    // Kernels: 0 and 4 are the cubic spline (4 precomputed); 2 with gradient 3 is poly6 with the
-    // spiky gradient, wgsph's Mueller kernels.
+    // Kernels: 0 and 4 are the cubic spline (4 precomputed); 1 is Wendland's quintic C2 (the
+    // same function as wgsph's `wendland`, support h); 2 with gradient 3 is poly6 with the spiky
+    // gradient, wgsph's Mueller kernels.
     let kernel = match (method(config, "kernel", 4, "Configuration", &mut p), method(config, "gradKernel", 4, "Configuration", &mut p)) {
         (0 | 4, 0 | 4) => Kernel::CubicSpline,
+        (1, 1) => Kernel::Wendland,
         (2, 3) => Kernel::Mueller,
         (k, g) => {
             p.add(
                 "Configuration.kernel",
-                format!("kernel {k} with gradKernel {g}; wgsph supports the cubic spline (0 or 4 for both) and poly6 with the spiky gradient (kernel 2, gradKernel 3)"),
+                format!("kernel {k} with gradKernel {g}; wgsph supports the cubic spline (0 or 4 for both), Wendland's quintic C2 (1 for both) and poly6 with the spiky gradient (kernel 2, gradKernel 3)"),
             );
             Kernel::CubicSpline
         }

@@ -6,7 +6,6 @@
 use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::params::{AdaptiveDt, Grid};
 use crate::model::real::{Real, V3};
-use crate::model::scene::Kernel;
 use rayon::prelude::*;
 
 pub struct PredictInput<'a, R> {
@@ -34,7 +33,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
         return g;
     }
     let kernel = input.kernel;
-    let cubic = kernel.kind == Kernel::CubicSpline;
+    let gradient_viscosity = kernel.kind.gradient_viscosity();
     let walls = !input.wall_masses.is_empty();
     let eps = R::of(0.01) * kernel.h2;
     let xi = input.fluid.positions[i];
@@ -52,7 +51,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
             let r = r2.sqrt();
             let inv_rho = R::one() / input.densities[j];
             let uij = ui - input.velocities[j];
-            if cubic {
+            if gradient_viscosity {
                 fluid_visc += kernel.grad_w(rij, r) * (inv_rho * uij.dot(rij) / (r2 + eps));
             } else {
                 fluid_visc -= uij * (inv_rho * kernel.lap_w(r));
@@ -66,7 +65,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
             }
             let r = r2.sqrt();
             let mw = input.wall_masses[j];
-            if cubic {
+            if gradient_viscosity {
                 wall_visc += kernel.grad_w(rij, r) * (mw * ui.dot(rij) / (r2 + eps));
             } else {
                 wall_visc -= ui * (mw * kernel.lap_w(r));
@@ -74,7 +73,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
         }
     }
     let rho_i = input.densities[i];
-    let nu = if cubic { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let nu = if gradient_viscosity { R::of(10.0) * input.viscosity } else { input.viscosity };
     let visc = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
     visc + g
 }

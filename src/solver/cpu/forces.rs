@@ -11,7 +11,7 @@ use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::lanes::{Pack, PackV3, LANES};
 use crate::model::params::Grid;
 use crate::model::real::{as_arrays, Real, V3};
-use crate::model::scene::{BoundaryPressure, Kernel};
+use crate::model::scene::BoundaryPressure;
 use rayon::prelude::*;
 
 pub struct ForcesInput<'a, R> {
@@ -47,7 +47,7 @@ pub struct ForcesInput<'a, R> {
 /// Viscosity is Eq. 7 with the volumes m_k/rho_k of Eq. 4 and the dynamic viscosity
 /// mu = rho0 nu, divided by rho_i (Mueller et al. 2003, Eq. 14): nu rho0 sum_k m_k/(rho_i rho_k)
 /// lap W_ik (u_k - u_i), symmetric in i and k so that it conserves momentum exactly; for the
-/// cubic spline, whose Laplacian changes sign, 2 (d + 2) nu rho0 sum_k m_k/(rho_i rho_k)
+/// cubic spline and Wendland's kernel, whose Laplacians change sign, 2 (d + 2) nu rho0 sum_k m_k/(rho_i rho_k)
 /// (u_ik . x_ik) / (|x_ik|^2 + 0.01 h^2) grad W_ik (Monaghan 2005, Eq. 6.3).
 /// A wall particle pushes with `boundary_pressure`: `Mirror` mirrors the fluid particle's
 /// pressure (p_w = max(p_i, 0), rho_w = rho_i, giving 2 max(p_i, 0)/rho_i^2), so walls only push;
@@ -95,7 +95,7 @@ struct Lanes<R: Real> {
 /// The terms a scene uses; the others are skipped, as they are compiled out on the GPU.
 #[derive(Clone, Copy)]
 struct Terms {
-    cubic: bool,
+    gradient_viscosity: bool,
     viscous: bool,
     artificial: bool,
     /// Adami's wall pressure: each wall particle's own pressure inside the sum.
@@ -105,7 +105,7 @@ struct Terms {
 impl Terms {
     fn of<R: Real>(input: &ForcesInput<R>) -> Terms {
         Terms {
-            cubic: input.kernel.kind == Kernel::CubicSpline,
+            gradient_viscosity: input.kernel.kind.gradient_viscosity(),
             viscous: input.viscosity > R::zero(),
             artificial: input.artificial_viscosity_factor > R::zero(),
             adami: input.boundary_pressure == BoundaryPressure::Adami,
@@ -145,7 +145,7 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
                 let uij = pi.u - PackV3::gather(velocities, index);
                 if terms.viscous {
                     let inv_rho = Pack::splat(R::one()) / rho_j;
-                    let visc = if terms.cubic {
+                    let visc = if terms.gradient_viscosity {
                         fluid_visc + grad.scale(inv_rho * uij.dot(rij) / (r2 + eps))
                     } else {
                         fluid_visc - uij.scale(inv_rho * kernel.lap_w_lanes(r))
@@ -179,7 +179,7 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
             };
             wall_pressure = PackV3::select(valid, wall_pressure - term, wall_pressure);
             if terms.viscous {
-                let visc = if terms.cubic {
+                let visc = if terms.gradient_viscosity {
                     wall_visc + grad.scale(mw * pi.u.dot(rij) / (r2 + eps))
                 } else {
                     wall_visc - pi.u.scale(mw * kernel.lap_w_lanes(r))
@@ -232,7 +232,7 @@ fn finish<R: Real>(input: &ForcesInput<R>, i: usize, sums: &ForceSums<R>) -> V3<
         BoundaryPressure::Consistent => pi_over,
         BoundaryPressure::Adami => R::one(),
     };
-    let nu = if terms.cubic { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let nu = if terms.gradient_viscosity { R::of(10.0) * input.viscosity } else { input.viscosity };
     let visc = sums.fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + sums.wall_visc * (nu * input.boundary_friction / rho_i);
     let mut a = sums.fluid_pressure * input.fluid_mass + sums.wall_pressure * wall_p_over + visc;
     if terms.artificial {
@@ -259,7 +259,7 @@ pub fn pressure_terms<R: Real>(densities: &[R], pressures: &[R], points: &mut [[
 /// approaching pairs (u_ik . x_ik < 0) only; rho_ik is the pair's mean density (rho_i for a wall).
 pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R> {
     let kernel = input.kernel;
-    let cubic = kernel.kind == Kernel::CubicSpline;
+    let gradient_viscosity = kernel.kind.gradient_viscosity();
     let viscous = input.viscosity > R::zero();
     // Terms the scene does not use are skipped, as they are compiled out on the GPU.
     let walls = !input.wall_masses.is_empty();
@@ -295,7 +295,7 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
             if viscous {
                 let inv_rho = R::one() / rho_j;
                 let uij = ui - input.velocities[j];
-                if cubic {
+                if gradient_viscosity {
                     fluid_visc += grad * (inv_rho * uij.dot(rij) / (r2 + eps));
                 } else {
                     fluid_visc -= uij * (inv_rho * kernel.lap_w(r));
@@ -325,7 +325,7 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
                 wall_pressure -= grad * mw;
             }
             if viscous {
-                if cubic {
+                if gradient_viscosity {
                     wall_visc += grad * (mw * ui.dot(rij) / (r2 + eps));
                 } else {
                     wall_visc -= ui * (mw * kernel.lap_w(r));

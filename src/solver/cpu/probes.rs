@@ -10,7 +10,7 @@ use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::params::Grid;
 use crate::model::probes::{Probe, ProbeGeometry, GAUGE_FRACTION};
 use crate::model::real::{Real, V3};
-use crate::model::scene::{BoundaryPressure, Kernel};
+use crate::model::scene::BoundaryPressure;
 use rayon::prelude::*;
 
 /// Particles per workgroup of `probe_particles` (PROBE_WORKGROUP in probes.wgsl).
@@ -268,7 +268,7 @@ pub fn probe_particles<R: Real>(input: &ProbeInput<R>, probes: &[Probe], counted
 /// adds to a_i.
 pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &[V3<R>]) -> Vec<R> {
     let kernel = input.kernel;
-    let cubic = kernel.kind == Kernel::CubicSpline;
+    let gradient_viscosity = kernel.kind.gradient_viscosity();
     let viscous = input.viscosity > R::zero();
     let eps = R::of(0.01) * kernel.h2;
     let xi = input.fluid.positions[i];
@@ -283,7 +283,7 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
         BoundaryPressure::Adami => R::zero(),
     };
     let adami = input.boundary_pressure == BoundaryPressure::Adami;
-    let nu = if cubic { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let nu = if gradient_viscosity { R::of(10.0) * input.viscosity } else { input.viscosity };
     let visc_factor = nu * input.boundary_friction / rho_i;
     let artificial = input.artificial_viscosity_factor > R::zero();
     let artificial_factor = input.artificial_viscosity_factor * input.boundary_friction / rho_i;
@@ -314,7 +314,7 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
                 grad * (-mw * wall_p_over)
             };
             if viscous {
-                a += if cubic { grad * (visc_factor * mw * ui.dot(rij) / (r2 + eps)) } else { ui * (-visc_factor * mw * kernel.lap_w(r)) };
+                a += if gradient_viscosity { grad * (visc_factor * mw * ui.dot(rij) / (r2 + eps)) } else { ui * (-visc_factor * mw * kernel.lap_w(r)) };
             }
             if artificial {
                 let approach = ui.dot(rij);

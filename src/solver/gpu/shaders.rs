@@ -145,7 +145,7 @@ pub fn bind_group(device: &wgpu::Device, label: &str, layout: &wgpu::BindGroupLa
 pub fn constants(params: &Params) -> Vec<(&'static str, f64)> {
     let flag = |on: bool| if on { 1.0 } else { 0.0 };
     vec![
-        ("KERNEL", match params.kernel { Kernel::Mueller => 0.0, Kernel::CubicSpline => 1.0 }),
+        ("KERNEL", Kernel::ALL.iter().position(|&k| k == params.kernel).expect("every kernel is listed") as f64),
         ("EOS", match params.eos { EquationOfState::Linear => 0.0, EquationOfState::Tait => 1.0 }),
         ("CLAMP_NEGATIVE_PRESSURE", flag(params.clamp_negative_pressure)),
         ("CONSISTENT_WALL_PRESSURE", flag(params.boundary_pressure == BoundaryPressure::Consistent)),
