@@ -445,10 +445,11 @@ pub fn at_particles(scene: &Scene, n: u64) -> anyhow::Result<Scene> {
 }
 
 /// One warning line on stderr for each fluid block of `scene` that its particle lattice does
-/// not fill exactly (none when `quiet`).
+/// not fill exactly, and one when the lattice does not start at its rest density (none when
+/// `quiet`).
 pub fn warn_lattice(scene: &Scene, quiet: bool) {
     if !quiet {
-        for line in scene.lattice_changes() {
+        for line in scene.lattice_changes().into_iter().chain(scene.rest_density_warning()) {
             eprintln!("warning: {line}");
         }
     }

@@ -184,3 +184,39 @@ fn the_host_memory_a_scene_needs_is_checked_before_any_particle_exists() {
     let e = over.validate(&SceneOrigin::File("big.toml".into())).expect_err("refused").to_string();
     assert!(e.contains("big.toml") && e.contains("fluid") && e.contains("of host memory") && e.contains("MiB are available"), "{e}");
 }
+
+/// A kernel and smoothing length whose sum over the particle lattice is off by more than 2 %
+/// start the fluid away from its rest density: the scene loads with a warning that says so and
+/// what would start it at rest (Wendland's function needs about 3 spacings, the cubic spline 2).
+#[test]
+fn a_lattice_that_does_not_start_at_rest_density_is_warned_of() {
+    use wgsph::model::scene::{lattice_kernel_sum, Kernel};
+    // The sums the warning's advice rests on (simple cubic lattice, m = rho0 s^3).
+    for (kernel, over, want) in [(Kernel::CubicSpline, 2.0, 1.0000), (Kernel::Mueller, 2.0, 1.0098), (Kernel::Wendland, 2.0, 1.0338), (Kernel::Wendland, 3.0, 1.0031), (Kernel::CubicSpline, 1.5, 1.0932)] {
+        let got = lattice_kernel_sum(kernel, over);
+        assert!((got - want).abs() < 1e-4, "{kernel:?} at {over} spacings: {got}");
+    }
+    let dam_break = Scene::load("dam_break").unwrap();
+    assert_eq!(dam_break.rest_density_warning(), None, "the built-in dam break starts at rest (1.0098 rho0)");
+    let mut wendland = dam_break.clone();
+    wendland.physics.kernel = Kernel::Wendland;
+    let w = wendland.rest_density_warning().expect("2 spacings are too few for Wendland's function");
+    assert!(w.contains("\"wendland\"") && w.contains("1.03") && w.contains("apart") && w.contains("3 spacings") && w.contains("physics.particle_mass"), "{w}");
+    // The mass it proposes starts the lattice at rest, and then nothing is said.
+    let mass = dam_break.physics.rest_density * dam_break.physics.particle_spacing.powi(3) / lattice_kernel_sum(Kernel::Wendland, 2.0);
+    wendland.physics.particle_mass = Some(mass);
+    assert!((wendland.lattice_rest_density_ratio() - 1.0).abs() < 1e-12 && wendland.rest_density_warning().is_none());
+    wendland.physics.particle_mass = None;
+    wendland.physics.smoothing_length = 3.0 * wendland.physics.particle_spacing;
+    assert_eq!(wendland.rest_density_warning(), None);
+    // Too few neighbours the other way: a lattice that starts too light is pulled together.
+    let mut thin = dam_break.clone();
+    thin.physics.smoothing_length = 1.5 * thin.physics.particle_spacing;
+    let w = thin.rest_density_warning().expect("Mueller's kernels at 1.5 spacings");
+    assert!(w.contains("0.949") && w.contains("together"), "{w}");
+    // And the command line prints it.
+    let dir = tempfile::tempdir().unwrap();
+    let out = wgsph(&["run", "dam_break", "--set", "physics.kernel=wendland", "--backend", "cpu", "--steps", "1", "--particles", "500", "--out", "o"], dir.path());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && err.contains("warning: physics.kernel = \"wendland\""), "{err}");
+}
