@@ -770,41 +770,6 @@ impl Scene {
         out
     }
 
-    /// The density the kernel sum gives a fluid particle deep inside a block at rest, over rho0:
-    /// sum over the simple cubic lattice of spacing s of m W(|x|, h) / rho0, with the scene's
-    /// kernel, h and particle mass. About 1 where h suits the kernel (with m = rho0 s^3: the
-    /// cubic spline from 2 spacings, Mueller's within 1 % from 2, Wendland's within 0.5 % from 3).
-    pub fn lattice_rest_density_ratio(&self) -> f64 {
-        let p = &self.physics;
-        let mass = p.particle_mass.unwrap_or(p.rest_density * p.particle_spacing.powi(3));
-        lattice_kernel_sum(p.kernel, p.smoothing_length / p.particle_spacing) * mass / (p.rest_density * p.particle_spacing.powi(3))
-    }
-
-    /// A warning when a fluid particle inside a block starts more than 2 % off its rest density
-    /// (see [`Scene::lattice_rest_density_ratio`]): the equation of state (or DFSPH's solve)
-    /// then pushes the fluid apart, or pulls it together, from the first step.
-    pub fn rest_density_warning(&self) -> Option<String> {
-        use super::numbers::short;
-        let ratio = self.lattice_rest_density_ratio();
-        if (ratio - 1.0).abs() <= 0.02 {
-            return None;
-        }
-        let p = &self.physics;
-        let over = p.smoothing_length / p.particle_spacing;
-        let kernel = serde_json::to_string(&p.kernel).unwrap_or_default();
-        let suits = (4..=10).map(|k| k as f64 * 0.5).find(|&r| (lattice_kernel_sum(p.kernel, r) - 1.0).abs() <= 0.005);
-        let mass = p.particle_mass.unwrap_or(p.rest_density * p.particle_spacing.powi(3)) / ratio;
-        Some(format!(
-            "physics.kernel = {kernel} with physics.smoothing_length = {} ({} particle spacings): a fluid particle inside a block starts at {} rho0 (the kernel's sum over the lattice), not at its rest density, so the fluid is pushed {} from the first step; {}or set physics.particle_mass = {} to start at rho0",
-            short(p.smoothing_length),
-            short(over),
-            short(ratio),
-            if ratio > 1.0 { "apart" } else { "together" },
-            suits.map(|r| format!("with this kernel a smoothing length of {} spacings ({} rho0) starts at rest, ", short(r), short(lattice_kernel_sum(p.kernel, r)))).unwrap_or_default(),
-            short(mass)
-        ))
-    }
-
     /// Fluid particles of the scene, counted from the lattice sizes without creating them.
     pub fn fluid_particle_count(&self) -> u64 {
         (0..self.fluid.len()).map(|i| self.fluid_lattice(i).iter().map(|a| a.count).product::<u64>()).sum()
@@ -970,24 +935,4 @@ impl ProbeSpec {
             every_seconds: None,
         }
     }
-}
-
-/// s^3 sum over the simple cubic lattice of spacing s of W(|x|, h), for h = `h_over_spacing` s:
-/// the kernel's integral, 1, as the lattice sees it. Past 8 spacings the lattice resolves every
-/// kernel to within 0.1 %, and 1 is returned (the sum would cost (2 h / s)^3 terms).
-pub fn lattice_kernel_sum(kernel: Kernel, h_over_spacing: f64) -> f64 {
-    if !(h_over_spacing.is_finite() && h_over_spacing > 0.0) || h_over_spacing > 8.0 {
-        return 1.0;
-    }
-    let w = super::kernels::KernelCoefficients::<f64>::new(kernel, h_over_spacing);
-    let n = h_over_spacing.ceil() as i64;
-    let mut sum = 0.0;
-    for i in -n..=n {
-        for j in -n..=n {
-            for k in -n..=n {
-                sum += w.w((i * i + j * j + k * k) as f64);
-            }
-        }
-    }
-    sum
 }

@@ -71,6 +71,35 @@ fn profiled_steps_match_normal_steps() {
     }
 }
 
+/// A DFSPH step profiled ends its solves as a normal one does (the timed recorder submits and
+/// waits at each block's end, each solve timed in segments): the same bits after the same
+/// steps, whichever way the loop ends, and both solves timed.
+#[test]
+fn profiled_dfsph_steps_match_normal_steps_whichever_way_the_loop_ends() {
+    use wgsph::solver::gpu::SolverLoop;
+    use wgsph::Backend;
+    let scene = common::TestScene::small_tank().dfsph().build();
+    for ctx in common::contexts() {
+        if !ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            continue;
+        }
+        for solver_loop in [SolverLoop::Adaptive, SolverLoop::Indirect, SolverLoop::Readback(2)] {
+            let options = GpuOptions { solver_loop, ..Default::default() };
+            let mut normal = common::gpu_with(ctx.clone(), &scene, None, options).unwrap();
+            let mut profiled = common::gpu_with(ctx.clone(), &scene, None, options).unwrap();
+            normal.advance(4);
+            let times = profiled.profile_stages(4).unwrap().expect("the device has timestamps");
+            let what = format!("{} with {solver_loop:?}", ctx.describe());
+            // bin_count .. dfsph_integrate: every stage ran, the two solves included.
+            assert!(times.len() == 9 && times.iter().all(|&t| t > 0.0), "{what}: {times:?}");
+            assert_eq!(profiled.steps_done(), 4);
+            let (a, b) = (normal.snapshot().unwrap(), profiled.snapshot().unwrap());
+            assert_eq!(a.positions, b.positions, "{what}");
+            assert_eq!(a.velocities, b.velocities, "{what}");
+        }
+    }
+}
+
 #[test]
 fn neighbour_pairs_match_brute_force() {
     let scene = small_dam_break();

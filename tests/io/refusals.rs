@@ -190,7 +190,8 @@ fn the_host_memory_a_scene_needs_is_checked_before_any_particle_exists() {
 /// what would start it at rest (Wendland's function needs about 3 spacings, the cubic spline 2).
 #[test]
 fn a_lattice_that_does_not_start_at_rest_density_is_warned_of() {
-    use wgsph::model::scene::{lattice_kernel_sum, Kernel};
+    use wgsph::model::kernels::lattice_kernel_sum;
+    use wgsph::model::scene::Kernel;
     // The sums the warning's advice rests on (simple cubic lattice, m = rho0 s^3).
     for (kernel, over, want) in [(Kernel::CubicSpline, 2.0, 1.0000), (Kernel::Mueller, 2.0, 1.0098), (Kernel::Wendland, 2.0, 1.0338), (Kernel::Wendland, 3.0, 1.0031), (Kernel::CubicSpline, 1.5, 1.0932)] {
         let got = lattice_kernel_sum(kernel, over);

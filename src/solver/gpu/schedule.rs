@@ -17,8 +17,8 @@ use super::params::status;
 pub const PROFILED_STAGES: [&str; 7] = ["bin_count", "prefix_sum", "bin_scatter", "reorder", "density", "forces", "integrate"];
 
 /// The stages of a DFSPH step as the profile names them, in dispatch order: a solve is timed
-/// whole (its warm start and every recorded iteration, the empty ones included); `dfsph_integrate`
-/// includes the step's bookkeeping.
+/// whole (its warm start and the iterations its loop records: with the default loop, up to the
+/// end of the block in which it converged); `dfsph_integrate` includes the step's bookkeeping.
 pub const DFSPH_PROFILED_STAGES: [&str; 9] =
     ["bin_count", "prefix_sum", "bin_scatter", "reorder", "dfsph_factors", "divergence_solve", "dfsph_predict", "pressure_solve", "dfsph_integrate"];
 
@@ -123,33 +123,35 @@ impl Recorder for PlainRecorder {
 }
 
 /// Records every profiled stage into its own compute pass with timestamps at its start (query
-/// 2i) and end (2i + 1).
+/// 2i) and end (2i + 1). Where `waits` allows, it submits and waits as the normal step does (a
+/// DFSPH solve's loop asking whether to go on): the stage open then is timed in segments, the
+/// ones before the last summed in `carried`.
 pub struct TimedRecorder<'q> {
     encoder: wgpu::CommandEncoder,
     pass: Option<wgpu::ComputePass<'static>>,
     queries: &'q wgpu::QuerySet,
+    /// Where the timestamps are resolved to (also between segments).
+    resolved: &'q wgpu::Buffer,
+    /// The stage whose timed pass was opened last.
+    open: Option<usize>,
+    /// Whether `submit_and_wait` may submit (not across ranks, whose exchanges between the
+    /// submissions the profile does not time).
+    waits: bool,
     /// Which stages were recorded.
     pub ran: [bool; ALL_PROFILED_STAGES],
+    /// Ticks of each stage's segments before its last (a stage open at a submission).
+    pub carried: [u64; ALL_PROFILED_STAGES],
 }
 
 impl<'q> TimedRecorder<'q> {
-    pub fn new(device: &wgpu::Device, queries: &'q wgpu::QuerySet) -> Self {
+    pub fn new(device: &wgpu::Device, queries: &'q wgpu::QuerySet, resolved: &'q wgpu::Buffer, waits: bool) -> Self {
         let encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("profiled step") });
-        TimedRecorder { encoder, pass: None, queries, ran: [false; ALL_PROFILED_STAGES] }
+        TimedRecorder { encoder, pass: None, queries, resolved, open: None, waits, ran: [false; ALL_PROFILED_STAGES], carried: [0; ALL_PROFILED_STAGES] }
     }
-    /// The command buffer, with the timestamps resolved into `resolved`.
-    pub fn finish(mut self, resolved: &wgpu::Buffer) -> wgpu::CommandBuffer {
+    /// Opens the timed pass of stage `i` (its timestamps at queries 2i and 2i + 1).
+    fn open_timed(&mut self, i: usize) {
         self.pass = None;
-        self.encoder.resolve_query_set(self.queries, 0..2 * ALL_PROFILED_STAGES as u32, resolved, 0);
-        self.encoder.finish()
-    }
-}
-
-impl Recorder for TimedRecorder<'_> {
-    fn begin(&mut self, stage: ProfiledStage) {
-        let i = stage as usize;
-        self.pass = None;
-        self.ran[i] = true;
+        self.open = Some(i);
         let writes = wgpu::ComputePassTimestampWrites {
             query_set: self.queries,
             beginning_of_pass_write_index: Some(2 * i as u32),
@@ -157,6 +159,20 @@ impl Recorder for TimedRecorder<'_> {
         };
         let pass = self.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("profiled stage"), timestamp_writes: Some(writes) });
         self.pass = Some(pass.forget_lifetime());
+    }
+    /// The command buffer, with the timestamps resolved.
+    pub fn finish(mut self) -> wgpu::CommandBuffer {
+        self.pass = None;
+        self.encoder.resolve_query_set(self.queries, 0..2 * ALL_PROFILED_STAGES as u32, self.resolved, 0);
+        self.encoder.finish()
+    }
+}
+
+impl Recorder for TimedRecorder<'_> {
+    fn begin(&mut self, stage: ProfiledStage) {
+        let i = stage as usize;
+        self.ran[i] = true;
+        self.open_timed(i);
     }
     fn pass(&mut self) -> &mut wgpu::ComputePass<'static> {
         let encoder = &mut self.encoder;
@@ -166,8 +182,25 @@ impl Recorder for TimedRecorder<'_> {
         self.pass = None;
         self.encoder.clear_buffer(buffer, offset, size);
     }
-    fn submit_and_wait(&mut self, _: &super::device::GpuContext) -> bool {
-        false
+    fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool {
+        if !self.waits {
+            return false;
+        }
+        self.pass = None;
+        let count = 2 * ALL_PROFILED_STAGES as u32;
+        self.encoder.resolve_query_set(self.queries, 0..count, self.resolved, 0);
+        let next = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("profiled step") });
+        let done = std::mem::replace(&mut self.encoder, next);
+        ctx.queue.submit([done.finish()]);
+        // The segment of the open stage so far (reading waits for the submission); the rest of
+        // the stage is timed from a new pass.
+        let Ok(data) = read_buffers(ctx, &[(self.resolved, count as u64 * 8)]) else { return false };
+        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&data[0]);
+        if let Some(i) = self.open {
+            self.carried[i] += ticks[2 * i + 1].saturating_sub(ticks[2 * i]);
+            self.open_timed(i);
+        }
+        true
     }
 }
 
@@ -412,7 +445,7 @@ impl GpuSolver {
             recorded += n;
             block = later;
             // A block boundary: ask the GPU whether the solve goes on (a recorder that cannot
-            // wait, the profile's, records every iteration up to the limit).
+            // wait, the profile's across ranks, records every iteration up to the limit).
             if recorded < limit && rec.submit_and_wait(&self.ctx) {
                 if let Some(done) = self.solve_ended() {
                     let mut last = self.last_iterations.get();
@@ -565,9 +598,10 @@ impl GpuSolver {
     /// [`DFSPH_PROFILED_STAGES`]) in nanoseconds (a stage that did not run, like the binning
     /// between neighbour rebuilds, adds 0). `None` when the device has no timestamp queries.
     /// Each step is submitted and read back on its own: slower than `advance`, but the GPU time
-    /// of the stages holds no host round trip. A DFSPH solve is recorded as with
-    /// [`SolverLoop::Indirect`], whatever the solver's loop (the timed passes cannot wait for a
-    /// readback): the same iterations, timed with the empty ones after convergence.
+    /// of the stages holds no host round trip. A DFSPH solve's loop ends as the solver's does
+    /// (the recorder submits and waits at each block's end, the solve timed in segments); across
+    /// ranks, whose exchanges it does not time, the recorder does not wait, and what needs a
+    /// wait there is refused.
     pub fn profile_stages(&mut self, steps: u64) -> anyhow::Result<Option<Vec<f64>>> {
         if !self.has_timestamps() {
             return Ok(None);
@@ -586,17 +620,17 @@ impl GpuSolver {
         for _ in 0..steps {
             let nu = self.params.viscosity_at_step(self.steps);
             self.set_viscosity(nu);
-            let mut rec = TimedRecorder::new(&self.ctx.device, &queries);
+            let mut rec = TimedRecorder::new(&self.ctx.device, &queries, &resolved, self.ranks.is_none());
             self.schedule(Work::Step, &mut rec);
-            let ran = rec.ran;
-            self.ctx.queue.submit([rec.finish(&resolved)]);
+            let (ran, carried) = (rec.ran, rec.carried);
+            self.ctx.queue.submit([rec.finish()]);
             self.steps += 1;
             let data = read_buffers(&self.ctx, &[(&resolved, count as u64 * 8)])?;
             let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&data[0]);
             for (i, total) in totals.iter_mut().enumerate() {
                 if ran[i] {
                     // Timestamps can wrap or come back equal on coarse clocks: never negative.
-                    *total += ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns;
+                    *total += (ticks[2 * i + 1].saturating_sub(ticks[2 * i]) + carried[i]) as f64 * period_ns;
                 }
             }
         }
