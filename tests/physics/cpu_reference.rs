@@ -29,7 +29,7 @@ fn colliding_blocks(kernel: Kernel, eos: EquationOfState) -> Scene {
 
 #[test]
 fn pressure_and_viscosity_conserve_momentum_in_a_closed_box_without_gravity() {
-    for kernel in [Kernel::Mueller, Kernel::CubicSpline] {
+    for kernel in Kernel::ALL {
         for eos in [EquationOfState::Linear, EquationOfState::Tait] {
             let s = colliding_blocks(kernel, eos);
             let p = s.params();
