@@ -179,7 +179,9 @@ impl Recorder for TimedRecorder<'_> {
         self.pass.get_or_insert_with(|| encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("untimed"), timestamp_writes: None }).forget_lifetime())
     }
     fn clear(&mut self, buffer: &wgpu::Buffer, offset: u64, size: Option<u64>) {
+        // The timed pass ends here; what follows is untimed until the next stage begins.
         self.pass = None;
+        self.open = None;
         self.encoder.clear_buffer(buffer, offset, size);
     }
     fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool {
