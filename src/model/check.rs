@@ -256,7 +256,7 @@ impl Scene {
             return Err(err(origin, "fluid", format!("would create {count} particles; at most {MAX_PARTICLES} are allowed")));
         }
         if let Some(avail) = available_memory_bytes() {
-            let need = count * SCENE_BYTES_PER_PARTICLE + cells * 8;
+            let need = host_bytes(count, cells, SCENE_BYTES_PER_PARTICLE);
             if need > avail {
                 return Err(err(origin, "fluid", format!(
                     "{count} particles (fluid and walls) and {cells} cells need about {} MiB of host memory; {} MiB are available",
@@ -409,6 +409,12 @@ impl Scene {
         }
         Ok(())
     }
+}
+
+/// Host bytes that `particles` particles at `per_particle` bytes and a grid of `cells` cells (a
+/// start index each, and its count) need.
+pub fn host_bytes(particles: u64, cells: u64, per_particle: u64) -> u64 {
+    particles * per_particle + cells * 8
 }
 
 /// Host memory available to this process, where the platform tells.

@@ -318,3 +318,14 @@ pub fn lattice_kernel_sum(kernel: Kernel, h_over_spacing: f64) -> f64 {
     }
     sum
 }
+
+/// The viscosity's nu as the pair sums use it: with the gradient form (the cubic spline's and
+/// Wendland's), 2 (d + 2) nu = 10 nu (Monaghan 2005, Eq. 6.3); the twin of `viscous_nu` in
+/// wgsl/shared/common.wgsl.
+pub fn viscous_nu<R: Real>(kernel: Kernel, viscosity: R) -> R {
+    if kernel.gradient_viscosity() {
+        R::of(10.0) * viscosity
+    } else {
+        viscosity
+    }
+}

@@ -232,6 +232,19 @@ fn kernel_grad(rij: vec3<f32>, r: f32) -> vec3<f32> {
     return select(rij * (dwdr / r), vec3<f32>(0.0), r >= params.h || r <= 1e-12 * params.h);
 }
 
+// Whether viscosity is the Morris/Monaghan term built on grad W (the cubic spline's and
+// Wendland's, whose Laplacians change sign) rather than Mueller's viscosity Laplacian; the twin
+// of Kernel::gradient_viscosity (src/model/scene.rs).
+fn gradient_viscosity() -> bool {
+    return KERNEL != 0u;
+}
+
+// The viscosity's nu as the pair sums use it: with the gradient form 2 (d + 2) nu (Monaghan 2005,
+// Eq. 6.3); the twin of viscous_nu in src/model/kernels.rs.
+fn viscous_nu() -> f32 {
+    return select(params.viscosity, 10.0 * params.viscosity, gradient_viscosity());
+}
+
 // Laplacian of the viscosity kernel (Mueller 2003 Eq. 22).
 fn kernel_laplacian(r: f32) -> f32 {
     return select(params.lap_coef * (params.h - r), 0.0, r >= params.h);

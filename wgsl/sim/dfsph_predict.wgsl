@@ -27,7 +27,6 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
     if (!(VISCOSITY && params.viscosity > 0.0)) {
         return g;
     }
-    let gradient_viscosity = KERNEL != 0u;
     let eps = 0.01 * params.h2;
     let xi = positions_at(i).xyz;
     let ui = velocities_at(i).xyz;
@@ -45,7 +44,7 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
             let r = sqrt(r2);
             let inv_rho = 1.0 / densities_at(j);
             let uij = ui - velocities_at(j).xyz;
-            if (gradient_viscosity) {
+            if (gradient_viscosity()) {
                 fluid_visc += kernel_grad(rij, r) * (inv_rho * dot(uij, rij) / (r2 + eps));
             } else {
                 fluid_visc -= uij * (inv_rho * kernel_laplacian(r));
@@ -60,7 +59,7 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
                     continue;
                 }
                 let r = sqrt(r2);
-                if (gradient_viscosity) {
+                if (gradient_viscosity()) {
                     wall_visc += kernel_grad(rij, r) * (w.w * dot(ui, rij) / (r2 + eps));
                 } else {
                     wall_visc -= ui * (w.w * kernel_laplacian(r));
@@ -69,7 +68,7 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
         }
     }
     let rho_i = densities_at(i);
-    let nu = select(params.viscosity, 10.0 * params.viscosity, gradient_viscosity);
+    let nu = viscous_nu();
     let visc = fluid_visc * (nu * params.rest_density * params.fluid_mass / rho_i) + wall_visc * (nu * params.boundary_friction / rho_i);
     return visc + g;
 }

@@ -82,7 +82,7 @@ fn add_fluid_pair(sums: ptr<function, ForceSums>, own: OwnParticle, n: FluidCand
     let uij = own.u - n.u;
     if (viscous_pairs()) {
         let inv_rho = 1.0 / n.rho;
-        if (KERNEL != 0u) {
+        if (gradient_viscosity()) {
             (*sums).fluid_visc += select(vec3<f32>(0.0), grad * (inv_rho * dot(uij, rij) / (r2 + eps)), counts);
         } else {
             (*sums).fluid_visc -= select(vec3<f32>(0.0), uij * (inv_rho * kernel_laplacian(r)), counts);
@@ -122,7 +122,7 @@ fn add_wall_pair(sums: ptr<function, ForceSums>, own: OwnParticle, n: WallCandid
         (*sums).wall_pressure -= select(vec3<f32>(0.0), grad * n.w.w, counts);
     }
     if (viscous_pairs()) {
-        if (KERNEL != 0u) {
+        if (gradient_viscosity()) {
             (*sums).wall_visc += select(vec3<f32>(0.0), grad * (n.w.w * dot(own.u, rij) / (r2 + eps)), counts);
         } else {
             (*sums).wall_visc -= select(vec3<f32>(0.0), own.u * (n.w.w * kernel_laplacian(r)), counts);
@@ -143,7 +143,7 @@ fn finish_acceleration(own: OwnParticle, sums: ForceSums) -> vec4<f32> {
     if (ADAMI_WALL_PRESSURE) {
         wall_p_over = 1.0;
     }
-    let nu = select(params.viscosity, 10.0 * params.viscosity, KERNEL != 0u);
+    let nu = viscous_nu();
     let visc = sums.fluid_visc * (nu * params.rest_density * params.fluid_mass / own.rho) + sums.wall_visc * (nu * params.boundary_friction / own.rho);
     var a = sums.fluid_pressure * params.fluid_mass + sums.wall_pressure * wall_p_over + visc;
     if (ARTIFICIAL_VISCOSITY) {

@@ -181,7 +181,6 @@ var<workgroup> group_values: array<vec4<f32>, PROBE_WORKGROUP>;
 // to slot_sums: the reaction to the wall terms of its acceleration in forces.wgsl, m_i times
 // minus what wall particle w adds to a_i (pressure, viscosity, artificial viscosity).
 fn add_wall_forces(i: u32, forces: u32) {
-    let gradient_viscosity = KERNEL != 0u;
     let viscous = VISCOSITY && params.viscosity > 0.0;
     let eps = 0.01 * params.h2;
     let xi = positions_at(i).xyz;
@@ -190,7 +189,7 @@ fn add_wall_forces(i: u32, forces: u32) {
     let p_i = pressures_at(i);
     let pi_over = p_i / (rho_i * rho_i);
     let wall_p_over = select(2.0 * max(p_i, 0.0) / (rho_i * rho_i), pi_over, CONSISTENT_WALL_PRESSURE);
-    let nu = select(params.viscosity, 10.0 * params.viscosity, gradient_viscosity);
+    let nu = viscous_nu();
     let visc_factor = nu * params.boundary_friction / rho_i;
     let artificial_factor = params.artificial_viscosity_factor * params.boundary_friction / rho_i;
     let c = cell_coords(xi);
@@ -215,7 +214,7 @@ fn add_wall_forces(i: u32, forces: u32) {
                 a = grad * (-w.w * (pi_over + own.x / (own.y * own.y)));
             }
             if (viscous) {
-                if (gradient_viscosity) {
+                if (gradient_viscosity()) {
                     a += grad * (visc_factor * w.w * dot(ui, rij) / (r2 + eps));
                 } else {
                     a += ui * (-visc_factor * w.w * kernel_laplacian(r));

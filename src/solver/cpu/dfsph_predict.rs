@@ -3,7 +3,7 @@
 //! entry point (`predict_velocities` with a fixed dt; `non_pressure_accelerations`,
 //! `choose_dt` and `predict_from_accelerations` with adaptive dt).
 
-use crate::model::kernels::{KernelCoefficients, Neighbours};
+use crate::model::kernels::{viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::params::{AdaptiveDt, Grid};
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
@@ -73,7 +73,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
         }
     }
     let rho_i = input.densities[i];
-    let nu = if gradient_viscosity { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let nu = viscous_nu(kernel.kind, input.viscosity);
     let visc = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
     visc + g
 }

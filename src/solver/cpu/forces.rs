@@ -7,7 +7,7 @@
 //! the same operations, so the same bits.
 
 use super::cell_batches::{wide, ListChunk, NeighbourLists, RowMasks};
-use crate::model::kernels::{KernelCoefficients, Neighbours};
+use crate::model::kernels::{viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::lanes::{Pack, PackV3, LANES};
 use crate::model::params::Grid;
 use crate::model::real::{as_arrays, Real, V3};
@@ -232,7 +232,7 @@ fn finish<R: Real>(input: &ForcesInput<R>, i: usize, sums: &ForceSums<R>) -> V3<
         BoundaryPressure::Consistent => pi_over,
         BoundaryPressure::Adami => R::one(),
     };
-    let nu = if terms.gradient_viscosity { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let nu = viscous_nu(input.kernel.kind, input.viscosity);
     let visc = sums.fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + sums.wall_visc * (nu * input.boundary_friction / rho_i);
     let mut a = sums.fluid_pressure * input.fluid_mass + sums.wall_pressure * wall_p_over + visc;
     if terms.artificial {

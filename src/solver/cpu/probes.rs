@@ -6,7 +6,7 @@
 //! the solves, on the pressure `wall_push_pressure` gives the step's wall push. What each probe measures is in
 //! [`crate::model::probes`] and docs/probes.md.
 
-use crate::model::kernels::{KernelCoefficients, Neighbours};
+use crate::model::kernels::{viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::params::Grid;
 use crate::model::probes::{Probe, ProbeGeometry, GAUGE_FRACTION};
 use crate::model::real::{Real, V3};
@@ -283,7 +283,7 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
         BoundaryPressure::Adami => R::zero(),
     };
     let adami = input.boundary_pressure == BoundaryPressure::Adami;
-    let nu = if gradient_viscosity { R::of(10.0) * input.viscosity } else { input.viscosity };
+    let nu = viscous_nu(kernel.kind, input.viscosity);
     let visc_factor = nu * input.boundary_friction / rho_i;
     let artificial = input.artificial_viscosity_factor > R::zero();
     let artificial_factor = input.artificial_viscosity_factor * input.boundary_friction / rho_i;
