@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The measurements of a hardware GPU in one command, for a machine without a Rust toolchain:
 # the dam break profiled by size, the tuning knobs, the continuity/delta-SPH and DFSPH variants,
-# the block workload, the GPU against the CPU reference, and each parity test alone (with its
-# own time limit, so that one slow or stuck test cannot hide the others).
+# the block workload, the GPU against the CPU reference, what probes cost and the Buchner
+# wall-pressure case, and each parity test alone (with its own time limit, so that one slow or
+# stuck test cannot hide the others).
 #
 # Usage, from the project root, with the release binary at $WGSPH (default .gpu/wgsph) and,
 # optionally, the parity test program at $PARITY (default .gpu/tests/parity; the one that
@@ -60,6 +61,20 @@ t 120 "$W" bench --n 30 --steps 200 --out "$out/bench_n30.json"
 t 120 "$W" bench --n 40 --steps 200 --paths gpu,dfsph-gpu,cpu-f32 --out "$out/bench_n40.json"
 t 120 "$W" bench --n 30 --steps 200 --paths dfsph-gpu --solver-loop indirect
 t 60 "$W" compare dam_break --steps 100
+
+# Probes: the dam break at 30 k and 1 M without probes and with four point probes sampled every
+# step (what a probe costs on the GPU), and the Buchner wall-pressure case at two resolutions.
+awk '/^\[\[fluid\]\]/ && !done { for (y = 1; y <= 4; y++) printf "[[probe]]\nname = \"p%d\"\ntype = \"point\"\nposition = [1.0, %.2f, 0.05]\nevery_steps = 1\n\n", y, 0.1 * y; done = 1 } { print }' \
+    scenes/dam_break.toml > "$variants/dam_break_probes.toml"
+for size in "30000 4000" "1000000 400"; do
+  set -- $size
+  for scene in dam_break "$variants/dam_break_probes.toml"; do
+    t 120 "$W" run "$scene" --backend gpu --particles $1 --steps $2 --snapshot-every 0 --out "$variants/run_$1_$(basename "$scene" .toml)"
+  done
+done
+for resolution in default fine; do
+  t 120 "$W" validate buchner_p1 --backend gpu --resolution $resolution --out "$out/buchner_$resolution"
+done
 
 # The largest dam break asked for.
 t 300 "$W" profile dam_break --particles "$largest" --steps 10 --out "$out/profile_$largest.json"
