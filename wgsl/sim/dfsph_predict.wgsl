@@ -5,6 +5,7 @@
 
 //! include shared/common.wgsl
 //! include shared/reduce.wgsl
+//! include shared/adaptive_dt.wgsl
 //! array positions: vec4<f32>, read
 //! array velocities: vec4<f32>, read
 //! array densities: f32, read
@@ -100,52 +101,25 @@ fn non_pressure_accelerations(
         let speed = length(velocities_at(i).xyz);
         let accel = length(a);
         // A ghost is its own rank's to count; the host takes the largest over the ranks.
-        let own = !is_ghost(positions_at(i).w);
-        if (own && is_finite_f32(speed)) {
-            reduce_offer(0u, bitcast<u32>(speed));
-        }
-        if (own && is_finite_f32(accel)) {
-            reduce_offer(1u, bitcast<u32>(accel));
+        if (!is_ghost(positions_at(i).w)) {
+            offer_speed_and_acceleration(speed, accel);
         }
     }
-    reduce_end();
-    if (lid == 0u) {
-        atomicMax(&status[STATUS_MAX_SPEED], reduce_result(0u));
-        atomicMax(&status[STATUS_MAX_ACCELERATION], reduce_result(1u));
-    }
+    publish_speed_and_acceleration(lid);
 }
 
-// Adaptive dt, 2 of 3 (one thread): dt = clamp(min(C_cfl h / |v|max, C_f sqrt(h / |a|max),
-// C_visc h^2 / nu), dt_min, dt_max): the CFL condition on the flow speed alone, an incompressible
-// fluid having no speed of sound; a condition whose quantity is zero is left out. Then the
-// simulated time (a Kahan sum) and the dt range, as wgsl/sim/integrate.wgsl `choose_dt` keeps
-// them. Twin of AdaptiveDt::dt in src/model/params.rs with c0 = 0.
+// Adaptive dt, 2 of 3 (one thread): the CFL condition on the flow speed alone, C_cfl h / |v|max
+// (an incompressible fluid has no speed of sound; none while nothing moves), with the force and
+// viscous conditions (shared/adaptive_dt.wgsl). Twin of AdaptiveDt::dt in src/model/params.rs
+// with c0 = 0.
 @compute @workgroup_size(1)
 fn choose_dt() {
-    let speed = bitcast<f32>(atomicLoad(&status[STATUS_MAX_SPEED]));
-    let accel = bitcast<f32>(atomicLoad(&status[STATUS_MAX_ACCELERATION]));
-    atomicStore(&status[STATUS_MAX_SPEED], 0u);
-    atomicStore(&status[STATUS_MAX_ACCELERATION], 0u);
-    var dt = params.dt_max;
-    if (speed > 0.0) {
-        dt = min(dt, params.cfl_number * params.h / speed);
+    let maxima = take_speed_and_acceleration();
+    var cfl_dt = params.dt_max;
+    if (maxima.x > 0.0) {
+        cfl_dt = min(cfl_dt, params.cfl_number * params.h / maxima.x);
     }
-    if (accel > 0.0) {
-        dt = min(dt, params.force_number * sqrt(params.h / accel));
-    }
-    if (VISCOSITY && params.viscosity > 0.0) {
-        dt = min(dt, params.viscous_number * params.h2 / params.viscosity);
-    }
-    dt = clamp(dt, params.dt_min, params.dt_max);
-    atomicStore(&status[STATUS_DT], bitcast<u32>(dt));
-    let sum = bitcast<f32>(atomicLoad(&status[STATUS_TIME]));
-    let compensation = bitcast<f32>(atomicLoad(&status[STATUS_TIME_COMPENSATION]));
-    let y = dt - compensation;
-    let t = sum + y;
-    atomicStore(&status[STATUS_TIME_COMPENSATION], bitcast<u32>((t - sum) - y));
-    atomicStore(&status[STATUS_TIME], bitcast<u32>(t));
-    atomicStore(&status[STATUS_DT_MIN], bitcast<u32>(min(bitcast<f32>(atomicLoad(&status[STATUS_DT_MIN])), dt)));
-    atomicStore(&status[STATUS_DT_MAX], bitcast<u32>(max(bitcast<f32>(atomicLoad(&status[STATUS_DT_MAX])), dt)));
+    choose_and_record_dt(cfl_dt, maxima.y);
 }
 
 // Adaptive dt, 3 of 3: v*_i = v_i + dt a_i; the stiffness sum starts at 0.

@@ -6,6 +6,7 @@
 
 //! include shared/common.wgsl
 //! include shared/reduce.wgsl
+//! include shared/adaptive_dt.wgsl
 //! array positions: vec4<f32>, read
 //! array velocities: vec4<f32>, read
 //! array accelerations: vec4<f32>, read
@@ -96,8 +97,7 @@ fn integrate(
 
 // Adaptive dt, 1 of 2: the largest |v| (at the start of the step) and |a| (of this step),
 // reduced per workgroup, then once per workgroup into the status buffer (across ranks, of the
-// rank's own particles). Non-negative floats
-// order like their bits; a non-finite value is left out (the health check reports it).
+// rank's own particles; shared/adaptive_dt.wgsl).
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn reduce_maxima(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -109,49 +109,17 @@ fn reduce_maxima(
     // A ghost is its own rank's to count: each rank offers its own particles, and the host
     // takes the largest over the ranks before choose_dt.
     if (i < params.fluid_count && !is_ghost(positions_at(i).w)) {
-        let speed = length(velocities_at(i).xyz);
-        let accel = length(accelerations_at(i).xyz);
-        if (is_finite_f32(speed)) {
-            reduce_offer(0u, bitcast<u32>(speed));
-        }
-        if (is_finite_f32(accel)) {
-            reduce_offer(1u, bitcast<u32>(accel));
-        }
+        offer_speed_and_acceleration(length(velocities_at(i).xyz), length(accelerations_at(i).xyz));
     }
-    reduce_end();
-    if (lid == 0u) {
-        atomicMax(&status[STATUS_MAX_SPEED], reduce_result(0u));
-        atomicMax(&status[STATUS_MAX_ACCELERATION], reduce_result(1u));
-    }
+    publish_speed_and_acceleration(lid);
 }
 
-// Adaptive dt, 2 of 2 (one thread): dt = clamp(min(C_cfl h / (c0 + |v|max), C_f sqrt(h / |a|max),
-// C_visc h^2 / nu), dt_min, dt_max) (Monaghan 1992; Morris et al. 1997), the simulated time
-// (Kahan-compensated sum, so that 10^5 steps of f32 lose no time) and the dt range.
-// Twin of AdaptiveDt::dt in src/model/params.rs.
+// Adaptive dt, 2 of 2 (one thread): the CFL condition on the speed of sound and the largest
+// flow speed, C_cfl h / (c0 + |v|max), with the force and viscous conditions (shared/adaptive_dt.wgsl).
 @compute @workgroup_size(1)
 fn choose_dt() {
-    let speed = bitcast<f32>(atomicLoad(&status[STATUS_MAX_SPEED]));
-    let accel = bitcast<f32>(atomicLoad(&status[STATUS_MAX_ACCELERATION]));
-    atomicStore(&status[STATUS_MAX_SPEED], 0u);
-    atomicStore(&status[STATUS_MAX_ACCELERATION], 0u);
-    var dt = params.cfl_number * params.h / (params.speed_of_sound + speed);
-    if (accel > 0.0) {
-        dt = min(dt, params.force_number * sqrt(params.h / accel));
-    }
-    if (VISCOSITY && params.viscosity > 0.0) {
-        dt = min(dt, params.viscous_number * params.h2 / params.viscosity);
-    }
-    dt = clamp(dt, params.dt_min, params.dt_max);
-    atomicStore(&status[STATUS_DT], bitcast<u32>(dt));
-    let sum = bitcast<f32>(atomicLoad(&status[STATUS_TIME]));
-    let compensation = bitcast<f32>(atomicLoad(&status[STATUS_TIME_COMPENSATION]));
-    let y = dt - compensation;
-    let t = sum + y;
-    atomicStore(&status[STATUS_TIME_COMPENSATION], bitcast<u32>((t - sum) - y));
-    atomicStore(&status[STATUS_TIME], bitcast<u32>(t));
-    atomicStore(&status[STATUS_DT_MIN], bitcast<u32>(min(bitcast<f32>(atomicLoad(&status[STATUS_DT_MIN])), dt)));
-    atomicStore(&status[STATUS_DT_MAX], bitcast<u32>(max(bitcast<f32>(atomicLoad(&status[STATUS_DT_MAX])), dt)));
+    let maxima = take_speed_and_acceleration();
+    choose_and_record_dt(params.cfl_number * params.h / (params.speed_of_sound + maxima.x), maxima.y);
 }
 
 // One thread after every step: counts the step, keeps the largest speed so far, and at the

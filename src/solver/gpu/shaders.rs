@@ -16,6 +16,7 @@ use crate::model::scene::{BoundaryPressure, EquationOfState, Kernel};
 pub const SOURCES: &[(&str, &str)] = &[
     ("shared/common.wgsl", include_str!("../../../wgsl/shared/common.wgsl")),
     ("shared/reduce.wgsl", include_str!("../../../wgsl/shared/reduce.wgsl")),
+    ("shared/adaptive_dt.wgsl", include_str!("../../../wgsl/shared/adaptive_dt.wgsl")),
     ("shared/density_write.wgsl", include_str!("../../../wgsl/shared/density_write.wgsl")),
     ("shared/tiles.wgsl", include_str!("../../../wgsl/shared/tiles.wgsl")),
     ("shared/tiles_walls.wgsl", include_str!("../../../wgsl/shared/tiles_walls.wgsl")),
