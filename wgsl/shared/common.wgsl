@@ -310,7 +310,7 @@ fn stencil_run(c: vec3<u32>, index: u32) -> vec2<u32> {
     return vec2<u32>(row + x0, row + x1 + 1u);
 }
 
-// A particle's position and velocity after the solid boxes' backstop.
+// A particle's position and velocity after the backstops (planes, solid boxes).
 struct Backstopped {
     x: vec3<f32>,
     v: vec3<f32>,
@@ -352,6 +352,32 @@ fn leave_solid_boxes(x_in: vec3<f32>, v_in: vec3<f32>) -> Backstopped {
             x[axis] = lo[axis];
             v[axis] = min(v[axis], 0.0);
         }
+    }
+    return Backstopped(x, v);
+}
+
+// The backstops of a particle just moved to x with velocity v: a plane puts a particle behind
+// it back on it and removes (or reflects, with restitution) the velocity into it, so that no
+// particle is lost through it; then a solid box's faces do the same for a particle that entered
+// the box. Twin of backstop in src/solver/cpu/integrate.rs.
+fn backstop(x_in: vec3<f32>, v_in: vec3<f32>) -> Backstopped {
+    var x = x_in;
+    var v = v_in;
+    if (PLANES) {
+        for (var k = 0u; k < params.plane_count; k++) {
+            let plane = params.planes[k];
+            let d = dot(x, plane.xyz) - plane.w;
+            if (d < 0.0) {
+                x -= plane.xyz * d;
+                let vn = dot(v, plane.xyz);
+                if (vn < 0.0) {
+                    v -= plane.xyz * ((1.0 + params.plane_restitution[k].x) * vn);
+                }
+            }
+        }
+    }
+    if (SOLID_BOXES) {
+        return leave_solid_boxes(x, v);
     }
     return Backstopped(x, v);
 }

@@ -41,26 +41,9 @@ fn integrate(
         // The speed the solves gave the particle, before a plane takes the velocity into it
         // away (as wgsl/sim/integrate.wgsl advance_particle).
         let speed = length(v);
-        // A plane puts a particle behind it back on it and removes (or reflects, with
-        // restitution) the velocity into it.
-        if (PLANES) {
-            for (var k = 0u; k < params.plane_count; k++) {
-                let plane = params.planes[k];
-                let d = dot(x, plane.xyz) - plane.w;
-                if (d < 0.0) {
-                    x -= plane.xyz * d;
-                    let vn = dot(v, plane.xyz);
-                    if (vn < 0.0) {
-                        v -= plane.xyz * ((1.0 + params.plane_restitution[k].x) * vn);
-                    }
-                }
-            }
-        }
-        if (SOLID_BOXES) {
-            let kept = leave_solid_boxes(x, v);
-            x = kept.x;
-            v = kept.v;
-        }
+        let kept = backstop(x, v);
+        x = kept.x;
+        v = kept.v;
         positions_out_set(i, vec4<f32>(x, old.w));
         velocities_set(i, vec4<f32>(v, 0.0));
         let id = particle_id(old.w);

@@ -37,27 +37,9 @@ fn advance_particle(i: u32, a4: vec4<f32>, dt: f32) -> f32 {
     v += a * dt;
     x += v * dt;
     let speed = length(v);
-    // A plane puts a particle behind it back on it and removes (or reflects, with restitution)
-    // the velocity into it, so that no particle is lost through it.
-    if (PLANES) {
-        for (var k = 0u; k < params.plane_count; k++) {
-            let plane = params.planes[k];
-            let d = dot(x, plane.xyz) - plane.w;
-            if (d < 0.0) {
-                x -= plane.xyz * d;
-                let vn = dot(v, plane.xyz);
-                if (vn < 0.0) {
-                    v -= plane.xyz * ((1.0 + params.plane_restitution[k].x) * vn);
-                }
-            }
-        }
-    }
-    // A solid box's faces do the same for a particle that entered the box.
-    if (SOLID_BOXES) {
-        let kept = leave_solid_boxes(x, v);
-        x = kept.x;
-        v = kept.v;
-    }
+    let kept = backstop(x, v);
+    x = kept.x;
+    v = kept.v;
     positions_out_set(i, vec4<f32>(x, old.w));
     velocities_out_set(i, vec4<f32>(v, a4.w));
     let finite = is_finite_vec3(x) && is_finite_vec3(v) && (!CONTINUITY || is_finite_f32(a4.w));

@@ -61,15 +61,26 @@ pub struct IntegrateInput<'a, R> {
     pub densities: &'a [R],
 }
 
-/// Advances one particle with acceleration `a` over `dt` (wgsl `advance_particle`): a plane puts
-/// a particle behind it back on it and removes (or reflects, with restitution) the velocity
-/// into it, so that no particle is lost through it; so does a solid box's nearest face
-/// ([`leave_solid_boxes`]).
+/// Advances one particle with acceleration `a` over `dt` (wgsl `advance_particle`), then its
+/// [`backstop`].
 pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, backstops: &Backstops<R>, domain: (V3<R>, V3<R>)) -> StepHealth {
     *v += a * dt;
     *x += *v * dt;
     // The speed the forces gave the particle, before a plane takes the velocity into it away.
     let speed = v.length().to64();
+    backstop(x, v, backstops);
+    let finite = x.is_finite() && v.is_finite();
+    let inside = (0..3).all(|k| x.0[k] >= domain.0 .0[k] && x.0[k] <= domain.1 .0[k]);
+    // As on the GPU: 0 for a non-finite particle; a finite velocity whose length overflows is
+    // infinitely fast.
+    StepHealth { non_finite: (!finite) as u32, escaped: (finite && !inside) as u32, max_speed: if finite { speed } else { 0.0 } }
+}
+
+/// The backstops of a particle just moved (wgsl `backstop` in shared/common.wgsl): a plane puts
+/// a particle behind it back on it and removes (or reflects, with restitution) the velocity
+/// into it, so that no particle is lost through it; then a solid box's nearest face does the
+/// same for a particle that entered the box ([`leave_solid_boxes`]).
+pub fn backstop<R: Real>(x: &mut V3<R>, v: &mut V3<R>, backstops: &Backstops<R>) {
     for plane in &backstops.planes {
         let d = x.dot(plane.normal) - plane.offset;
         if d < R::zero() {
@@ -81,11 +92,6 @@ pub fn advance_particle<R: Real>(x: &mut V3<R>, v: &mut V3<R>, a: V3<R>, dt: R, 
         }
     }
     leave_solid_boxes(x, v, &backstops.boxes);
-    let finite = x.is_finite() && v.is_finite();
-    let inside = (0..3).all(|k| x.0[k] >= domain.0 .0[k] && x.0[k] <= domain.1 .0[k]);
-    // As on the GPU: 0 for a non-finite particle; a finite velocity whose length overflows is
-    // infinitely fast.
-    StepHealth { non_finite: (!finite) as u32, escaped: (finite && !inside) as u32, max_speed: if finite { speed } else { 0.0 } }
 }
 
 /// A particle strictly inside a solid box is put back on the box's nearest face and the
