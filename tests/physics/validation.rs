@@ -128,9 +128,9 @@ fn buchner_p1_wall_pressure() {
         assert!(rows.len() > 1000 && rows.last().unwrap()[1] > 7.3, "{backend}: {} rows", rows.len());
         // Dry before the surge arrives.
         assert!(rows.iter().filter(|r| r[1] < 2.0).all(|r| r[2] == 0.0 && r[4] == 0.0), "{backend}: pressure on the wall before the surge");
-        // The surge wets the wall from the floor up: 0.2 H (0.12 m) before P1 (0.16 m).
+        // The surge wets the wall from the floor up: 0.2 H (0.12 m) no later than P1 (0.16 m).
         let first_wet = |column: usize| rows.iter().find(|r| r[column] > 0.0).map(|r| r[1]).unwrap();
-        assert!(first_wet(4) < first_wet(2), "{backend}: 0.2 H wet at {}, P1 at {}", first_wet(4), first_wet(2));
+        assert!(first_wet(4) <= first_wet(2), "{backend}: 0.2 H wet at {}, P1 at {}", first_wet(4), first_wet(2));
         let lower = r.figure("at 0.2 H: arrival (first p > 0.1 rho g H), t sqrt(g/H)").unwrap();
         assert!(lower.value < r.figure("simulated arrival, t sqrt(g/H)").unwrap().value, "{backend}: {lower:?}");
     }
