@@ -3,8 +3,8 @@
 //! atomically (header and lines), then the lines of every later batch of steps are appended with
 //! one write: rewriting a series after every batch made a long run's writing grow with the
 //! square of its samples (measured: 0.1-0.5 ms per probe and step on a GPU, more than the step).
-//! A run stopped during an append can leave part of one line at the end, which a resumed run
-//! drops; a resumed run keeps the lines of the steps before its checkpoint (rewriting the file
+//! An append that fails is cut back to the lines before it; a run killed during one can leave
+//! part of a line at the end, which a resumed run drops; a resumed run keeps the lines of the steps before its checkpoint (rewriting the file
 //! once) and computes the later ones again, so no line is lost or written twice.
 
 use super::atomic::write_atomic;
@@ -117,8 +117,15 @@ impl ProbeWriter {
                     write_line(&mut text, row)?;
                 }
                 match std::fs::OpenOptions::new().append(true).open(&f.path) {
-                    // One write of whole lines.
-                    Ok(mut file) => file.write_all(&text).with_context(|| format!("cannot write {}", f.path.display()))?,
+                    // One write of whole lines; one that fails part way (a full disk) is cut back
+                    // to the lines before it, so that the file never ends in part of a line.
+                    Ok(mut file) => {
+                        let before = file.metadata().with_context(|| format!("cannot write {}", f.path.display()))?.len();
+                        if let Err(e) = file.write_all(&text) {
+                            let _ = file.set_len(before);
+                            return Err(e).with_context(|| format!("cannot write {}", f.path.display()));
+                        }
+                    }
                     // Removed while the run went on: written whole again below.
                     Err(e) if e.kind() == std::io::ErrorKind::NotFound => f.rewrite = true,
                     Err(e) => return Err(e).with_context(|| format!("cannot write {}", f.path.display())),
