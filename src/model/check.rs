@@ -255,13 +255,8 @@ impl Scene {
         if count > MAX_PARTICLES {
             return Err(err(origin, "fluid", format!("would create {count} particles; at most {MAX_PARTICLES} are allowed")));
         }
-        if let Some(avail) = available_memory_bytes() {
-            let need = host_bytes(count, cells, SCENE_BYTES_PER_PARTICLE);
-            if need > avail {
-                return Err(err(origin, "fluid", format!(
-                    "{count} particles (fluid and walls) and {cells} cells need about {} MiB of host memory; {} MiB are available",
-                    need >> 20, avail >> 20)));
-            }
+        if let Some(message) = host_memory_shortfall(count, cells, SCENE_BYTES_PER_PARTICLE, "") {
+            return Err(err(origin, "fluid", message));
         }
         Ok(())
     }
@@ -411,10 +406,15 @@ impl Scene {
     }
 }
 
-/// Host bytes that `particles` particles at `per_particle` bytes and a grid of `cells` cells (a
-/// start index each, and its count) need.
-pub fn host_bytes(particles: u64, cells: u64, per_particle: u64) -> u64 {
-    particles * per_particle + cells * 8
+/// Where the platform tells the host's available memory and `particles` particles at
+/// `per_particle` bytes and a grid of `cells` cells (a start index each, and its count) need
+/// more: the refusal's message (`user`, e.g. " on the cpu backend", says whose figure it is).
+pub fn host_memory_shortfall(particles: u64, cells: u64, per_particle: u64, user: &str) -> Option<String> {
+    let available = available_memory_bytes()?;
+    let need = particles * per_particle + cells * 8;
+    (need > available).then(|| {
+        format!("{particles} particles (fluid and walls) and {cells} cells need about {} MiB of host memory{user}; {} MiB are available", need >> 20, available >> 20)
+    })
 }
 
 /// Host memory available to this process, where the platform tells.
@@ -433,7 +433,7 @@ impl Scene {
     /// cubic spline from 2 spacings, Mueller's within 1 % from 2, Wendland's within 0.5 % from 3).
     pub fn lattice_rest_density_ratio(&self) -> f64 {
         let p = &self.physics;
-        let mass = p.particle_mass.unwrap_or(p.rest_density * p.particle_spacing.powi(3));
+        let mass = p.fluid_mass();
         super::kernels::lattice_kernel_sum(p.kernel, p.smoothing_length / p.particle_spacing) * mass / (p.rest_density * p.particle_spacing.powi(3))
     }
 
@@ -449,7 +449,7 @@ impl Scene {
         let over = p.smoothing_length / p.particle_spacing;
         let kernel = serde_json::to_string(&p.kernel).unwrap_or_default();
         let suits = (4..=10).map(|k| k as f64 * 0.5).find(|&r| (super::kernels::lattice_kernel_sum(p.kernel, r) - 1.0).abs() <= 0.005);
-        let mass = p.particle_mass.unwrap_or(p.rest_density * p.particle_spacing.powi(3)) / ratio;
+        let mass = p.fluid_mass() / ratio;
         Some(format!(
             "physics.kernel = {kernel} with physics.smoothing_length = {} ({} particle spacings): a fluid particle inside a block starts at {} rho0 (the kernel's sum over the lattice), not at its rest density, so the fluid is pushed {} from the first step; {}or set physics.particle_mass = {} to start at rho0",
             short(p.smoothing_length),

@@ -261,7 +261,7 @@ impl Scene {
         Params {
             h: p.smoothing_length,
             rest_density: p.rest_density,
-            fluid_mass: p.particle_mass.unwrap_or(p.rest_density * p.particle_spacing.powi(3)),
+            fluid_mass: p.fluid_mass(),
             kernel: p.kernel,
             eos: p.equation_of_state,
             stiffness,

@@ -302,6 +302,13 @@ pub struct Physics {
     pub initial_pressure: InitialPressure,
 }
 
+impl Physics {
+    /// The mass of a fluid particle: `particle_mass`, or rho0 s^3 (a lattice cell of water).
+    pub fn fluid_mass(&self) -> f64 {
+        self.particle_mass.unwrap_or(self.rest_density * self.particle_spacing.powi(3))
+    }
+}
+
 /// How a particle's density is found.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]

@@ -25,7 +25,7 @@ use super::cpu::CpuSolver;
 use super::gpu::{GpuContext, GpuOptions, GpuSolver, ParticleBuffers};
 use super::backend::Backend;
 use super::communicator::Ranks;
-use crate::model::check::{available_memory_bytes, host_bytes, CPU_BYTES_PER_PARTICLE};
+use crate::model::check::{host_memory_shortfall, CPU_BYTES_PER_PARTICLE};
 use crate::model::initial::InitialState;
 use crate::model::params::Params;
 use crate::model::real::Real;
@@ -283,18 +283,9 @@ fn open_part_on_gpu(scene: &Scene, params: &Params, initial: Option<InitialState
 fn check_host_memory(scene: &Scene, share: f64) -> Result<(), SceneError> {
     let count = (scene.estimated_particle_count() as f64 * share.min(1.0)).ceil() as u64;
     let cells = scene.grid().cell_count() as u64;
-    let need = host_bytes(count, cells, CPU_BYTES_PER_PARTICLE);
-    match available_memory_bytes() {
-        Some(available) if need > available => Err(SceneError {
-            origin: scene.name.clone(),
-            field: "fluid".into(),
-            message: format!(
-                "{count} particles (fluid and walls) and {cells} cells need about {} MiB of host memory on the cpu backend; {} MiB are available",
-                need >> 20,
-                available >> 20
-            ),
-        }),
-        _ => Ok(()),
+    match host_memory_shortfall(count, cells, CPU_BYTES_PER_PARTICLE, " on the cpu backend") {
+        Some(message) => Err(SceneError { origin: scene.name.clone(), field: "fluid".into(), message }),
+        None => Ok(()),
     }
 }
 

@@ -160,10 +160,14 @@ impl<'q> TimedRecorder<'q> {
         let pass = self.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("profiled stage"), timestamp_writes: Some(writes) });
         self.pass = Some(pass.forget_lifetime());
     }
-    /// The command buffer, with the timestamps resolved.
-    pub fn finish(mut self) -> wgpu::CommandBuffer {
+    /// Ends the open pass and resolves every timestamp into `resolved`.
+    fn resolve(&mut self) {
         self.pass = None;
         self.encoder.resolve_query_set(self.queries, 0..2 * ALL_PROFILED_STAGES as u32, self.resolved, 0);
+    }
+    /// The command buffer, with the timestamps resolved.
+    pub fn finish(mut self) -> wgpu::CommandBuffer {
+        self.resolve();
         self.encoder.finish()
     }
 }
@@ -188,15 +192,13 @@ impl Recorder for TimedRecorder<'_> {
         if !self.waits {
             return false;
         }
-        self.pass = None;
-        let count = 2 * ALL_PROFILED_STAGES as u32;
-        self.encoder.resolve_query_set(self.queries, 0..count, self.resolved, 0);
+        self.resolve();
         let next = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("profiled step") });
         let done = std::mem::replace(&mut self.encoder, next);
         ctx.queue.submit([done.finish()]);
         // The segment of the open stage so far (reading waits for the submission); the rest of
         // the stage is timed from a new pass.
-        let Ok(data) = read_buffers(ctx, &[(self.resolved, count as u64 * 8)]) else { return false };
+        let Ok(data) = read_buffers(ctx, &[(self.resolved, 2 * ALL_PROFILED_STAGES as u64 * 8)]) else { return false };
         let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&data[0]);
         if let Some(i) = self.open {
             self.carried[i] += ticks[2 * i + 1].saturating_sub(ticks[2 * i]);
