@@ -277,6 +277,11 @@ pub struct GpuTuning {
     /// Give every particle its own walk of its stencil, even where subgroup tiles are possible.
     #[arg(long)]
     pub no_subgroup_tiles: bool,
+    /// With subgroup tiles, walk them in the forces too instead of the neighbour lists the
+    /// density stage records (lists: the default of the weakly compressible step with two
+    /// passes; 4 bytes per slot of each fluid particle's list). The same values.
+    #[arg(long)]
+    pub no_neighbour_lists: bool,
     /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes
     /// (`density=64,forces=256`; stages: bin_count, bin_scatter, reorder, density, forces,
     /// integrate). Default 128.
@@ -303,6 +308,8 @@ impl GpuTuning {
             single_cells: false,
             solver_loop: self.solver_loop.unwrap_or_default(),
             subgroup_tiles: if self.subgroup_tiles { Some(true) } else if self.no_subgroup_tiles { Some(false) } else { None },
+            neighbour_lists: if self.no_neighbour_lists { Some(false) } else { None },
+            neighbour_list_capacity: None,
         }
     }
 }
@@ -419,6 +426,10 @@ pub struct BenchArgs {
     /// tiles are possible (to measure what the tiles gain; see `wgsph run --help`).
     #[arg(long)]
     pub no_subgroup_tiles: bool,
+    /// Walk the subgroup tiles in the forces too, without neighbour lists (to measure what the
+    /// lists gain; see `wgsph run --help`).
+    #[arg(long)]
+    pub no_neighbour_lists: bool,
     /// Also write the figures to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,

@@ -217,6 +217,7 @@ pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
                 let options = GpuOptions {
                     solver_loop: args.solver_loop.unwrap_or_default(),
                     subgroup_tiles: if args.no_subgroup_tiles { Some(false) } else { None },
+                    neighbour_lists: if args.no_neighbour_lists { Some(false) } else { None },
                     ..Default::default()
                 };
                 let adapters = if args.every_adapter { compute_adapters() } else { Vec::new() };

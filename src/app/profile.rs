@@ -55,7 +55,8 @@ pub struct Profile {
     pub adapter: String,
     /// "timestamp queries" or "host (whole steps, submit and wait)".
     pub timing: String,
-    /// How the neighbour stages walk the neighbours: "subgroup tiles of 8" or "one particle per
+    /// How the neighbour stages walk the neighbours: "subgroup tiles of 8" (with ", the forces
+    /// over neighbour lists of N slots" where the density records lists) or "one particle per
     /// invocation".
     #[serde(default)]
     pub neighbour_loops: String,
@@ -288,7 +289,11 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
         scene: scene.name.clone(),
         adapter: gpu.adapter(),
         timing: timing.into(),
-        neighbour_loops: if gpu.subgroup_tiles() { format!("subgroup tiles of {TILE_LANES}") } else { "one particle per invocation".to_string() },
+        neighbour_loops: match (gpu.subgroup_tiles(), gpu.neighbour_list_capacity()) {
+            (true, Some(slots)) => format!("subgroup tiles of {TILE_LANES}, the forces over neighbour lists of {slots} slots"),
+            (true, None) => format!("subgroup tiles of {TILE_LANES}"),
+            _ => "one particle per invocation".to_string(),
+        },
         fluid_particles: n,
         wall_particles: w,
         grid_cells: cells,

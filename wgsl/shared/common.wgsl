@@ -41,6 +41,10 @@ override ARTIFICIAL_VISCOSITY: bool = false;    // Monaghan's, on approaching pa
 // The neighbour stencil as 9 runs of 3 cells (true) or as 27 single cells (false, kept to
 // measure what the runs gain; the same neighbours in the same order).
 override STENCIL_RUNS: bool = true;
+// Neighbour lists (shared/neighbour_lists.wgsl): the tiled density records each particle's
+// neighbours, at most LIST_CAPACITY of them, and the tiled forces walk those lists.
+override NEIGHBOUR_LISTS: bool = false;
+override LIST_CAPACITY: u32 = 0u;
 
 // Threads per workgroup of a particle stage, chosen per stage by the host (GpuOptions).
 override WORKGROUP_SIZE: u32 = 128u;

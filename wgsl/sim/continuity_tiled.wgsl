@@ -1,29 +1,56 @@
 // The continuity density with the stencils of a subgroup walked together (shared/tiles.wgsl):
 // the pair terms of continuity.wgsl, the same sums in the same order as its
-// `continuity_density`, so its twin is the same, src/solver/cpu/continuity.rs. A file of its own
-// since its subgroup operations need an adapter with subgroups, which the other stages do not.
+// `continuity_density`, so its twin is the same, src/solver/cpu/continuity.rs. With
+// NEIGHBOUR_LISTS it also records each particle's neighbours for the forces
+// (shared/neighbour_lists.wgsl). A file of its own since its subgroup operations need an
+// adapter with subgroups, which the other stages do not.
 
 //! include sim/continuity.wgsl
 //! include shared/tiles.wgsl
 //! include shared/tiles_walls.wgsl
+//! include shared/neighbour_lists.wgsl
 
-alias TileOwn = RateOwn;
-alias TileSums = RateSums;
+// What a particle brings to its pairs, and its index (fluid_count or more for an invocation
+// without one).
+struct TileOwn {
+    rate: RateOwn,
+    i: u32,
+}
+
+struct TileSums {
+    rate: RateSums,
+    list: ListCounts,
+}
 
 fn no_tile_sums() -> TileSums {
-    return RateSums(0.0, 0.0, 0.0);
+    return TileSums(RateSums(0.0, 0.0, 0.0), ListCounts(0u, 0u));
 }
 
-// The fluid candidates b to b + TILE - 1 (this lane's: j), in order.
-fn tile_fluid_chunk(sums: ptr<function, RateSums>, own: RateOwn, j: u32, b: u32, span: vec2<u32>) {
+// The fluid candidates b to b + TILE - 1 (this lane's: j), in order; with lists, the chunk
+// recorded.
+fn tile_fluid_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, span: vec2<u32>) {
     let xj = positions_at(j).xyz;
     let vj = velocities_at(j);
-    //! unroll 8 add_fluid_rate(sums, own, subgroupShuffle(xj, {k}u), subgroupShuffle(vj, {k}u), in_span(b + {k}u, span));
+    var rate = (*sums).rate;
+    //! unroll 8 add_fluid_rate(&rate, own.rate, subgroupShuffle(xj, {k}u), subgroupShuffle(vj, {k}u), in_span(b + {k}u, span));
+    (*sums).rate = rate;
+    if (NEIGHBOUR_LISTS) {
+        var mask = 0u;
+        //! unroll 8 mask |= list_bit(own.rate.x, subgroupShuffle(xj, {k}u), b + {k}u, span) << {k}u;
+        (*sums).list = record_chunk((*sums).list, own.i, b, mask, false);
+    }
 }
 
-fn tile_wall_chunk(sums: ptr<function, RateSums>, own: RateOwn, j: u32, b: u32, span: vec2<u32>) {
+fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, span: vec2<u32>) {
     let w = wall_positions_at(j);
-    //! unroll 8 add_wall_rate(sums, own, subgroupShuffle(w, {k}u), in_span(b + {k}u, span));
+    var rate = (*sums).rate;
+    //! unroll 8 add_wall_rate(&rate, own.rate, subgroupShuffle(w, {k}u), in_span(b + {k}u, span));
+    (*sums).rate = rate;
+    if (NEIGHBOUR_LISTS) {
+        var mask = 0u;
+        //! unroll 8 mask |= list_bit(own.rate.x, subgroupShuffle(w, {k}u).xyz, b + {k}u, span) << {k}u;
+        (*sums).list = record_chunk((*sums).list, own.i, b, mask, true);
+    }
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -36,9 +63,12 @@ fn continuity_tiled(
     reduce_begin(lid);
     let i = thread_index(gid, groups);
     let own = rate_own(tile_particle(i));
-    let sums = tile_walk(own, cell_coords(own.x), lane, i < params.fluid_count);
+    let sums = tile_walk(TileOwn(own, i), cell_coords(own.x), lane, i < params.fluid_count);
     if (i < params.fluid_count) {
-        set_carried_density(i, finish_rate(sums));
+        set_carried_density(i, finish_rate(sums.rate));
+        if (NEIGHBOUR_LISTS) {
+            finish_list(i, sums.list);
+        }
     }
     finish_densities(lid);
 }

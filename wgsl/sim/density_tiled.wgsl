@@ -1,41 +1,64 @@
 // The density stage with the stencils of a subgroup walked together (shared/tiles.wgsl): the
 // same sums in the same order as density.wgsl's `density`, so its twin is the same,
-// src/solver/cpu/density.rs. A file of its own since its subgroup operations need an adapter
-// with subgroups, which the other stages do not.
+// src/solver/cpu/density.rs. With NEIGHBOUR_LISTS it also records each particle's neighbours
+// for the forces (shared/neighbour_lists.wgsl). A file of its own since its subgroup operations
+// need an adapter with subgroups, which the other stages do not.
 
 //! include sim/density.wgsl
 //! include shared/tiles.wgsl
 //! include shared/tiles_walls.wgsl
+//! include shared/neighbour_lists.wgsl
 
-// A particle's position; the fluid sum of W (x) and the walls' sum of m W (y).
-alias TileOwn = vec3<f32>;
-alias TileSums = vec2<f32>;
+// A particle's position, and its index (fluid_count or more for an invocation without one).
+struct TileOwn {
+    x: vec3<f32>,
+    i: u32,
+}
+
+// The fluid sum of W (x) and the walls' sum of m W (y), and the list's counts.
+struct TileSums {
+    w: vec2<f32>,
+    list: ListCounts,
+}
 
 fn no_tile_sums() -> TileSums {
-    return vec2<f32>(0.0);
+    return TileSums(vec2<f32>(0.0), ListCounts(0u, 0u));
 }
 
-// W of candidate j at w.xyz, times its mass w.w where `weighed` (a wall particle), zero unless
-// j is in the invocation's own span.
-fn tile_w(xi: vec3<f32>, w: vec4<f32>, weighed: bool, j: u32, span: vec2<u32>) -> f32 {
-    let d = xi - w.xyz;
-    let kernel = kernel_w(dot(d, d));
-    return select(0.0, select(kernel, w.w * kernel, weighed), in_span(j, span));
+// Candidate j at w.xyz (a wall particle with `wall`, its mass in w.w): its W, times its mass for
+// a wall, added where j is in the invocation's own span; 1 where it is also a neighbour for the
+// forces (within LIST_MARGIN h^2, shared/neighbour_lists.wgsl), else 0.
+fn tile_candidate(sums: ptr<function, TileSums>, own: TileOwn, w: vec4<f32>, wall: bool, j: u32, span: vec2<u32>) -> u32 {
+    let d = own.x - w.xyz;
+    let r2 = dot(d, d);
+    let kernel = kernel_w(r2);
+    let counted = in_span(j, span);
+    if (wall) {
+        (*sums).w.y += select(0.0, w.w * kernel, counted);
+    } else {
+        (*sums).w.x += select(0.0, kernel, counted);
+    }
+    return select(0u, 1u, counted && !(r2 >= LIST_MARGIN * params.h2));
 }
 
-// The chunk's sum: the candidates b to b + TILE - 1, one per lane in w, in order.
-fn chunk_sum(sum: f32, xi: vec3<f32>, w: vec4<f32>, weighed: bool, b: u32, span: vec2<u32>) -> f32 {
-    var s = sum;
-    //! unroll 8 s += tile_w(xi, subgroupShuffle(w, {k}u), weighed, b + {k}u, span);
-    return s;
+// The chunk's candidates b to b + TILE - 1, one per lane in w, in order; with lists, the chunk
+// recorded.
+fn tile_fluid_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, span: vec2<u32>) {
+    let w = positions_at(j);
+    var mask = 0u;
+    //! unroll 8 mask |= tile_candidate(sums, own, subgroupShuffle(w, {k}u), false, b + {k}u, span) << {k}u;
+    if (NEIGHBOUR_LISTS) {
+        (*sums).list = record_chunk((*sums).list, own.i, b, mask, false);
+    }
 }
 
-fn tile_fluid_chunk(sums: ptr<function, TileSums>, xi: TileOwn, j: u32, b: u32, span: vec2<u32>) {
-    (*sums).x = chunk_sum((*sums).x, xi, positions_at(j), false, b, span);
-}
-
-fn tile_wall_chunk(sums: ptr<function, TileSums>, xi: TileOwn, j: u32, b: u32, span: vec2<u32>) {
-    (*sums).y = chunk_sum((*sums).y, xi, wall_positions_at(j), true, b, span);
+fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, span: vec2<u32>) {
+    let w = wall_positions_at(j);
+    var mask = 0u;
+    //! unroll 8 mask |= tile_candidate(sums, own, subgroupShuffle(w, {k}u), true, b + {k}u, span) << {k}u;
+    if (NEIGHBOUR_LISTS) {
+        (*sums).list = record_chunk((*sums).list, own.i, b, mask, true);
+    }
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -48,9 +71,12 @@ fn density_tiled(
     reduce_begin(lid);
     let i = thread_index(gid, groups);
     let xi = positions_at(tile_particle(i)).xyz;
-    let sums = tile_walk(xi, cell_coords(xi), lane, i < params.fluid_count);
+    let sums = tile_walk(TileOwn(xi, i), cell_coords(xi), lane, i < params.fluid_count);
     if (i < params.fluid_count) {
-        set_density(i, params.fluid_mass * sums.x + sums.y);
+        set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
+        if (NEIGHBOUR_LISTS) {
+            finish_list(i, sums.list);
+        }
     }
     finish_densities(lid);
 }

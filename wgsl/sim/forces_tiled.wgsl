@@ -1,11 +1,14 @@
 // The forces stage with the stencils of a subgroup walked together (shared/tiles.wgsl): the
 // pair terms of forces.wgsl, the same sums in the same order as its `forces`, so its twin is
-// the same, src/solver/cpu/forces.rs. A file of its own since its subgroup operations need an
-// adapter with subgroups, which the other stages do not.
+// the same, src/solver/cpu/forces.rs. With NEIGHBOUR_LISTS a subgroup whose particles' lists
+// all fit walks those lists instead (shared/neighbour_lists.wgsl): the same pairs in the same
+// order. A file of its own since its subgroup operations need an adapter with subgroups, which
+// the other stages do not.
 
 //! include sim/forces.wgsl
 //! include shared/tiles.wgsl
 //! include shared/tiles_walls.wgsl
+//! include shared/neighbour_lists.wgsl
 
 // Lane k's candidate, for every invocation.
 fn shuffled_fluid(n: FluidCandidate, k: u32) -> FluidCandidate {
@@ -42,6 +45,47 @@ fn tile_wall_chunk(sums: ptr<function, ForceSums>, own: OwnParticle, j: u32, b: 
     //! unroll 8 add_wall_pair(sums, own, shuffled_wall(n, {k}u), in_span(b + {k}u, span));
 }
 
+// The sums over particle i's list (`counts`: list_counts's), one neighbour per iteration (the
+// next entry read when the current one's mask is used up), so that the invocations of a SIMD
+// batch iterate about as often as the one with the most neighbours.
+fn listed_sums(own: OwnParticle, i: u32, counts: u32) -> ForceSums {
+    var sums = no_sums();
+    var next = 0u;
+    var entry = 0u;
+    var mask = 0u;
+    loop {
+        if (mask == 0u) {
+            if (next == (counts & 0xffffu)) {
+                break;
+            }
+            entry = neighbours_at(list_slot(next, i));
+            mask = entry >> ENTRY_MASK_SHIFT;
+            next += 1u;
+        }
+        let j = (entry & ENTRY_BASE) + firstTrailingBit(mask);
+        mask &= mask - 1u;
+        add_fluid_pair(&sums, own, fluid_candidate(j, positions_at(j).xyz), true);
+    }
+    if (WALLS) {
+        next = 0u;
+        mask = 0u;
+        loop {
+            if (mask == 0u) {
+                if (next == (counts >> 16u)) {
+                    break;
+                }
+                entry = neighbours_at(list_slot(LIST_CAPACITY - 1u - next, i));
+                mask = entry >> ENTRY_MASK_SHIFT;
+                next += 1u;
+            }
+            let j = (entry & ENTRY_BASE) + firstTrailingBit(mask);
+            mask &= mask - 1u;
+            add_wall_pair(&sums, own, wall_candidate(j, wall_positions_at(j)), true);
+        }
+    }
+    return sums;
+}
+
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn forces_tiled(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -50,8 +94,20 @@ fn forces_tiled(
 ) {
     let i = thread_index(gid, groups);
     let own = own_particle(tile_particle(i));
-    let sums = tile_walk(own, cell_coords(own.x), lane, i < params.fluid_count);
-    if (i < params.fluid_count) {
-        accelerations_set(i, finish_acceleration(own, sums));
+    let counts = select(0u, list_counts(tile_particle(i)), NEIGHBOUR_LISTS);
+    // Lists where every particle's fits (the choice is the subgroup's, as the tiles' shuffles
+    // need all its lanes). Each branch finishes its own sums: with one finish after both,
+    // lavapipe (Mesa 22.3) compiled the acceleration's sum differently from the stage without
+    // lists, one unit in the last place apart (tests/parity/tiles.rs, the scene with planes only).
+    if (NEIGHBOUR_LISTS && subgroupAll(counts != LIST_FULL)) {
+        let sums = listed_sums(own, tile_particle(i), counts);
+        if (i < params.fluid_count) {
+            accelerations_set(i, finish_acceleration(own, sums));
+        }
+    } else {
+        let sums = tile_walk(own, cell_coords(own.x), lane, i < params.fluid_count);
+        if (i < params.fluid_count) {
+            accelerations_set(i, finish_acceleration(own, sums));
+        }
     }
 }

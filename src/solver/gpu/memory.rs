@@ -148,6 +148,17 @@ impl MemoryPlan {
         self
     }
 
+    /// The plan with the neighbour lists (`capacity` slots and a count per fluid particle;
+    /// nothing for a capacity of 0).
+    pub fn with_neighbour_lists(mut self, fluid: u64, capacity: u32) -> MemoryPlan {
+        if capacity > 0 {
+            let per = capacity as u64 * 4;
+            self.buffers.push(PlannedBuffer { label: "neighbour lists", bytes: padded(fluid * per), bytes_per_fluid_particle: per, single_binding: false });
+            self.buffers.push(PlannedBuffer { label: "neighbour counts", bytes: padded(fluid * 4), bytes_per_fluid_particle: 4, single_binding: false });
+        }
+        self
+    }
+
     /// The plan with DFSPH's own arrays added (for `fluid` particles).
     pub fn with_dfsph(mut self, fluid: u64) -> MemoryPlan {
         for (label, bytes) in super::dfsph::buffer_bytes(fluid) {

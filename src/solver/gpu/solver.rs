@@ -91,6 +91,8 @@ pub(super) struct Pipelines {
     pub fused: bool,
     /// The neighbour stages walk a subgroup's stencils together (see [`subgroup_tiles`]).
     pub subgroup_tiles: bool,
+    /// The slots of each neighbour list, where the density records lists for the forces.
+    pub list_capacity: Option<u32>,
 }
 
 /// Whether the density (summation or continuity), the two-pass forces and DFSPH's solve
@@ -112,6 +114,27 @@ fn subgroup_tiles(ctx: &GpuContext, options: &GpuOptions) -> Result<bool, GpuErr
         (Some(true), None) => Ok(true),
         (Some(true), Some(why)) => Err(GpuError::NoSubgroupTiles { adapter: ctx.info.name.clone(), backend: format!("{:?}", ctx.info.backend), why }),
     }
+}
+
+/// The capacity of each fluid particle's neighbour list where the step keeps lists
+/// (wgsl/shared/neighbour_lists.wgsl), else `None`: with subgroup tiles, the weakly compressible
+/// step and the forces in a pass of their own (not fused), unless the options turn them off. The
+/// capacity is 1.3 times the neighbours a particle has at rest density, 4/3 pi h^3 rho0 / m
+/// (fluid and walls together, the walls' spacing being the fluid's), in whole rows of eight
+/// (a denser particle's list overflows, and its subgroup walks the tiles), or the options'.
+fn neighbour_lists(ctx: &GpuContext, params: &Params, tiles: bool, options: &GpuOptions, fluid: u64, walls: u64) -> Option<u32> {
+    let used = tiles
+        && params.dfsph.is_none()
+        && options.fuse_forces_and_integration != Some(true)
+        && options.neighbour_lists != Some(false);
+    let at_rest = 4.0 / 3.0 * std::f64::consts::PI * params.h.powi(3) * params.rest_density / params.fluid_mass;
+    // The counts are kept in 16 bits.
+    let capacity = options.neighbour_list_capacity.unwrap_or(((1.3 * at_rest / 8.0).ceil() * 8.0).clamp(8.0, 4096.0) as u32).clamp(1, 0xffff);
+    // Slots are indexed with 32 bits, and an entry holds a chunk's first fluid or wall
+    // candidate in 24; the lists are one buffer, which a scene too big for it runs without.
+    let slots = fluid.saturating_mul(capacity as u64);
+    let fits = slots <= u32::MAX as u64 && fluid.max(walls) < 1 << 24 && slots * 4 <= ctx.device.limits().max_buffer_size;
+    (used && fits).then_some(capacity)
 }
 
 /// The weakly compressible step's own stages.
@@ -176,6 +199,8 @@ pub struct GpuSolver {
     /// With the Adami wall pressure: each sorted wall particle's pressure and density
     /// (`vec2<f32>`).
     pub(super) wall_fields: Option<wgpu::Buffer>,
+    /// The neighbour lists and their counts, where the step keeps them.
+    neighbour_lists: Option<(wgpu::Buffer, wgpu::Buffer)>,
     /// The original index of each sorted wall particle.
     pub(super) wall_order: Vec<u32>,
     pub(super) scan: Scan,
@@ -243,6 +268,8 @@ struct ArrayCounts {
     wall_cell_firsts: u64,
     /// The wall particles with the Adami wall pressure, else 0 (the array is then not bound).
     wall_fields: u64,
+    /// The neighbour lists' slots (fluid particles times the capacity), else 0.
+    list_slots: u64,
 }
 
 impl ArrayCounts {
@@ -253,6 +280,8 @@ impl ArrayCounts {
             "wall_cell_blocks" => self.wall_cell_blocks,
             "wall_cell_firsts" => self.wall_cell_firsts,
             "wall_fields" => self.wall_fields,
+            "neighbours" => self.list_slots,
+            "neighbour_counts" => if self.list_slots > 0 { self.fluid } else { 0 },
             "status" | "solve_dispatch" => 0,
             _ => self.fluid,
         }
@@ -286,14 +315,27 @@ impl GpuSolver {
         let (wall_order, wall_starts) = sort_by_cell(&grid, &wall_f32);
         let wall_index = if has_walls { WallCellIndex::new(&wall_starts) } else { WallCellIndex::default() };
         let wall_cell_room = if ranks.is_some() { (w + 1).min(cells + 1) } else { wall_index.firsts.len() as u64 };
-        let counts = ArrayCounts {
+        let ws = options.workgroup_sizes;
+        ws.check(&ctx)?;
+        let tiles = subgroup_tiles(&ctx, &options)?;
+        let mut list_capacity = neighbour_lists(&ctx, params, tiles, &options, n, w);
+        let mut counts = ArrayCounts {
             fluid: n,
             cells_plus_one: cells + 1,
             walls: w,
             wall_cell_blocks: wall_index.blocks.len() as u64,
             wall_cell_firsts: if has_walls { wall_cell_room } else { 0 },
             wall_fields: if adami { w } else { 0 },
+            list_slots: n * list_capacity.unwrap_or(0) as u64,
         };
+        // The lists' bindings (one per segment) must fit the stages that declare them; a scene
+        // whose arrays take too many segments runs without.
+        let density_stage = if params.continuity_density { "continuity_tiled" } else { "density_tiled" };
+        let most = ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
+        if list_capacity.is_some() && [density_stage, "forces_tiled"].iter().any(|stage| storage_bindings(&ctx, stage, &|name: &str| counts.len(name)) > most) {
+            list_capacity = None;
+            counts.list_slots = 0;
+        }
         // The fused stage binds a placeholder for the accelerations it declares but never uses,
         // as does the one-thread finish_step.
         let without_accelerations = |name: &str| if name == "accelerations" { 0 } else { counts.len(name) };
@@ -313,7 +355,7 @@ impl GpuSolver {
         let arrays = StepArrays::new(dfsph, params.continuity_density, params.adaptive.is_some(), fused);
         let layout = arrays.layout;
         let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_cell_starts(counts.wall_cell_firsts);
-        let plan = if dfsph { plan.with_dfsph(n) } else { plan.with_wall_fields(counts.wall_fields) };
+        let plan = if dfsph { plan.with_dfsph(n) } else { plan.with_wall_fields(counts.wall_fields).with_neighbour_lists(n, list_capacity.unwrap_or(0)) };
         plan.check(&ctx)?;
         let aliases = array_places(&arrays);
         let in_place: Vec<(&str, Alias)> = aliases.iter().copied().chain(if layout == StateLayout::InPlace { IN_PLACE.to_vec() } else { Vec::new() }).collect();
@@ -326,9 +368,8 @@ impl GpuSolver {
         k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
         k.push(("STENCIL_RUNS", if options.single_cells { 0.0 } else { 1.0 }));
         k.push(("GHOSTS", if ranks.is_some() { 1.0 } else { 0.0 }));
-        let ws = options.workgroup_sizes;
-        ws.check(&ctx)?;
-        let tiles = subgroup_tiles(&ctx, &options)?;
+        k.push(("NEIGHBOUR_LISTS", if list_capacity.is_some() { 1.0 } else { 0.0 }));
+        k.push(("LIST_CAPACITY", list_capacity.unwrap_or(0) as f64));
         // The constants of a stage with `size` threads per workgroup.
         let sized = |size: u32| {
             let mut c = k.clone();
@@ -388,6 +429,7 @@ impl GpuSolver {
             finish_step: stage_in_place("integrate", "finish_step", &without_accelerations, &k)?,
             fused,
             subgroup_tiles: tiles,
+            list_capacity,
         };
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
         // placeholder (until `step_fields` asks for them).
@@ -428,6 +470,7 @@ impl GpuSolver {
         let placeholder = storage(device, "placeholder", 16);
         let accelerations = (dfsph && params.adaptive.is_some()).then(|| storage(device, "accelerations", n * 16));
         let status = storage_init(device, "status", bytemuck::cast_slice(&status::initial()));
+        let lists = (counts.list_slots > 0).then(|| (storage(device, "neighbour lists", counts.list_slots * 4), storage(device, "neighbour counts", n * 4)));
         let scan = Scan::new(&ctx, &uniform, &starts, cells + 1)?;
 
         let u = &uniform;
@@ -443,8 +486,8 @@ impl GpuSolver {
             let spare = (layout == StateLayout::InPlace).then(|| store.spare(c));
             let acc = spare.clone().or_else(|| accelerations.clone()).unwrap_or_else(|| placeholder.clone());
             let bins = spare.unwrap_or_else(|| dst.velocities.clone());
-            let (starts, densities, pressures, status, wall_positions, wall_cell_blocks, wall_cell_firsts, wall_fields) =
-                (&starts, &densities, &pressures, &status, &wall_positions, &wall_cell_blocks, &wall_cell_firsts, &wall_fields);
+            let (starts, densities, pressures, status, wall_positions, wall_cell_blocks, wall_cell_firsts, wall_fields, lists) =
+                (&starts, &densities, &pressures, &status, &wall_positions, &wall_cell_blocks, &wall_cell_firsts, &wall_fields, &lists);
             move |name: &str| -> wgpu::Buffer {
                 match name {
                     "positions" => src.positions.clone(),
@@ -459,6 +502,8 @@ impl GpuSolver {
                     "wall_cell_blocks" => wall_cell_blocks.clone(),
                     "wall_cell_firsts" => wall_cell_firsts.clone(),
                     "wall_fields" => wall_fields.clone().expect("bound only with the Adami wall pressure"),
+                    "neighbours" => lists.as_ref().expect("bound only with neighbour lists").0.clone(),
+                    "neighbour_counts" => lists.as_ref().expect("bound only with neighbour lists").1.clone(),
                     "status" => status.clone(),
                     "accelerations" => acc.clone(),
                     other => panic!("no buffer holds the array '{other}'"),
@@ -552,6 +597,7 @@ impl GpuSolver {
             wall_cell_blocks,
             wall_cell_firsts,
             wall_fields,
+            neighbour_lists: lists,
             wall_order,
             scan,
             groups,
@@ -714,6 +760,12 @@ impl GpuSolver {
     /// iterations walk a subgroup's stencils together.
     pub fn subgroup_tiles(&self) -> bool {
         self.pipelines.subgroup_tiles
+    }
+
+    /// The slots of each fluid particle's neighbour list where the tiled forces walk lists
+    /// (see [`GpuOptions::neighbour_lists`]), else `None`.
+    pub fn neighbour_list_capacity(&self) -> Option<u32> {
+        self.pipelines.list_capacity
     }
     /// Blocks until the GPU has finished everything submitted (for timing).
     pub fn wait(&self) -> anyhow::Result<()> {
@@ -880,6 +932,7 @@ impl GpuSolver {
             .chain(s.pressures.as_ref())
             .chain(planned_accelerations)
             .chain(s.wall_fields.as_ref())
+            .chain(s.neighbour_lists.iter().flat_map(|(slots, counts)| [slots, counts]))
             .map(|b| b.size())
             .sum::<u64>()
             + s.store.bytes()

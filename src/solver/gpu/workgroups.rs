@@ -186,6 +186,17 @@ pub struct GpuOptions {
     /// the same values): `None` (the default) where the device
     /// can, `Some(true)` or an error where it cannot, `Some(false)` never.
     pub subgroup_tiles: Option<bool>,
+    /// With subgroup tiles, the weakly compressible step's density stage (summation or
+    /// continuity) records each particle's neighbours and the forces walk those lists
+    /// (wgsl/shared/neighbour_lists.wgsl; the same values, 4 bytes per slot of each fluid
+    /// particle's list): `None` (the default) wherever the tiles run with the forces in a pass
+    /// of their own, `Some(false)` never.
+    pub neighbour_lists: Option<bool>,
+    /// The slots of each list (each slot one chunk of eight candidates that holds a
+    /// neighbour); `None`: 1.3 times a particle's neighbours at rest density, in whole rows of
+    /// eight. A particle whose list overflows has its subgroup walk the tiles (the same values),
+    /// so the capacity changes only the speed (kept within 1 to 65,535).
+    pub neighbour_list_capacity: Option<u32>,
 }
 
 #[cfg(test)]

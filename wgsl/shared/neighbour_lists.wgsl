@@ -1,0 +1,74 @@
+// Neighbour lists, recorded by the tiled density (density_tiled.wgsl or continuity_tiled.wgsl)
+// and walked by the tiled forces (forces_tiled.wgsl) of the same step. On a software adapter a tile evaluates every
+// candidate of the union of its eight particles' stencils (216 in a resting block with cells
+// one support wide) where a particle has about 33 neighbours; the forces, whose pair terms cost
+// the most, then evaluate only those (docs/performance.md, "Neighbour lists").
+//
+// Particle i's list is a column of LIST_CAPACITY slots, slot t at t * fluid_count + i (the
+// invocations of a subgroup read neighbouring words), each slot one chunk of the tile's walk
+// that holds a neighbour (an entry: the chunk's first candidate and a mask of its neighbours):
+// its fluid chunks from the top, its wall chunks from the bottom, each in the order the
+// per-particle walk meets them, so the forces' sums over a list are those of the walk bit for
+// bit. One store per chunk rather than per neighbour: on a software adapter each store is eight
+// scalar ones, and a store per neighbour cost the density more than the lists saved the forces. `neighbour_counts` holds the
+// fluid count in its low 16 bits and the wall count above; a particle with more neighbours than
+// the slots hold (counted on, not written) is marked full, and its subgroup walks the tiles.
+//! array neighbours: u32, read_write, optional
+//! array neighbour_counts: u32, read_write, optional
+
+// The counts of a list being recorded.
+struct ListCounts {
+    fluid: u32,
+    walls: u32,
+}
+
+fn list_slot(t: u32, i: u32) -> u32 {
+    return t * params.fluid_count + i;
+}
+
+// An entry: the first candidate b of a chunk of TILE (low 24 bits) and which of them are
+// neighbours (bit k: candidate b + k).
+const ENTRY_MASK_SHIFT: u32 = 24u;
+const ENTRY_BASE: u32 = 0xffffffu;
+
+// `counts` after recording the chunk of fluid (or with `wall`, wall) candidates from b whose
+// neighbours are `mask`. Written without a branch on the mask (one in the tile's walk costs a
+// software adapter more than the store): the entry goes to the next free slot in any case and
+// is counted only where the mask is not empty, so the next chunk overwrites one that is. A list
+// with no free slot (whose particle's subgroup may still read it, if nothing more is kept) or
+// an invocation without a particle writes nothing.
+fn record_chunk(counts: ListCounts, i: u32, b: u32, mask: u32, wall: bool) -> ListCounts {
+    var c = counts;
+    if (i < params.fluid_count && c.fluid + c.walls < LIST_CAPACITY) {
+        let free = LIST_CAPACITY - 1u - c.walls;
+        neighbours_set(list_slot(select(c.fluid, free, wall), i), b | (mask << ENTRY_MASK_SHIFT));
+    }
+    let kept = select(0u, 1u, mask != 0u);
+    c.fluid += select(kept, 0u, wall);
+    c.walls += select(0u, kept, wall);
+    return c;
+}
+
+// The forces test r^2 < h^2 again with their own arithmetic, which a driver may compile
+// differently from a density stage's (a fused multiply-add in the dot product), so the density
+// stages keep a little more, up to LIST_MARGIN h^2, and the lists hold every pair the forces
+// keep.
+const LIST_MARGIN: f32 = 1.001;
+
+// 1 where candidate j at xj is in the invocation's own span and within the lists' radius of xi.
+fn list_bit(xi: vec3<f32>, xj: vec3<f32>, j: u32, span: vec2<u32>) -> u32 {
+    let d = xi - xj;
+    return select(0u, 1u, in_span(j, span) && !(dot(d, d) >= LIST_MARGIN * params.h2));
+}
+
+const LIST_FULL: u32 = 0xffffffffu;
+
+fn finish_list(i: u32, counts: ListCounts) {
+    let fits = counts.fluid + counts.walls <= LIST_CAPACITY;
+    neighbour_counts_set(i, select(LIST_FULL, counts.fluid | (counts.walls << 16u), fits));
+}
+
+// Particle i's counts, or LIST_FULL.
+fn list_counts(i: u32) -> u32 {
+    return neighbour_counts_at(i);
+}
