@@ -277,9 +277,9 @@ pub struct GpuTuning {
     /// Give every particle its own walk of its stencil, even where subgroup tiles are possible.
     #[arg(long)]
     pub no_subgroup_tiles: bool,
-    /// With subgroup tiles, walk them in the forces too instead of the neighbour lists the
-    /// density stage records (lists: the default of the weakly compressible step with two
-    /// passes; 4 bytes per slot of each fluid particle's list). The same values.
+    /// With subgroup tiles, walk them in the forces and DFSPH's solves too instead of the
+    /// neighbour lists recorded once a step (lists: the default with the forces in a pass of
+    /// their own; 4 bytes per slot of each fluid particle's list). The same values.
     #[arg(long)]
     pub no_neighbour_lists: bool,
     /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes

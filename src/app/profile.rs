@@ -55,9 +55,9 @@ pub struct Profile {
     pub adapter: String,
     /// "timestamp queries" or "host (whole steps, submit and wait)".
     pub timing: String,
-    /// How the neighbour stages walk the neighbours: "subgroup tiles of 8" (with ", the forces
-    /// over neighbour lists of N slots" where the density records lists) or "one particle per
-    /// invocation".
+    /// How the neighbour stages walk the neighbours: "subgroup tiles of 8" (with ", and
+    /// neighbour lists of N slots" where the forces or DFSPH's solves walk lists) or "one
+    /// particle per invocation".
     #[serde(default)]
     pub neighbour_loops: String,
     pub fluid_particles: u64,
@@ -290,7 +290,7 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
         adapter: gpu.adapter(),
         timing: timing.into(),
         neighbour_loops: match (gpu.subgroup_tiles(), gpu.neighbour_list_capacity()) {
-            (true, Some(slots)) => format!("subgroup tiles of {TILE_LANES}, the forces over neighbour lists of {slots} slots"),
+            (true, Some(slots)) => format!("subgroup tiles of {TILE_LANES}, and neighbour lists of {slots} slots"),
             (true, None) => format!("subgroup tiles of {TILE_LANES}"),
             _ => "one particle per invocation".to_string(),
         },

@@ -38,11 +38,10 @@ fn the_memory_figure_is_the_plan_and_matches_the_buffers_created() {
             let (_, starts) = sort_by_cell(&params.grid.cast::<f32>(), &walls);
             let kept = if walls.is_empty() { 0 } else { WallCellIndex::new(&starts).firsts.len() as u64 };
             let plan = plan.with_wall_cell_starts(kept);
-            // On an adapter with subgroup tiles the two-pass weakly compressible step keeps
-            // neighbour lists (none fused, none with DFSPH).
+            // On an adapter with subgroup tiles the step keeps neighbour lists (none fused).
             let capacity = solver.neighbour_list_capacity();
-            assert_eq!(capacity.is_some(), solver.subgroup_tiles() && !fused && !is_dfsph, "{} on {}", scene.name, ctx.describe());
-            let plan = if is_dfsph { plan.with_dfsph(n) } else { plan.with_neighbour_lists(n, capacity.unwrap_or(0)) };
+            assert_eq!(capacity.is_some(), solver.subgroup_tiles() && !fused, "{} on {}", scene.name, ctx.describe());
+            let plan = if is_dfsph { plan.with_dfsph(n) } else { plan }.with_neighbour_lists(n, capacity.unwrap_or(0));
             let name = &scene.name;
             assert_eq!(solver.fused(), fused);
             assert_eq!(solver.memory_bytes(), plan.total(), "{name} on {}", ctx.describe());

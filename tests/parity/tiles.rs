@@ -1,13 +1,13 @@
 //! The neighbour tiles (wgsl/shared/tiles.wgsl): where the adapter's subgroups have 8
 //! invocations, the tiled density, continuity density, forces and DFSPH solve passes give the
-//! one-particle-per-invocation stages' bits for every term they carry, and so do the forces walking
-//! the neighbour lists the tiled density records (wgsl/shared/neighbour_lists.wgsl), whether
-//! every list fits, some or none; elsewhere asking for the tiles is refused with the reason.
+//! one-particle-per-invocation stages' bits for every term they carry, and so do the forces and
+//! DFSPH's solves walking the neighbour lists (wgsl/shared/neighbour_lists.wgsl), whether every
+//! list fits, some or none; elsewhere asking for the tiles is refused with the reason.
 
 use crate::common;
 use crate::common::TestScene;
 
-use wgsph::model::scene::{BoundaryPressure, EquationOfState, Kernel, PressureSolver, Scene};
+use wgsph::model::scene::{BoundaryPressure, EquationOfState, Kernel, Scene};
 use wgsph::solver::gpu::{GpuOptions, WorkgroupSizes};
 use wgsph::solver::Backend;
 
@@ -51,19 +51,15 @@ fn subgroup_tiles_change_no_value() {
             assert!(!used);
             assert!(state.positions != scene.initial_state().fluid_positions, "{name}: the particles moved");
             assert!(tiled_state == state && tiled_fields == fields, "{name} on {}: the tiles changed a value", ctx.describe());
-            // Neighbour lists are the default in the weakly compressible step; without them, and with
-            // lists too short for some or all particles (their subgroups walk the tiles), the
-            // same bits.
-            let s = &scene.physics;
-            let listed = s.solver != PressureSolver::Dfsph;
+            // Neighbour lists are the default with the tiles (the weakly compressible forces and
+            // DFSPH's solves walk them); without them, and with lists too short for some or all
+            // particles (their subgroups walk the tiles), the same bits.
             let capacity = common::gpu_with(ctx.clone(), &scene, None, GpuOptions::default()).unwrap().neighbour_list_capacity();
-            assert_eq!(capacity.is_some(), listed, "{name}: lists with the weakly compressible step");
-            if listed {
-                let lists = |on: bool, capacity: Option<u32>| GpuOptions { neighbour_lists: Some(on), neighbour_list_capacity: capacity, ..GpuOptions::default() };
-                for (options, what) in [(lists(false, None), "without lists"), (lists(true, Some(24)), "24 slots"), (lists(true, Some(12)), "12 slots"), (lists(true, Some(2)), "2 slots")] {
-                    let (_, listed_state, listed_fields) = run(options);
-                    assert!(listed_state == state && listed_fields == fields, "{name} on {}: {what} changed a value", ctx.describe());
-                }
+            assert!(capacity.is_some(), "{name}: lists with the tiles");
+            let lists = |on: bool, capacity: Option<u32>| GpuOptions { neighbour_lists: Some(on), neighbour_list_capacity: capacity, ..GpuOptions::default() };
+            for (options, what) in [(lists(false, None), "without lists"), (lists(true, Some(24)), "24 slots"), (lists(true, Some(12)), "12 slots"), (lists(true, Some(2)), "2 slots")] {
+                let (_, listed_state, listed_fields) = run(options);
+                assert!(listed_state == state && listed_fields == fields, "{name} on {}: {what} changed a value", ctx.describe());
             }
         }
         // Workgroups that are not whole subgroups: per particle by default, refused when asked.

@@ -72,3 +72,21 @@ fn finish_list(i: u32, counts: ListCounts) {
 fn list_counts(i: u32) -> u32 {
     return neighbour_counts_at(i);
 }
+
+// The next neighbour j of the `count` entries of particle i's list from its top (or with
+// `walls`, from its bottom), one neighbour per call, so that the invocations of a SIMD batch
+// iterate about as often as the one with the most neighbours; false past the last. `at` starts
+// at zero and holds the next entry's number (x), the mask left of the current entry (y) and its
+// first candidate (z).
+fn next_listed(i: u32, count: u32, walls: bool, at: ptr<function, vec3<u32>>, j: ptr<function, u32>) -> bool {
+    if ((*at).y == 0u) {
+        if ((*at).x == count) {
+            return false;
+        }
+        let entry = neighbours_at(list_slot(select((*at).x, LIST_CAPACITY - 1u - (*at).x, walls), i));
+        *at = vec3<u32>((*at).x + 1u, entry >> ENTRY_MASK_SHIFT, entry & ENTRY_BASE);
+    }
+    *j = (*at).z + firstTrailingBit((*at).y);
+    (*at).y &= (*at).y - 1u;
+    return true;
+}

@@ -45,41 +45,17 @@ fn tile_wall_chunk(sums: ptr<function, ForceSums>, own: OwnParticle, j: u32, b: 
     //! unroll 8 add_wall_pair(sums, own, shuffled_wall(n, {k}u), in_span(b + {k}u, span));
 }
 
-// The sums over particle i's list (`counts`: list_counts's), one neighbour per iteration (the
-// next entry read when the current one's mask is used up), so that the invocations of a SIMD
-// batch iterate about as often as the one with the most neighbours.
+// The sums over particle i's list (`counts`: list_counts's), in the tiles' order.
 fn listed_sums(own: OwnParticle, i: u32, counts: u32) -> ForceSums {
     var sums = no_sums();
-    var next = 0u;
-    var entry = 0u;
-    var mask = 0u;
-    loop {
-        if (mask == 0u) {
-            if (next == (counts & 0xffffu)) {
-                break;
-            }
-            entry = neighbours_at(list_slot(next, i));
-            mask = entry >> ENTRY_MASK_SHIFT;
-            next += 1u;
-        }
-        let j = (entry & ENTRY_BASE) + firstTrailingBit(mask);
-        mask &= mask - 1u;
+    var at = vec3<u32>(0u);
+    var j = 0u;
+    while (next_listed(i, counts & 0xffffu, false, &at, &j)) {
         add_fluid_pair(&sums, own, fluid_candidate(j, positions_at(j).xyz), true);
     }
     if (WALLS) {
-        next = 0u;
-        mask = 0u;
-        loop {
-            if (mask == 0u) {
-                if (next == (counts >> 16u)) {
-                    break;
-                }
-                entry = neighbours_at(list_slot(LIST_CAPACITY - 1u - next, i));
-                mask = entry >> ENTRY_MASK_SHIFT;
-                next += 1u;
-            }
-            let j = (entry & ENTRY_BASE) + firstTrailingBit(mask);
-            mask &= mask - 1u;
+        at = vec3<u32>(0u);
+        while (next_listed(i, counts >> 16u, true, &at, &j)) {
             add_wall_pair(&sums, own, wall_candidate(j, wall_positions_at(j)), true);
         }
     }

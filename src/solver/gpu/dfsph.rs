@@ -100,6 +100,8 @@ pub(super) struct DfsphStages {
     pub check: [Stage; 2],
     pub integrate: Stage,
     pub step_accelerations: Stage,
+    /// With neighbour lists: the pass after the factors that records them.
+    pub record_lists: Option<Stage>,
 }
 
 /// DFSPH's arrays.
@@ -128,6 +130,7 @@ pub(super) struct DfsphGroups {
     pub predict_density: wgpu::BindGroup,
     pub pressure_apply: wgpu::BindGroup,
     pub integrate: wgpu::BindGroup,
+    pub record_lists: Option<wgpu::BindGroup>,
 }
 
 /// DFSPH on the GPU: its settings, pipelines, arrays and bind groups.
@@ -158,6 +161,8 @@ pub(super) struct SharedBuffers<'a> {
     pub wall_cell_firsts: &'a wgpu::Buffer,
     /// The accelerations (adaptive dt), or a placeholder.
     pub accelerations: &'a wgpu::Buffer,
+    /// The neighbour lists and their counts, where the solves walk lists.
+    pub lists: Option<&'a (wgpu::Buffer, wgpu::Buffer)>,
 }
 
 /// Threads per workgroup of the solves' passes, whose dispatch size the GPU's checks write.
@@ -170,7 +175,7 @@ impl DfsphStages {
     /// the factors; forces: the prediction and the solves; integrate: the integration); with
     /// `tiles`, the solves' iterations walk a subgroup's stencils together
     /// (wgsl/shared/dfsph_tiles.wgsl).
-    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths, places: &[(&str, Alias)], tiles: bool) -> Result<Self, GpuError> {
+    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths, places: &[(&str, Alias)], tiles: bool, lists: bool) -> Result<Self, GpuError> {
         let settings = params.dfsph.as_ref().expect("a DFSPH scene");
         let sized = |size: u32| {
             let mut c = k.to_vec();
@@ -211,6 +216,7 @@ impl DfsphStages {
             check: [one("check_convergence", &control(0, warm))?, one("check_convergence", &control(1, warm))?],
             integrate: one("integrate", &sized(sizes.integrate))?,
             step_accelerations: one("step_accelerations", &sized(sizes.integrate))?,
+            record_lists: if lists { Some(stage_with_aliases(ctx, "dfsph_divergence_tiled", "record_lists", lens, &solve, places)?) } else { None },
         })
     }
 }
@@ -333,6 +339,8 @@ impl DfsphGpu {
                         "divergence_sum" => b.divergence_sum.clone(),
                         "warm_pressure" => b.warm_pressure.clone(),
                         "warm_divergence" => b.warm_divergence.clone(),
+                        "neighbours" => s.lists.expect("bound only with neighbour lists").0.clone(),
+                        "neighbour_counts" => s.lists.expect("bound only with neighbour lists").1.clone(),
                         other => panic!("no DFSPH buffer holds the array '{other}'"),
                     }
                 }
@@ -357,6 +365,7 @@ impl DfsphGpu {
                 predict_density: st.predict_density.bind_group(device, "predict_density", uniform, &predicted),
                 pressure_apply: st.pressure_apply.bind_group(device, "pressure_apply", uniform, &predicted),
                 integrate: st.integrate.bind_group(device, "integrate", uniform, &predicted),
+                record_lists: st.record_lists.as_ref().map(|stage| stage.bind_group(device, "record_lists", uniform, &own)),
             }
         }).collect();
         let control_buffers = |name: &str| match name {

@@ -117,16 +117,13 @@ fn subgroup_tiles(ctx: &GpuContext, options: &GpuOptions) -> Result<bool, GpuErr
 }
 
 /// The capacity of each fluid particle's neighbour list where the step keeps lists
-/// (wgsl/shared/neighbour_lists.wgsl), else `None`: with subgroup tiles, the weakly compressible
-/// step and the forces in a pass of their own (not fused), unless the options turn them off. The
+/// (wgsl/shared/neighbour_lists.wgsl), else `None`: with subgroup tiles, and the forces in a pass
+/// of their own (not fused), unless the options turn them off; alone (not across ranks). The
 /// capacity is 1.3 times the neighbours a particle has at rest density, 4/3 pi h^3 rho0 / m
 /// (fluid and walls together, the walls' spacing being the fluid's), in whole rows of eight
 /// (a denser particle's list overflows, and its subgroup walks the tiles), or the options'.
 fn neighbour_lists(ctx: &GpuContext, params: &Params, tiles: bool, options: &GpuOptions, fluid: u64, walls: u64) -> Option<u32> {
-    let used = tiles
-        && params.dfsph.is_none()
-        && options.fuse_forces_and_integration != Some(true)
-        && options.neighbour_lists != Some(false);
+    let used = tiles && options.fuse_forces_and_integration != Some(true) && options.neighbour_lists != Some(false);
     let at_rest = 4.0 / 3.0 * std::f64::consts::PI * params.h.powi(3) * params.rest_density / params.fluid_mass;
     // The counts are kept in 16 bits.
     let capacity = options.neighbour_list_capacity.unwrap_or(((1.3 * at_rest / 8.0).ceil() * 8.0).clamp(8.0, 4096.0) as u32).clamp(1, 0xffff);
@@ -200,7 +197,7 @@ pub struct GpuSolver {
     /// (`vec2<f32>`).
     pub(super) wall_fields: Option<wgpu::Buffer>,
     /// The neighbour lists and their counts, where the step keeps them.
-    neighbour_lists: Option<(wgpu::Buffer, wgpu::Buffer)>,
+    pub(super) neighbour_lists: Option<(wgpu::Buffer, wgpu::Buffer)>,
     /// The original index of each sorted wall particle.
     pub(super) wall_order: Vec<u32>,
     pub(super) scan: Scan,
@@ -318,7 +315,7 @@ impl GpuSolver {
         let ws = options.workgroup_sizes;
         ws.check(&ctx)?;
         let tiles = subgroup_tiles(&ctx, &options)?;
-        let mut list_capacity = neighbour_lists(&ctx, params, tiles, &options, n, w);
+        let mut list_capacity = neighbour_lists(&ctx, params, tiles, &options, n, w).filter(|_| ranks.is_none());
         let mut counts = ArrayCounts {
             fluid: n,
             cells_plus_one: cells + 1,
@@ -330,9 +327,13 @@ impl GpuSolver {
         };
         // The lists' bindings (one per segment) must fit the stages that declare them; a scene
         // whose arrays take too many segments runs without.
-        let density_stage = if params.continuity_density { "continuity_tiled" } else { "density_tiled" };
+        let list_stages = match (params.dfsph.is_some(), params.continuity_density) {
+            (true, _) => ["dfsph_divergence_tiled", "dfsph_pressure_tiled"],
+            (false, true) => ["continuity_tiled", "forces_tiled"],
+            (false, false) => ["density_tiled", "forces_tiled"],
+        };
         let most = ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
-        if list_capacity.is_some() && [density_stage, "forces_tiled"].iter().any(|stage| storage_bindings(&ctx, stage, &|name: &str| counts.len(name)) > most) {
+        if list_capacity.is_some() && list_stages.iter().any(|stage| storage_bindings(&ctx, stage, &|name: &str| counts.len(name)) > most) {
             list_capacity = None;
             counts.list_slots = 0;
         }
@@ -355,7 +356,7 @@ impl GpuSolver {
         let arrays = StepArrays::new(dfsph, params.continuity_density, params.adaptive.is_some(), fused);
         let layout = arrays.layout;
         let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_cell_starts(counts.wall_cell_firsts);
-        let plan = if dfsph { plan.with_dfsph(n) } else { plan.with_wall_fields(counts.wall_fields).with_neighbour_lists(n, list_capacity.unwrap_or(0)) };
+        let plan = if dfsph { plan.with_dfsph(n) } else { plan.with_wall_fields(counts.wall_fields) }.with_neighbour_lists(n, list_capacity.unwrap_or(0));
         plan.check(&ctx)?;
         let aliases = array_places(&arrays);
         let in_place: Vec<(&str, Alias)> = aliases.iter().copied().chain(if layout == StateLayout::InPlace { IN_PLACE.to_vec() } else { Vec::new() }).collect();
@@ -436,7 +437,7 @@ impl GpuSolver {
         let dfsph_len = |name: &str| if name == "accelerations" && params.adaptive.is_none() { 0 } else { counts.len(name) };
         // In place DFSPH's integration writes the positions it reads.
         let dfsph_places: Vec<(&str, Alias)> = aliases.iter().copied().chain((layout == StateLayout::InPlace).then_some(IN_PLACE[0])).collect();
-        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places, tiles)?) } else { None };
+        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places, tiles, list_capacity.is_some())?) } else { None };
 
         let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -470,7 +471,9 @@ impl GpuSolver {
         let placeholder = storage(device, "placeholder", 16);
         let accelerations = (dfsph && params.adaptive.is_some()).then(|| storage(device, "accelerations", n * 16));
         let status = storage_init(device, "status", bytemuck::cast_slice(&status::initial()));
-        let lists = (counts.list_slots > 0).then(|| (storage(device, "neighbour lists", counts.list_slots * 4), storage(device, "neighbour counts", n * 4)));
+        // Every list marked full until a density stage records it: a pass that walked lists
+        // before then would walk the tiles instead.
+        let lists = (counts.list_slots > 0).then(|| (storage(device, "neighbour lists", counts.list_slots * 4), storage_init(device, "neighbour counts", bytemuck::cast_slice(&vec![u32::MAX; n as usize]))));
         let scan = Scan::new(&ctx, &uniform, &starts, cells + 1)?;
 
         let u = &uniform;
@@ -562,6 +565,7 @@ impl GpuSolver {
                 wall_cell_blocks: &wall_cell_blocks,
                 wall_cell_firsts: &wall_cell_firsts,
                 accelerations: accelerations.as_ref().unwrap_or(&placeholder),
+                lists: lists.as_ref(),
             };
             let buffers = DfsphBuffers::new(&ctx, n, solve_threads(&ws), max_groups_per_dim);
             DfsphGpu::new(&ctx, params.dfsph.as_ref().expect("DFSPH"), stages, buffers, &shared, &uniform)

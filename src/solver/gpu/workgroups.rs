@@ -187,10 +187,11 @@ pub struct GpuOptions {
     /// can, `Some(true)` or an error where it cannot, `Some(false)` never.
     pub subgroup_tiles: Option<bool>,
     /// With subgroup tiles, the weakly compressible step's density stage (summation or
-    /// continuity) records each particle's neighbours and the forces walk those lists
+    /// continuity) records each particle's neighbours and the forces walk those lists, and
+    /// DFSPH records them after its factors for every solve pass of the step
     /// (wgsl/shared/neighbour_lists.wgsl; the same values, 4 bytes per slot of each fluid
-    /// particle's list): `None` (the default) wherever the tiles run with the forces in a pass
-    /// of their own, `Some(false)` never.
+    /// particle's list): `None` or `Some(true)` (the default) wherever the tiles run, on one
+    /// device, with the forces in a pass of their own, `Some(false)` never.
     pub neighbour_lists: Option<bool>,
     /// The slots of each list (each slot one chunk of eight candidates that holds a
     /// neighbour); `None`: 1.3 times a particle's neighbours at rest density, in whole rows of
