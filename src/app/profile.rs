@@ -56,8 +56,8 @@ pub struct Profile {
     /// "timestamp queries" or "host (whole steps, submit and wait)".
     pub timing: String,
     /// How the neighbour stages walk the neighbours: "subgroup tiles of 8" (with ", and
-    /// neighbour lists of N slots" where the forces or DFSPH's solves walk lists) or "one
-    /// particle per invocation".
+    /// neighbour lists of N slots" and how full they were where the forces or DFSPH's solves
+    /// walk lists) or "one particle per invocation".
     #[serde(default)]
     pub neighbour_loops: String,
     pub fluid_particles: u64,
@@ -289,8 +289,11 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
         scene: scene.name.clone(),
         adapter: gpu.adapter(),
         timing: timing.into(),
-        neighbour_loops: match (gpu.subgroup_tiles(), gpu.neighbour_list_capacity()) {
-            (true, Some(slots)) => format!("subgroup tiles of {TILE_LANES}, and neighbour lists of {slots} slots"),
+        neighbour_loops: match (gpu.subgroup_tiles(), gpu.neighbour_list_usage()?) {
+            (true, Some(u)) => format!(
+                "subgroup tiles of {TILE_LANES}, and neighbour lists of {} slots (after the last step: the longest used {}, {} of {n} full)",
+                u.slots, u.longest, u.full
+            ),
             (true, None) => format!("subgroup tiles of {TILE_LANES}"),
             _ => "one particle per invocation".to_string(),
         },

@@ -71,3 +71,32 @@ fn subgroup_tiles_change_no_value() {
         assert!(format!("{e:#}").contains("workgroups of 100"), "{e:#}");
     }
 }
+
+#[test]
+fn neighbour_lists_report_how_full_they_are() {
+    for ctx in common::contexts() {
+        if ctx.subgroup_tiles_unavailable().is_some() {
+            continue;
+        }
+        let scene = TestScene::small_tank().build();
+        let usage = |capacity: Option<u32>| {
+            let options = GpuOptions { neighbour_list_capacity: capacity, ..GpuOptions::default() };
+            let mut solver = common::gpu_with(ctx.clone(), &scene, None, options).unwrap();
+            solver.step(10).unwrap();
+            let n = solver.snapshot().unwrap().positions.len() as u64;
+            (solver.neighbour_list_usage().unwrap().expect("lists with the tiles"), n)
+        };
+        // The default leaves room: nothing overflows, and the longest list is its own length.
+        let (u, _) = usage(None);
+        assert!(u.full == 0 && u.longest > 0 && u.longest <= u.slots, "{u:?}");
+        // Shorter than the longest: some overflow; two slots: nearly all.
+        let (some, n) = usage(Some(u.longest - 1));
+        assert!(some.full > 0 && some.full < n && some.longest <= some.slots, "{some:?} of {n}");
+        let (few, n) = usage(Some(2));
+        assert!(few.full > n / 2, "{few:?} of {n}");
+        // Without lists, nothing to report.
+        let mut solver = common::gpu_with(ctx.clone(), &scene, None, GpuOptions { neighbour_lists: Some(false), ..GpuOptions::default() }).unwrap();
+        solver.step(1).unwrap();
+        assert_eq!(solver.neighbour_list_usage().unwrap(), None);
+    }
+}

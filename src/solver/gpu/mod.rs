@@ -18,5 +18,5 @@ pub mod workgroups;
 
 pub use buffers::ParticleBuffers;
 pub use device::{GpuContext, GpuError};
-pub use solver::GpuSolver;
+pub use solver::{GpuSolver, ListUsage};
 pub use workgroups::{GpuOptions, SolverLoop, WorkgroupSizes};

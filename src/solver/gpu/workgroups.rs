@@ -194,7 +194,7 @@ pub struct GpuOptions {
     /// device, with the forces in a pass of their own, `Some(false)` never.
     pub neighbour_lists: Option<bool>,
     /// The slots of each list (each slot one chunk of eight candidates that holds a
-    /// neighbour); `None`: 1.3 times a particle's neighbours at rest density, in whole rows of
+    /// neighbour); `None`: 0.75 times a particle's neighbours at rest density, in whole rows of
     /// eight. A particle whose list overflows has its subgroup walk the tiles (the same values),
     /// so the capacity changes only the speed (kept within 1 to 65,535).
     pub neighbour_list_capacity: Option<u32>,
