@@ -6,45 +6,37 @@
 // `apply_stiffness_push` do.
 
 //
-// With NEIGHBOUR_LISTS (shared/neighbour_lists.wgsl) a pass after the factors, `record_lists`,
-// walks the tiles once to record each particle's fluid neighbours, and every solve pass of the
-// step (all on the step's first positions) walks those lists where its subgroup's all fit: the
-// same pairs in the same order.
+// With NEIGHBOUR_LISTS (shared/neighbour_lists.wgsl) the tiled factors
+// (dfsph_factors_tiled.wgsl) record each particle's fluid neighbours, and every solve pass of
+// the step (all on the step's first positions) walks those lists where its subgroup's all fit:
+// the same pairs in the same order.
 
 //! include shared/neighbour_lists.wgsl
 
-// A particle's position, velocity and stiffness, its index, and which sum the walk takes (the
-// same for the whole dispatch): the push of the stiffness, the rate, or (`record`) none but the
-// particle's list.
+// A particle's position, velocity and stiffness, and which sum the walk takes (the same for the
+// whole dispatch): the push of the stiffness, or the rate.
 struct SolveOwn {
     x: vec3<f32>,
     v: vec3<f32>,
     k: f32,
     push: bool,
-    record: bool,
-    i: u32,
 }
 
 struct SolveSums {
     rate: f32,
     push: vec3<f32>,
-    list: ListCounts,
 }
 
 alias TileOwn = SolveOwn;
 alias TileSums = SolveSums;
 
 fn no_tile_sums() -> TileSums {
-    return SolveSums(0.0, vec3<f32>(0.0), ListCounts(0u, 0u));
+    return SolveSums(0.0, vec3<f32>(0.0));
 }
 
 fn tile_fluid_chunk(sums: ptr<function, SolveSums>, own: SolveOwn, j: u32, b: u32, span: vec2<u32>) {
     let xj = positions_at(j).xyz;
-    if (own.record) {
-        var mask = 0u;
-        //! unroll 8 mask |= list_bit(own.x, subgroupShuffle(xj, {k}u), b + {k}u, span) << {k}u;
-        (*sums).list = record_chunk((*sums).list, own.i, b, mask, false);
-    } else if (own.push) {
+    if (own.push) {
         let kj = stiffness_at(j);
         //! unroll 8 (*sums).push += push_pair(own.x, own.k, subgroupShuffle(xj, {k}u), subgroupShuffle(kj, {k}u), in_span(b + {k}u, span));
     } else {
@@ -72,7 +64,7 @@ fn walks_lists(p: u32) -> bool {
 // subgroup; every invocation calls it. Each way finishes its own sum (see forces_tiled.wgsl).
 fn tiled_density_rate(i: u32, lane: u32) -> f32 {
     let p = tile_particle(i);
-    let own = SolveOwn(positions_at(p).xyz, velocities_at(p).xyz, 0.0, false, false, i);
+    let own = SolveOwn(positions_at(p).xyz, velocities_at(p).xyz, 0.0, false);
     if (walks_lists(p)) {
         var rate = 0.0;
         var at = vec3<u32>(0u);
@@ -90,7 +82,7 @@ fn tiled_density_rate(i: u32, lane: u32) -> f32 {
 // stiffness_push of particle i with the subgroup; every invocation calls it.
 fn tiled_stiffness_push(i: u32, lane: u32) -> vec3<f32> {
     let p = tile_particle(i);
-    let own = SolveOwn(positions_at(p).xyz, vec3<f32>(0.0), stiffness_at(p), true, false, i);
+    let own = SolveOwn(positions_at(p).xyz, vec3<f32>(0.0), stiffness_at(p), true);
     if (walks_lists(p)) {
         var push = vec3<f32>(0.0);
         var at = vec3<u32>(0u);
@@ -102,22 +94,6 @@ fn tiled_stiffness_push(i: u32, lane: u32) -> vec3<f32> {
     } else {
         let sums = tile_walk(own, cell_coords(own.x), lane, i < params.fluid_count);
         return sums.push * params.fluid_volume + wall_gradients_at(p).xyz * own.k;
-    }
-}
-
-// Records each particle's list (NEIGHBOUR_LISTS only), once a step after the factors.
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn record_lists(
-    @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(subgroup_invocation_id) lane: u32,
-) {
-    let i = thread_index(gid, groups);
-    let p = tile_particle(i);
-    let own = SolveOwn(positions_at(p).xyz, vec3<f32>(0.0), 0.0, false, true, i);
-    let sums = tile_walk(own, cell_coords(own.x), lane, i < params.fluid_count);
-    if (i < params.fluid_count) {
-        finish_list(i, sums.list);
     }
 }
 

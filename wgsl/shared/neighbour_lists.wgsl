@@ -61,6 +61,15 @@ fn list_bit(xi: vec3<f32>, xj: vec3<f32>, j: u32, span: vec2<u32>) -> u32 {
     return select(0u, 1u, in_span(j, span) && !(dot(d, d) >= LIST_MARGIN * params.h2));
 }
 
+// `counts` after recording the chunk of fluid (or with `wall`, wall) candidates from b, this
+// lane's at x, that lie in `span` within the lists' radius of xi (the chunk shuffled to every
+// lane: the whole subgroup calls it).
+fn record_shuffled_chunk(counts: ListCounts, i: u32, xi: vec3<f32>, x: vec3<f32>, b: u32, span: vec2<u32>, wall: bool) -> ListCounts {
+    var mask = 0u;
+    //! unroll 8 mask |= list_bit(xi, subgroupShuffle(x, {k}u), b + {k}u, span) << {k}u;
+    return record_chunk(counts, i, b, mask, wall);
+}
+
 const LIST_FULL: u32 = 0xffffffffu;
 
 fn finish_list(i: u32, counts: ListCounts) {

@@ -35,9 +35,7 @@ fn tile_fluid_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32,
     //! unroll 8 add_fluid_rate(&rate, own.rate, subgroupShuffle(xj, {k}u), subgroupShuffle(vj, {k}u), in_span(b + {k}u, span));
     (*sums).rate = rate;
     if (NEIGHBOUR_LISTS) {
-        var mask = 0u;
-        //! unroll 8 mask |= list_bit(own.rate.x, subgroupShuffle(xj, {k}u), b + {k}u, span) << {k}u;
-        (*sums).list = record_chunk((*sums).list, own.i, b, mask, false);
+        (*sums).list = record_shuffled_chunk((*sums).list, own.i, own.rate.x, xj, b, span, false);
     }
 }
 
@@ -47,9 +45,7 @@ fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, 
     //! unroll 8 add_wall_rate(&rate, own.rate, subgroupShuffle(w, {k}u), in_span(b + {k}u, span));
     (*sums).rate = rate;
     if (NEIGHBOUR_LISTS) {
-        var mask = 0u;
-        //! unroll 8 mask |= list_bit(own.rate.x, subgroupShuffle(w, {k}u).xyz, b + {k}u, span) << {k}u;
-        (*sums).list = record_chunk((*sums).list, own.i, b, mask, true);
+        (*sums).list = record_shuffled_chunk((*sums).list, own.i, own.rate.x, w.xyz, b, span, true);
     }
 }
 

@@ -20,6 +20,74 @@
 // STATUS_DT: the last dt (adaptive dt).
 //! array status: u32, atomic, whole
 
+// The sums over a particle's neighbours: kernel sums of the fluid and the walls (m W), the fluid
+// gradient and its squares, and the walls' m grad W.
+struct FactorSums {
+    fluid: f32,
+    walls: f32,
+    fluid_gradient: vec3<f32>,
+    gradient_squares: f32,
+    wall_gradient: vec3<f32>,
+}
+
+fn no_factor_sums() -> FactorSums {
+    return FactorSums(0.0, 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0));
+}
+
+// Fluid neighbour at xj of the particle at xi, added where `counted` (its own stencil's
+// candidate) and closer than h.
+fn add_factor_fluid(sums: ptr<function, FactorSums>, xi: vec3<f32>, xj: vec3<f32>, counted: bool) {
+    let rij = xi - xj;
+    let r2 = dot(rij, rij);
+    let counts = counted && !(r2 >= params.h2);
+    let grad = kernel_grad(rij, sqrt(r2));
+    (*sums).fluid += select(0.0, kernel_w(r2), counts);
+    (*sums).fluid_gradient += select(vec3<f32>(0.0), grad, counts);
+    (*sums).gradient_squares += select(0.0, dot(grad, grad), counts);
+}
+
+// Wall neighbour w (its mass in w.w), as add_factor_fluid.
+fn add_factor_wall(sums: ptr<function, FactorSums>, xi: vec3<f32>, w: vec4<f32>, counted: bool) {
+    let rij = xi - w.xyz;
+    let r2 = dot(rij, rij);
+    let counts = counted && !(r2 >= params.h2);
+    (*sums).walls += select(0.0, w.w * kernel_w(r2), counts);
+    (*sums).wall_gradient += select(vec3<f32>(0.0), kernel_grad(rij, sqrt(r2)) * w.w, counts);
+}
+
+// Particle i's outputs (p: its position, w its id) from its sums.
+fn finish_factors(i: u32, p: vec4<f32>, sums: FactorSums) {
+    let volume = params.fluid_volume;
+    let g_wall = sums.wall_gradient / params.rest_density;
+    let total = sums.fluid_gradient * volume + g_wall;
+    let denominator = dot(total, total) + volume * volume * sums.gradient_squares;
+    let factor = select(0.0, 1.0 / denominator, denominator > params.factor_epsilon);
+    let rho = params.fluid_mass * sums.fluid + sums.walls;
+    densities_set(i, rho);
+    factors_set(i, factor);
+    wall_gradients_set(i, vec4<f32>(g_wall, 0.0));
+    divergence_sum_set(i, 0.0);
+    var dt = params.dt;
+    if (ADAPTIVE_DT) {
+        dt = bitcast<f32>(atomicLoad(&status[STATUS_DT]));
+    }
+    let scale = select(0.0, 1.0 / (params.rest_density * dt * dt), dt > 0.0);
+    pressures_set(i, rho * rho * warm_pressure_at(particle_id(p.w)) * scale);
+    if (is_finite_f32(rho) && rho > 0.0) {
+        reduce_offer(0u, bitcast<u32>(rho));
+    }
+}
+
+fn finish_factor_maxima(lid: u32) {
+    reduce_end();
+    if (lid == 0u) {
+        atomicMax(&status[STATUS_MAX_DENSITY], reduce_result(0u));
+        atomicMax(&status[STATUS_STEP_MAX_DENSITY], reduce_result(0u));
+    }
+}
+
+// One invocation walks one particle's stencil; dfsph_factors_tiled.wgsl walks a subgroup's
+// together, with the pair terms above.
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn density_and_factor(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -32,60 +100,29 @@ fn density_and_factor(
         let p = positions_at(i);
         let xi = p.xyz;
         let c = cell_coords(xi);
-        var fluid_sum = 0.0;
-        var wall_sum = 0.0;
-        var fluid_gradient = vec3<f32>(0.0);
-        var gradient_squares = 0.0;
-        var wall_gradient = vec3<f32>(0.0);
+        var sums = no_factor_sums();
         for (var run = 0u; run < stencil_span_count(); run++) {
             let cells = stencil_run(c, run);
             for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
-                let rij = xi - positions_at(j).xyz;
-                let r2 = dot(rij, rij);
-                if (r2 >= params.h2) {
+                let xj = positions_at(j).xyz;
+                let rij = xi - xj;
+                if (dot(rij, rij) >= params.h2) {
                     continue;
                 }
-                fluid_sum += kernel_w(r2);
-                let grad = kernel_grad(rij, sqrt(r2));
-                fluid_gradient += grad;
-                gradient_squares += dot(grad, grad);
+                add_factor_fluid(&sums, xi, xj, true);
             }
             if (WALLS) {
                 for (var j = wall_starts_at(cells.x); j < wall_starts_at(cells.y); j++) {
                     let w = wall_positions_at(j);  // w: mass
                     let rij = xi - w.xyz;
-                    let r2 = dot(rij, rij);
-                    if (r2 >= params.h2) {
+                    if (dot(rij, rij) >= params.h2) {
                         continue;
                     }
-                    wall_sum += w.w * kernel_w(r2);
-                    wall_gradient += kernel_grad(rij, sqrt(r2)) * w.w;
+                    add_factor_wall(&sums, xi, w, true);
                 }
             }
         }
-        let volume = params.fluid_volume;
-        let g_wall = wall_gradient / params.rest_density;
-        let total = fluid_gradient * volume + g_wall;
-        let denominator = dot(total, total) + volume * volume * gradient_squares;
-        let factor = select(0.0, 1.0 / denominator, denominator > params.factor_epsilon);
-        let rho = params.fluid_mass * fluid_sum + wall_sum;
-        densities_set(i, rho);
-        factors_set(i, factor);
-        wall_gradients_set(i, vec4<f32>(g_wall, 0.0));
-        divergence_sum_set(i, 0.0);
-        var dt = params.dt;
-        if (ADAPTIVE_DT) {
-            dt = bitcast<f32>(atomicLoad(&status[STATUS_DT]));
-        }
-        let scale = select(0.0, 1.0 / (params.rest_density * dt * dt), dt > 0.0);
-        pressures_set(i, rho * rho * warm_pressure_at(particle_id(p.w)) * scale);
-        if (is_finite_f32(rho) && rho > 0.0) {
-            reduce_offer(0u, bitcast<u32>(rho));
-        }
+        finish_factors(i, p, sums);
     }
-    reduce_end();
-    if (lid == 0u) {
-        atomicMax(&status[STATUS_MAX_DENSITY], reduce_result(0u));
-        atomicMax(&status[STATUS_STEP_MAX_DENSITY], reduce_result(0u));
-    }
+    finish_factor_maxima(lid);
 }

@@ -100,8 +100,6 @@ pub(super) struct DfsphStages {
     pub check: [Stage; 2],
     pub integrate: Stage,
     pub step_accelerations: Stage,
-    /// With neighbour lists: the pass after the factors that records them.
-    pub record_lists: Option<Stage>,
 }
 
 /// DFSPH's arrays.
@@ -130,7 +128,6 @@ pub(super) struct DfsphGroups {
     pub predict_density: wgpu::BindGroup,
     pub pressure_apply: wgpu::BindGroup,
     pub integrate: wgpu::BindGroup,
-    pub record_lists: Option<wgpu::BindGroup>,
 }
 
 /// DFSPH on the GPU: its settings, pipelines, arrays and bind groups.
@@ -173,9 +170,9 @@ pub(super) fn solve_threads(sizes: &WorkgroupSizes) -> u32 {
 impl DfsphStages {
     /// Every DFSPH pipeline, with the scene's constants `k` and the workgroup sizes (density:
     /// the factors; forces: the prediction and the solves; integrate: the integration); with
-    /// `tiles`, the solves' iterations walk a subgroup's stencils together
-    /// (wgsl/shared/dfsph_tiles.wgsl).
-    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths, places: &[(&str, Alias)], tiles: bool, lists: bool) -> Result<Self, GpuError> {
+    /// `tiles`, the factors and the solves' iterations walk a subgroup's stencils together
+    /// (wgsl/sim/dfsph_factors_tiled.wgsl, wgsl/shared/dfsph_tiles.wgsl).
+    pub fn new(ctx: &GpuContext, params: &Params, k: &[(&'static str, f64)], sizes: &WorkgroupSizes, lens: ArrayLengths, places: &[(&str, Alias)], tiles: bool) -> Result<Self, GpuError> {
         let settings = params.dfsph.as_ref().expect("a DFSPH scene");
         let sized = |size: u32| {
             let mut c = k.to_vec();
@@ -200,7 +197,13 @@ impl DfsphStages {
             }
         };
         Ok(DfsphStages {
-            factors: one("density_and_factor", &sized(sizes.density))?,
+            // With tiles the factors' walk is tiled too, and records the neighbour lists where
+            // the step keeps them (NEIGHBOUR_LISTS).
+            factors: if tiles {
+                stage_with_aliases(ctx, "dfsph_factors_tiled", "factors_tiled", lens, &sized(sizes.density), places)?
+            } else {
+                one("density_and_factor", &sized(sizes.density))?
+            },
             divergence_warm_start: one("divergence_warm_start", &solve)?,
             divergence_rate: iteration("divergence_rate", "rate_tiled")?,
             divergence_apply: iteration("divergence_apply", "apply_tiled")?,
@@ -216,7 +219,6 @@ impl DfsphStages {
             check: [one("check_convergence", &control(0, warm))?, one("check_convergence", &control(1, warm))?],
             integrate: one("integrate", &sized(sizes.integrate))?,
             step_accelerations: one("step_accelerations", &sized(sizes.integrate))?,
-            record_lists: if lists { Some(stage_with_aliases(ctx, "dfsph_divergence_tiled", "record_lists", lens, &solve, places)?) } else { None },
         })
     }
 }
@@ -365,7 +367,6 @@ impl DfsphGpu {
                 predict_density: st.predict_density.bind_group(device, "predict_density", uniform, &predicted),
                 pressure_apply: st.pressure_apply.bind_group(device, "pressure_apply", uniform, &predicted),
                 integrate: st.integrate.bind_group(device, "integrate", uniform, &predicted),
-                record_lists: st.record_lists.as_ref().map(|stage| stage.bind_group(device, "record_lists", uniform, &own)),
             }
         }).collect();
         let control_buffers = |name: &str| match name {

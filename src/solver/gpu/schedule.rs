@@ -357,10 +357,6 @@ impl GpuSolver {
             self.accelerations_valid = false;
             return;
         }
-        // The neighbour lists every solve pass of the step walks (profiled with the factors).
-        if let (Some(stage), Some(group)) = (&d.stages.record_lists, &g.record_lists) {
-            self.dispatch_particles(rec, stage, group);
-        }
         // The point probes and gauges sample the state the step starts from with its factors'
         // density and output pressure, as the weakly compressible step's with its density stage
         // (profiled with the factors; only on the steps where one is due); the force and front
@@ -576,13 +572,7 @@ impl GpuSolver {
         let mut rec = PlainRecorder::new(&self.ctx.device, "dfsph stage");
         rec.clear_range(&self.status, lo, 8);
         match stage {
-            // The factors, and (as in a step) the neighbour lists the solve passes walk.
-            S::Factors => {
-                self.dispatch_particles(&mut rec, &st.factors, &g.factors);
-                if let (Some(stage), Some(group)) = (&st.record_lists, &g.record_lists) {
-                    self.dispatch_particles(&mut rec, stage, group);
-                }
-            }
+            S::Factors => self.dispatch_particles(&mut rec, &st.factors, &g.factors),
             S::DivergenceWarmStart => self.dispatch_particles(&mut rec, &st.divergence_warm_start, &g.divergence_warm_start),
             S::DivergenceRate => self.dispatch_particles(&mut rec, &st.divergence_rate, &g.divergence_rate),
             S::DivergenceApply => self.dispatch_particles(&mut rec, &st.divergence_apply, &g.divergence_apply),

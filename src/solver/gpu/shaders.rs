@@ -36,6 +36,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/forces_integrate.wgsl", include_str!("../../../wgsl/sim/forces_integrate.wgsl")),
     ("shared/dfsph.wgsl", include_str!("../../../wgsl/shared/dfsph.wgsl")),
     ("sim/dfsph_factors.wgsl", include_str!("../../../wgsl/sim/dfsph_factors.wgsl")),
+    ("sim/dfsph_factors_tiled.wgsl", include_str!("../../../wgsl/sim/dfsph_factors_tiled.wgsl")),
     ("sim/dfsph_divergence.wgsl", include_str!("../../../wgsl/sim/dfsph_divergence.wgsl")),
     ("sim/dfsph_divergence_tiled.wgsl", include_str!("../../../wgsl/sim/dfsph_divergence_tiled.wgsl")),
     ("sim/dfsph_predict.wgsl", include_str!("../../../wgsl/sim/dfsph_predict.wgsl")),

@@ -341,10 +341,10 @@ impl GpuSolver {
         };
         // The lists' bindings (one per segment) must fit the stages that declare them; a scene
         // whose arrays take too many segments runs without.
-        let list_stages = match (params.dfsph.is_some(), params.continuity_density) {
-            (true, _) => ["dfsph_divergence_tiled", "dfsph_pressure_tiled"],
-            (false, true) => ["continuity_tiled", "forces_tiled"],
-            (false, false) => ["density_tiled", "forces_tiled"],
+        let list_stages: &[&str] = match (params.dfsph.is_some(), params.continuity_density) {
+            (true, _) => &["dfsph_factors_tiled", "dfsph_divergence_tiled", "dfsph_pressure_tiled"],
+            (false, true) => &["continuity_tiled", "forces_tiled"],
+            (false, false) => &["density_tiled", "forces_tiled"],
         };
         let most = ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
         if list_capacity.is_some() && list_stages.iter().any(|stage| storage_bindings(&ctx, stage, &|name: &str| counts.len(name)) > most) {
@@ -451,7 +451,7 @@ impl GpuSolver {
         let dfsph_len = |name: &str| if name == "accelerations" && params.adaptive.is_none() { 0 } else { counts.len(name) };
         // In place DFSPH's integration writes the positions it reads.
         let dfsph_places: Vec<(&str, Alias)> = aliases.iter().copied().chain((layout == StateLayout::InPlace).then_some(IN_PLACE[0])).collect();
-        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places, tiles, list_capacity.is_some())?) } else { None };
+        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places, tiles)?) } else { None };
 
         let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
