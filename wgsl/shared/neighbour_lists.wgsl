@@ -1,18 +1,20 @@
-// Neighbour lists, recorded by the tiled density (density_tiled.wgsl or continuity_tiled.wgsl)
-// and walked by the tiled forces (forces_tiled.wgsl) of the same step. On a software adapter a tile evaluates every
-// candidate of the union of its eight particles' stencils (216 in a resting block with cells
-// one support wide) where a particle has about 33 neighbours; the forces, whose pair terms cost
-// the most, then evaluate only those (docs/performance.md, "Neighbour lists").
+// Neighbour lists, recorded by a tiled density stage (density_tiled.wgsl, continuity_tiled.wgsl,
+// DFSPH's dfsph_factors_tiled.wgsl) and walked by the passes of the same step that follow it on
+// the same positions (forces_tiled.wgsl; DFSPH's solves, shared/dfsph_tiles.wgsl). On a software
+// adapter a tile evaluates every candidate of the union of its eight particles' stencils (216 in
+// a resting block with cells one support wide) where a particle has about 33 neighbours; the
+// passes over lists evaluate only those (docs/performance.md, "Neighbour lists").
 //
 // Particle i's list is a column of LIST_CAPACITY slots, slot t at t * fluid_count + i (the
 // invocations of a subgroup read neighbouring words), each slot one chunk of the tile's walk
 // that holds a neighbour (an entry: the chunk's first candidate and a mask of its neighbours):
 // its fluid chunks from the top, its wall chunks from the bottom, each in the order the
-// per-particle walk meets them, so the forces' sums over a list are those of the walk bit for
-// bit. One store per chunk rather than per neighbour: on a software adapter each store is eight
-// scalar ones, and a store per neighbour cost the density more than the lists saved the forces. `neighbour_counts` holds the
-// fluid count in its low 16 bits and the wall count above; a particle with more neighbours than
-// the slots hold (counted on, not written) is marked full, and its subgroup walks the tiles.
+// per-particle walk meets them, so the sums over a list are those of the walk bit for bit. One
+// store per chunk rather than per neighbour: on a software adapter each store is eight scalar
+// ones, and a store per neighbour cost the density more than the lists saved the forces.
+// `neighbour_counts` holds the fluid chunks in its low 16 bits and the wall chunks above; a
+// particle with more chunks than slots (counted on, not written) is marked full, and its
+// subgroup walks the tiles.
 //! array neighbours: u32, read_write, optional
 //! array neighbour_counts: u32, read_write, optional
 
