@@ -1,6 +1,6 @@
-// What the density stages (density.wgsl, continuity.wgsl and their tiled twins) write: a
-// particle's density and its pressure from the equation of state, and the workgroup's largest
-// density into the status words (STATUS_MAX_DENSITY: of the run; STATUS_STEP_MAX_DENSITY: of
+// What the density stages (density.wgsl, continuity.wgsl and their tiled twins; DFSPH's factors
+// the largest density only) write: a particle's density and its pressure from the equation of
+// state, and the workgroup's largest density into the status words (STATUS_MAX_DENSITY: of the run; STATUS_STEP_MAX_DENSITY: of
 // this step). The including stage declares `densities`, `pressures` and `status` and includes
 // shared/reduce.wgsl; every invocation of a workgroup calls reduce_begin before and
 // finish_densities after.
@@ -8,6 +8,11 @@
 fn set_density(i: u32, rho: f32) {
     densities_set(i, rho);
     pressures_set(i, eos_pressure(rho));
+    offer_density(rho);
+}
+
+// Offers a density to the workgroup's largest (finish_densities passes it on).
+fn offer_density(rho: f32) {
     if (is_finite_f32(rho) && rho > 0.0) {
         reduce_offer(0u, bitcast<u32>(rho));
     }

@@ -5,6 +5,7 @@
 
 //! include shared/common.wgsl
 //! include shared/reduce.wgsl
+//! include shared/density_write.wgsl
 //! array positions: vec4<f32>, read
 //! array starts: u32, read
 //! array wall_positions: vec4<f32>, read
@@ -73,17 +74,7 @@ fn finish_factors(i: u32, p: vec4<f32>, sums: FactorSums) {
     }
     let scale = select(0.0, 1.0 / (params.rest_density * dt * dt), dt > 0.0);
     pressures_set(i, rho * rho * warm_pressure_at(particle_id(p.w)) * scale);
-    if (is_finite_f32(rho) && rho > 0.0) {
-        reduce_offer(0u, bitcast<u32>(rho));
-    }
-}
-
-fn finish_factor_maxima(lid: u32) {
-    reduce_end();
-    if (lid == 0u) {
-        atomicMax(&status[STATUS_MAX_DENSITY], reduce_result(0u));
-        atomicMax(&status[STATUS_STEP_MAX_DENSITY], reduce_result(0u));
-    }
+    offer_density(rho);
 }
 
 // One invocation walks one particle's stencil; dfsph_factors_tiled.wgsl walks a subgroup's
@@ -124,5 +115,5 @@ fn density_and_factor(
         }
         finish_factors(i, p, sums);
     }
-    finish_factor_maxima(lid);
+    finish_densities(lid);
 }

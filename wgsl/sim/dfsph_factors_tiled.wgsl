@@ -62,5 +62,5 @@ fn factors_tiled(
             finish_list(i, sums.list);
         }
     }
-    finish_factor_maxima(lid);
+    finish_densities(lid);
 }
