@@ -53,13 +53,6 @@ fn tile_wall_spans(t: TileRow, cx: u32, run: u32) -> vec4<u32> {
 fn tile_wall_chunk(sums: ptr<function, SolveSums>, own: SolveOwn, j: u32, b: u32, span: vec2<u32>) {
 }
 
-// Whether the subgroup walks its particles' lists: where it has them and every one fits (the
-// choice is the subgroup's, as the tiles' shuffles need all its lanes).
-fn walks_lists(p: u32) -> bool {
-    let counts = select(0u, list_counts(p), NEIGHBOUR_LISTS);
-    return NEIGHBOUR_LISTS && subgroupAll(counts != LIST_FULL);
-}
-
 // density_rate of particle i (or, past the last, of the last: see tile_particle) with the
 // subgroup; every invocation calls it. Each way finishes its own sum (see forces_tiled.wgsl).
 fn tiled_density_rate(i: u32, lane: u32) -> f32 {

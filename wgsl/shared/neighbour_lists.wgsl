@@ -38,8 +38,12 @@ const ENTRY_BASE: u32 = 0xffffffu;
 // software adapter more than the store): the entry goes to the next free slot in any case and
 // is counted only where the mask is not empty, so the next chunk overwrites one that is. A list
 // with no free slot (whose particle's subgroup may still read it, if nothing more is kept) or
-// an invocation without a particle writes nothing.
+// an invocation without a particle writes nothing; nothing at all without NEIGHBOUR_LISTS (the
+// recording stages call the helpers of this file unconditionally).
 fn record_chunk(counts: ListCounts, i: u32, b: u32, mask: u32, wall: bool) -> ListCounts {
+    if (!NEIGHBOUR_LISTS) {
+        return counts;
+    }
     var c = counts;
     if (i < params.fluid_count && c.fluid + c.walls < LIST_CAPACITY) {
         let free = LIST_CAPACITY - 1u - c.walls;
@@ -67,6 +71,9 @@ fn list_bit(xi: vec3<f32>, xj: vec3<f32>, j: u32, span: vec2<u32>) -> u32 {
 // lane's at x, that lie in `span` within the lists' radius of xi (the chunk shuffled to every
 // lane: the whole subgroup calls it).
 fn record_shuffled_chunk(counts: ListCounts, i: u32, xi: vec3<f32>, x: vec3<f32>, b: u32, span: vec2<u32>, wall: bool) -> ListCounts {
+    if (!NEIGHBOUR_LISTS) {
+        return counts;
+    }
     var mask = 0u;
     //! unroll 8 mask |= list_bit(xi, subgroupShuffle(x, {k}u), b + {k}u, span) << {k}u;
     return record_chunk(counts, i, b, mask, wall);
@@ -74,7 +81,11 @@ fn record_shuffled_chunk(counts: ListCounts, i: u32, xi: vec3<f32>, x: vec3<f32>
 
 const LIST_FULL: u32 = 0xffffffffu;
 
+// Particle i's counts, written by the recording stage once its walk has ended.
 fn finish_list(i: u32, counts: ListCounts) {
+    if (!NEIGHBOUR_LISTS) {
+        return;
+    }
     let fits = counts.fluid + counts.walls <= LIST_CAPACITY;
     neighbour_counts_set(i, select(LIST_FULL, counts.fluid | (counts.walls << 16u), fits));
 }
@@ -82,6 +93,14 @@ fn finish_list(i: u32, counts: ListCounts) {
 // Particle i's counts, or LIST_FULL.
 fn list_counts(i: u32) -> u32 {
     return neighbour_counts_at(i);
+}
+
+// Whether the subgroup walks its particles' lists (p: this invocation's): where the step keeps
+// lists and every one fits. The choice is the subgroup's, as the tiles' shuffles need all its
+// lanes; each way should finish its own sums (forces_tiled.wgsl says why).
+fn walks_lists(p: u32) -> bool {
+    let counts = select(0u, list_counts(p), NEIGHBOUR_LISTS);
+    return NEIGHBOUR_LISTS && subgroupAll(counts != LIST_FULL);
 }
 
 // The next neighbour j of the `count` entries of particle i's list from its top (or with

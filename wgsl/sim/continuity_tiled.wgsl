@@ -34,9 +34,7 @@ fn tile_fluid_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32,
     var rate = (*sums).rate;
     //! unroll 8 add_fluid_rate(&rate, own.rate, subgroupShuffle(xj, {k}u), subgroupShuffle(vj, {k}u), in_span(b + {k}u, span));
     (*sums).rate = rate;
-    if (NEIGHBOUR_LISTS) {
-        (*sums).list = record_shuffled_chunk((*sums).list, own.i, own.rate.x, xj, b, span, false);
-    }
+    (*sums).list = record_shuffled_chunk((*sums).list, own.i, own.rate.x, xj, b, span, false);
 }
 
 fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, span: vec2<u32>) {
@@ -44,9 +42,7 @@ fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, 
     var rate = (*sums).rate;
     //! unroll 8 add_wall_rate(&rate, own.rate, subgroupShuffle(w, {k}u), in_span(b + {k}u, span));
     (*sums).rate = rate;
-    if (NEIGHBOUR_LISTS) {
-        (*sums).list = record_shuffled_chunk((*sums).list, own.i, own.rate.x, w.xyz, b, span, true);
-    }
+    (*sums).list = record_shuffled_chunk((*sums).list, own.i, own.rate.x, w.xyz, b, span, true);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -62,9 +58,7 @@ fn continuity_tiled(
     let sums = tile_walk(TileOwn(own, i), cell_coords(own.x), lane, i < params.fluid_count);
     if (i < params.fluid_count) {
         set_carried_density(i, finish_rate(sums.rate));
-        if (NEIGHBOUR_LISTS) {
-            finish_list(i, sums.list);
-        }
+        finish_list(i, sums.list);
     }
     finish_densities(lid);
 }

@@ -47,18 +47,14 @@ fn tile_fluid_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32,
     let w = positions_at(j);
     var mask = 0u;
     //! unroll 8 mask |= tile_candidate(sums, own, subgroupShuffle(w, {k}u), false, b + {k}u, span) << {k}u;
-    if (NEIGHBOUR_LISTS) {
-        (*sums).list = record_chunk((*sums).list, own.i, b, mask, false);
-    }
+    (*sums).list = record_chunk((*sums).list, own.i, b, mask, false);
 }
 
 fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, span: vec2<u32>) {
     let w = wall_positions_at(j);
     var mask = 0u;
     //! unroll 8 mask |= tile_candidate(sums, own, subgroupShuffle(w, {k}u), true, b + {k}u, span) << {k}u;
-    if (NEIGHBOUR_LISTS) {
-        (*sums).list = record_chunk((*sums).list, own.i, b, mask, true);
-    }
+    (*sums).list = record_chunk((*sums).list, own.i, b, mask, true);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -74,9 +70,7 @@ fn density_tiled(
     let sums = tile_walk(TileOwn(xi, i), cell_coords(xi), lane, i < params.fluid_count);
     if (i < params.fluid_count) {
         set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
-        if (NEIGHBOUR_LISTS) {
-            finish_list(i, sums.list);
-        }
+        finish_list(i, sums.list);
     }
     finish_densities(lid);
 }

@@ -32,9 +32,7 @@ fn tile_fluid_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32,
     var factors = (*sums).factors;
     //! unroll 8 add_factor_fluid(&factors, own.x, subgroupShuffle(xj, {k}u), in_span(b + {k}u, span));
     (*sums).factors = factors;
-    if (NEIGHBOUR_LISTS) {
-        (*sums).list = record_shuffled_chunk((*sums).list, own.i, own.x, xj, b, span, false);
-    }
+    (*sums).list = record_shuffled_chunk((*sums).list, own.i, own.x, xj, b, span, false);
 }
 
 // The solves take the walls through each particle's wall gradient: no wall is recorded.
@@ -58,9 +56,7 @@ fn factors_tiled(
     let sums = tile_walk(TileOwn(p.xyz, i), cell_coords(p.xyz), lane, i < params.fluid_count);
     if (i < params.fluid_count) {
         finish_factors(i, p, sums.factors);
-        if (NEIGHBOUR_LISTS) {
-            finish_list(i, sums.list);
-        }
+        finish_list(i, sums.list);
     }
     finish_densities(lid);
 }

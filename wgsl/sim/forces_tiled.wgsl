@@ -45,8 +45,9 @@ fn tile_wall_chunk(sums: ptr<function, ForceSums>, own: OwnParticle, j: u32, b: 
     //! unroll 8 add_wall_pair(sums, own, shuffled_wall(n, {k}u), in_span(b + {k}u, span));
 }
 
-// The sums over particle i's list (`counts`: list_counts's), in the tiles' order.
-fn listed_sums(own: OwnParticle, i: u32, counts: u32) -> ForceSums {
+// The sums over particle i's list, in the tiles' order.
+fn listed_sums(own: OwnParticle, i: u32) -> ForceSums {
+    let counts = list_counts(i);
     var sums = no_sums();
     var at = vec3<u32>(0u);
     var j = 0u;
@@ -70,13 +71,11 @@ fn forces_tiled(
 ) {
     let i = thread_index(gid, groups);
     let own = own_particle(tile_particle(i));
-    let counts = select(0u, list_counts(tile_particle(i)), NEIGHBOUR_LISTS);
-    // Lists where every particle's fits (the choice is the subgroup's, as the tiles' shuffles
-    // need all its lanes). Each branch finishes its own sums: with one finish after both,
-    // lavapipe (Mesa 22.3) compiled the acceleration's sum differently from the stage without
-    // lists, one unit in the last place apart (tests/parity/tiles.rs, the scene with planes only).
-    if (NEIGHBOUR_LISTS && subgroupAll(counts != LIST_FULL)) {
-        let sums = listed_sums(own, tile_particle(i), counts);
+    // Each branch finishes its own sums: with one finish after both, lavapipe (Mesa 22.3)
+    // compiled the acceleration's sum differently from the stage without lists, one unit in the
+    // last place apart (tests/parity/tiles.rs, the scene with planes only).
+    if (walks_lists(tile_particle(i))) {
+        let sums = listed_sums(own, tile_particle(i));
         if (i < params.fluid_count) {
             accelerations_set(i, finish_acceleration(own, sums));
         }

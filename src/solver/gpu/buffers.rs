@@ -271,3 +271,11 @@ pub struct ParticleBuffers {
     /// Number of fluid particles (elements of each array).
     pub count: u32,
 }
+
+/// The neighbour lists (wgsl/shared/neighbour_lists.wgsl): `capacity` slots per fluid particle
+/// in `slots`, and each particle's counts.
+pub(super) struct NeighbourLists {
+    pub capacity: u32,
+    pub slots: wgpu::Buffer,
+    pub counts: wgpu::Buffer,
+}

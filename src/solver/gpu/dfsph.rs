@@ -159,7 +159,7 @@ pub(super) struct SharedBuffers<'a> {
     /// The accelerations (adaptive dt), or a placeholder.
     pub accelerations: &'a wgpu::Buffer,
     /// The neighbour lists and their counts, where the solves walk lists.
-    pub lists: Option<&'a (wgpu::Buffer, wgpu::Buffer)>,
+    pub lists: Option<&'a super::buffers::NeighbourLists>,
 }
 
 /// Threads per workgroup of the solves' passes, whose dispatch size the GPU's checks write.
@@ -341,8 +341,8 @@ impl DfsphGpu {
                         "divergence_sum" => b.divergence_sum.clone(),
                         "warm_pressure" => b.warm_pressure.clone(),
                         "warm_divergence" => b.warm_divergence.clone(),
-                        "neighbours" => s.lists.expect("bound only with neighbour lists").0.clone(),
-                        "neighbour_counts" => s.lists.expect("bound only with neighbour lists").1.clone(),
+                        "neighbours" => s.lists.expect("bound only with neighbour lists").slots.clone(),
+                        "neighbour_counts" => s.lists.expect("bound only with neighbour lists").counts.clone(),
                         other => panic!("no DFSPH buffer holds the array '{other}'"),
                     }
                 }

@@ -3,7 +3,7 @@
 //! which a step dispatches the stages is recorded in one place, `schedule.rs`; nothing is read
 //! back, waited for or created while steps are recorded.
 
-use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, ParticleBuffers, StateLayout, StateStore, WallCellIndex, STREAM_CHUNK};
+use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, NeighbourLists, ParticleBuffers, StateLayout, StateStore, WallCellIndex, STREAM_CHUNK};
 use super::device::{GpuContext, GpuError, TILE_LANES};
 use super::memory::{MemoryPlan, StepArrays};
 use super::params::{status, GpuParams};
@@ -91,9 +91,8 @@ pub(super) struct Pipelines {
     pub fused: bool,
     /// The neighbour stages walk a subgroup's stencils together (see [`subgroup_tiles`]).
     pub subgroup_tiles: bool,
-    /// The slots of each neighbour list, where the density records lists for the forces.
-    pub list_capacity: Option<u32>,
 }
+
 
 /// Whether the density (summation or continuity), the two-pass forces and DFSPH's solve
 /// iterations walk the stencils of a subgroup together (wgsl/shared/tiles.wgsl): by default where
@@ -128,16 +127,17 @@ pub struct ListUsage {
 }
 
 /// The capacity of each fluid particle's neighbour list where the step keeps lists
-/// (wgsl/shared/neighbour_lists.wgsl), else `None`: with subgroup tiles, and the forces in a pass
-/// of their own (not fused), unless the options turn them off; alone (not across ranks). The
+/// (wgsl/shared/neighbour_lists.wgsl), else `None`: where `walks_tiles` (subgroup tiles, the
+/// weakly compressible forces in a pass of their own, one device) and the options do not turn
+/// them off. The
 /// capacity is 0.75 times the neighbours a particle has at rest density, 4/3 pi h^3 rho0 / m
 /// (fluid and walls together, the walls' spacing being the fluid's), in whole rows of eight, or
 /// the options'. A slot holds a chunk of up to eight neighbours: measured on the dam break and
 /// the resting block, the longest list used 0.37-0.52 times that many slots (17, 34 and 42
 /// with supports of 2, 2.5 and 3 spacings), so this leaves room for compression; a longer list
 /// overflows, and its subgroup walks the tiles.
-fn neighbour_lists(ctx: &GpuContext, params: &Params, tiles: bool, options: &GpuOptions, fluid: u64, walls: u64) -> Option<u32> {
-    let used = tiles && options.fuse_forces_and_integration != Some(true) && options.neighbour_lists != Some(false);
+fn neighbour_lists(ctx: &GpuContext, params: &Params, walks_tiles: bool, options: &GpuOptions, fluid: u64, walls: u64) -> Option<u32> {
+    let used = walks_tiles && options.neighbour_lists != Some(false);
     let at_rest = 4.0 / 3.0 * std::f64::consts::PI * params.h.powi(3) * params.rest_density / params.fluid_mass;
     // The counts are kept in 16 bits.
     let capacity = options.neighbour_list_capacity.unwrap_or(((0.75 * at_rest / 8.0).ceil() * 8.0).clamp(8.0, 4096.0) as u32).clamp(1, 0xffff);
@@ -210,8 +210,8 @@ pub struct GpuSolver {
     /// With the Adami wall pressure: each sorted wall particle's pressure and density
     /// (`vec2<f32>`).
     pub(super) wall_fields: Option<wgpu::Buffer>,
-    /// The neighbour lists and their counts, where the step keeps them.
-    pub(super) neighbour_lists: Option<(wgpu::Buffer, wgpu::Buffer)>,
+    /// The neighbour lists, where the step keeps them.
+    pub(super) neighbour_lists: Option<NeighbourLists>,
     /// The original index of each sorted wall particle.
     pub(super) wall_order: Vec<u32>,
     pub(super) scan: Scan,
@@ -329,7 +329,6 @@ impl GpuSolver {
         let ws = options.workgroup_sizes;
         ws.check(&ctx)?;
         let tiles = subgroup_tiles(&ctx, &options)?;
-        let mut list_capacity = neighbour_lists(&ctx, params, tiles, &options, n, w).filter(|_| ranks.is_none());
         let mut counts = ArrayCounts {
             fluid: n,
             cells_plus_one: cells + 1,
@@ -337,8 +336,20 @@ impl GpuSolver {
             wall_cell_blocks: wall_index.blocks.len() as u64,
             wall_cell_firsts: if has_walls { wall_cell_room } else { 0 },
             wall_fields: if adami { w } else { 0 },
-            list_slots: n * list_capacity.unwrap_or(0) as u64,
+            list_slots: 0,
         };
+        // Forces and integration can be fused with fixed dt, unless the fused stage's bindings
+        // exceed the adapter's (arrays in many segments): then they run as two passes.
+        let dfsph = params.dfsph.is_some();
+        let most = ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
+        let can_fuse = params.adaptive.is_none()
+            && !dfsph
+            && storage_bindings(&ctx, "forces_integrate", &|name: &str| if name == "accelerations" { 0 } else { counts.len(name) }) <= most;
+        // The two-pass step with its state in place is the default: 48 bytes of state per
+        // particle instead of the fused step's 64 (docs/performance.md).
+        let fused = can_fuse && options.fuse_forces_and_integration.unwrap_or(false);
+        let mut list_capacity = neighbour_lists(&ctx, params, tiles && !fused && ranks.is_none(), &options, n, w);
+        counts.list_slots = n * list_capacity.unwrap_or(0) as u64;
         // The lists' bindings (one per segment) must fit the stages that declare them; a scene
         // whose arrays take too many segments runs without.
         let list_stages: &[&str] = match (params.dfsph.is_some(), params.continuity_density) {
@@ -346,7 +357,6 @@ impl GpuSolver {
             (false, true) => &["continuity_tiled", "forces_tiled"],
             (false, false) => &["density_tiled", "forces_tiled"],
         };
-        let most = ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
         if list_capacity.is_some() && list_stages.iter().any(|stage| storage_bindings(&ctx, stage, &|name: &str| counts.len(name)) > most) {
             list_capacity = None;
             counts.list_slots = 0;
@@ -355,16 +365,7 @@ impl GpuSolver {
         // as does the one-thread finish_step.
         let without_accelerations = |name: &str| if name == "accelerations" { 0 } else { counts.len(name) };
         let len = |name: &str| counts.len(name);
-        // Forces and integration can be fused with fixed dt, unless the fused stage's bindings
-        // exceed the adapter's (arrays in many segments): then they run as two passes.
-        let dfsph = params.dfsph.is_some();
-        let can_fuse = params.adaptive.is_none()
-            && !dfsph
-            && storage_bindings(&ctx, "forces_integrate", &without_accelerations) <= ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
         let uniform_bytes = gpu_params.bytes().len() as u64;
-        // The two-pass step with its state in place is the default: 48 bytes of state per
-        // particle instead of the fused step's 64 (docs/performance.md).
-        let fused = can_fuse && options.fuse_forces_and_integration.unwrap_or(false);
         // The fused step writes a second state; DFSPH keeps accelerations with adaptive dt only
         // (fixed dt: in registers).
         let arrays = StepArrays::new(dfsph, params.continuity_density, params.adaptive.is_some(), fused);
@@ -444,7 +445,6 @@ impl GpuSolver {
             finish_step: stage_in_place("integrate", "finish_step", &without_accelerations, &k)?,
             fused,
             subgroup_tiles: tiles,
-            list_capacity,
         };
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
         // placeholder (until `step_fields` asks for them).
@@ -487,7 +487,11 @@ impl GpuSolver {
         let status = storage_init(device, "status", bytemuck::cast_slice(&status::initial()));
         // Every list marked full until a density stage records it: a pass that walked lists
         // before then would walk the tiles instead.
-        let lists = (counts.list_slots > 0).then(|| (storage(device, "neighbour lists", counts.list_slots * 4), storage_init(device, "neighbour counts", bytemuck::cast_slice(&vec![u32::MAX; n as usize]))));
+        let lists = list_capacity.map(|capacity| NeighbourLists {
+            capacity,
+            slots: storage(device, "neighbour lists", counts.list_slots * 4),
+            counts: storage_init(device, "neighbour counts", bytemuck::cast_slice(&vec![u32::MAX; n as usize])),
+        });
         let scan = Scan::new(&ctx, &uniform, &starts, cells + 1)?;
 
         let u = &uniform;
@@ -519,8 +523,8 @@ impl GpuSolver {
                     "wall_cell_blocks" => wall_cell_blocks.clone(),
                     "wall_cell_firsts" => wall_cell_firsts.clone(),
                     "wall_fields" => wall_fields.clone().expect("bound only with the Adami wall pressure"),
-                    "neighbours" => lists.as_ref().expect("bound only with neighbour lists").0.clone(),
-                    "neighbour_counts" => lists.as_ref().expect("bound only with neighbour lists").1.clone(),
+                    "neighbours" => lists.as_ref().expect("bound only with neighbour lists").slots.clone(),
+                    "neighbour_counts" => lists.as_ref().expect("bound only with neighbour lists").counts.clone(),
                     "status" => status.clone(),
                     "accelerations" => acc.clone(),
                     other => panic!("no buffer holds the array '{other}'"),
@@ -780,24 +784,24 @@ impl GpuSolver {
         self.pipelines.subgroup_tiles
     }
 
-    /// The slots of each fluid particle's neighbour list where the tiled forces walk lists
-    /// (see [`GpuOptions::neighbour_lists`]), else `None`.
+    /// The slots of each fluid particle's neighbour list where the tiled forces or DFSPH's
+    /// solves walk lists (see [`GpuOptions::neighbour_lists`]), else `None`.
     pub fn neighbour_list_capacity(&self) -> Option<u32> {
-        self.pipelines.list_capacity
+        self.neighbour_lists.as_ref().map(|l| l.capacity)
     }
 
     /// How full the lists the last step recorded were: the most slots one particle's list
     /// used, and the particles whose lists overflowed (their subgroups walked the tiles);
     /// `None` without lists.
     pub fn neighbour_list_usage(&self) -> anyhow::Result<Option<ListUsage>> {
-        let (Some(slots), Some((_, counts))) = (self.pipelines.list_capacity, &self.neighbour_lists) else {
+        let Some(lists) = &self.neighbour_lists else {
             return Ok(None);
         };
-        let data = read_buffers(&self.ctx, &[(counts, self.fluid_count as u64 * 4)])?;
+        let data = read_buffers(&self.ctx, &[(&lists.counts, self.fluid_count as u64 * 4)])?;
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
         let full = words.iter().filter(|&&c| c == u32::MAX).count() as u64;
         let longest = words.iter().filter(|&&c| c != u32::MAX).map(|&c| (c & 0xffff) + (c >> 16)).max().unwrap_or(0);
-        Ok(Some(ListUsage { slots, longest, full }))
+        Ok(Some(ListUsage { slots: lists.capacity, longest, full }))
     }
     /// Blocks until the GPU has finished everything submitted (for timing).
     pub fn wait(&self) -> anyhow::Result<()> {
@@ -964,7 +968,7 @@ impl GpuSolver {
             .chain(s.pressures.as_ref())
             .chain(planned_accelerations)
             .chain(s.wall_fields.as_ref())
-            .chain(s.neighbour_lists.iter().flat_map(|(slots, counts)| [slots, counts]))
+            .chain(s.neighbour_lists.iter().flat_map(|l| [&l.slots, &l.counts]))
             .map(|b| b.size())
             .sum::<u64>()
             + s.store.bytes()
