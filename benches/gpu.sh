@@ -11,6 +11,8 @@
 #
 #   benches/gpu.sh [OUTDIR] [LARGEST]
 #
+# With ONLY=probes in the environment it runs only the probes' measurement.
+#
 # OUTDIR (default gpu-results) receives log.txt, one JSON file per profile and bench, and
 # parity_failures.txt; LARGEST (default 64000000) is the largest dam break profiled (256000000
 # needs about 37 GB of host memory and 14 GB of GPU memory). The figures go to BENCHMARKS.md
@@ -32,6 +34,30 @@ t() {
   echo "=== exit ${PIPESTATUS[0]} ($(date -u +%T))"
 }
 
+# Probes: what four point probes sampled every step cost on the GPU. The dam break at 30 k
+# particles without and with them, each at two step counts (the difference between the two is
+# the steps' own time, without the setup and the snapshots), alternating, twice; and at 1 M the
+# profile without and with them (the probes' dispatches are timed with the density; at 1 M a
+# run's setup varies by more than the steps take).
+probe_runs() {
+  awk '/^\[\[fluid\]\]/ && !done { for (y = 1; y <= 4; y++) printf "[[probe]]\nname = \"p%d\"\ntype = \"point\"\nposition = [1.0, %.2f, 0.05]\nevery_steps = 1\n\n", y, 0.1 * y; done = 1 } { print }' \
+    scenes/dam_break.toml > "$variants/dam_break_probes.toml"
+  for round in 1 2; do
+    for steps in 2000 8000; do
+      for scene in dam_break "$variants/dam_break_probes.toml"; do
+        rm -rf "$variants/run"
+        t 120 "$W" run "$scene" --backend gpu --particles 30000 --steps $steps --snapshot-every 0 --out "$variants/run"
+      done
+    done
+  done
+  for scene in dam_break "$variants/dam_break_probes.toml"; do
+    t 60 "$W" profile "$scene" --particles 1000000 --steps 40
+  done
+}
+
+variants=$(mktemp -d)
+if [ "${ONLY:-}" = probes ]; then probe_runs; rm -rf "$variants"; exit 0; fi
+
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv
 echo "host cores: $(nproc)"; date -u
 t 20 "$W" adapters
@@ -47,7 +73,6 @@ t 60 "$W" profile dam_break --particles 4000000 --steps 40 --workgroup-size 256
 t 60 "$W" profile dam_break --particles 4000000 --steps 40 --single-cells
 
 # The pressure model and DFSPH: the dam break with the lines changed.
-variants=$(mktemp -d)
 sed -e 's/^name = "dam_break"$/name = "dam_break_delta"/' \
     -e 's/^viscosity = 0.01$/viscosity = 0.01\ndensity = "continuity"\ndensity_diffusion = 0.1\nboundary_pressure = "adami"/' \
     scenes/dam_break.toml > "$variants/dam_break_delta.toml"
@@ -62,16 +87,7 @@ t 120 "$W" bench --n 40 --steps 200 --paths gpu,dfsph-gpu,cpu-f32 --out "$out/be
 t 120 "$W" bench --n 30 --steps 200 --paths dfsph-gpu --solver-loop indirect
 t 60 "$W" compare dam_break --steps 100
 
-# Probes: the dam break at 30 k and 1 M without probes and with four point probes sampled every
-# step (what a probe costs on the GPU), and the Buchner wall-pressure case at two resolutions.
-awk '/^\[\[fluid\]\]/ && !done { for (y = 1; y <= 4; y++) printf "[[probe]]\nname = \"p%d\"\ntype = \"point\"\nposition = [1.0, %.2f, 0.05]\nevery_steps = 1\n\n", y, 0.1 * y; done = 1 } { print }' \
-    scenes/dam_break.toml > "$variants/dam_break_probes.toml"
-for size in "30000 4000" "1000000 400"; do
-  set -- $size
-  for scene in dam_break "$variants/dam_break_probes.toml"; do
-    t 120 "$W" run "$scene" --backend gpu --particles $1 --steps $2 --snapshot-every 0 --out "$variants/run_$1_$(basename "$scene" .toml)"
-  done
-done
+probe_runs
 for resolution in default fine; do
   t 120 "$W" validate buchner_p1 --backend gpu --resolution $resolution --out "$out/buchner_$resolution"
 done
