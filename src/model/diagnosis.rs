@@ -6,6 +6,7 @@
 
 use super::numbers::short;
 use super::initial::SolidRegion;
+use super::kernels::KernelCoefficients;
 use super::params::Params;
 use super::scene::Scene;
 use super::state::{BadStep, Health};
@@ -48,10 +49,68 @@ impl SolidIntrusions {
     }
 }
 
+/// Below this fraction of the rest density, a fluid particle held at negative pressure counts as
+/// torn (the fluid is stretched there, not just thinned at a free surface).
+pub const TORN_DENSITY_RATIO: f64 = 0.5;
+
+/// With summation density, a particle counts as torn only above this many times its own
+/// kernel's share m W(0): a lone particle, or a droplet of two or three, is thin because it has
+/// next to no neighbours, not because tension stretched it.
+pub const TORN_ABOVE_OWN_SHARE: f64 = 2.0;
+
+/// Fluid stretched under tension: the fluid particles below [`TORN_DENSITY_RATIO`] rho0 whose
+/// pressure is negative (or undefined), which only a scene that keeps negative pressure has.
+#[derive(Clone, Debug)]
+pub struct TornFluid {
+    rest_density: f64,
+    /// Densities at or below this are a lone particle's or a droplet's (summation density).
+    floor: f64,
+    /// How many such particles.
+    pub count: u64,
+    /// The smallest density among them, and its pressure.
+    pub smallest: Option<(f64, f64)>,
+}
+
+impl TornFluid {
+    pub fn new(params: &Params) -> Self {
+        let own_share = params.fluid_mass * KernelCoefficients::<f64>::new(params.kernel, params.h).w(0.0);
+        let floor = if params.continuity_density { f64::NEG_INFINITY } else { TORN_ABOVE_OWN_SHARE * own_share };
+        TornFluid { rest_density: params.rest_density, floor, count: 0, smallest: None }
+    }
+    /// Counts a fluid particle of `density` and `pressure` if it is torn.
+    pub fn add(&mut self, density: f64, pressure: f64) {
+        // A NaN pressure counts: a density at or below zero gives the equation of state none.
+        if density.is_finite() && density < TORN_DENSITY_RATIO * self.rest_density && density > self.floor && !(pressure >= 0.0) {
+            self.count += 1;
+            if self.smallest.is_none_or(|(d, _)| density < d) {
+                self.smallest = Some((density, pressure));
+            }
+        }
+    }
+}
+
+/// What the state at a failure shows: fluid inside solids, and fluid torn under tension.
+#[derive(Clone, Debug)]
+pub struct FailureScan {
+    pub intrusions: SolidIntrusions,
+    pub torn: TornFluid,
+}
+
+impl FailureScan {
+    pub fn new(scene: &Scene) -> Self {
+        FailureScan { intrusions: SolidIntrusions::new(scene), torn: TornFluid::new(&scene.params()) }
+    }
+    /// Adds a fluid particle at `x` with its density and pressure.
+    pub fn add(&mut self, x: [f64; 3], density: f64, pressure: f64) {
+        self.intrusions.add(x);
+        self.torn.add(density, pressure);
+    }
+}
+
 /// Why a run went bad: the first bad step and what went wrong there, then the cause that the
 /// figures of that step show (`intrusions`: the fluid inside solids when the failure was
 /// found, where the caller looked), or "cause unknown".
-pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusions>) -> String {
+pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> String {
     let params = scene.params();
     let Some(bad) = health.bad_step else {
         return "no step went bad".into();
@@ -157,6 +216,18 @@ pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusi
                 if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
             ));
         }
+        if let Some(torn) = scan.map(|s| &s.torn).filter(|t| t.count > 0 && !dfsph && !params.clamp_negative_pressure) {
+            let (density, pressure) = torn.smallest.unwrap_or_default();
+            causes.push(format!(
+                "the fluid was torn under tension: {} fluid particles are below {TORN_DENSITY_RATIO} rho0 at negative pressure (the least dense at {} rho0, \
+                 pressure {} Pa), which the scene keeps (physics.clamp_negative_pressure = false); this is SPH's tensile instability, which clumps particles \
+                 and flings others out fast, and can take a density to zero, where the equation of state has no pressure: set \
+                 physics.clamp_negative_pressure = true",
+                torn.count,
+                short(density / rho0),
+                short(pressure)
+            ));
+        }
         if too_dense && dfsph {
             causes.push(format!(
                 "the fluid was compressed to {} rho0, which DFSPH's constant-density solve should have prevented: lower time.dt, or check what presses the fluid",
@@ -179,7 +250,7 @@ pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusi
                 short(c0)
             ));
         }
-        for (name, count) in intrusions.map(SolidIntrusions::found).unwrap_or_default() {
+        for (name, count) in scan.map(|s| s.intrusions.found()).unwrap_or_default() {
             causes.push(format!("{count} fluid particles are inside {name}, past its first layer of wall particles: the fluid leaked into the solid or started in it"));
         }
     }
@@ -201,7 +272,7 @@ pub fn diagnose(scene: &Scene, health: &Health, intrusions: Option<&SolidIntrusi
             short(force),
             short(ratio),
             if dfsph { String::new() } else { format!(" and the speed (Mach {})", short(mach)) },
-            if intrusions.is_some() { "no fluid particle is inside a solid" } else { "the particles were not checked against the solids" }
+            if scan.is_some() { "no fluid particle is inside a solid or torn under tension" } else { "the particles were not checked against the solids" }
         );
     } else {
         msg += &format!(" Cause: {}. ({figures}.)", causes.join("; and "));

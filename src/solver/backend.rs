@@ -2,7 +2,7 @@
 
 use super::decomposition::RankReport;
 use super::gpu::buffers::ParticleBuffers;
-use crate::model::diagnosis::{diagnose, SolidIntrusions};
+use crate::model::diagnosis::{diagnose, FailureScan};
 use crate::model::params::Params;
 use crate::model::probes::ProbeSample;
 use crate::model::scene::Scene;
@@ -241,21 +241,23 @@ pub fn visit_state_pieces(state: &BackendState, array: StateArray, chunk: u64, v
 }
 
 /// Why the run of `backend` (a run of `scene`) went bad: the diagnosis of its first bad step
-/// ([`crate::model::diagnosis::diagnose`]), with the fluid particles now inside the scene's
-/// solids (read in pieces where the backend streams its snapshots).
+/// ([`crate::model::diagnosis::diagnose`]), with what the state now shows: fluid particles
+/// inside the scene's solids, and fluid torn under tension (read in pieces where the backend
+/// streams its snapshots).
 pub fn diagnose_failure(backend: &mut dyn Backend, scene: &Scene) -> anyhow::Result<String> {
     let health = backend.health()?;
-    let mut found = SolidIntrusions::new(scene);
+    let mut found = FailureScan::new(scene);
     if backend.streams_snapshots() {
         backend.visit_snapshot_rows(&mut |_, rows| {
             for r in rows {
-                found.add([r[0] as f64, r[1] as f64, r[2] as f64]);
+                found.add([r[0] as f64, r[1] as f64, r[2] as f64], r[6] as f64, r[7] as f64);
             }
             Ok(())
         })?;
     } else {
-        for x in backend.snapshot()?.positions {
-            found.add(x);
+        let s = backend.snapshot()?;
+        for ((&x, &density), &pressure) in s.positions.iter().zip(&s.densities).zip(&s.pressures) {
+            found.add(x, density, pressure);
         }
     }
     Ok(diagnose(scene, &health, Some(&found)))
