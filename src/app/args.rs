@@ -299,6 +299,20 @@ pub struct GpuTuning {
 }
 
 impl GpuTuning {
+    /// The flags given, by name (a run on the CPU path has no use for any of them).
+    pub fn given(&self) -> Vec<&'static str> {
+        let flags = [
+            (self.unfused, "--unfused"),
+            (self.fused, "--fused"),
+            (self.subgroup_tiles, "--subgroup-tiles"),
+            (self.no_subgroup_tiles, "--no-subgroup-tiles"),
+            (self.no_neighbour_lists, "--no-neighbour-lists"),
+            (self.workgroup_size.is_some(), "--workgroup-size"),
+            (self.steps_per_submit.is_some(), "--steps-per-submit"),
+            (self.solver_loop.is_some(), "--solver-loop"),
+        ];
+        flags.iter().filter(|(given, _)| *given).map(|&(_, name)| name).collect()
+    }
     /// The solver options these flags ask for.
     pub fn options(&self) -> GpuOptions {
         GpuOptions {
@@ -329,8 +343,8 @@ pub struct ProfileArgs {
     #[command(flatten)]
     pub tuning: GpuTuning,
     /// Visit the neighbour stencil as 27 single cells instead of 9 runs of 3 cells (to measure
-    /// what the runs gain).
-    #[arg(long)]
+    /// what the runs gain; each particle walks its own stencil, so not with subgroup tiles).
+    #[arg(long, conflicts_with = "subgroup_tiles")]
     pub single_cells: bool,
     /// Also write the numbers to this JSON file.
     #[arg(long, value_name = "FILE.json")]

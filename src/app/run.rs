@@ -1,7 +1,7 @@
 //! `wgsph run`: the run loop steps a backend, writes snapshots, checkpoints, frames and the
 //! summary, and stops with a diagnosis when the state goes bad.
 
-use super::args::{RunArgs, SnapshotInterval};
+use super::args::{BackendArg, RunArgs, SnapshotInterval};
 use super::errors::InputError;
 use super::signals::{self, StopSignal};
 use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
@@ -523,12 +523,28 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     if let (Some(note), false) = (scene_note(&args.scene), quiet) {
         println!("{note}");
     }
+    // The GPU step's tuning flags change nothing on the CPU path: refused where the CPU was
+    // asked for, a note where the automatic choice fell on it.
+    let gpu_flags = args.gpu.given();
+    if args.backend == BackendArg::Cpu && !gpu_flags.is_empty() {
+        return Err(InputError(format!(
+            "{} tune{} the GPU step, and --backend cpu runs the CPU path, where {} would change nothing: leave {} out, or run with --backend gpu",
+            gpu_flags.join(", "),
+            if gpu_flags.len() == 1 { "s" } else { "" },
+            if gpu_flags.len() == 1 { "it" } else { "they" },
+            if gpu_flags.len() == 1 { "it" } else { "them" }
+        ))
+        .into());
+    }
     signals::install();
     let mut choice = args.backend_choice();
     choice.ranks = ranks.cloned();
     let mut sim = open(&scene, &choice)?;
     if !quiet {
         println!("backend: {}", sim.backend_reason());
+    }
+    if sim.kind() == "cpu" && !gpu_flags.is_empty() {
+        eprintln!("note: {} not used: the automatic choice is the CPU path (--backend gpu runs the GPU step)", gpu_flags.join(", "));
     }
     // From here on the directories are changed; a failure before the first step undoes it.
     let start = match outputs {

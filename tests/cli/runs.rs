@@ -250,6 +250,34 @@ fn auto_takes_a_hardware_gpu_else_the_cpu_path_and_says_why() {
     }
 }
 
+/// The GPU step's tuning flags change nothing on the CPU path: asked for with `--backend cpu`
+/// they are refused by name with exit code 2 before anything is written; where the automatic
+/// choice falls on the CPU path, a note says they were not used. `profile --single-cells`
+/// (each particle's own walk) cannot go with `--subgroup-tiles`.
+#[test]
+fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flags, named) in [
+        (&["--workgroup-size", "64"][..], "--workgroup-size tunes the GPU step"),
+        (&["--fused", "--no-neighbour-lists"][..], "--fused, --no-neighbour-lists tune the GPU step"),
+        (&["--steps-per-submit", "4"][..], "--steps-per-submit tunes"),
+    ] {
+        let mut args = vec!["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "cpu", "--out", "refused"];
+        args.extend_from_slice(flags);
+        let o = wgsph(&args, dir.path());
+        assert_eq!(o.status.code(), Some(2), "{flags:?}: {}", text(&o.stderr));
+        assert!(text(&o.stderr).contains(named) && text(&o.stderr).contains("--backend cpu"), "{flags:?}: {}", text(&o.stderr));
+        assert!(!dir.path().join("refused").exists(), "{flags:?}");
+    }
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--workgroup-size", "64", "--out", "auto"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let noted = text(&o.stderr).contains("note: --workgroup-size not used: the automatic choice is the CPU path");
+    assert_eq!(noted, summary(&dir.path().join("auto")).backend == "cpu", "{}", text(&o.stderr));
+    let o = wgsph(&["profile", "dam_break", "--steps", "1", "--single-cells", "--subgroup-tiles"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--single-cells"), "{}", text(&o.stderr));
+}
+
 /// The seed scene is run as published, oddities and all; it says so in one line.
 #[test]
 fn the_seed_scene_states_its_oddities() {
