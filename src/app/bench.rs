@@ -12,6 +12,7 @@
 //! Akinci's wall volumes, as SPlisHSPlasH (see [`dfsph_block_scene`]).
 
 use super::args::{BenchArgs, BenchPath};
+use super::errors::InputError;
 use crate::io::atomic::write_atomic;
 use crate::model::scene::{Boundary, BoundaryVolume, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, Time, WallParticles};
 use crate::solver::gpu::device::compute_adapters;
@@ -197,7 +198,28 @@ pub fn table(rows: &[BenchRow]) -> String {
     s
 }
 
+/// Flags that tune paths `--paths` does not ask for change nothing: refused by name.
+fn check_flags_have_paths(args: &BenchArgs) -> Result<(), InputError> {
+    let paths = args.paths.iter().map(|p| p.name()).collect::<Vec<_>>().join(",");
+    let has = |wanted: &[BenchPath]| args.paths.iter().any(|p| wanted.contains(p));
+    let checks: [(bool, &str, &[BenchPath]); 5] = [
+        (args.threads.is_some(), "--threads sets the CPU paths' threads", &[BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::DfsphCpuF32, BenchPath::DfsphCpuF64]),
+        (args.every_adapter, "--every-adapter runs the GPU paths on every adapter", &[BenchPath::Gpu, BenchPath::DfsphGpu]),
+        (args.no_subgroup_tiles, "--no-subgroup-tiles tunes the GPU paths", &[BenchPath::Gpu, BenchPath::DfsphGpu]),
+        (args.no_neighbour_lists, "--no-neighbour-lists tunes the GPU paths", &[BenchPath::Gpu, BenchPath::DfsphGpu]),
+        (args.solver_loop.is_some(), "--solver-loop tunes DFSPH's GPU path", &[BenchPath::DfsphGpu]),
+    ];
+    for (given, what, wanted) in checks {
+        if given && !has(wanted) {
+            let names = wanted.iter().map(|p| p.name()).collect::<Vec<_>>().join(", ");
+            return Err(InputError(format!("{what}, and --paths {paths} has no such path ({names}): leave it out or add one")));
+        }
+    }
+    Ok(())
+}
+
 pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
+    check_flags_have_paths(args)?;
     if let Some(t) = args.threads {
         // The CPU paths' pool; set once, before any parallel work.
         rayon::ThreadPoolBuilder::new().num_threads(t as usize).build_global().map_err(|e| anyhow::anyhow!("--threads {t}: {e}"))?;

@@ -76,3 +76,21 @@ fn the_gpu_path_runs_with_and_without_subgroup_tiles() {
         assert!(stdout.lines().any(|l| l.starts_with("gpu ")), "{extra:?}: {stdout}");
     }
 }
+
+#[test]
+fn flags_for_paths_not_asked_for_are_refused_by_name() {
+    // A flag that tunes only paths left out of --paths would change nothing: exit code 2,
+    // naming the flag and the paths it needs, before any path is timed.
+    for (args, named) in [
+        (&["--paths", "cpu-f32", "--no-neighbour-lists"][..], "--no-neighbour-lists tunes the GPU paths, and --paths cpu-f32 has no such path (gpu, dfsph-gpu)"),
+        (&["--paths", "cpu-f64", "--every-adapter"][..], "--every-adapter"),
+        (&["--paths", "gpu", "--threads", "2"][..], "--threads sets the CPU paths' threads"),
+        (&["--paths", "gpu,cpu-f32", "--solver-loop", "indirect"][..], "(dfsph-gpu)"),
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["bench", "--n", "2", "--steps", "1"]).args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(named), "{args:?}: {err}");
+        assert!(o.stdout.is_empty(), "{args:?}: timed before refusing");
+    }
+}
