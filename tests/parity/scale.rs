@@ -384,3 +384,24 @@ fn run_tuning_flags_change_no_output_and_bad_sizes_exit_2() {
         assert!(err.contains(names), "{flags:?}: {err}");
     }
 }
+
+#[test]
+fn an_error_the_device_reports_later_is_an_error_not_a_panic() {
+    // wgpu reports some errors after the call that caused them (a shader a driver rejects, a
+    // buffer the device has no memory for), by default with a panic. Here a buffer made with
+    // usages that cannot go together: the next check of the device, and every readback after
+    // it, is an error naming the adapter; a device opened afresh is unaffected.
+    for ctx in common::contexts() {
+        let name = ctx.describe();
+        ctx.check_device().unwrap();
+        let good = ctx.device.create_buffer(&wgpu::BufferDescriptor { label: Some("good"), size: 16, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
+        assert!(wgsph::solver::gpu::readback::read_buffers(&ctx, &[(&good, 16)]).is_ok(), "{name}");
+        let _bad = ctx.device.create_buffer(&wgpu::BufferDescriptor { label: Some("bad"), size: 16, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::STORAGE, mapped_at_creation: false });
+        let e = format!("{:#}", ctx.check_device().unwrap_err());
+        assert!(e.contains("reported an error") && e.contains(&name), "{name}: {e}");
+        let e = format!("{:#}", wgsph::solver::gpu::readback::read_buffers(&ctx, &[(&good, 16)]).unwrap_err());
+        assert!(e.contains("reported an error"), "{name}: {e}");
+        let fresh = wgsph::solver::gpu::GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
+        fresh.check_device().unwrap();
+    }
+}

@@ -14,6 +14,8 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     /// Bytes per storage binding of a split array (see [`GpuContext::storage_segment_bytes`]).
     segment_bytes: u64,
+    /// The first error the device reported (see [`GpuContext::check_device`]).
+    device_error: std::sync::Arc<std::sync::Mutex<Option<String>>>,
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -215,7 +217,18 @@ impl GpuContext {
     pub fn from_device(adapter: wgpu::Adapter, device: wgpu::Device, queue: wgpu::Queue) -> anyhow::Result<Self> {
         let info = adapter.get_info();
         let natural = Self::natural_segment_bytes(&device.limits());
-        let ctx = GpuContext { adapter, device, queue, info, segment_bytes: natural };
+        // wgpu's default handler panics on an error it reports later than the call (a shader a
+        // driver rejects, a buffer the device has no memory for): kept instead, and turned into
+        // an error where the work is next checked (GpuContext::check_device).
+        let device_error = std::sync::Arc::new(std::sync::Mutex::new(None::<String>));
+        let kept = device_error.clone();
+        device.on_uncaptured_error(std::sync::Arc::new(move |e: wgpu::Error| {
+            let mut first = kept.lock().unwrap_or_else(|p| p.into_inner());
+            if first.is_none() {
+                *first = Some(e.to_string());
+            }
+        }));
+        let ctx = GpuContext { adapter, device, queue, info, segment_bytes: natural, device_error };
         match std::env::var(SEGMENT_BYTES_VAR) {
             Ok(v) => {
                 let bytes = v.trim().parse::<u64>().map_err(|_| {
@@ -224,6 +237,17 @@ impl GpuContext {
                 ctx.with_storage_segment_bytes(bytes).with_context(|| format!("{SEGMENT_BYTES_VAR}='{v}'"))
             }
             Err(_) => Ok(ctx),
+        }
+    }
+
+    /// An error if the device reported one since it was opened (the first, with the adapter's
+    /// name): its buffers and results can no longer be trusted. Checked after a solver is built
+    /// and after every readback.
+    pub fn check_device(&self) -> anyhow::Result<()> {
+        let first = self.device_error.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        match first {
+            Some(e) => Err(anyhow::anyhow!("the GPU device on {} reported an error: {}", self.describe(), e.trim())),
+            None => Ok(()),
         }
     }
 

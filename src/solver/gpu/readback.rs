@@ -57,6 +57,7 @@ pub fn read_ranges(ctx: &GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> an
         });
     }
     device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None })?;
+    ctx.check_device()?;
     for _ in 0..staging.len() {
         let (i, r) = rx.recv()?;
         r.map_err(|e| anyhow::anyhow!("mapping readback buffer {i} failed: {e}"))?;

@@ -647,6 +647,7 @@ impl GpuSolver {
         if let Some(d) = &mut solver.dfsph {
             d.accelerations = accelerations;
         }
+        solver.ctx.check_device()?;
         Ok(solver)
     }
 
