@@ -264,6 +264,7 @@ fn read_texture(g: &Gfx, texture: &wgpu::Texture, mut encoder: wgpu::CommandEnco
         let _ = tx.send(r);
     });
     g.ctx.device.poll(wgpu::PollType::Wait { submission_index: Some(submission), timeout: None })?;
+    g.ctx.check_device()?;
     rx.recv()?.context("mapping the screenshot")?;
     let bgra = matches!(g.config.format, wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb);
     let mut rgba = Vec::with_capacity((w * h * 4) as usize);

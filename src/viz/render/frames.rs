@@ -151,6 +151,7 @@ impl Offscreen {
             let _ = tx.send(r);
         });
         self.renderer.device().poll(wgpu::PollType::Wait { submission_index: Some(submission), timeout: None })?;
+        self.renderer.check_device()?;
         rx.recv()?.context("mapping the frame for reading")?;
         Ok(self.unpack(buffer))
     }
@@ -247,6 +248,7 @@ impl FrameRecorder {
         } else {
             device.poll(wgpu::PollType::Poll)?;
         }
+        self.offscreen.renderer.check_device()?;
         while let Some(front) = self.in_flight.front() {
             match front.state.load(Ordering::Acquire) {
                 MAP_PENDING => break,

@@ -55,6 +55,8 @@ enum StyleParts {
 
 /// Draws particles with one device. Built once; `encode` records one picture.
 pub struct Renderer {
+    /// The device's context, for its error check (`GpuContext::check_device`).
+    context: GpuContext,
     device: wgpu::Device,
     queue: wgpu::Queue,
     pub options: RenderOptions,
@@ -94,6 +96,7 @@ impl Renderer {
         };
         let depth = depth_texture(device, options.width, options.height);
         Renderer {
+            context: ctx.clone(),
             device: device.clone(),
             queue: ctx.queue.clone(),
             options,
@@ -202,6 +205,10 @@ impl Renderer {
         self.spheres.draw_walls(&mut pass, &self.frame);
     }
 
+    /// An error if the device reported one (a picture drawn after it is not to be trusted).
+    pub fn check_device(&self) -> anyhow::Result<()> {
+        self.context.check_device()
+    }
     pub fn device(&self) -> &wgpu::Device {
         &self.device
     }
