@@ -140,9 +140,9 @@ pub struct RunArgs {
     pub time: Option<f64>,
     #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
     pub backend: BackendArg,
-    /// Float type of the CPU backend (the GPU always runs f32).
-    #[arg(long, value_enum, default_value_t = PrecisionArg::F64)]
-    pub precision: PrecisionArg,
+    /// Float type of the CPU backend (default f64; the GPU always runs f32).
+    #[arg(long, value_enum)]
+    pub precision: Option<PrecisionArg>,
     #[command(flatten)]
     pub gpu: GpuTuning,
     /// Output directory (default: a new one per run, out/SCENE-001, out/SCENE-002, ...).
@@ -254,7 +254,8 @@ pub struct CompareArgs {
 impl RunArgs {
     /// The backend these flags ask for.
     pub fn backend_choice(&self) -> BackendChoice {
-        BackendChoice { device: self.backend.device(), precision: self.precision.precision(), gpu_options: self.gpu.options(), context: None, ranks: None }
+        let precision = self.precision.map_or(Precision::F64, PrecisionArg::precision);
+        BackendChoice { device: self.backend.device(), precision, gpu_options: self.gpu.options(), context: None, ranks: None }
     }
 }
 

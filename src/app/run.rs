@@ -1,7 +1,7 @@
 //! `wgsph run`: the run loop steps a backend, writes snapshots, checkpoints, frames and the
 //! summary, and stops with a diagnosis when the state goes bad.
 
-use super::args::{BackendArg, RunArgs, SnapshotInterval};
+use super::args::{BackendArg, PrecisionArg, RunArgs, SnapshotInterval};
 use super::errors::InputError;
 use super::signals::{self, StopSignal};
 use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
@@ -536,12 +536,19 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
         ))
         .into());
     }
+    // The GPU computes in f32 whatever the CPU path's float type.
+    if let (BackendArg::Gpu, Some(PrecisionArg::F64)) = (args.backend, args.precision) {
+        return Err(InputError("--precision f64 sets the CPU path's float type, and --backend gpu computes in f32: leave it out, or run with --backend cpu".into()).into());
+    }
     signals::install();
     let mut choice = args.backend_choice();
     choice.ranks = ranks.cloned();
     let mut sim = open(&scene, &choice)?;
     if !quiet {
         println!("backend: {}", sim.backend_reason());
+    }
+    if sim.kind() == "gpu" && args.precision == Some(PrecisionArg::F64) {
+        eprintln!("note: --precision f64 not used: the automatic choice is the GPU, which computes in f32 (--backend cpu runs the CPU path in f64)");
     }
     if sim.kind() == "cpu" && !gpu_flags.is_empty() {
         eprintln!("note: {} not used: the automatic choice is the CPU path (--backend gpu runs the GPU step)", gpu_flags.join(", "));

@@ -252,8 +252,9 @@ fn auto_takes_a_hardware_gpu_else_the_cpu_path_and_says_why() {
 
 /// The GPU step's tuning flags change nothing on the CPU path: asked for with `--backend cpu`
 /// they are refused by name with exit code 2 before anything is written; where the automatic
-/// choice falls on the CPU path, a note says they were not used. `profile --single-cells`
-/// (each particle's own walk) cannot go with `--subgroup-tiles`.
+/// choice falls on the CPU path, a note says they were not used; `--precision f64` with
+/// `--backend gpu` is refused the same way. `profile --single-cells` (each particle's own walk)
+/// cannot go with `--subgroup-tiles`.
 #[test]
 fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
     let dir = tempfile::tempdir().unwrap();
@@ -273,6 +274,11 @@ fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     let noted = text(&o.stderr).contains("note: --workgroup-size not used: the automatic choice is the CPU path");
     assert_eq!(noted, summary(&dir.path().join("auto")).backend == "cpu", "{}", text(&o.stderr));
+    // Nor does the CPU path's float type on the GPU, which computes in f32.
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "gpu", "--precision", "f64", "--out", "refused"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--precision f64 sets the CPU path's float type"), "{}", text(&o.stderr));
+    assert!(!dir.path().join("refused").exists());
     let o = wgsph(&["profile", "dam_break", "--steps", "1", "--single-cells", "--subgroup-tiles"], dir.path());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--single-cells"), "{}", text(&o.stderr));
