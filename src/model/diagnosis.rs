@@ -108,8 +108,8 @@ impl FailureScan {
 }
 
 /// Why a run went bad: the first bad step and what went wrong there, then the cause that the
-/// figures of that step show (`intrusions`: the fluid inside solids when the failure was
-/// found, where the caller looked), or "cause unknown".
+/// figures of that step show (`scan`: the fluid inside solids and the fluid torn under tension
+/// when the failure was found, where the caller looked), or "cause unknown".
 pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> String {
     let params = scene.params();
     let Some(bad) = health.bad_step else {
@@ -219,7 +219,7 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
         if let Some(torn) = scan.map(|s| &s.torn).filter(|t| t.count > 0 && !dfsph && !params.clamp_negative_pressure) {
             let (density, pressure) = torn.smallest.unwrap_or_default();
             causes.push(format!(
-                "the fluid was torn under tension: {} fluid particles are below {TORN_DENSITY_RATIO} rho0 at negative pressure (the least dense at {} rho0, \
+                "the fluid was torn under tension: {} fluid particles are below {TORN_DENSITY_RATIO} rho0 at negative (or no) pressure (the least dense at {} rho0, \
                  pressure {} Pa), which the scene keeps (physics.clamp_negative_pressure = false); this is SPH's tensile instability, which clumps particles \
                  and flings others out fast, and can take a density to zero, where the equation of state has no pressure: set \
                  physics.clamp_negative_pressure = true",

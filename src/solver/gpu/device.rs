@@ -241,8 +241,8 @@ impl GpuContext {
     }
 
     /// An error if the device reported one since it was opened (the first, with the adapter's
-    /// name): its buffers and results can no longer be trusted. Checked after a solver is built
-    /// and after every readback.
+    /// name): its buffers and results can no longer be trusted. Checked after a solver is built,
+    /// after every readback and after every picture drawn.
     pub fn check_device(&self) -> anyhow::Result<()> {
         let first = self.device_error.lock().unwrap_or_else(|p| p.into_inner()).clone();
         match first {
