@@ -489,6 +489,21 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
             return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
         }
     }
+    // The GPU step's tuning flags change nothing on the CPU path: refused where the CPU was
+    // asked for, a note where the automatic choice fell on it.
+    let gpu_flags = args.gpu.given();
+    if args.backend == BackendArg::Cpu && !gpu_flags.is_empty() {
+        let (tune, they, them) = if gpu_flags.len() == 1 { ("tunes", "it", "it") } else { ("tune", "they", "them") };
+        return Err(InputError(format!(
+            "{} {tune} the GPU step, and --backend cpu runs the CPU path, where {they} would change nothing: leave {them} out, or run with --backend gpu",
+            gpu_flags.join(", ")
+        ))
+        .into());
+    }
+    // The GPU computes in f32 whatever the CPU path's float type.
+    if let (BackendArg::Gpu, Some(PrecisionArg::F64)) = (args.backend, args.precision) {
+        return Err(InputError("--precision f64 sets the CPU path's float type, and --backend gpu computes in f32: leave it out, or run with --backend cpu".into()).into());
+    }
     let writes_files = super::ranks::writes_files(ranks);
     let quiet = args.quiet || !writes_files;
     if let Some(r) = ranks.filter(|r| r.comm.size() > 1) {
@@ -522,23 +537,6 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     }
     if let (Some(note), false) = (scene_note(&args.scene), quiet) {
         println!("{note}");
-    }
-    // The GPU step's tuning flags change nothing on the CPU path: refused where the CPU was
-    // asked for, a note where the automatic choice fell on it.
-    let gpu_flags = args.gpu.given();
-    if args.backend == BackendArg::Cpu && !gpu_flags.is_empty() {
-        return Err(InputError(format!(
-            "{} tune{} the GPU step, and --backend cpu runs the CPU path, where {} would change nothing: leave {} out, or run with --backend gpu",
-            gpu_flags.join(", "),
-            if gpu_flags.len() == 1 { "s" } else { "" },
-            if gpu_flags.len() == 1 { "it" } else { "they" },
-            if gpu_flags.len() == 1 { "it" } else { "them" }
-        ))
-        .into());
-    }
-    // The GPU computes in f32 whatever the CPU path's float type.
-    if let (BackendArg::Gpu, Some(PrecisionArg::F64)) = (args.backend, args.precision) {
-        return Err(InputError("--precision f64 sets the CPU path's float type, and --backend gpu computes in f32: leave it out, or run with --backend cpu".into()).into());
     }
     signals::install();
     let mut choice = args.backend_choice();

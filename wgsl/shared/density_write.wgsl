@@ -1,9 +1,9 @@
 // What the density stages (density.wgsl, continuity.wgsl and their tiled twins; DFSPH's factors
 // the largest density only) write: a particle's density and its pressure from the equation of
-// state, and the workgroup's largest density into the status words (STATUS_MAX_DENSITY: of the run; STATUS_STEP_MAX_DENSITY: of
-// this step). The including stage declares `densities`, `pressures` and `status` and includes
-// shared/reduce.wgsl; every invocation of a workgroup calls reduce_begin before and
-// finish_densities after.
+// state, and the workgroup's largest density into the status words (STATUS_MAX_DENSITY: of the
+// run; STATUS_STEP_MAX_DENSITY: of this step). The including stage declares `densities`,
+// `pressures` and `status` and includes shared/reduce.wgsl; every invocation of a workgroup
+// calls reduce_begin before and finish_densities after.
 
 fn set_density(i: u32, rho: f32) {
     densities_set(i, rho);

@@ -4,7 +4,6 @@
 // terms of shared/dfsph.wgsl in the order of its per-particle loops. The entry points
 // `rate_tiled` and `apply_tiled` end as the including solve's `set_stiffness_from_rate` and
 // `apply_stiffness_push` do.
-
 //
 // With NEIGHBOUR_LISTS (shared/neighbour_lists.wgsl) the tiled factors
 // (dfsph_factors_tiled.wgsl) record each particle's fluid neighbours, and every solve pass of

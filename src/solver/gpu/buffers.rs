@@ -279,3 +279,14 @@ pub(super) struct NeighbourLists {
     pub slots: wgpu::Buffer,
     pub counts: wgpu::Buffer,
 }
+
+impl NeighbourLists {
+    /// A particle's counts word when its list overflowed (LIST_FULL in neighbour_lists.wgsl).
+    pub const FULL: u32 = u32::MAX;
+
+    /// The slots a counts word says the list uses (fluid chunks in the low 16 bits, wall chunks
+    /// above), or `None` for a list that overflowed.
+    pub fn used(counts: u32) -> Option<u32> {
+        (counts != Self::FULL).then_some((counts & 0xffff) + (counts >> 16))
+    }
+}

@@ -93,7 +93,6 @@ pub(super) struct Pipelines {
     pub subgroup_tiles: bool,
 }
 
-
 /// Whether the density (summation or continuity), the two-pass forces and DFSPH's solve
 /// iterations walk the stencils of a subgroup together (wgsl/shared/tiles.wgsl): by default where
 /// the device has subgroups of exactly [`TILE_LANES`] invocations, the density and forces
@@ -129,8 +128,7 @@ pub struct ListUsage {
 /// The capacity of each fluid particle's neighbour list where the step keeps lists
 /// (wgsl/shared/neighbour_lists.wgsl), else `None`: where `walks_tiles` (subgroup tiles, the
 /// weakly compressible forces in a pass of their own, one device) and the options do not turn
-/// them off. The
-/// capacity is 0.75 times the neighbours a particle has at rest density, 4/3 pi h^3 rho0 / m
+/// them off. The capacity is 0.75 times the neighbours a particle has at rest density, 4/3 pi h^3 rho0 / m
 /// (fluid and walls together, the walls' spacing being the fluid's), in whole rows of eight, or
 /// the options'. A slot holds a chunk of up to eight neighbours: measured on the dam break and
 /// the resting block, the longest list used 0.37-0.52 times that many slots (17, 34 and 42
@@ -297,6 +295,11 @@ impl ArrayCounts {
             _ => self.fluid,
         }
     }
+    /// [`ArrayCounts::len`] for a stage that does not bind `accelerations` (the fused step
+    /// keeps them in registers, as does the one-thread finish_step).
+    fn len_without_accelerations(&self, name: &str) -> u64 {
+        if name == "accelerations" { 0 } else { self.len(name) }
+    }
 }
 
 impl GpuSolver {
@@ -344,7 +347,7 @@ impl GpuSolver {
         let most = ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
         let can_fuse = params.adaptive.is_none()
             && !dfsph
-            && storage_bindings(&ctx, "forces_integrate", &|name: &str| if name == "accelerations" { 0 } else { counts.len(name) }) <= most;
+            && storage_bindings(&ctx, "forces_integrate", &|name: &str| counts.len_without_accelerations(name)) <= most;
         // The two-pass step with its state in place is the default: 48 bytes of state per
         // particle instead of the fused step's 64 (docs/performance.md).
         let fused = can_fuse && options.fuse_forces_and_integration.unwrap_or(false);
@@ -363,7 +366,7 @@ impl GpuSolver {
         }
         // The fused stage binds a placeholder for the accelerations it declares but never uses,
         // as does the one-thread finish_step.
-        let without_accelerations = |name: &str| if name == "accelerations" { 0 } else { counts.len(name) };
+        let without_accelerations = |name: &str| counts.len_without_accelerations(name);
         let len = |name: &str| counts.len(name);
         let uniform_bytes = gpu_params.bytes().len() as u64;
         // The fused step writes a second state; DFSPH keeps accelerations with adaptive dt only
@@ -490,7 +493,7 @@ impl GpuSolver {
         let lists = list_capacity.map(|capacity| NeighbourLists {
             capacity,
             slots: storage(device, "neighbour lists", counts.list_slots * 4),
-            counts: storage_init(device, "neighbour counts", bytemuck::cast_slice(&vec![u32::MAX; n as usize])),
+            counts: storage_init(device, "neighbour counts", bytemuck::cast_slice(&vec![NeighbourLists::FULL; n as usize])),
         });
         let scan = Scan::new(&ctx, &uniform, &starts, cells + 1)?;
 
@@ -800,8 +803,8 @@ impl GpuSolver {
         };
         let data = read_buffers(&self.ctx, &[(&lists.counts, self.fluid_count as u64 * 4)])?;
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
-        let full = words.iter().filter(|&&c| c == u32::MAX).count() as u64;
-        let longest = words.iter().filter(|&&c| c != u32::MAX).map(|&c| (c & 0xffff) + (c >> 16)).max().unwrap_or(0);
+        let full = words.iter().filter(|&&c| c == NeighbourLists::FULL).count() as u64;
+        let longest = words.iter().filter_map(|&c| NeighbourLists::used(c)).max().unwrap_or(0);
         Ok(Some(ListUsage { slots: lists.capacity, longest, full }))
     }
     /// Blocks until the GPU has finished everything submitted (for timing).
