@@ -6,6 +6,7 @@ use crate::io::snapshot::format::SnapshotFormat;
 use crate::model::scene::Scene;
 use crate::io::surface::MeshFormat;
 use crate::model::overrides::Override;
+use crate::solver::gpu::skin::MAX_SKIN;
 use crate::solver::gpu::{GpuOptions, SolverLoop, WorkgroupSizes};
 use crate::solver::{BackendChoice, Device, Precision};
 use crate::viz::render;
@@ -259,7 +260,18 @@ impl RunArgs {
     }
 }
 
-/// The GPU step's tuning options of `wgsph run` and `wgsph profile` (none changes a value).
+/// `--neighbour-skin`: a fraction of h above 0 and at most [`MAX_SKIN`].
+fn parse_skin(text: &str) -> Result<f64, String> {
+    let skin: f64 = text.parse().map_err(|_| format!("'{text}' is not a number (a fraction of the kernel's support h, e.g. 0.1)"))?;
+    if skin > 0.0 && skin <= MAX_SKIN {
+        Ok(skin)
+    } else {
+        Err(format!("{text} is not above 0 and at most {MAX_SKIN} (a fraction of the kernel's support h, e.g. 0.1)"))
+    }
+}
+
+/// The GPU step's tuning options of `wgsph run` and `wgsph profile` (none changes a value but
+/// `--neighbour-skin`, which changes the order of the sums).
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct GpuTuning {
     /// Run the forces and the integration as two passes, the particle state updated in place
@@ -283,6 +295,13 @@ pub struct GpuTuning {
     /// their own; 4 bytes per slot of each fluid particle's list). The same values.
     #[arg(long)]
     pub no_neighbour_lists: bool,
+    /// Keep the neighbour grid, the particles' order and the neighbour lists from one rebuild
+    /// to the next, with cells and lists reaching h (1 + SKIN) (a fraction of the kernel's
+    /// support, above 0 and at most 1; e.g. 0.1), and rebuild only once a particle has moved
+    /// SKIN h / 2: the same neighbours, summed in another order. Weakly compressible scenes
+    /// with summation density, on one device.
+    #[arg(long, value_name = "SKIN", value_parser = parse_skin)]
+    pub neighbour_skin: Option<f64>,
     /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes
     /// (`density=64,forces=256`; stages: bin_count, bin_scatter, reorder, density, forces,
     /// integrate). Default 128.
@@ -308,6 +327,7 @@ impl GpuTuning {
             (self.subgroup_tiles, "--subgroup-tiles"),
             (self.no_subgroup_tiles, "--no-subgroup-tiles"),
             (self.no_neighbour_lists, "--no-neighbour-lists"),
+            (self.neighbour_skin.is_some(), "--neighbour-skin"),
             (self.workgroup_size.is_some(), "--workgroup-size"),
             (self.steps_per_submit.is_some(), "--steps-per-submit"),
             (self.solver_loop.is_some(), "--solver-loop"),
@@ -325,6 +345,7 @@ impl GpuTuning {
             subgroup_tiles: if self.subgroup_tiles { Some(true) } else if self.no_subgroup_tiles { Some(false) } else { None },
             neighbour_lists: if self.no_neighbour_lists { Some(false) } else { None },
             neighbour_list_capacity: None,
+            neighbour_skin: self.neighbour_skin,
         }
     }
 }
@@ -445,6 +466,9 @@ pub struct BenchArgs {
     /// lists gain; see `wgsph run --help`).
     #[arg(long)]
     pub no_neighbour_lists: bool,
+    /// The gpu path with a neighbour skin of SKIN h (see `wgsph run --help`).
+    #[arg(long, value_name = "SKIN", value_parser = parse_skin)]
+    pub neighbour_skin: Option<f64>,
     /// Also write the figures to this JSON file.
     #[arg(long, value_name = "FILE.json")]
     pub out: Option<PathBuf>,

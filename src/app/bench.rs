@@ -202,11 +202,12 @@ pub fn table(rows: &[BenchRow]) -> String {
 fn check_flags_have_paths(args: &BenchArgs) -> Result<(), InputError> {
     let paths = args.paths.iter().map(|p| p.name()).collect::<Vec<_>>().join(",");
     let has = |wanted: &[BenchPath]| args.paths.iter().any(|p| wanted.contains(p));
-    let checks: [(bool, &str, &[BenchPath]); 5] = [
+    let checks: [(bool, &str, &[BenchPath]); 6] = [
         (args.threads.is_some(), "--threads sets the CPU paths' threads", &[BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::DfsphCpuF32, BenchPath::DfsphCpuF64]),
         (args.every_adapter, "--every-adapter runs the GPU paths on every adapter", &[BenchPath::Gpu, BenchPath::DfsphGpu]),
         (args.no_subgroup_tiles, "--no-subgroup-tiles tunes the GPU paths", &[BenchPath::Gpu, BenchPath::DfsphGpu]),
         (args.no_neighbour_lists, "--no-neighbour-lists tunes the GPU paths", &[BenchPath::Gpu, BenchPath::DfsphGpu]),
+        (args.neighbour_skin.is_some(), "--neighbour-skin tunes the weakly compressible GPU path", &[BenchPath::Gpu]),
         (args.solver_loop.is_some(), "--solver-loop tunes DFSPH's GPU path", &[BenchPath::DfsphGpu]),
     ];
     for (given, what, wanted) in checks {
@@ -240,6 +241,8 @@ pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
                     solver_loop: args.solver_loop.unwrap_or_default(),
                     subgroup_tiles: if args.no_subgroup_tiles { Some(false) } else { None },
                     neighbour_lists: if args.no_neighbour_lists { Some(false) } else { None },
+                    // DFSPH records its lists every step: the skin is the weakly compressible path's.
+                    neighbour_skin: if *path == BenchPath::Gpu { args.neighbour_skin } else { None },
                     ..Default::default()
                 };
                 let adapters = if args.every_adapter { compute_adapters() } else { Vec::new() };

@@ -296,6 +296,9 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
             ),
             (true, None) => format!("subgroup tiles of {TILE_LANES}"),
             _ => "one particle per invocation".to_string(),
+        } + &match gpu.neighbour_skin() {
+            Some((skin, rebuilds)) => format!("; a neighbour skin of {skin} h: {rebuilds} rebuilds in {} steps", gpu.steps_done()),
+            None => String::new(),
         },
         fluid_particles: n,
         wall_particles: w,

@@ -187,6 +187,16 @@ impl AdaptiveDt {
     }
 }
 
+impl Grid {
+    /// The same grid with cells `factor` times as wide, from the same origin over at least the
+    /// same box (a neighbour skin's, src/solver/gpu/skin.rs).
+    pub fn widened(&self, factor: f64) -> Grid {
+        let cell_size = self.cell_size * factor;
+        let dims = self.dims.map(|d| ((d as f64 * self.cell_size / cell_size).ceil().max(1.0)) as u32);
+        Grid { origin: self.origin, cell_size, inv_cell: 1.0 / cell_size, dims }
+    }
+}
+
 impl Scene {
     /// The cells of the domain's lattice (origin `domain.min`, size h) that a particle can
     /// reach: all of them, or in a closed container holding every fluid block only those over

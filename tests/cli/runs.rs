@@ -262,6 +262,7 @@ fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
         (&["--workgroup-size", "64"][..], "--workgroup-size tunes the GPU step"),
         (&["--fused", "--no-neighbour-lists"][..], "--fused, --no-neighbour-lists tune the GPU step"),
         (&["--steps-per-submit", "4"][..], "--steps-per-submit tunes"),
+        (&["--neighbour-skin", "0.1"][..], "--neighbour-skin tunes the GPU step"),
     ] {
         let mut args = vec!["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "cpu", "--out", "refused"];
         args.extend_from_slice(flags);
@@ -278,6 +279,17 @@ fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
     let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "gpu", "--precision", "f64", "--out", "refused"], dir.path());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--precision f64 sets the CPU path's float type"), "{}", text(&o.stderr));
+    assert!(!dir.path().join("refused").exists());
+    // A neighbour skin outside its range, or with a scene whose density stage records its
+    // lists every step: refused by name before anything is written.
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--neighbour-skin", "1.5", "--out", "refused"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--neighbour-skin") && text(&o.stderr).contains("at most 1"), "{}", text(&o.stderr));
+    if wgsph::solver::gpu::GpuContext::new().is_ok() {
+        let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "gpu", "--neighbour-skin", "0.1", "--set", "physics.density=\"continuity\"", "--out", "refused"], dir.path());
+        assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+        assert!(text(&o.stderr).contains("--neighbour-skin 0.1 cannot be used") && text(&o.stderr).contains("continuity"), "{}", text(&o.stderr));
+    }
     assert!(!dir.path().join("refused").exists());
     let o = wgsph(&["profile", "dam_break", "--steps", "1", "--single-cells", "--subgroup-tiles"], dir.path());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));

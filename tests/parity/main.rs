@@ -16,3 +16,4 @@ mod pressure;
 mod lanes;
 mod ranks;
 mod tiles;
+mod skin;

@@ -45,6 +45,11 @@ override STENCIL_RUNS: bool = true;
 // neighbours, at most LIST_CAPACITY of them, and the tiled forces walk those lists.
 override NEIGHBOUR_LISTS: bool = false;
 override LIST_CAPACITY: u32 = 0u;
+// With a neighbour skin (neighbour_skin.wgsl) the lists hold the candidates within h (1 + skin)
+// (LIST_RADIUS2 = (1 + skin)^2), and a density stage that walks lists recorded at an earlier
+// step records none (RECORD_LISTS false).
+override LIST_RADIUS2: f32 = 1.0;
+override RECORD_LISTS: bool = true;
 
 // Threads per workgroup of a particle stage, chosen per stage by the host (GpuOptions).
 override WORKGROUP_SIZE: u32 = 128u;

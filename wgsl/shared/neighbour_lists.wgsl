@@ -41,7 +41,7 @@ const ENTRY_BASE: u32 = 0xffffffu;
 // an invocation without a particle writes nothing; nothing at all without NEIGHBOUR_LISTS (the
 // recording stages call the helpers of this file unconditionally).
 fn record_chunk(counts: ListCounts, i: u32, b: u32, mask: u32, wall: bool) -> ListCounts {
-    if (!NEIGHBOUR_LISTS) {
+    if (!NEIGHBOUR_LISTS || !RECORD_LISTS) {
         return counts;
     }
     var c = counts;
@@ -58,13 +58,13 @@ fn record_chunk(counts: ListCounts, i: u32, b: u32, mask: u32, wall: bool) -> Li
 // The forces test r^2 < h^2 again with their own arithmetic, which a driver may compile
 // differently from a density stage's (a fused multiply-add in the dot product), so the density
 // stages keep a little more, up to LIST_MARGIN h^2, and the lists hold every pair the forces
-// keep.
+// keep. With a skin the lists' radius is h (1 + skin) (LIST_RADIUS2 its square over h^2).
 const LIST_MARGIN: f32 = 1.001;
 
 // 1 where candidate j at xj is in the invocation's own span and within the lists' radius of xi.
 fn list_bit(xi: vec3<f32>, xj: vec3<f32>, j: u32, span: vec2<u32>) -> u32 {
     let d = xi - xj;
-    return select(0u, 1u, in_span(j, span) && !(dot(d, d) >= LIST_MARGIN * params.h2));
+    return select(0u, 1u, in_span(j, span) && !(dot(d, d) >= LIST_MARGIN * LIST_RADIUS2 * params.h2));
 }
 
 // `counts` after recording the chunk of fluid (or with `wall`, wall) candidates from b, this
@@ -83,7 +83,7 @@ const LIST_FULL: u32 = 0xffffffffu;
 
 // Particle i's counts, written by the recording stage once its walk has ended.
 fn finish_list(i: u32, counts: ListCounts) {
-    if (!NEIGHBOUR_LISTS) {
+    if (!NEIGHBOUR_LISTS || !RECORD_LISTS) {
         return;
     }
     let fits = counts.fluid + counts.walls <= LIST_CAPACITY;

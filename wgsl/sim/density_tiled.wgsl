@@ -1,7 +1,8 @@
 // The density stage with the stencils of a subgroup walked together (shared/tiles.wgsl): the
 // same sums in the same order as density.wgsl's `density`, so its twin is the same,
 // src/solver/cpu/density.rs. With NEIGHBOUR_LISTS it also records each particle's neighbours
-// for the forces (shared/neighbour_lists.wgsl). A file of its own since its subgroup operations
+// for the forces (shared/neighbour_lists.wgsl); with a neighbour skin, `density_listed` walks
+// the lists of the last rebuild instead on the steps between rebuilds. A file of its own since its subgroup operations
 // need an adapter with subgroups, which the other stages do not.
 
 //! include sim/density.wgsl
@@ -38,7 +39,7 @@ fn tile_candidate(sums: ptr<function, TileSums>, own: TileOwn, w: vec4<f32>, wal
     } else {
         (*sums).w.x += select(0.0, kernel, counted);
     }
-    return select(0u, 1u, counted && !(r2 >= LIST_MARGIN * params.h2));
+    return select(0u, 1u, counted && !(r2 >= LIST_MARGIN * LIST_RADIUS2 * params.h2));
 }
 
 // The chunk's candidates b to b + TILE - 1, one per lane in w, in order; with lists, the chunk
@@ -71,6 +72,58 @@ fn density_tiled(
     if (i < params.fluid_count) {
         set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
         finish_list(i, sums.list);
+    }
+    finish_densities(lid);
+}
+
+// The fluid sum of W (x) and the walls' sum of m W (y) over particle i's list: the candidates
+// and the order of the tiles' walk (a candidate the list leaves out lies beyond h, where W adds
+// an exact zero to the walk's sums), so the same sums bit for bit.
+fn listed_density_sums(xi: vec3<f32>, i: u32) -> vec2<f32> {
+    let counts = list_counts(i);
+    var w = vec2<f32>(0.0);
+    var at = vec3<u32>(0u);
+    var j = 0u;
+    while (next_listed(i, counts & 0xffffu, false, &at, &j)) {
+        let d = xi - positions_at(j).xyz;
+        w.x += kernel_w(dot(d, d));
+    }
+    if (WALLS) {
+        at = vec3<u32>(0u);
+        while (next_listed(i, counts >> 16u, true, &at, &j)) {
+            let p = wall_positions_at(j);  // w: mass
+            let d = xi - p.xyz;
+            w.y += p.w * kernel_w(dot(d, d));
+        }
+    }
+    return w;
+}
+
+// With a neighbour skin, on the steps between rebuilds (built with RECORD_LISTS false): the
+// density over the lists of the last rebuild; a subgroup with a list that overflowed walks the
+// tiles, on the cells of the last rebuild, which hold every neighbour as the lists do
+// (neighbour_skin.wgsl). Each branch finishes its own sums (forces_tiled.wgsl says why).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn density_listed(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+    @builtin(subgroup_invocation_id) lane: u32,
+) {
+    reduce_begin(lid);
+    let i = thread_index(gid, groups);
+    let p = tile_particle(i);
+    let xi = positions_at(p).xyz;
+    if (walks_lists(p)) {
+        let w = listed_density_sums(xi, p);
+        if (i < params.fluid_count) {
+            set_density(i, params.fluid_mass * w.x + w.y);
+        }
+    } else {
+        let sums = tile_walk(TileOwn(xi, i), cell_coords(xi), lane, i < params.fluid_count);
+        if (i < params.fluid_count) {
+            set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
+        }
     }
     finish_densities(lid);
 }

@@ -21,6 +21,7 @@ pub mod ghost_velocities;
 pub mod forces;
 pub mod forces_integrate;
 pub mod integrate;
+pub mod neighbour_skin;
 pub mod prefix_sum;
 pub mod probes;
 pub mod reorder;

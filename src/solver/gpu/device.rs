@@ -41,6 +41,9 @@ pub enum GpuError {
     Limit { adapter: String, backend: String, what: String, limit: &'static str, need: u64, have: u64 },
     #[error("adapter '{adapter}' ({backend}): subgroup tiles were asked for, but {why}; run without --subgroup-tiles")]
     NoSubgroupTiles { adapter: String, backend: String, why: String },
+    /// A neighbour skin asked for where it cannot run (`skin::refusal`).
+    #[error("{0}")]
+    NoNeighbourSkin(String),
 }
 
 pub fn backends() -> wgpu::Backends {

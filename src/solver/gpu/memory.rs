@@ -159,6 +159,16 @@ impl MemoryPlan {
         self
     }
 
+    /// The plan with a neighbour skin's arrays (each fluid particle's position at the last
+    /// rebuild, and the check's word); nothing without one.
+    pub fn with_neighbour_skin(mut self, fluid: u64, skin: bool) -> MemoryPlan {
+        if skin {
+            self.buffers.push(PlannedBuffer { label: "rebuild positions", bytes: padded(fluid * 16), bytes_per_fluid_particle: 16, single_binding: false });
+            self.buffers.push(PlannedBuffer { label: "skin check", bytes: 16, bytes_per_fluid_particle: 0, single_binding: true });
+        }
+        self
+    }
+
     /// The plan with DFSPH's own arrays added (for `fluid` particles).
     pub fn with_dfsph(mut self, fluid: u64) -> MemoryPlan {
         for (label, bytes) in super::dfsph::buffer_bytes(fluid) {

@@ -13,6 +13,7 @@ pub mod ranks;
 pub mod readback;
 pub mod schedule;
 pub mod shaders;
+pub mod skin;
 pub mod solver;
 pub mod workgroups;
 

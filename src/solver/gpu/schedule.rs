@@ -77,6 +77,8 @@ pub trait Recorder {
     fn pass(&mut self) -> &mut wgpu::ComputePass<'static>;
     /// Clears a range of a buffer (outside any pass).
     fn clear(&mut self, buffer: &wgpu::Buffer, offset: u64, size: Option<u64>);
+    /// Copies the first `bytes` bytes of `from` into `to` (outside any pass).
+    fn copy(&mut self, from: &wgpu::Buffer, to: &wgpu::Buffer, bytes: u64);
     /// Submits what is recorded and waits for it, so that the host can read a result back
     /// before recording more (the DFSPH loop with readbacks). `false` where the recorder cannot.
     fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool;
@@ -111,6 +113,10 @@ impl Recorder for PlainRecorder {
     fn clear(&mut self, buffer: &wgpu::Buffer, offset: u64, size: Option<u64>) {
         self.pass = None;
         self.encoder.clear_buffer(buffer, offset, size);
+    }
+    fn copy(&mut self, from: &wgpu::Buffer, to: &wgpu::Buffer, bytes: u64) {
+        self.pass = None;
+        self.encoder.copy_buffer_to_buffer(from, 0, to, 0, bytes);
     }
     fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool {
         self.pass = None;
@@ -188,6 +194,12 @@ impl Recorder for TimedRecorder<'_> {
         self.open = None;
         self.encoder.clear_buffer(buffer, offset, size);
     }
+    fn copy(&mut self, from: &wgpu::Buffer, to: &wgpu::Buffer, bytes: u64) {
+        // As a clear: untimed, between the timed passes.
+        self.pass = None;
+        self.open = None;
+        self.encoder.copy_buffer_to_buffer(from, 0, to, 0, bytes);
+    }
     fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool {
         if !self.waits {
             return false;
@@ -234,6 +246,14 @@ impl GpuSolver {
             self.current = self.store.after_binning(self.current);
             // DFSPH across ranks: the ghosts of the solves follow the binning.
             self.link_in_device_order(rec);
+            // With a skin: the positions the next rebuild is due from. The fields of the state
+            // (before a snapshot) leave their order for the next step to rebuild again (see
+            // NeighbourSkin::rebuild_due).
+            if let Some(skin) = &self.skin {
+                rec.copy(&self.store.state(self.current).positions, &skin.rebuild_positions, self.fluid_count as u64 * 16);
+                skin.rebuild_due.set(work == Work::Fields);
+                skin.rebuilds.set(skin.rebuilds.get() + u64::from(work == Work::Step));
+            }
         }
         if self.dfsph.is_some() {
             self.schedule_dfsph(work, rec);
@@ -255,8 +275,15 @@ impl GpuSolver {
         }
         // This step's counts of bad particles start from zero.
         rec.clear(&self.status, status::NON_FINITE as u64 * 4, Some(8));
+        if let Some(skin) = &self.skin {
+            rec.clear(&skin.left, 0, Some(4));
+        }
         rec.begin(ProfiledStage::Density);
-        self.dispatch_particles(rec, &w.density, &g.density);
+        // With a skin, between rebuilds: the density over the lists of the last rebuild.
+        match (&w.density_listed, &g.density_listed) {
+            (Some(stage), Some(group)) if !bins => self.dispatch_particles(rec, stage, group),
+            _ => self.dispatch_particles(rec, &w.density, &g.density),
+        }
         // With the Adami wall pressure, the wall particles' pressure from this step's fluid
         // fields (profiled with the density).
         if let (Some(stage), Some(group)) = (&w.wall_pressure, &g.wall_pressure) {
@@ -287,6 +314,11 @@ impl GpuSolver {
         }
         dispatch_one(rec, &self.pipelines.finish_step, &self.finish_group);
         self.current = self.store.after_integration(read);
+        // With a skin: whether a particle has moved half of it since the rebuild (read by the
+        // host after the step, see `GpuSolver::read_skin_check`).
+        if let Some(skin) = &self.skin {
+            self.dispatch_particles(rec, &skin.check, &skin.groups[self.current]);
+        }
         self.fields_state = read;
         self.accelerations_valid = !self.pipelines.fused;
     }
@@ -316,9 +348,36 @@ impl GpuSolver {
     }
 
     /// Whether the step about to run rebuilds the neighbour grid (every `rebuild_every` steps;
-    /// in between, the stages use the cells of the last rebuild).
+    /// in between, the stages use the cells of the last rebuild), or with a skin when it is due.
     fn rebuilds(&self) -> bool {
-        self.steps % self.params.rebuild_every.max(1) as u64 == 0
+        match &self.skin {
+            Some(skin) => skin.rebuild_due.get(),
+            None => self.steps % self.params.rebuild_every.max(1) as u64 == 0,
+        }
+    }
+
+    /// With a skin, after a step has been submitted: reads its check and makes the next step
+    /// rebuild where a particle has moved half the skin (or where the check cannot be read).
+    pub(super) fn read_skin_check(&self) {
+        let Some(skin) = &self.skin else { return };
+        match read_ranges(&self.ctx, &[(&skin.left, 0, 4)]) {
+            Ok(data) => {
+                if data[0].iter().any(|&b| b != 0) {
+                    skin.rebuild_due.set(true);
+                }
+            }
+            Err(e) => {
+                log::error!("reading the neighbour skin's check failed: {e:#}");
+                skin.rebuild_due.set(true);
+            }
+        }
+    }
+
+    /// With a skin, the next step rebuilds (the host read or wrote the state).
+    pub(super) fn rebuild_next_step(&self) {
+        if let Some(skin) = &self.skin {
+            skin.rebuild_due.set(true);
+        }
     }
 
     pub(super) fn dispatch_particles(&self, rec: &mut dyn Recorder, stage: &Stage, group: &wgpu::BindGroup) {
@@ -489,7 +548,9 @@ impl GpuSolver {
             self.set_viscosity(nu);
             let mut rec = PlainRecorder::new(&self.ctx.device, "steps");
             let mut batch = 0;
-            while batch < left.min(self.steps_per_submit) {
+            // With a skin the host reads each step's check before recording the next.
+            let per_submit = if self.skin.is_some() { 1 } else { self.steps_per_submit };
+            while batch < left.min(per_submit) {
                 if scheduled && batch > 0 && self.params.viscosity_at_step(self.steps) != nu {
                     break;
                 }
@@ -498,6 +559,7 @@ impl GpuSolver {
                 batch += 1;
             }
             self.ctx.queue.submit([rec.finish()]);
+            self.read_skin_check();
             left -= batch;
         }
     }
@@ -630,6 +692,7 @@ impl GpuSolver {
             let (ran, carried) = (rec.ran, rec.carried);
             self.ctx.queue.submit([rec.finish()]);
             self.steps += 1;
+            self.read_skin_check();
             let data = read_buffers(&self.ctx, &[(&resolved, count as u64 * 8)])?;
             let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&data[0]);
             for (i, total) in totals.iter_mut().enumerate() {

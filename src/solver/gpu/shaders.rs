@@ -47,6 +47,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/probes.wgsl", include_str!("../../../wgsl/sim/probes.wgsl")),
     ("sim/wall_pressure.wgsl", include_str!("../../../wgsl/sim/wall_pressure.wgsl")),
     ("sim/fields.wgsl", include_str!("../../../wgsl/sim/fields.wgsl")),
+    ("sim/neighbour_skin.wgsl", include_str!("../../../wgsl/sim/neighbour_skin.wgsl")),
     ("sim/ghost_velocities.wgsl", include_str!("../../../wgsl/sim/ghost_velocities.wgsl")),
 ];
 

@@ -69,6 +69,8 @@ pub(super) struct ParityBindGroups {
 /// The weakly compressible step's bind groups of one parity.
 pub(super) struct WcsphBindGroups {
     pub density: wgpu::BindGroup,
+    /// With a neighbour skin and lists: the density over the lists of the last rebuild.
+    pub density_listed: Option<wgpu::BindGroup>,
     /// With the Adami wall pressure: the wall stage's.
     pub wall_pressure: Option<wgpu::BindGroup>,
     /// The forces into the state's spare buffer (the state in place; the fused step makes its
@@ -136,7 +138,9 @@ pub struct ListUsage {
 /// overflows, and its subgroup walks the tiles.
 fn neighbour_lists(ctx: &GpuContext, params: &Params, walks_tiles: bool, options: &GpuOptions, fluid: u64, walls: u64) -> Option<u32> {
     let used = walks_tiles && options.neighbour_lists != Some(false);
-    let at_rest = 4.0 / 3.0 * std::f64::consts::PI * params.h.powi(3) * params.rest_density / params.fluid_mass;
+    // With a skin the lists reach h (1 + skin).
+    let reach = params.h * (1.0 + options.neighbour_skin.unwrap_or(0.0));
+    let at_rest = 4.0 / 3.0 * std::f64::consts::PI * reach.powi(3) * params.rest_density / params.fluid_mass;
     // The counts are kept in 16 bits.
     let capacity = options.neighbour_list_capacity.unwrap_or(((0.75 * at_rest / 8.0).ceil() * 8.0).clamp(8.0, 4096.0) as u32).clamp(1, 0xffff);
     // Slots are indexed with 32 bits, and an entry holds a chunk's first fluid or wall
@@ -149,6 +153,9 @@ fn neighbour_lists(ctx: &GpuContext, params: &Params, walks_tiles: bool, options
 /// The weakly compressible step's own stages.
 pub(super) struct WcsphStages {
     pub density: Stage,
+    /// With a neighbour skin and lists: `density_listed` (density_tiled.wgsl), which walks the
+    /// lists of the last rebuild on the steps between rebuilds.
+    pub density_listed: Option<Stage>,
     /// With `boundary_pressure = "adami"`: the wall particles' pressure (wall_pressure.wgsl),
     /// after the density stage, one invocation per wall particle.
     pub wall_pressure: Option<Stage>,
@@ -210,6 +217,8 @@ pub struct GpuSolver {
     pub(super) wall_fields: Option<wgpu::Buffer>,
     /// The neighbour lists, where the step keeps them.
     pub(super) neighbour_lists: Option<NeighbourLists>,
+    /// The neighbour skin, where the options ask for one.
+    pub(super) skin: Option<super::skin::NeighbourSkin>,
     /// The original index of each sorted wall particle.
     pub(super) wall_order: Vec<u32>,
     pub(super) scan: Scan,
@@ -312,6 +321,18 @@ impl GpuSolver {
     /// [`GpuSolver::with_options`] for one rank's part of a simulation across `ranks`
     /// (positions mark ghosts, see [`GpuSolver::load_held`]), or alone with `None`.
     pub(super) fn build(ctx: GpuContext, params: &Params, initial: &InitialState, options: GpuOptions, ranks: Option<std::sync::Arc<dyn crate::solver::communicator::Communicator>>) -> anyhow::Result<Self> {
+        // With a neighbour skin the grid's cells are h (1 + skin) wide (wgsl/sim/neighbour_skin.wgsl).
+        let widened;
+        let params = match options.neighbour_skin {
+            Some(skin) => {
+                if let Some(why) = super::skin::refusal(params, skin, ranks.is_some()) {
+                    return Err(GpuError::NoNeighbourSkin(why).into());
+                }
+                widened = Params { grid: params.grid.widened(1.0 + skin), ..params.clone() };
+                &widened
+            }
+            None => params,
+        };
         let n = initial.fluid_positions.len() as u64;
         let cells = params.grid.cell_count() as u64;
         let viscosity = params.viscosity_at_step(0);
@@ -375,6 +396,7 @@ impl GpuSolver {
         let layout = arrays.layout;
         let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_cell_starts(counts.wall_cell_firsts);
         let plan = if dfsph { plan.with_dfsph(n) } else { plan.with_wall_fields(counts.wall_fields) }.with_neighbour_lists(n, list_capacity.unwrap_or(0));
+        let plan = plan.with_neighbour_skin(n, options.neighbour_skin.is_some());
         plan.check(&ctx)?;
         let aliases = array_places(&arrays);
         let in_place: Vec<(&str, Alias)> = aliases.iter().copied().chain(if layout == StateLayout::InPlace { IN_PLACE.to_vec() } else { Vec::new() }).collect();
@@ -389,6 +411,9 @@ impl GpuSolver {
         k.push(("GHOSTS", if ranks.is_some() { 1.0 } else { 0.0 }));
         k.push(("NEIGHBOUR_LISTS", if list_capacity.is_some() { 1.0 } else { 0.0 }));
         k.push(("LIST_CAPACITY", list_capacity.unwrap_or(0) as f64));
+        if let Some(skin) = options.neighbour_skin {
+            k.push(("LIST_RADIUS2", (1.0 + skin) * (1.0 + skin)));
+        }
         // The constants of a stage with `size` threads per workgroup.
         let sized = |size: u32| {
             let mut c = k.clone();
@@ -428,6 +453,14 @@ impl GpuSolver {
                         neighbour_stage("density", "density", ws.density)?
                     },
                     // One invocation per wall particle, at the density stage's workgroup size.
+                    density_listed: match (options.neighbour_skin, list_capacity) {
+                        (Some(_), Some(_)) => {
+                            let mut c = sized(ws.density);
+                            c.push(("RECORD_LISTS", 0.0));
+                            Some(stage("density_tiled", "density_listed", &len, &c)?)
+                        }
+                        _ => None,
+                    },
                     wall_pressure: if adami { Some(stage("wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
                     forces: neighbour_stage("forces", "forces", ws.forces)?,
                     advance: if fused {
@@ -562,6 +595,7 @@ impl GpuSolver {
                 reorder: [gather(c, 0), gather(c, 1)],
                 wcsph: p.wcsph.as_ref().map(|w| WcsphBindGroups {
                     density: w.density.bind_group(device, "density", u, &b),
+                    density_listed: w.density_listed.as_ref().map(|stage| stage.bind_group(device, "density_listed", u, &b)),
                     wall_pressure: w.wall_pressure.as_ref().map(|stage| stage.bind_group(device, "wall_pressure", u, &b)),
                     forces: (layout == StateLayout::InPlace).then(|| w.forces.bind_group(device, "forces", u, &b)),
                     advance: if fused {
@@ -573,6 +607,41 @@ impl GpuSolver {
             }
         };
         let groups: Vec<ParityBindGroups> = (0..store.phases()).map(make_parity).collect();
+        // The skin's check, after each step, on the phase the step leaves its state in.
+        let skin = match options.neighbour_skin {
+            Some(fraction) => {
+                let rebuild_positions = storage(device, "rebuild positions", n * 16);
+                let left = storage(device, "skin check", 16);
+                let skin_len = |name: &str| match name {
+                    "skin_left" => 0,
+                    other => len(other),
+                };
+                let mut c = sized(ws.integrate);
+                c.push(("SKIN", fraction));
+                let check = stage("neighbour_skin", "check_skin", &skin_len, &c)?;
+                let groups = (0..store.phases())
+                    .map(|c| {
+                        let b = buffers(c);
+                        let (rebuild_positions, left) = (&rebuild_positions, &left);
+                        check.bind_group(device, "check_skin", u, &move |name: &str| match name {
+                            "rebuild_positions" => rebuild_positions.clone(),
+                            "skin_left" => left.clone(),
+                            other => b(other),
+                        })
+                    })
+                    .collect();
+                Some(super::skin::NeighbourSkin {
+                    fraction,
+                    rebuild_positions,
+                    left,
+                    check,
+                    groups,
+                    rebuild_due: std::cell::Cell::new(true),
+                    rebuilds: std::cell::Cell::new(0),
+                })
+            }
+            None => None,
+        };
         let finish_group = p.finish_step.bind_group(device, "finish_step", u, &without_accelerations(0));
         let max_groups_per_dim = device.limits().max_compute_workgroups_per_dimension;
         let dfsph = dfsph_stages.map(|stages| {
@@ -623,6 +692,7 @@ impl GpuSolver {
             wall_cell_firsts,
             wall_fields,
             neighbour_lists: lists,
+            skin,
             wall_order,
             scan,
             groups,
@@ -792,6 +862,12 @@ impl GpuSolver {
     /// solves walk lists (see [`GpuOptions::neighbour_lists`]), else `None`.
     pub fn neighbour_list_capacity(&self) -> Option<u32> {
         self.neighbour_lists.as_ref().map(|l| l.capacity)
+    }
+
+    /// With a neighbour skin (see [`GpuOptions::neighbour_skin`]): the skin, a fraction of h,
+    /// and the steps that rebuilt the grid and the lists so far; else `None`.
+    pub fn neighbour_skin(&self) -> Option<(f64, u64)> {
+        self.skin.as_ref().map(|s| (s.fraction, s.rebuilds.get()))
     }
 
     /// How full the lists the last step recorded were: the most slots one particle's list
@@ -973,6 +1049,7 @@ impl GpuSolver {
             .chain(planned_accelerations)
             .chain(s.wall_fields.as_ref())
             .chain(s.neighbour_lists.iter().flat_map(|l| [&l.slots, &l.counts]))
+            .chain(s.skin.iter().flat_map(|k| [&k.rebuild_positions, &k.left]))
             .map(|b| b.size())
             .sum::<u64>()
             + s.store.bytes()
@@ -1151,6 +1228,8 @@ impl Backend for GpuSolver {
         Ok(state)
     }
     fn save_state_header(&mut self) -> anyhow::Result<BackendState> {
+        // A run resumed from this state rebuilds its neighbours at its first step: so does this.
+        self.rebuild_next_step();
         let words = self.counted_status()?;
         let h = status::health(&words, self.fixed_dt());
         // The time, dt range and iterations as the CPU path keeps them, for GPU ranks resuming
@@ -1223,6 +1302,7 @@ impl Backend for GpuSolver {
         self.fields_state = 0;
         self.accelerations_valid = false;
         self.steps = state.step;
+        self.rebuild_next_step();
         Ok(())
     }
     fn step_fields(&mut self) -> anyhow::Result<StepFields> {

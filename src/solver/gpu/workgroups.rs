@@ -164,8 +164,9 @@ impl FromStr for SolverLoop {
     }
 }
 
-/// Choices of the GPU step that do not change its results.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// Choices of the GPU step that do not change its results (but for the neighbour skin's, which
+/// changes the order the particles are held in, and with it the rounding of their sums).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GpuOptions {
     /// Fuse the forces and the integration into one pass when dt is fixed: the same values and
     /// one pass over the state less, but the state then needs two copies (64 bytes per fluid
@@ -198,6 +199,14 @@ pub struct GpuOptions {
     /// eight. A particle whose list overflows has its subgroup walk the tiles (the same values),
     /// so the capacity changes only the speed (kept within 1 to 65,535).
     pub neighbour_list_capacity: Option<u32>,
+    /// A neighbour skin, as a fraction of h (wgsl/sim/neighbour_skin.wgsl): the grid's cells
+    /// h (1 + skin) wide, the lists holding the candidates within h (1 + skin), and both
+    /// rebuilt, with the particles' order, only once a particle has moved skin h / 2 since the
+    /// last rebuild; in between the density walks the lists. The same neighbours, each summed
+    /// in the order of its particle's walk, but with the particles in the order of the last
+    /// rebuild, so not the bits of a run without. `None` (the default): rebuilt every step.
+    /// Weakly compressible scenes with summation density, on one device.
+    pub neighbour_skin: Option<f64>,
 }
 
 #[cfg(test)]

@@ -1,0 +1,111 @@
+//! The neighbour skin (wgsl/sim/neighbour_skin.wgsl): the grid, the particles' order and the
+//! neighbour lists kept between rebuilds, rebuilt once a particle has moved half the skin. With
+//! a skin the tiled density walking the lists, the tiles alone and one particle per invocation
+//! give the same bits; the run follows the one without a skin to the rounding of its sums; a
+//! run resumed from a saved state keeps the bits of the run that saved it; a scene it cannot
+//! serve is refused by name.
+
+use crate::common;
+use crate::common::TestScene;
+
+use wgsph::model::scene::{BoundaryPressure, EquationOfState, Kernel, Scene};
+use wgsph::solver::gpu::{GpuError, GpuOptions};
+use wgsph::solver::Backend;
+
+const SKIN: f64 = 0.1;
+
+fn skin(options: GpuOptions) -> GpuOptions {
+    GpuOptions { neighbour_skin: Some(SKIN), ..options }
+}
+
+fn scenes() -> Vec<(&'static str, Scene)> {
+    let tank = || TestScene::small_tank();
+    vec![
+        ("small tank (walls, plane, viscosity)", tank().build()),
+        ("cubic spline, linear, unclamped", tank().kernel(Kernel::CubicSpline).equation_of_state(EquationOfState::Linear).clamp_negative_pressure(false).build()),
+        ("Adami wall pressure, artificial viscosity", tank().boundary_pressure(BoundaryPressure::Adami).viscosity(0.0).artificial_viscosity(0.1).build()),
+        ("planes only", tank().without_walls().plane([0.0; 3], [0.0, 1.0, 0.0], 0.5).build()),
+        ("solid box", tank().solid_box([0.3, 0.0, 0.05], [0.4, 0.1, 0.15]).build()),
+        ("dam break", Scene::load("dam_break").unwrap().with_fluid_particles(2000)),
+    ]
+}
+
+/// The largest distance between the same particle's positions in two snapshots.
+fn largest_gap(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter().zip(b).map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max)
+}
+
+#[test]
+fn a_skin_keeps_every_neighbour() {
+    for ctx in common::contexts() {
+        let tiles = ctx.subgroup_tiles_unavailable().is_none();
+        for (name, scene) in scenes() {
+            let steps = 60;
+            let run = |options: GpuOptions| {
+                let mut solver = common::gpu_with(ctx.clone(), &scene, None, options).unwrap();
+                solver.step(steps).unwrap();
+                let rebuilds = solver.neighbour_skin().map(|(_, r)| r);
+                (rebuilds, solver.snapshot().unwrap(), solver.step_fields().unwrap())
+            };
+            let (rebuilds, state, fields) = run(skin(GpuOptions::default()));
+            let rebuilds = rebuilds.expect("a skin was asked for");
+            // The first step rebuilds; the particles move, so some later ones do, but not all.
+            assert!(rebuilds >= 1 && rebuilds < steps, "{name} on {}: {rebuilds} rebuilds in {steps} steps", ctx.describe());
+            // The lists of the last rebuild, the tiles on its cells and one particle per
+            // invocation on them: the same neighbours in the same order, the same bits.
+            let mut others = vec![(skin(GpuOptions { subgroup_tiles: Some(false), ..GpuOptions::default() }), "one particle per invocation")];
+            if tiles {
+                others.push((skin(GpuOptions { neighbour_lists: Some(false), ..GpuOptions::default() }), "tiles without lists"));
+                others.push((skin(GpuOptions { neighbour_list_capacity: Some(4), ..GpuOptions::default() }), "lists of 4 slots"));
+            }
+            for (options, what) in others {
+                let (r, other_state, other_fields) = run(options);
+                assert_eq!(r, Some(rebuilds), "{name} on {}: {what} rebuilt at other steps", ctx.describe());
+                assert!(other_state == state && other_fields == fields, "{name} on {}: {what} changed a value", ctx.describe());
+            }
+            // Without a skin: the same neighbours, summed with the particles in another order.
+            let (_, plain, _) = run(GpuOptions::default());
+            assert!(plain.positions != scene.initial_state().fluid_positions, "{name}: the particles moved");
+            let h = scene.physics.smoothing_length;
+            let gap = largest_gap(&plain.positions, &state.positions);
+            assert!(gap < 1e-3 * h, "{name} on {}: with the skin a particle ends {gap} m from its place without (h = {h})", ctx.describe());
+        }
+    }
+}
+
+#[test]
+fn a_run_resumed_with_a_skin_keeps_the_bits() {
+    let scene = Scene::load("dam_break").unwrap().with_fluid_particles(2000);
+    for ctx in common::contexts() {
+        let open = || common::gpu_with(ctx.clone(), &scene, None, skin(GpuOptions::default())).unwrap();
+        let mut first = open();
+        first.step(25).unwrap();
+        let saved = first.save_state().unwrap();
+        first.step(25).unwrap();
+        let mut resumed = open();
+        resumed.restore_state(&saved).unwrap();
+        resumed.step(25).unwrap();
+        assert_eq!(first.neighbour_skin().map(|s| s.0), resumed.neighbour_skin().map(|s| s.0));
+        assert!(first.snapshot().unwrap() == resumed.snapshot().unwrap(), "on {}: the resumed run left the bits of the run that saved the state", ctx.describe());
+    }
+}
+
+#[test]
+fn a_skin_is_refused_where_it_cannot_serve() {
+    let tank = || TestScene::small_tank();
+    for ctx in common::contexts() {
+        for (scene, named) in [
+            (tank().continuity().build(), "physics.density = \"continuity\""),
+            (tank().dfsph().build(), "physics.solver = \"dfsph\""),
+        ] {
+            let e = common::gpu_with(ctx.clone(), &scene, None, skin(GpuOptions::default())).err().expect("refused");
+            assert!(matches!(e.downcast_ref::<GpuError>(), Some(GpuError::NoNeighbourSkin(_))), "{e:#}");
+            let msg = format!("{e:#}");
+            assert!(msg.contains("--neighbour-skin 0.1") && msg.contains(named), "{msg}");
+        }
+        for bad in [0.0, -0.1, 1.5, f64::NAN] {
+            let e = common::gpu_with(ctx.clone(), &tank().build(), None, GpuOptions { neighbour_skin: Some(bad), ..GpuOptions::default() }).err().expect("refused");
+            assert!(format!("{e:#}").contains("must be above 0 and at most 1"), "{bad}: {e:#}");
+        }
+    }
+}
