@@ -1,9 +1,9 @@
 //! The neighbour skin (wgsl/sim/neighbour_skin.wgsl): the grid, the particles' order and the
 //! neighbour lists kept between rebuilds, rebuilt once a particle has moved half the skin. With
 //! a skin the tiled density walking the lists, the tiles alone and one particle per invocation
-//! give the same bits; the run follows the one without a skin to the rounding of its sums; a
-//! run resumed from a saved state keeps the bits of the run that saved it; a scene it cannot
-//! serve is refused by name.
+//! give the same bits; the run follows the one without a skin to the rounding of its sums;
+//! snapshots leave its bits as they were, and a run resumed from a saved state keeps the bits of
+//! the run that saved it; a scene it cannot serve is refused by name.
 
 use crate::common;
 use crate::common::TestScene;
@@ -70,6 +70,26 @@ fn a_skin_keeps_every_neighbour() {
             let gap = largest_gap(&plain.positions, &state.positions);
             assert!(gap < 1e-3 * h, "{name} on {}: with the skin a particle ends {gap} m from its place without (h = {h})", ctx.describe());
         }
+    }
+}
+
+#[test]
+fn snapshots_leave_a_skinned_run_as_it_was() {
+    // A snapshot evaluates the fields of the state it reads; with a skin it rebuilds only where
+    // the next step would have, so a run read every few steps keeps the bits of one read once.
+    let scene = Scene::load("dam_break").unwrap().with_fluid_particles(2000);
+    for ctx in common::contexts() {
+        let open = || common::gpu_with(ctx.clone(), &scene, None, skin(GpuOptions::default())).unwrap();
+        let mut read_often = open();
+        for _ in 0..10 {
+            read_often.step(7).unwrap();
+            read_often.snapshot().unwrap();
+        }
+        let mut read_once = open();
+        read_once.step(70).unwrap();
+        assert!(read_often.snapshot().unwrap() == read_once.snapshot().unwrap(), "on {}: snapshots changed the run's bits", ctx.describe());
+        let rebuilds = |s: &wgsph::solver::gpu::GpuSolver| s.neighbour_skin().expect("a skin").1;
+        assert_eq!(rebuilds(&read_often), rebuilds(&read_once), "on {}", ctx.describe());
     }
 }
 

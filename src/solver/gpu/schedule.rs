@@ -225,9 +225,12 @@ impl GpuSolver {
     /// into the other buffer of the pair (when due), the fields on it, and (for a step) the
     /// forces, the integration back into the first buffer and the bookkeeping.
     pub(super) fn schedule(&mut self, work: Work, rec: &mut dyn Recorder) {
+        // The fields of the current state bin it (a sorted state stays as it is), but with a
+        // skin only where a rebuild is due: a snapshot then leaves the run's order, and its bits,
+        // as they were.
         let bins = match work {
             Work::Step => self.rebuilds(),
-            Work::Fields => true,
+            Work::Fields => self.skin.is_none() || self.rebuilds(),
         };
         if bins {
             rec.clear(&self.starts, 0, None);
@@ -246,13 +249,12 @@ impl GpuSolver {
             self.current = self.store.after_binning(self.current);
             // DFSPH across ranks: the ghosts of the solves follow the binning.
             self.link_in_device_order(rec);
-            // With a skin: the positions the next rebuild is due from. The fields of the state
-            // (before a snapshot) leave their order for the next step to rebuild again (see
-            // NeighbourSkin::rebuild_due).
+            // With a skin: the positions the next rebuild is due from (the fields' rebuild is
+            // the one the next step would have made, on the same positions).
             if let Some(skin) = &self.skin {
                 rec.copy(&self.store.state(self.current).positions, &skin.rebuild_positions, self.fluid_count as u64 * 16);
-                skin.rebuild_due.set(work == Work::Fields);
-                skin.rebuilds.set(skin.rebuilds.get() + u64::from(work == Work::Step));
+                skin.rebuild_due.set(false);
+                skin.rebuilds.set(skin.rebuilds.get() + 1);
             }
         }
         if self.dfsph.is_some() {
@@ -263,9 +265,14 @@ impl GpuSolver {
         // Field borrows, not a method's, so that the probes below can be borrowed mutably.
         let w = self.pipelines.wcsph.as_ref().expect("a weakly compressible scene");
         let g = self.groups[read].wcsph.as_ref().expect("a weakly compressible scene");
+        // With a skin, between rebuilds: the density over the lists of the last rebuild.
+        let (density, density_group) = match (&w.density_listed, &g.density_listed) {
+            (Some(stage), Some(group)) if !bins => (stage, group),
+            _ => (&w.density, &g.density),
+        };
         if work == Work::Fields {
             rec.begin(ProfiledStage::Density);
-            self.dispatch_particles(rec, &w.density, &g.density);
+            self.dispatch_particles(rec, density, density_group);
             if let (Some(stage), Some(group)) = (&w.wall_pressure, &g.wall_pressure) {
                 self.dispatch_walls(rec, stage, group);
             }
@@ -279,11 +286,7 @@ impl GpuSolver {
             rec.clear(&skin.left, 0, Some(4));
         }
         rec.begin(ProfiledStage::Density);
-        // With a skin, between rebuilds: the density over the lists of the last rebuild.
-        match (&w.density_listed, &g.density_listed) {
-            (Some(stage), Some(group)) if !bins => self.dispatch_particles(rec, stage, group),
-            _ => self.dispatch_particles(rec, &w.density, &g.density),
-        }
+        self.dispatch_particles(rec, density, density_group);
         // With the Adami wall pressure, the wall particles' pressure from this step's fluid
         // fields (profiled with the density).
         if let (Some(stage), Some(group)) = (&w.wall_pressure, &g.wall_pressure) {
@@ -373,7 +376,7 @@ impl GpuSolver {
         }
     }
 
-    /// With a skin, the next step rebuilds (the host read or wrote the state).
+    /// With a skin, the next step rebuilds (the host saved or restored the state).
     pub(super) fn rebuild_next_step(&self) {
         if let Some(skin) = &self.skin {
             skin.rebuild_due.set(true);
@@ -564,8 +567,9 @@ impl GpuSolver {
         }
     }
 
-    /// Sorts the current state by cell (idempotent: a sorted state stays as it is) and
-    /// evaluates density and pressure for it, without advancing time.
+    /// Sorts the current state by cell (idempotent: a sorted state stays as it is; with a skin
+    /// only where a rebuild is due) and evaluates density and pressure for it, without
+    /// advancing time.
     pub(super) fn refresh_fields(&mut self) {
         let mut rec = PlainRecorder::new(&self.ctx.device, "refresh");
         self.schedule(Work::Fields, &mut rec);

@@ -41,9 +41,10 @@ pub(super) struct NeighbourSkin {
     pub check: Stage,
     /// The check's bind groups, per phase of the state store.
     pub groups: Vec<wgpu::BindGroup>,
-    /// Whether the next step rebuilds: before the first, after a particle left the skin, and
-    /// after the host read or wrote the state (a checkpoint, a snapshot, a restart), so that a
-    /// run resumed from a saved state rebuilds where the run that saved it did.
+    /// Whether the next step (or the fields of a snapshot) rebuilds: before the first, after a
+    /// particle left the skin, and after the state was saved or restored (a checkpoint, a
+    /// restart), so that a run resumed from a saved state rebuilds where the run that saved it
+    /// did. A snapshot does not make one: it leaves the run's bits as they were.
     pub rebuild_due: Cell<bool>,
     /// Rebuilds so far.
     pub rebuilds: Cell<u64>,
