@@ -299,7 +299,7 @@ pub struct GpuTuning {
     /// to the next, with cells and lists reaching h (1 + SKIN) (a fraction of the kernel's
     /// support, above 0 and at most 1; e.g. 0.1), and rebuild only once a particle has moved
     /// SKIN h / 2: the same neighbours, summed in another order. Weakly compressible scenes
-    /// with summation density, on one device.
+    /// on one device.
     #[arg(long, value_name = "SKIN", value_parser = parse_skin)]
     pub neighbour_skin: Option<f64>,
     /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes

@@ -280,15 +280,15 @@ fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--precision f64 sets the CPU path's float type"), "{}", text(&o.stderr));
     assert!(!dir.path().join("refused").exists());
-    // A neighbour skin outside its range, or with a scene whose density stage records its
-    // lists every step: refused by name before anything is written.
+    // A neighbour skin outside its range, or with a grid rebuilt every 2nd step (the skin
+    // chooses when): refused by name before anything is written.
     let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--neighbour-skin", "1.5", "--out", "refused"], dir.path());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--neighbour-skin") && text(&o.stderr).contains("at most 1"), "{}", text(&o.stderr));
     if wgsph::solver::gpu::GpuContext::new().is_ok() {
-        let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "gpu", "--neighbour-skin", "0.1", "--set", "physics.density=\"continuity\"", "--out", "refused"], dir.path());
+        let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "gpu", "--neighbour-skin", "0.1", "--set", "time.neighbour_rebuild_every=2", "--out", "refused"], dir.path());
         assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
-        assert!(text(&o.stderr).contains("--neighbour-skin 0.1 cannot be used") && text(&o.stderr).contains("continuity"), "{}", text(&o.stderr));
+        assert!(text(&o.stderr).contains("--neighbour-skin 0.1 cannot be used") && text(&o.stderr).contains("time.neighbour_rebuild_every = 2"), "{}", text(&o.stderr));
     }
     assert!(!dir.path().join("refused").exists());
     let o = wgsph(&["profile", "dam_break", "--steps", "1", "--single-cells", "--subgroup-tiles"], dir.path());

@@ -24,6 +24,8 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         ("small tank (walls, plane, viscosity)", tank().build()),
         ("cubic spline, linear, unclamped", tank().kernel(Kernel::CubicSpline).equation_of_state(EquationOfState::Linear).clamp_negative_pressure(false).build()),
         ("Adami wall pressure, artificial viscosity", tank().boundary_pressure(BoundaryPressure::Adami).viscosity(0.0).artificial_viscosity(0.1).build()),
+        ("continuity, diffusion, hydrostatic start", tank().continuity().density_diffusion(0.1).hydrostatic_start().build()),
+        ("continuity, Adami wall pressure", tank().continuity().boundary_pressure(BoundaryPressure::Adami).build()),
         ("planes only", tank().without_walls().plane([0.0; 3], [0.0, 1.0, 0.0], 0.5).build()),
         ("solid box", tank().solid_box([0.3, 0.0, 0.05], [0.4, 0.1, 0.15]).build()),
         ("dam break", Scene::load("dam_break").unwrap().with_fluid_particles(2000)),
@@ -114,10 +116,9 @@ fn a_run_resumed_with_a_skin_keeps_the_bits() {
 fn a_skin_is_refused_where_it_cannot_serve() {
     let tank = || TestScene::small_tank();
     for ctx in common::contexts() {
-        for (scene, named) in [
-            (tank().continuity().build(), "physics.density = \"continuity\""),
-            (tank().dfsph().build(), "physics.solver = \"dfsph\""),
-        ] {
+        let mut every_2nd_step = tank().build();
+        every_2nd_step.time.neighbour_rebuild_every = 2;
+        for (scene, named) in [(tank().dfsph().build(), "physics.solver = \"dfsph\""), (every_2nd_step, "time.neighbour_rebuild_every = 2")] {
             let e = common::gpu_with(ctx.clone(), &scene, None, skin(GpuOptions::default())).err().expect("refused");
             assert!(matches!(e.downcast_ref::<GpuError>(), Some(GpuError::NoNeighbourSkin(_))), "{e:#}");
             let msg = format!("{e:#}");

@@ -2,7 +2,8 @@
 // the pair terms of continuity.wgsl, the same sums in the same order as its
 // `continuity_density`, so its twin is the same, src/solver/cpu/continuity.rs. With
 // NEIGHBOUR_LISTS it also records each particle's neighbours for the forces
-// (shared/neighbour_lists.wgsl). A file of its own since its subgroup operations need an
+// (shared/neighbour_lists.wgsl); with a neighbour skin, `continuity_listed` walks the lists of
+// the last rebuild instead on the steps between rebuilds. A file of its own since its subgroup operations need an
 // adapter with subgroups, which the other stages do not.
 
 //! include sim/continuity.wgsl
@@ -59,6 +60,55 @@ fn continuity_tiled(
     if (i < params.fluid_count) {
         set_carried_density(i, finish_rate(sums.rate));
         finish_list(i, sums.list);
+    }
+    finish_densities(lid);
+}
+
+// The sums of the rate over particle i's list: the candidates and the order of the tiles' walk
+// (a candidate the list leaves out lies beyond h, where its terms add exact zeros), so the
+// same sums bit for bit.
+fn listed_rate(own: RateOwn, i: u32) -> RateSums {
+    let counts = list_counts(i);
+    var rate = RateSums(0.0, 0.0, 0.0);
+    var at = vec3<u32>(0u);
+    var j = 0u;
+    while (next_listed(i, counts & 0xffffu, false, &at, &j)) {
+        add_fluid_rate(&rate, own, positions_at(j).xyz, velocities_at(j), true);
+    }
+    if (WALLS) {
+        at = vec3<u32>(0u);
+        while (next_listed(i, counts >> 16u, true, &at, &j)) {
+            add_wall_rate(&rate, own, wall_positions_at(j), true);
+        }
+    }
+    return rate;
+}
+
+// With a neighbour skin, on the steps between rebuilds (built with RECORD_LISTS false): the
+// carried density advanced with the rate over the lists of the last rebuild; a subgroup with a
+// list that overflowed walks the tiles on the cells of the rebuild (density_tiled.wgsl's
+// `density_listed` does the same for the summed density).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn continuity_listed(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+    @builtin(subgroup_invocation_id) lane: u32,
+) {
+    reduce_begin(lid);
+    let i = thread_index(gid, groups);
+    let p = tile_particle(i);
+    let own = rate_own(p);
+    if (walks_lists(p)) {
+        let rate = listed_rate(own, p);
+        if (i < params.fluid_count) {
+            set_carried_density(i, finish_rate(rate));
+        }
+    } else {
+        let sums = tile_walk(TileOwn(own, i), cell_coords(own.x), lane, i < params.fluid_count);
+        if (i < params.fluid_count) {
+            set_carried_density(i, finish_rate(sums.rate));
+        }
     }
     finish_densities(lid);
 }

@@ -17,9 +17,7 @@ pub fn refusal(params: &Params, skin: f64, across_ranks: bool) -> Option<String>
         return Some(format!("--neighbour-skin is {skin}; it must be above 0 and at most {MAX_SKIN} (a fraction of the kernel's support h, e.g. 0.1)"));
     }
     let why = if params.dfsph.is_some() {
-        "the scene uses DFSPH (physics.solver = \"dfsph\"), whose solves record their own lists every step"
-    } else if params.continuity_density {
-        "the scene carries its density by the continuity equation (physics.density = \"continuity\"), whose density stage records the lists every step"
+        "the scene uses DFSPH (physics.solver = \"dfsph\"), whose factors record their own lists every step"
     } else if params.rebuild_every != 1 {
         "the scene rebuilds its grid every 2nd step (time.neighbour_rebuild_every = 2); the skin chooses when to rebuild"
     } else if across_ranks {
@@ -27,7 +25,7 @@ pub fn refusal(params: &Params, skin: f64, across_ranks: bool) -> Option<String>
     } else {
         return None;
     };
-    Some(format!("--neighbour-skin {skin} cannot be used: {why}; it needs a weakly compressible scene with summation density on one device"))
+    Some(format!("--neighbour-skin {skin} cannot be used: {why}; it needs a weakly compressible scene on one device"))
 }
 
 /// The skin's state on the device and on the host.

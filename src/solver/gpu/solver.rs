@@ -153,8 +153,9 @@ fn neighbour_lists(ctx: &GpuContext, params: &Params, walks_tiles: bool, options
 /// The weakly compressible step's own stages.
 pub(super) struct WcsphStages {
     pub density: Stage,
-    /// With a neighbour skin and lists: `density_listed` (density_tiled.wgsl), which walks the
-    /// lists of the last rebuild on the steps between rebuilds.
+    /// With a neighbour skin and lists: `density_listed` (density_tiled.wgsl) or with
+    /// continuity density `continuity_listed` (continuity_tiled.wgsl), which walk the lists of
+    /// the last rebuild on the steps between rebuilds.
     pub density_listed: Option<Stage>,
     /// With `boundary_pressure = "adami"`: the wall particles' pressure (wall_pressure.wgsl),
     /// after the density stage, one invocation per wall particle.
@@ -457,7 +458,11 @@ impl GpuSolver {
                         (Some(_), Some(_)) => {
                             let mut c = sized(ws.density);
                             c.push(("RECORD_LISTS", 0.0));
-                            Some(stage("density_tiled", "density_listed", &len, &c)?)
+                            Some(if params.continuity_density {
+                                stage("continuity_tiled", "continuity_listed", &len, &c)?
+                            } else {
+                                stage("density_tiled", "density_listed", &len, &c)?
+                            })
                         }
                         _ => None,
                     },
