@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # The measurements of a hardware GPU in one command, for a machine without a Rust toolchain:
-# the dam break profiled by size, the tuning knobs, the continuity/delta-SPH and DFSPH variants,
-# the block workload, the GPU against the CPU reference, what probes cost and the Buchner
-# wall-pressure case, and each parity test alone (with its own time limit, so that one slow or
-# stuck test cannot hide the others).
+# the dam break profiled by size, the tuning knobs (the neighbour skin among them), the
+# continuity/delta-SPH and DFSPH variants, the block workload, the GPU against the CPU
+# reference, what probes cost and the Buchner wall-pressure case, and each parity test alone
+# (with its own time limit, so that one slow or stuck test cannot hide the others).
 #
 # Usage, from the project root, with the release binary at $WGSPH (default .gpu/wgsph) and,
 # optionally, the parity test program at $PARITY (default .gpu/tests/parity; the one that
@@ -71,6 +71,10 @@ t 60 "$W" profile dam_break --particles 16000000 --steps 40 --fused
 t 60 "$W" profile dam_break --particles 4000000 --steps 40 --workgroup-size 64
 t 60 "$W" profile dam_break --particles 4000000 --steps 40 --workgroup-size 256
 t 60 "$W" profile dam_break --particles 4000000 --steps 40 --single-cells
+# The neighbour skin (no lists on a hardware GPU: the sort left out between rebuilds, the walks
+# over cells 1.1 h wide), at 1 M and 4 M.
+t 60 "$W" profile dam_break --particles 1000000 --steps 40 --neighbour-skin 0.1
+t 60 "$W" profile dam_break --particles 4000000 --steps 40 --neighbour-skin 0.1
 
 # The pressure model and DFSPH: the dam break with the lines changed.
 sed -e 's/^name = "dam_break"$/name = "dam_break_delta"/' \
