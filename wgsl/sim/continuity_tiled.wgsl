@@ -10,6 +10,7 @@
 //! include shared/tiles.wgsl
 //! include shared/tiles_walls.wgsl
 //! include shared/neighbour_lists.wgsl
+//! include shared/list_walk.wgsl
 
 // What a particle brings to its pairs, and its index (fluid_count or more for an invocation
 // without one).
@@ -64,30 +65,24 @@ fn continuity_tiled(
     finish_densities(lid);
 }
 
-// The sums of the rate over particle i's list: the candidates and the order of the tiles' walk
-// (a candidate the list leaves out lies beyond h, where its terms add exact zeros), so the
-// same sums bit for bit.
-fn listed_rate(own: RateOwn, i: u32) -> RateSums {
-    let counts = list_counts(i);
-    var rate = RateSums(0.0, 0.0, 0.0);
-    var at = vec3<u32>(0u);
-    var j = 0u;
-    while (next_listed(i, counts & 0xffffu, false, &at, &j)) {
-        add_fluid_rate(&rate, own, positions_at(j).xyz, velocities_at(j), true);
-    }
-    if (WALLS) {
-        at = vec3<u32>(0u);
-        while (next_listed(i, counts >> 16u, true, &at, &j)) {
-            add_wall_rate(&rate, own, wall_positions_at(j), true);
-        }
-    }
-    return rate;
+// Candidate j's terms over a list (shared/list_walk.wgsl): those of the tiles' chunks where it
+// is counted (a candidate the list leaves out lies beyond h, where its terms add exact zeros).
+fn listed_fluid(sums: ptr<function, TileSums>, own: TileOwn, j: u32) {
+    var rate = (*sums).rate;
+    add_fluid_rate(&rate, own.rate, positions_at(j).xyz, velocities_at(j), true);
+    (*sums).rate = rate;
+}
+
+fn listed_wall(sums: ptr<function, TileSums>, own: TileOwn, j: u32) {
+    var rate = (*sums).rate;
+    add_wall_rate(&rate, own.rate, wall_positions_at(j), true);
+    (*sums).rate = rate;
 }
 
 // With a neighbour skin, on the steps between rebuilds (built with RECORD_LISTS false): the
-// carried density advanced with the rate over the lists of the last rebuild; a subgroup with a
-// list that overflowed walks the tiles on the cells of the rebuild (density_tiled.wgsl's
-// `density_listed` does the same for the summed density).
+// carried density advanced with the rate over the lists of the last rebuild, or over the tiles
+// on the rebuild's cells (density_tiled.wgsl's `density_listed` does the same for the summed
+// density).
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn continuity_listed(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -97,18 +92,10 @@ fn continuity_listed(
 ) {
     reduce_begin(lid);
     let i = thread_index(gid, groups);
-    let p = tile_particle(i);
-    let own = rate_own(p);
-    if (walks_lists(p)) {
-        let rate = listed_rate(own, p);
-        if (i < params.fluid_count) {
-            set_carried_density(i, finish_rate(rate));
-        }
-    } else {
-        let sums = tile_walk(TileOwn(own, i), cell_coords(own.x), lane, i < params.fluid_count);
-        if (i < params.fluid_count) {
-            set_carried_density(i, finish_rate(sums.rate));
-        }
+    let own = rate_own(tile_particle(i));
+    let sums = list_or_tile_walk(TileOwn(own, i), i, tile_particle(i), cell_coords(own.x), lane);
+    if (i < params.fluid_count) {
+        set_carried_density(i, finish_rate(sums.rate));
     }
     finish_densities(lid);
 }

@@ -9,6 +9,7 @@
 //! include shared/tiles.wgsl
 //! include shared/tiles_walls.wgsl
 //! include shared/neighbour_lists.wgsl
+//! include shared/list_walk.wgsl
 
 // A particle's position, and its index (fluid_count or more for an invocation without one).
 struct TileOwn {
@@ -76,33 +77,24 @@ fn density_tiled(
     finish_densities(lid);
 }
 
-// The fluid sum of W (x) and the walls' sum of m W (y) over particle i's list: the candidates
-// and the order of the tiles' walk (a candidate the list leaves out lies beyond h, where W adds
-// an exact zero to the walk's sums), so the same sums bit for bit.
-fn listed_density_sums(xi: vec3<f32>, i: u32) -> vec2<f32> {
-    let counts = list_counts(i);
-    var w = vec2<f32>(0.0);
-    var at = vec3<u32>(0u);
-    var j = 0u;
-    while (next_listed(i, counts & 0xffffu, false, &at, &j)) {
-        let d = xi - positions_at(j).xyz;
-        w.x += kernel_w(dot(d, d));
-    }
-    if (WALLS) {
-        at = vec3<u32>(0u);
-        while (next_listed(i, counts >> 16u, true, &at, &j)) {
-            let p = wall_positions_at(j);  // w: mass
-            let d = xi - p.xyz;
-            w.y += p.w * kernel_w(dot(d, d));
-        }
-    }
-    return w;
+// Candidate j's terms over a list (shared/list_walk.wgsl): those of tile_candidate where it
+// is counted (a candidate the list leaves out lies beyond h, where W adds an exact zero to the
+// walk's sums).
+fn listed_fluid(sums: ptr<function, TileSums>, own: TileOwn, j: u32) {
+    let d = own.x - positions_at(j).xyz;
+    (*sums).w.x += kernel_w(dot(d, d));
+}
+
+fn listed_wall(sums: ptr<function, TileSums>, own: TileOwn, j: u32) {
+    let w = wall_positions_at(j);  // w: mass
+    let d = own.x - w.xyz;
+    (*sums).w.y += w.w * kernel_w(dot(d, d));
 }
 
 // With a neighbour skin, on the steps between rebuilds (built with RECORD_LISTS false): the
 // density over the lists of the last rebuild; a subgroup with a list that overflowed walks the
 // tiles, on the cells of the last rebuild, which hold every neighbour as the lists do
-// (neighbour_skin.wgsl). Each branch finishes its own sums (forces_tiled.wgsl says why).
+// (neighbour_skin.wgsl).
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn density_listed(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -112,18 +104,10 @@ fn density_listed(
 ) {
     reduce_begin(lid);
     let i = thread_index(gid, groups);
-    let p = tile_particle(i);
-    let xi = positions_at(p).xyz;
-    if (walks_lists(p)) {
-        let w = listed_density_sums(xi, p);
-        if (i < params.fluid_count) {
-            set_density(i, params.fluid_mass * w.x + w.y);
-        }
-    } else {
-        let sums = tile_walk(TileOwn(xi, i), cell_coords(xi), lane, i < params.fluid_count);
-        if (i < params.fluid_count) {
-            set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
-        }
+    let xi = positions_at(tile_particle(i)).xyz;
+    let sums = list_or_tile_walk(TileOwn(xi, i), i, tile_particle(i), cell_coords(xi), lane);
+    if (i < params.fluid_count) {
+        set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
     }
     finish_densities(lid);
 }

@@ -9,6 +9,7 @@
 //! include shared/tiles.wgsl
 //! include shared/tiles_walls.wgsl
 //! include shared/neighbour_lists.wgsl
+//! include shared/list_walk.wgsl
 
 // Lane k's candidate, for every invocation.
 fn shuffled_fluid(n: FluidCandidate, k: u32) -> FluidCandidate {
@@ -45,22 +46,13 @@ fn tile_wall_chunk(sums: ptr<function, ForceSums>, own: OwnParticle, j: u32, b: 
     //! unroll 8 add_wall_pair(sums, own, shuffled_wall(n, {k}u), in_span(b + {k}u, span));
 }
 
-// The sums over particle i's list, in the tiles' order.
-fn listed_sums(own: OwnParticle, i: u32) -> ForceSums {
-    let counts = list_counts(i);
-    var sums = no_sums();
-    var at = vec3<u32>(0u);
-    var j = 0u;
-    while (next_listed(i, counts & 0xffffu, false, &at, &j)) {
-        add_fluid_pair(&sums, own, fluid_candidate(j, positions_at(j).xyz), true);
-    }
-    if (WALLS) {
-        at = vec3<u32>(0u);
-        while (next_listed(i, counts >> 16u, true, &at, &j)) {
-            add_wall_pair(&sums, own, wall_candidate(j, wall_positions_at(j)), true);
-        }
-    }
-    return sums;
+// Candidate j's terms over a list (shared/list_walk.wgsl), in the tiles' order.
+fn listed_fluid(sums: ptr<function, ForceSums>, own: OwnParticle, j: u32) {
+    add_fluid_pair(sums, own, fluid_candidate(j, positions_at(j).xyz), true);
+}
+
+fn listed_wall(sums: ptr<function, ForceSums>, own: OwnParticle, j: u32) {
+    add_wall_pair(sums, own, wall_candidate(j, wall_positions_at(j)), true);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -75,7 +67,7 @@ fn forces_tiled(
     // compiled the acceleration's sum differently from the stage without lists, one unit in the
     // last place apart (tests/parity/tiles.rs, the scene with planes only).
     if (walks_lists(tile_particle(i))) {
-        let sums = listed_sums(own, tile_particle(i));
+        let sums = list_walk(own, tile_particle(i));
         if (i < params.fluid_count) {
             accelerations_set(i, finish_acceleration(own, sums));
         }

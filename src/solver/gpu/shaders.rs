@@ -21,6 +21,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("shared/tiles.wgsl", include_str!("../../../wgsl/shared/tiles.wgsl")),
     ("shared/tiles_walls.wgsl", include_str!("../../../wgsl/shared/tiles_walls.wgsl")),
     ("shared/neighbour_lists.wgsl", include_str!("../../../wgsl/shared/neighbour_lists.wgsl")),
+    ("shared/list_walk.wgsl", include_str!("../../../wgsl/shared/list_walk.wgsl")),
     ("shared/dfsph_tiles.wgsl", include_str!("../../../wgsl/shared/dfsph_tiles.wgsl")),
     ("sim/bin_count.wgsl", include_str!("../../../wgsl/sim/bin_count.wgsl")),
     ("sim/prefix_sum.wgsl", include_str!("../../../wgsl/sim/prefix_sum.wgsl")),

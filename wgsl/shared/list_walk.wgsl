@@ -1,0 +1,33 @@
+// The walk over one particle's neighbour list (shared/neighbour_lists.wgsl) in the weakly
+// compressible stages that walk lists (density_tiled.wgsl and continuity_tiled.wgsl between the
+// rebuilds of a neighbour skin, forces_tiled.wgsl every step). The including stage defines the
+// types TileOwn and TileSums and no_tile_sums() as for shared/tiles.wgsl, and
+// listed_fluid(sums, own, j) and listed_wall(sums, own, j), which add the terms of fluid (or
+// wall) candidate j. Its fluid entries, then its wall entries, each in the order of the tiles'
+// walk: a stage's fluid and wall sums are kept apart, so each is the walk's bit for bit.
+
+fn list_walk(own: TileOwn, i: u32) -> TileSums {
+    let counts = list_counts(i);
+    var sums = no_tile_sums();
+    var at = vec3<u32>(0u);
+    var j = 0u;
+    while (next_listed(i, counts & 0xffffu, false, &at, &j)) {
+        listed_fluid(&sums, own, j);
+    }
+    if (WALLS) {
+        at = vec3<u32>(0u);
+        while (next_listed(i, counts >> 16u, true, &at, &j)) {
+            listed_wall(&sums, own, j);
+        }
+    }
+    return sums;
+}
+
+// Particle i's sums (p: the particle its invocation takes, tile_particle(i)), over its list
+// where its subgroup walks lists (walks_lists), else over the tiles on the grid's cells.
+fn list_or_tile_walk(own: TileOwn, i: u32, p: u32, c: vec3<u32>, lane: u32) -> TileSums {
+    if (walks_lists(p)) {
+        return list_walk(own, p);
+    }
+    return tile_walk(own, c, lane, i < params.fluid_count);
+}
