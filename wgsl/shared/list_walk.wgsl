@@ -1,6 +1,7 @@
 // The walk over one particle's neighbour list (shared/neighbour_lists.wgsl) in the weakly
 // compressible stages that walk lists (density_tiled.wgsl and continuity_tiled.wgsl between the
-// rebuilds of a neighbour skin, forces_tiled.wgsl every step). The including stage defines the
+// rebuilds of a neighbour skin, forces_tiled.wgsl every step), and the tiled density stages'
+// choice of walk. The including stage defines the
 // types TileOwn and TileSums and no_tile_sums() as for shared/tiles.wgsl, and
 // listed_fluid(sums, own, j) and listed_wall(sums, own, j), which add the terms of fluid (or
 // wall) candidate j. Its fluid entries, then its wall entries, each in the order of the tiles'
@@ -30,4 +31,16 @@ fn list_or_tile_walk(own: TileOwn, i: u32, p: u32, c: vec3<u32>, lane: u32) -> T
         return list_walk(own, p);
     }
     return tile_walk(own, c, lane, i < params.fluid_count);
+}
+
+// The walk of a tiled density stage: where it records the lists (RECORD_LISTS, the default),
+// the tiles, recording as they go; between the rebuilds of a neighbour skin (built with
+// RECORD_LISTS false) the lists of the last rebuild, or the tiles on that rebuild's cells where
+// a list of the subgroup overflowed, which hold every neighbour as the lists do
+// (neighbour_skin.wgsl).
+fn density_walk(own: TileOwn, i: u32, c: vec3<u32>, lane: u32) -> TileSums {
+    if (RECORD_LISTS) {
+        return tile_walk(own, c, lane, i < params.fluid_count);
+    }
+    return list_or_tile_walk(own, i, tile_particle(i), c, lane);
 }

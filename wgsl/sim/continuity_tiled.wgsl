@@ -2,8 +2,9 @@
 // the pair terms of continuity.wgsl, the same sums in the same order as its
 // `continuity_density`, so its twin is the same, src/solver/cpu/continuity.rs. With
 // NEIGHBOUR_LISTS it also records each particle's neighbours for the forces
-// (shared/neighbour_lists.wgsl); with a neighbour skin, `continuity_listed` walks the lists of
-// the last rebuild instead on the steps between rebuilds. A file of its own since its subgroup operations need an
+// (shared/neighbour_lists.wgsl); with a neighbour skin, built with RECORD_LISTS false for the
+// steps between rebuilds, it walks the lists of the last rebuild instead
+// (shared/list_walk.wgsl). A file of its own since its subgroup operations need an
 // adapter with subgroups, which the other stages do not.
 
 //! include sim/continuity.wgsl
@@ -57,7 +58,7 @@ fn continuity_tiled(
     reduce_begin(lid);
     let i = thread_index(gid, groups);
     let own = rate_own(tile_particle(i));
-    let sums = tile_walk(TileOwn(own, i), cell_coords(own.x), lane, i < params.fluid_count);
+    let sums = density_walk(TileOwn(own, i), i, cell_coords(own.x), lane);
     if (i < params.fluid_count) {
         set_carried_density(i, finish_rate(sums.rate));
         finish_list(i, sums.list);
@@ -77,25 +78,4 @@ fn listed_wall(sums: ptr<function, TileSums>, own: TileOwn, j: u32) {
     var rate = (*sums).rate;
     add_wall_rate(&rate, own.rate, wall_positions_at(j), true);
     (*sums).rate = rate;
-}
-
-// With a neighbour skin, on the steps between rebuilds (built with RECORD_LISTS false): the
-// carried density advanced with the rate over the lists of the last rebuild, or over the tiles
-// on the rebuild's cells (density_tiled.wgsl's `density_listed` does the same for the summed
-// density).
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn continuity_listed(
-    @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-    @builtin(subgroup_invocation_id) lane: u32,
-) {
-    reduce_begin(lid);
-    let i = thread_index(gid, groups);
-    let own = rate_own(tile_particle(i));
-    let sums = list_or_tile_walk(TileOwn(own, i), i, tile_particle(i), cell_coords(own.x), lane);
-    if (i < params.fluid_count) {
-        set_carried_density(i, finish_rate(sums.rate));
-    }
-    finish_densities(lid);
 }

@@ -1,8 +1,9 @@
 // The density stage with the stencils of a subgroup walked together (shared/tiles.wgsl): the
 // same sums in the same order as density.wgsl's `density`, so its twin is the same,
 // src/solver/cpu/density.rs. With NEIGHBOUR_LISTS it also records each particle's neighbours
-// for the forces (shared/neighbour_lists.wgsl); with a neighbour skin, `density_listed` walks
-// the lists of the last rebuild instead on the steps between rebuilds. A file of its own since its subgroup operations
+// for the forces (shared/neighbour_lists.wgsl); with a neighbour skin, built with RECORD_LISTS
+// false for the steps between rebuilds, it walks the lists of the last rebuild instead
+// (shared/list_walk.wgsl). A file of its own since its subgroup operations
 // need an adapter with subgroups, which the other stages do not.
 
 //! include sim/density.wgsl
@@ -69,7 +70,7 @@ fn density_tiled(
     reduce_begin(lid);
     let i = thread_index(gid, groups);
     let xi = positions_at(tile_particle(i)).xyz;
-    let sums = tile_walk(TileOwn(xi, i), cell_coords(xi), lane, i < params.fluid_count);
+    let sums = density_walk(TileOwn(xi, i), i, cell_coords(xi), lane);
     if (i < params.fluid_count) {
         set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
         finish_list(i, sums.list);
@@ -89,25 +90,4 @@ fn listed_wall(sums: ptr<function, TileSums>, own: TileOwn, j: u32) {
     let w = wall_positions_at(j);  // w: mass
     let d = own.x - w.xyz;
     (*sums).w.y += w.w * kernel_w(dot(d, d));
-}
-
-// With a neighbour skin, on the steps between rebuilds (built with RECORD_LISTS false): the
-// density over the lists of the last rebuild; a subgroup with a list that overflowed walks the
-// tiles, on the cells of the last rebuild, which hold every neighbour as the lists do
-// (neighbour_skin.wgsl).
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn density_listed(
-    @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-    @builtin(subgroup_invocation_id) lane: u32,
-) {
-    reduce_begin(lid);
-    let i = thread_index(gid, groups);
-    let xi = positions_at(tile_particle(i)).xyz;
-    let sums = list_or_tile_walk(TileOwn(xi, i), i, tile_particle(i), cell_coords(xi), lane);
-    if (i < params.fluid_count) {
-        set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
-    }
-    finish_densities(lid);
 }

@@ -153,9 +153,8 @@ fn neighbour_lists(ctx: &GpuContext, params: &Params, walks_tiles: bool, options
 /// The weakly compressible step's own stages.
 pub(super) struct WcsphStages {
     pub density: Stage,
-    /// With a neighbour skin and lists: `density_listed` (density_tiled.wgsl) or with
-    /// continuity density `continuity_listed` (continuity_tiled.wgsl), which walk the lists of
-    /// the last rebuild on the steps between rebuilds.
+    /// With a neighbour skin and lists: the tiled density stage built with RECORD_LISTS false,
+    /// which walks the lists of the last rebuild on the steps between rebuilds.
     pub density_listed: Option<Stage>,
     /// With `boundary_pressure = "adami"`: the wall particles' pressure (wall_pressure.wgsl),
     /// after the density stage, one invocation per wall particle.
@@ -459,9 +458,9 @@ impl GpuSolver {
                             let mut c = sized(ws.density);
                             c.push(("RECORD_LISTS", 0.0));
                             Some(if params.continuity_density {
-                                stage("continuity_tiled", "continuity_listed", &len, &c)?
+                                stage("continuity_tiled", "continuity_tiled", &len, &c)?
                             } else {
-                                stage("density_tiled", "density_listed", &len, &c)?
+                                stage("density_tiled", "density_tiled", &len, &c)?
                             })
                         }
                         _ => None,
