@@ -1,11 +1,11 @@
 // The walk over one particle's neighbour list (shared/neighbour_lists.wgsl) in the weakly
 // compressible stages that walk lists (density_tiled.wgsl and continuity_tiled.wgsl between the
 // rebuilds of a neighbour skin, forces_tiled.wgsl every step), and the tiled density stages'
-// choice of walk. The including stage defines the
-// types TileOwn and TileSums and no_tile_sums() as for shared/tiles.wgsl, and
-// listed_fluid(sums, own, j) and listed_wall(sums, own, j), which add the terms of fluid (or
-// wall) candidate j. Its fluid entries, then its wall entries, each in the order of the tiles'
-// walk: a stage's fluid and wall sums are kept apart, so each is the walk's bit for bit.
+// choice of walk. The including stage defines the types TileOwn and TileSums and
+// no_tile_sums() as for shared/tiles.wgsl, and listed_fluid(sums, own, j) and
+// listed_wall(sums, own, j), which add the terms of fluid (or wall) candidate j. A list's
+// fluid entries, then its wall entries, each in the order of the tiles' walk: a stage's fluid
+// and wall sums are kept apart, so each is the walk's bit for bit.
 
 fn list_walk(own: TileOwn, i: u32) -> TileSums {
     let counts = list_counts(i);

@@ -3,8 +3,8 @@
 // src/solver/cpu/density.rs. With NEIGHBOUR_LISTS it also records each particle's neighbours
 // for the forces (shared/neighbour_lists.wgsl); with a neighbour skin, built with RECORD_LISTS
 // false for the steps between rebuilds, it walks the lists of the last rebuild instead
-// (shared/list_walk.wgsl). A file of its own since its subgroup operations
-// need an adapter with subgroups, which the other stages do not.
+// (shared/list_walk.wgsl). A file of its own since its subgroup operations need an adapter
+// with subgroups, which the other stages do not.
 
 //! include sim/density.wgsl
 //! include shared/tiles.wgsl

@@ -452,7 +452,6 @@ impl GpuSolver {
                     } else {
                         neighbour_stage("density", "density", ws.density)?
                     },
-                    // One invocation per wall particle, at the density stage's workgroup size.
                     density_listed: match (options.neighbour_skin, list_capacity) {
                         (Some(_), Some(_)) => {
                             let mut c = sized(ws.density);
@@ -465,6 +464,7 @@ impl GpuSolver {
                         }
                         _ => None,
                     },
+                    // One invocation per wall particle, at the density stage's workgroup size.
                     wall_pressure: if adami { Some(stage("wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
                     forces: neighbour_stage("forces", "forces", ws.forces)?,
                     advance: if fused {
