@@ -291,6 +291,11 @@ fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
         assert!(text(&o.stderr).contains("--neighbour-skin 0.1 cannot be used") && text(&o.stderr).contains("time.neighbour_rebuild_every = 2"), "{}", text(&o.stderr));
     }
     assert!(!dir.path().join("refused").exists());
+    // With a skin each step is submitted alone: --steps-per-submit would change nothing.
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--neighbour-skin", "0.1", "--steps-per-submit", "4", "--out", "refused"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--neighbour-skin") && text(&o.stderr).contains("--steps-per-submit"), "{}", text(&o.stderr));
+    assert!(!dir.path().join("refused").exists());
     let o = wgsph(&["profile", "dam_break", "--steps", "1", "--single-cells", "--subgroup-tiles"], dir.path());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--single-cells"), "{}", text(&o.stderr));

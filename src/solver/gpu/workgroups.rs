@@ -205,7 +205,9 @@ pub struct GpuOptions {
     /// last rebuild; in between the density walks the lists. The same neighbours, each summed
     /// in the order of its particle's walk, but with the particles in the order of the last
     /// rebuild, so not the bits of a run without. `None` (the default): rebuilt every step.
-    /// Weakly compressible scenes (summation or continuity density), on one device.
+    /// Weakly compressible scenes (summation or continuity density), on one device. Each step
+    /// is then submitted alone, whatever `steps_per_submit` says: the host reads whether the
+    /// next one rebuilds.
     pub neighbour_skin: Option<f64>,
 }
 
