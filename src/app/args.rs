@@ -6,7 +6,7 @@ use crate::io::snapshot::format::SnapshotFormat;
 use crate::model::scene::Scene;
 use crate::io::surface::MeshFormat;
 use crate::model::overrides::Override;
-use crate::solver::gpu::skin::MAX_SKIN;
+use crate::solver::gpu::skin::out_of_range;
 use crate::solver::gpu::{GpuOptions, SolverLoop, WorkgroupSizes};
 use crate::solver::{BackendChoice, Device, Precision};
 use crate::viz::render;
@@ -260,13 +260,12 @@ impl RunArgs {
     }
 }
 
-/// `--neighbour-skin`: a fraction of h above 0 and at most [`MAX_SKIN`].
+/// `--neighbour-skin`: a fraction of h in the range `skin::out_of_range` allows.
 fn parse_skin(text: &str) -> Result<f64, String> {
     let skin: f64 = text.parse().map_err(|_| format!("'{text}' is not a number (a fraction of the kernel's support h, e.g. 0.1)"))?;
-    if skin > 0.0 && skin <= MAX_SKIN {
-        Ok(skin)
-    } else {
-        Err(format!("{text} is not above 0 and at most {MAX_SKIN} (a fraction of the kernel's support h, e.g. 0.1)"))
+    match out_of_range(skin) {
+        Some(why) => Err(why),
+        None => Ok(skin),
     }
 }
 

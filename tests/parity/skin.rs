@@ -18,6 +18,11 @@ fn skin(options: GpuOptions) -> GpuOptions {
     GpuOptions { neighbour_skin: Some(SKIN), ..options }
 }
 
+/// `scene` on `ctx` with the skin and the other options' defaults.
+fn skinned(ctx: &wgsph::solver::gpu::GpuContext, scene: &Scene) -> wgsph::solver::gpu::GpuSolver {
+    common::gpu_with(ctx.clone(), scene, None, skin(GpuOptions::default())).unwrap()
+}
+
 fn scenes() -> Vec<(&'static str, Scene)> {
     let tank = || TestScene::small_tank();
     vec![
@@ -81,13 +86,12 @@ fn snapshots_leave_a_skinned_run_as_it_was() {
     // the next step would have, so a run read every few steps keeps the bits of one read once.
     let scene = Scene::load("dam_break").unwrap().with_fluid_particles(2000);
     for ctx in common::contexts() {
-        let open = || common::gpu_with(ctx.clone(), &scene, None, skin(GpuOptions::default())).unwrap();
-        let mut read_often = open();
+        let mut read_often = skinned(&ctx, &scene);
         for _ in 0..10 {
             read_often.step(7).unwrap();
             read_often.snapshot().unwrap();
         }
-        let mut read_once = open();
+        let mut read_once = skinned(&ctx, &scene);
         read_once.step(70).unwrap();
         assert!(read_often.snapshot().unwrap() == read_once.snapshot().unwrap(), "on {}: snapshots changed the run's bits", ctx.describe());
         let rebuilds = |s: &wgsph::solver::gpu::GpuSolver| s.neighbour_skin().expect("a skin").1;
@@ -99,12 +103,11 @@ fn snapshots_leave_a_skinned_run_as_it_was() {
 fn a_run_resumed_with_a_skin_keeps_the_bits() {
     let scene = Scene::load("dam_break").unwrap().with_fluid_particles(2000);
     for ctx in common::contexts() {
-        let open = || common::gpu_with(ctx.clone(), &scene, None, skin(GpuOptions::default())).unwrap();
-        let mut first = open();
+        let mut first = skinned(&ctx, &scene);
         first.step(25).unwrap();
         let saved = first.save_state().unwrap();
         first.step(25).unwrap();
-        let mut resumed = open();
+        let mut resumed = skinned(&ctx, &scene);
         resumed.restore_state(&saved).unwrap();
         resumed.step(25).unwrap();
         assert_eq!(first.neighbour_skin().map(|s| s.0), resumed.neighbour_skin().map(|s| s.0));

@@ -546,13 +546,13 @@ impl GpuSolver {
         let mut left = n;
         // Without a schedule the viscosity never changes: no per-step look-up.
         let scheduled = self.params.viscosity.len() > 1;
+        // With a skin the host reads each step's check before recording the next.
+        let per_submit = if self.skin.is_some() { 1 } else { self.steps_per_submit };
         while left > 0 {
             let nu = self.params.viscosity_at_step(self.steps);
             self.set_viscosity(nu);
             let mut rec = PlainRecorder::new(&self.ctx.device, "steps");
             let mut batch = 0;
-            // With a skin the host reads each step's check before recording the next.
-            let per_submit = if self.skin.is_some() { 1 } else { self.steps_per_submit };
             while batch < left.min(per_submit) {
                 if scheduled && batch > 0 && self.params.viscosity_at_step(self.steps) != nu {
                     break;

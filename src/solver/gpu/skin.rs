@@ -9,12 +9,17 @@ use super::shaders::Stage;
 use crate::model::params::Params;
 
 /// The largest skin, as a fraction of h: the cells are then twice the kernel's support.
-pub const MAX_SKIN: f64 = 1.0;
+const MAX_SKIN: f64 = 1.0;
+
+/// Why `skin` is no skin (the command line's check, and the solver's), or `None`.
+pub fn out_of_range(skin: f64) -> Option<String> {
+    (!(skin > 0.0 && skin <= MAX_SKIN)).then(|| format!("--neighbour-skin is {skin}; it must be above 0 and at most {MAX_SKIN} (a fraction of the kernel's support h, e.g. 0.1)"))
+}
 
 /// Why a scene cannot run with a neighbour skin of `skin` h, or `None`.
 pub fn refusal(params: &Params, skin: f64, across_ranks: bool) -> Option<String> {
-    if !(skin > 0.0 && skin <= MAX_SKIN) {
-        return Some(format!("--neighbour-skin is {skin}; it must be above 0 and at most {MAX_SKIN} (a fraction of the kernel's support h, e.g. 0.1)"));
+    if let Some(why) = out_of_range(skin) {
+        return Some(why);
     }
     let why = if params.dfsph.is_some() {
         "the scene uses DFSPH (physics.solver = \"dfsph\"), whose factors record their own lists every step"
