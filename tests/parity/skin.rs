@@ -1,5 +1,6 @@
 //! The neighbour skin (wgsl/sim/neighbour_skin.wgsl): the grid, the particles' order and the
-//! neighbour lists kept between rebuilds, rebuilt once a particle has moved half the skin. With
+//! neighbour lists kept between rebuilds, rebuilt once they may miss a neighbour (the check
+//! decides as its twin does). With
 //! a skin the tiled density walking the lists, the tiles alone and one particle per invocation
 //! give the same bits; the run follows the one without a skin to the rounding of its sums;
 //! snapshots leave its bits as they were, and a run resumed from a saved state keeps the bits of
@@ -77,6 +78,41 @@ fn a_skin_keeps_every_neighbour() {
             let gap = largest_gap(&plain.positions, &state.positions);
             assert!(gap < 1e-3 * h, "{name} on {}: with the skin a particle ends {gap} m from its place without (h = {h})", ctx.describe());
         }
+    }
+}
+
+/// The GPU's check (wgsl/sim/neighbour_skin.wgsl) and its twin decide alike after every step:
+/// the twin, given the positions after each step and those of the last rebuild, says whether
+/// the next step rebuilds, and the GPU's rebuilds follow it (a snapshot makes the rebuild that
+/// is due, so the count after it tells the GPU's decision).
+#[test]
+fn the_check_decides_as_its_twin() {
+    use wgsph::solver::cpu::neighbour_skin::{check_skin, skin_reach};
+    use wgsph::model::real::V3;
+    let scene = Scene::load("dam_break").unwrap().with_fluid_particles(2000);
+    let reach = skin_reach::<f32>(SKIN, scene.physics.smoothing_length);
+    let as_f32 = |p: &[[f64; 3]]| p.iter().map(|x| V3(x.map(|v| v as f32))).collect::<Vec<_>>();
+    for ctx in common::contexts() {
+        let mut solver = skinned(&ctx, &scene);
+        let rebuilds = |s: &wgsph::solver::gpu::GpuSolver| s.neighbour_skin().expect("a skin").1;
+        let mut rebuild_positions = as_f32(&solver.snapshot().unwrap().positions);
+        assert_eq!(rebuilds(&solver), 1, "on {}: the first snapshot rebuilds", ctx.describe());
+        let (mut due_count, mut kept_count) = (0, 0);
+        for step in 1..=80 {
+            solver.step(1).unwrap();
+            let before = rebuilds(&solver);
+            let positions = as_f32(&solver.snapshot().unwrap().positions);
+            let gpu_due = rebuilds(&solver) > before;
+            let twin_due = check_skin(&positions, &rebuild_positions, reach).rebuild_due(reach);
+            assert_eq!(gpu_due, twin_due, "on {}: after step {step} the GPU's check and its twin disagree", ctx.describe());
+            if twin_due {
+                rebuild_positions = positions;
+                due_count += 1;
+            } else {
+                kept_count += 1;
+            }
+        }
+        assert!(due_count > 0 && kept_count > 0, "on {}: {due_count} rebuilds and {kept_count} steps without", ctx.describe());
     }
 }
 

@@ -164,7 +164,7 @@ impl MemoryPlan {
     pub fn with_neighbour_skin(mut self, fluid: u64, skin: bool) -> MemoryPlan {
         if skin {
             self.buffers.push(PlannedBuffer { label: "rebuild positions", bytes: padded(fluid * 16), bytes_per_fluid_particle: 16, single_binding: false });
-            self.buffers.push(PlannedBuffer { label: "skin check", bytes: 16, bytes_per_fluid_particle: 0, single_binding: true });
+            self.buffers.push(PlannedBuffer { label: "skin check", bytes: super::skin::CHECK_BYTES, bytes_per_fluid_particle: 0, single_binding: true });
         }
         self
     }

@@ -283,7 +283,7 @@ impl GpuSolver {
         // This step's counts of bad particles start from zero.
         rec.clear(&self.status, status::NON_FINITE as u64 * 4, Some(8));
         if let Some(skin) = &self.skin {
-            rec.clear(&skin.left, 0, Some(4));
+            rec.clear(&skin.left, 0, None);
         }
         rec.begin(ProfiledStage::Density);
         self.dispatch_particles(rec, density, density_group);
@@ -317,8 +317,8 @@ impl GpuSolver {
         }
         dispatch_one(rec, &self.pipelines.finish_step, &self.finish_group);
         self.current = self.store.after_integration(read);
-        // With a skin: whether a particle has moved half of it since the rebuild (read by the
-        // host after the step, see `GpuSolver::read_skin_check`).
+        // With a skin: how far the particles have moved since the rebuild (read by the host
+        // after the step, see `read_skin_check`).
         if let Some(skin) = &self.skin {
             self.dispatch_particles(rec, &skin.check, &skin.groups[self.current]);
         }
@@ -360,12 +360,13 @@ impl GpuSolver {
     }
 
     /// With a skin, after a step has been submitted: reads its check and makes the next step
-    /// rebuild where a particle has moved half the skin (or where the check cannot be read).
+    /// rebuild where the lists may miss a neighbour (`SkinCheck::rebuild_due`; or where the
+    /// check cannot be read).
     pub(super) fn read_skin_check(&self) {
         let Some(skin) = &self.skin else { return };
-        match read_ranges(&self.ctx, &[(&skin.left, 0, 4)]) {
+        match read_ranges(&self.ctx, &[(&skin.left, 0, super::skin::CHECK_BYTES)]) {
             Ok(data) => {
-                if data[0].iter().any(|&b| b != 0) {
+                if super::skin::read_check(&data[0]).rebuild_due(skin.reach) {
                     skin.rebuild_due.set(true);
                 }
             }

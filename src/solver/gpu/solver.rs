@@ -615,14 +615,19 @@ impl GpuSolver {
         let skin = match options.neighbour_skin {
             Some(fraction) => {
                 let rebuild_positions = storage(device, "rebuild positions", n * 16);
-                let left = storage(device, "skin check", 16);
+                let left = storage(device, "skin check", super::skin::CHECK_BYTES);
                 let skin_len = |name: &str| match name {
                     "skin_left" => 0,
                     other => len(other),
                 };
                 let mut c = sized(ws.integrate);
-                c.push(("SKIN", fraction));
-                let check = stage("neighbour_skin", "check_skin", &skin_len, &c)?;
+                c.push(("SKIN", fraction * crate::solver::cpu::neighbour_skin::SKIN_MARGIN));
+                // One workgroup atomic a subgroup where the adapter has subgroups, else one an invocation.
+                let check = if device.features().contains(wgpu::Features::SUBGROUP) {
+                    stage("neighbour_skin_subgroups", "check_skin_subgroups", &skin_len, &c)?
+                } else {
+                    stage("neighbour_skin", "check_skin", &skin_len, &c)?
+                };
                 let groups = (0..store.phases())
                     .map(|c| {
                         let b = buffers(c);
@@ -636,6 +641,7 @@ impl GpuSolver {
                     .collect();
                 Some(super::skin::NeighbourSkin {
                     fraction,
+                    reach: crate::solver::cpu::neighbour_skin::skin_reach(fraction, params.h),
                     rebuild_positions,
                     left,
                     check,
