@@ -1,10 +1,10 @@
 //! The neighbour skin (wgsl/sim/neighbour_skin.wgsl): the grid, the particles' order and the
 //! neighbour lists kept between rebuilds, rebuilt once they may miss a neighbour (the check
-//! decides as its twin does). With
-//! a skin the tiled density walking the lists, the tiles alone and one particle per invocation
-//! give the same bits; the run follows the one without a skin to the rounding of its sums;
-//! snapshots leave its bits as they were, and a run resumed from a saved state keeps the bits of
-//! the run that saved it; a scene it cannot serve is refused by name.
+//! decides as its twin does). With a skin the tiled density walking the lists, the tiles alone
+//! and one particle per invocation give the same bits; the run follows the one without a skin
+//! to the rounding of its sums; snapshots leave its bits as they were, and a run resumed from a
+//! saved state keeps the bits of the run that saved it; a scene it cannot serve is refused by
+//! name.
 
 use crate::common;
 use crate::common::TestScene;

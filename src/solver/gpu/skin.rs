@@ -55,6 +55,29 @@ pub fn refusal(params: &Params, skin: f64, across_ranks: bool) -> Option<String>
     Some(format!("--neighbour-skin {skin} cannot be used: {why}; it needs a weakly compressible scene on one device"))
 }
 
+/// The skin's state on the device and on the host.
+pub(super) struct NeighbourSkin {
+    /// The skin, a fraction of h.
+    pub fraction: f64,
+    /// Each fluid particle's position at the last rebuild, in the order of that rebuild.
+    pub rebuild_positions: wgpu::Buffer,
+    /// The check's distance: the skin, less its margin, times h.
+    pub reach: f32,
+    /// What the check gathers (cleared before each step): a word, 1 once a particle has moved
+    /// `reach`, and the keys of the smallest and largest displacements (`read_check`).
+    pub left: wgpu::Buffer,
+    pub check: Stage,
+    /// The check's bind groups, per phase of the state store.
+    pub groups: Vec<wgpu::BindGroup>,
+    /// Whether the next step (or the fields of a snapshot) rebuilds: before the first, after a
+    /// particle left the skin, and after the state was saved or restored (a checkpoint, a
+    /// restart), so that a run resumed from a saved state rebuilds where the run that saved it
+    /// did. A snapshot does not make one: it leaves the run's bits as they were.
+    pub rebuild_due: Cell<bool>,
+    /// Rebuilds so far.
+    pub rebuilds: Cell<u64>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -82,27 +105,4 @@ mod tests {
         assert_eq!(check, SkinCheck { moved_far: false, extent: Some(([-0.5, 1.0, 0.25], [2.0, 3.0, 4.0])) });
         assert_eq!(read_check(&[0u8; 32]), SkinCheck { moved_far: false, extent: None });
     }
-}
-
-/// The skin's state on the device and on the host.
-pub(super) struct NeighbourSkin {
-    /// The skin, a fraction of h.
-    pub fraction: f64,
-    /// Each fluid particle's position at the last rebuild, in the order of that rebuild.
-    pub rebuild_positions: wgpu::Buffer,
-    /// The check's distance: the skin, less its margin, times h.
-    pub reach: f32,
-    /// What the check gathers (cleared before each step): a word, 1 once a particle has moved
-    /// `reach`, and the keys of the smallest and largest displacements (`read_check`).
-    pub left: wgpu::Buffer,
-    pub check: Stage,
-    /// The check's bind groups, per phase of the state store.
-    pub groups: Vec<wgpu::BindGroup>,
-    /// Whether the next step (or the fields of a snapshot) rebuilds: before the first, after a
-    /// particle left the skin, and after the state was saved or restored (a checkpoint, a
-    /// restart), so that a run resumed from a saved state rebuilds where the run that saved it
-    /// did. A snapshot does not make one: it leaves the run's bits as they were.
-    pub rebuild_due: Cell<bool>,
-    /// Rebuilds so far.
-    pub rebuilds: Cell<u64>,
 }

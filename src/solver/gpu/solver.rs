@@ -622,7 +622,8 @@ impl GpuSolver {
                 };
                 let mut c = sized(ws.integrate);
                 c.push(("SKIN", fraction * crate::solver::cpu::neighbour_skin::SKIN_MARGIN));
-                // One workgroup atomic a subgroup where the adapter has subgroups, else one an invocation.
+                // Where the adapter has subgroups, each subgroup offers its extent once; elsewhere
+                // each invocation offers its own.
                 let check = if device.features().contains(wgpu::Features::SUBGROUP) {
                     stage("neighbour_skin_subgroups", "check_skin_subgroups", &skin_len, &c)?
                 } else {

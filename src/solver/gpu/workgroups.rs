@@ -202,7 +202,8 @@ pub struct GpuOptions {
     /// A neighbour skin, as a fraction of h (wgsl/sim/neighbour_skin.wgsl): the grid's cells
     /// h (1 + skin) wide, the lists holding the candidates within h (1 + skin), and both
     /// rebuilt, with the particles' order, only once a particle has moved skin h since the last
-    /// rebuild or two may have closed in by that much (wgsl/sim/neighbour_skin.wgsl); in between the density walks the lists. The same neighbours, each summed
+    /// rebuild or two may have closed in by that much (wgsl/sim/neighbour_skin.wgsl); in
+    /// between the density walks the lists. The same neighbours, each summed
     /// in the order of its particle's walk, but with the particles in the order of the last
     /// rebuild, so not the bits of a run without. `None` (the default): rebuilt every step.
     /// Weakly compressible scenes (summation or continuity density), on one device. Each step
