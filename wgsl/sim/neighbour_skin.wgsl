@@ -55,9 +55,8 @@ fn offer_key(word: u32, key: u32) {
     }
 }
 
-// Each invocation offers its particle's displacement; neighbour_skin_subgroups.wgsl has the
-// variant for adapters with subgroups, which offers one extent a subgroup (a software adapter
-// pays for each access to the words lane by lane).
+// Each invocation offers its particle's displacement. (Gathering a subgroup's extent first, so
+// that one invocation in eight reads the shared words, measured no faster on lavapipe.)
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn check_skin(
     @builtin(global_invocation_id) gid: vec3<u32>,

@@ -49,7 +49,6 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/wall_pressure.wgsl", include_str!("../../../wgsl/sim/wall_pressure.wgsl")),
     ("sim/fields.wgsl", include_str!("../../../wgsl/sim/fields.wgsl")),
     ("sim/neighbour_skin.wgsl", include_str!("../../../wgsl/sim/neighbour_skin.wgsl")),
-    ("sim/neighbour_skin_subgroups.wgsl", include_str!("../../../wgsl/sim/neighbour_skin_subgroups.wgsl")),
     ("sim/ghost_velocities.wgsl", include_str!("../../../wgsl/sim/ghost_velocities.wgsl")),
 ];
 

@@ -622,13 +622,7 @@ impl GpuSolver {
                 };
                 let mut c = sized(ws.integrate);
                 c.push(("SKIN", fraction * crate::solver::cpu::neighbour_skin::SKIN_MARGIN));
-                // Where the adapter has subgroups, each subgroup offers its extent once; elsewhere
-                // each invocation offers its own.
-                let check = if device.features().contains(wgpu::Features::SUBGROUP) {
-                    stage("neighbour_skin_subgroups", "check_skin_subgroups", &skin_len, &c)?
-                } else {
-                    stage("neighbour_skin", "check_skin", &skin_len, &c)?
-                };
+                let check = stage("neighbour_skin", "check_skin", &skin_len, &c)?;
                 let groups = (0..store.phases())
                     .map(|c| {
                         let b = buffers(c);
