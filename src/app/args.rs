@@ -298,8 +298,8 @@ pub struct GpuTuning {
     /// to the next, with cells and lists reaching h (1 + SKIN) (a fraction of the kernel's
     /// support, above 0 and at most 1; e.g. 0.1), and rebuild only once a particle has moved
     /// SKIN h, or two may have closed in by it: the same neighbours, summed in another order.
-    /// Weakly compressible scenes on one device. Each step is then submitted alone (the host reads whether the next one
-    /// rebuilds), so it cannot go with --steps-per-submit.
+    /// Weakly compressible scenes on one device. Each step is then submitted alone (the host
+    /// reads whether the next one rebuilds), so it cannot go with --steps-per-submit.
     #[arg(long, value_name = "SKIN", value_parser = parse_skin, conflicts_with = "steps_per_submit")]
     pub neighbour_skin: Option<f64>,
     /// Threads per workgroup: one size for every particle stage (`64`), or some stages' sizes

@@ -24,6 +24,11 @@ fn skinned(ctx: &wgsph::solver::gpu::GpuContext, scene: &Scene) -> wgsph::solver
     common::gpu_with(ctx.clone(), scene, None, skin(GpuOptions::default())).unwrap()
 }
 
+/// The rebuilds a skinned solver has made so far.
+fn rebuilds(solver: &wgsph::solver::gpu::GpuSolver) -> u64 {
+    solver.neighbour_skin().expect("a skin").1
+}
+
 fn scenes() -> Vec<(&'static str, Scene)> {
     let tank = || TestScene::small_tank();
     vec![
@@ -94,7 +99,6 @@ fn the_check_decides_as_its_twin() {
     let as_f32 = |p: &[[f64; 3]]| p.iter().map(|x| V3(x.map(|v| v as f32))).collect::<Vec<_>>();
     for ctx in common::contexts() {
         let mut solver = skinned(&ctx, &scene);
-        let rebuilds = |s: &wgsph::solver::gpu::GpuSolver| s.neighbour_skin().expect("a skin").1;
         let mut rebuild_positions = as_f32(&solver.snapshot().unwrap().positions);
         assert_eq!(rebuilds(&solver), 1, "on {}: the first snapshot rebuilds", ctx.describe());
         let (mut due_count, mut kept_count) = (0, 0);
@@ -130,7 +134,6 @@ fn snapshots_leave_a_skinned_run_as_it_was() {
         let mut read_once = skinned(&ctx, &scene);
         read_once.step(70).unwrap();
         assert!(read_often.snapshot().unwrap() == read_once.snapshot().unwrap(), "on {}: snapshots changed the run's bits", ctx.describe());
-        let rebuilds = |s: &wgsph::solver::gpu::GpuSolver| s.neighbour_skin().expect("a skin").1;
         assert_eq!(rebuilds(&read_often), rebuilds(&read_once), "on {}", ctx.describe());
     }
 }

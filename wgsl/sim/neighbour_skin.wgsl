@@ -8,7 +8,7 @@
 // diagonal under s h (|d_i - d_j| is at most that diagonal): a block that moves as one keeps its
 // lists, where a test of |d_i| against s h / 2 alone would rebuild. After each step this stage
 // gathers both, and the host rebuilds before the next step where either reaches s h (less a
-// margin, SKIN_MARGIN in src/solver/cpu/neighbour_skin.rs). Twin: src/solver/cpu/neighbour_skin.rs.
+// margin, SKIN_MARGIN). Twin: src/solver/cpu/neighbour_skin.rs.
 
 //! include shared/common.wgsl
 //! array positions: vec4<f32>, read
@@ -38,14 +38,13 @@ fn displacement(i: u32) -> vec3<f32> {
     return d;
 }
 
-// Offers the smallest (lo) and largest (hi) displacements of some particles to the shared
-// words. The keys only grow, so a key at or below the word's is not offered: after the first
-// workgroups almost every offer is a plain load, not an atomic write that the other cores
-// must wait for.
-fn offer_extent(lo: vec3<f32>, hi: vec3<f32>) {
+// Offers displacement d to the box's words. The keys only grow, so a key at or below the
+// word's is not offered: after the first workgroups almost every offer is a plain load, not an
+// atomic write that the other cores must wait for.
+fn offer_displacement(d: vec3<f32>) {
     for (var axis = 0u; axis < 3u; axis++) {
-        offer_key(1u + axis, order_key(-lo[axis]));
-        offer_key(4u + axis, order_key(hi[axis]));
+        offer_key(1u + axis, order_key(-d[axis]));
+        offer_key(4u + axis, order_key(d[axis]));
     }
 }
 
@@ -64,7 +63,6 @@ fn check_skin(
 ) {
     let i = thread_index(gid, groups);
     if (i < params.fluid_count) {
-        let d = displacement(i);
-        offer_extent(d, d);
+        offer_displacement(displacement(i));
     }
 }

@@ -20,7 +20,7 @@ fn from_order_key(key: u32) -> f32 {
 
 /// The check's words as the CPU twin gathers them (no extent where no particle offered one).
 pub(super) fn read_check(bytes: &[u8]) -> SkinCheck<f32> {
-    let words: Vec<u32> = bytes.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    let words: Vec<u32> = bytemuck::pod_collect_to_vec(bytes);
     let keys = &words[1..7];
     let extent = keys.iter().all(|&k| k != 0).then(|| {
         let lo = [0, 1, 2].map(|axis| -from_order_key(keys[axis]));
