@@ -104,6 +104,8 @@ pub fn block_scene(n: u32) -> Scene {
 pub struct BenchRow {
     pub path: String,
     pub adapter: String,
+    /// The GPU driver and its version (empty on the CPU paths).
+    pub driver: String,
     pub fluid_particles: usize,
     pub wall_particles: usize,
     pub steps: u64,
@@ -148,6 +150,7 @@ fn measure(path: &str, scene: &Scene, choice: &BackendChoice, steps: u64, n: u32
     Ok(BenchRow {
         path: path.into(),
         adapter: backend.adapter(),
+        driver: backend.driver(),
         fluid_particles: fluid,
         wall_particles: backend.wall_count(),
         steps,
@@ -194,6 +197,17 @@ pub fn table(rows: &[BenchRow]) -> String {
             "{:<15} {:<48} {:>8} {:>6} {:>9.3} {:>12.3e} {:>9} {:>8} {:>13} {:>9} {:>12} {:>6}\n",
             r.path, r.adapter, r.fluid_particles, r.steps, r.seconds, r.particle_steps_per_second, bytes, ratio, iterations, cpu, per_cpu, load
         );
+    }
+    // Two drivers of one adapter share its name (two Mesa releases' llvmpipe, say): each
+    // adapter's driver once, under the table.
+    let mut drivers: Vec<(&str, &str)> = Vec::new();
+    for r in rows.iter().filter(|r| !r.driver.is_empty()) {
+        if !drivers.contains(&(r.adapter.as_str(), r.driver.as_str())) {
+            drivers.push((&r.adapter, &r.driver));
+        }
+    }
+    for (adapter, driver) in drivers {
+        s += &format!("driver of {adapter}: {driver}\n");
     }
     s
 }

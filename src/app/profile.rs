@@ -53,6 +53,9 @@ pub struct BufferMemory {
 pub struct Profile {
     pub scene: String,
     pub adapter: String,
+    /// The driver and its version, as the adapter reports them.
+    #[serde(default)]
+    pub driver: String,
     /// "timestamp queries" or "host (whole steps, submit and wait)".
     pub timing: String,
     /// How the neighbour stages walk the neighbours: "subgroup tiles of 8" (with ", and
@@ -288,6 +291,7 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
     Ok(Profile {
         scene: scene.name.clone(),
         adapter: gpu.adapter(),
+        driver: gpu.driver(),
         timing: timing.into(),
         neighbour_loops: match (gpu.subgroup_tiles(), gpu.neighbour_list_usage()?) {
             (true, Some(u)) => format!(
@@ -323,9 +327,13 @@ impl Profile {
     /// The table `wgsph profile` prints.
     pub fn table(&self) -> String {
         let mut s = format!(
-            "{}: {} fluid + {} wall particles, {} cells, {} steps on {}\ntiming: {}\nneighbour loops: {}\n",
-            self.scene, self.fluid_particles, self.wall_particles, self.grid_cells, self.steps, self.adapter, self.timing, self.neighbour_loops
+            "{}: {} fluid + {} wall particles, {} cells, {} steps on {}\n",
+            self.scene, self.fluid_particles, self.wall_particles, self.grid_cells, self.steps, self.adapter
         );
+        if !self.driver.is_empty() {
+            s += &format!("driver: {}\n", self.driver);
+        }
+        s += &format!("timing: {}\nneighbour loops: {}\n", self.timing, self.neighbour_loops);
         s += &format!("{:<16} {:>12} {:>8} {:>14} {:>10}\n", "stage", "µs/step", "share %", "bytes/step", "GB/s");
         for st in &self.stages {
             s += &format!(

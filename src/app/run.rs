@@ -364,6 +364,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         scene: scene.name.clone(),
         backend: backend.kind().into(),
         adapter: backend.adapter(),
+        driver: backend.driver(),
         fluid_particles: backend.fluid_count(),
         wall_particles: backend.wall_count(),
         steps,

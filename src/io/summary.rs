@@ -29,6 +29,9 @@ pub struct Summary {
     pub scene: String,
     pub backend: String,
     pub adapter: String,
+    /// The GPU driver and its version (empty on the CPU path).
+    #[serde(default)]
+    pub driver: String,
     pub fluid_particles: usize,
     pub wall_particles: usize,
     pub steps: u64,

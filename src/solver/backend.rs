@@ -121,6 +121,10 @@ pub trait Backend {
     fn kind(&self) -> &'static str;
     /// The adapter name, or "cpu".
     fn adapter(&self) -> String;
+    /// The GPU driver and its version where the adapter reports them; empty on the CPU path.
+    fn driver(&self) -> String {
+        String::new()
+    }
     fn params(&self) -> &Params;
     fn fluid_count(&self) -> usize;
     fn wall_count(&self) -> usize;

@@ -59,7 +59,10 @@ fn bench_times_each_path_asked_for_and_writes_the_figures() {
         assert!(r["cpu_seconds"].as_f64().unwrap() > 0.0, "{r}");
         // No peer figure was measured at n = 6.
         assert!(r["ratio_to_splishsplash"].is_null());
+        // The CPU paths have no driver, so the table names none.
+        assert_eq!(r["driver"], "", "{r}");
     }
+    assert!(!stdout.contains("driver of"), "{stdout}");
     let bad = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["bench", "--paths", "cpu-f16"]).output().unwrap();
     assert_eq!(bad.status.code(), Some(2));
 }
@@ -74,6 +77,13 @@ fn the_gpu_path_runs_with_and_without_subgroup_tiles() {
         assert!(out.status.success(), "{extra:?}: {}", String::from_utf8_lossy(&out.stderr));
         let stdout = String::from_utf8_lossy(&out.stdout);
         assert!(stdout.lines().any(|l| l.starts_with("gpu ")), "{extra:?}: {stdout}");
+        // The adapter's name does not say which driver ran it (two Mesa releases' llvmpipe
+        // share one); the line under the table does, as the adapter reports it.
+        let drivers: Vec<String> = crate::common::contexts().iter().map(|c| c.driver()).filter(|d| !d.is_empty()).collect();
+        if !drivers.is_empty() {
+            let line = stdout.lines().find(|l| l.starts_with("driver of ")).unwrap_or_else(|| panic!("{extra:?}: no driver line: {stdout}"));
+            assert!(drivers.iter().any(|d| line.ends_with(&format!(": {d}"))), "{line} names none of {drivers:?}");
+        }
     }
 }
 

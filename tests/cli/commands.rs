@@ -90,6 +90,9 @@ fn gpu_run_writes_the_same_outputs_as_cpu() {
     let (sc, sg) = (summary(&c), summary(&g));
     assert_eq!((sc.steps, sc.fluid_particles, sc.wall_particles), (sg.steps, sg.fluid_particles, sg.wall_particles));
     assert_eq!(sg.backend, "gpu");
+    // The GPU run keeps the driver that ran it (as an adapter reports it); the CPU run none.
+    assert!(common::contexts().iter().any(|c| c.driver() == sg.driver), "{}", sg.driver);
+    assert_eq!(sc.driver, "");
     assert!((sc.max_density_ratio - sg.max_density_ratio).abs() < 1e-4);
     let (a, b) = (read_snapshot_csv(&c.join("snapshots/step_000030.csv")).unwrap(), read_snapshot_csv(&g.join("snapshots/step_000030.csv")).unwrap());
     assert_eq!(a.len(), b.len());

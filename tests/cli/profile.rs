@@ -136,6 +136,10 @@ fn profile_command_prints_the_table_and_writes_json() {
     let p: Profile = serde_json::from_str(&std::fs::read_to_string(dir.path().join("p/profile.json")).unwrap()).unwrap();
     assert_eq!(p.scene, "dam_break");
     assert_eq!(p.steps, 2);
+    // The driver that ran it, as one of the adapters reports it, in the file and the table.
+    let drivers: Vec<String> = common::contexts().iter().map(|c| c.driver()).collect();
+    assert!(drivers.contains(&p.driver), "{} is none of {drivers:?}", p.driver);
+    assert_eq!(text.lines().any(|l| l == format!("driver: {}", p.driver)), !p.driver.is_empty(), "{text}");
     for s in &p.stages {
         assert!(text.contains(&s.stage), "{} missing from the table", s.stage);
     }

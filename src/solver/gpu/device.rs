@@ -285,6 +285,13 @@ impl GpuContext {
     pub fn describe(&self) -> String {
         format!("{} ({:?}, {:?})", self.info.name, self.info.backend, self.info.device_type)
     }
+
+    /// The driver and its version as the adapter reports them ("llvmpipe Mesa 25.0.7 (LLVM
+    /// 15.0.6)", "NVIDIA 580.159.04"); empty where it reports none. Two drivers of one adapter
+    /// share its name, and a timing or a bit-for-bit result belongs to the driver too.
+    pub fn driver(&self) -> String {
+        format!("{} {}", self.info.driver, self.info.driver_info).trim().to_string()
+    }
 }
 
 /// One line per adapter with the limits that matter for big scenes (`wgsph adapters`).

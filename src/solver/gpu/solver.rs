@@ -1107,6 +1107,9 @@ impl Backend for GpuSolver {
     fn adapter(&self) -> String {
         self.ctx.describe()
     }
+    fn driver(&self) -> String {
+        self.ctx.driver()
+    }
     fn params(&self) -> &Params {
         &self.params
     }
