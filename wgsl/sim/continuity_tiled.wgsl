@@ -9,6 +9,7 @@
 
 //! include sim/continuity.wgsl
 //! include shared/tiles.wgsl
+//! include shared/density_write_tiled.wgsl
 //! include shared/tiles_walls.wgsl
 //! include shared/neighbour_lists.wgsl
 //! include shared/list_walk.wgsl
@@ -52,10 +53,8 @@ fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, 
 fn continuity_tiled(
     @builtin(global_invocation_id) gid: vec3<u32>,
     @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
     @builtin(subgroup_invocation_id) lane: u32,
 ) {
-    reduce_begin(lid);
     let i = thread_index(gid, groups);
     let own = rate_own(tile_particle(i));
     let sums = density_walk(TileOwn(own, i), i, cell_coords(own.x), lane);
@@ -63,7 +62,7 @@ fn continuity_tiled(
         set_carried_density(i, finish_rate(sums.rate));
         finish_list(i, sums.list);
     }
-    finish_densities(lid);
+    finish_densities_in_subgroup(lane);
 }
 
 // Candidate j's terms over a list (shared/list_walk.wgsl): those of the tiles' chunks where it

@@ -8,6 +8,7 @@
 
 //! include sim/density.wgsl
 //! include shared/tiles.wgsl
+//! include shared/density_write_tiled.wgsl
 //! include shared/tiles_walls.wgsl
 //! include shared/neighbour_lists.wgsl
 //! include shared/list_walk.wgsl
@@ -64,10 +65,8 @@ fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, 
 fn density_tiled(
     @builtin(global_invocation_id) gid: vec3<u32>,
     @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
     @builtin(subgroup_invocation_id) lane: u32,
 ) {
-    reduce_begin(lid);
     let i = thread_index(gid, groups);
     let xi = positions_at(tile_particle(i)).xyz;
     let sums = density_walk(TileOwn(xi, i), i, cell_coords(xi), lane);
@@ -75,7 +74,7 @@ fn density_tiled(
         set_density(i, params.fluid_mass * sums.w.x + sums.w.y);
         finish_list(i, sums.list);
     }
-    finish_densities(lid);
+    finish_densities_in_subgroup(lane);
 }
 
 // Candidate j's terms over a list (shared/list_walk.wgsl): those of tile_candidate where it

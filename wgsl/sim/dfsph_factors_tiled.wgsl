@@ -7,6 +7,7 @@
 
 //! include sim/dfsph_factors.wgsl
 //! include shared/tiles.wgsl
+//! include shared/density_write_tiled.wgsl
 //! include shared/tiles_walls.wgsl
 //! include shared/neighbour_lists.wgsl
 
@@ -47,10 +48,8 @@ fn tile_wall_chunk(sums: ptr<function, TileSums>, own: TileOwn, j: u32, b: u32, 
 fn factors_tiled(
     @builtin(global_invocation_id) gid: vec3<u32>,
     @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
     @builtin(subgroup_invocation_id) lane: u32,
 ) {
-    reduce_begin(lid);
     let i = thread_index(gid, groups);
     let p = positions_at(tile_particle(i));
     let sums = tile_walk(TileOwn(p.xyz, i), cell_coords(p.xyz), lane, i < params.fluid_count);
@@ -58,5 +57,5 @@ fn factors_tiled(
         finish_factors(i, p, sums.factors);
         finish_list(i, sums.list);
     }
-    finish_densities(lid);
+    finish_densities_in_subgroup(lane);
 }

@@ -469,6 +469,9 @@ impl GpuSolver {
                     forces: neighbour_stage("forces", "forces", ws.forces)?,
                     advance: if fused {
                         stage("forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
+                    } else if tiles {
+                        // Its largest speed over a subgroup, without the workgroup's barriers.
+                        stage_in_place("integrate_tiled", "integrate_tiled", &len, &sized(ws.integrate))?
                     } else {
                         stage_in_place("integrate", "integrate", &len, &sized(ws.integrate))?
                     },
