@@ -2,9 +2,9 @@
 // dfsph_factors_tiled.wgsl): the largest over the subgroup, into the status words by one of its
 // invocations, in place of shared/density_write.wgsl's workgroup reduction. That one needs two
 // workgroup barriers, and lavapipe runs a shader with a barrier as coroutines, one per SIMD
-// batch, suspended and resumed at the barrier: the tiled density stage took 1.3 times as long
-// as the forces with them, 0.75-0.9 times without (BENCHMARKS.md). Each key only grows, so a
-// subgroup whose largest does not pass the step's word reads it and writes nothing.
+// batch, suspended and resumed at the barrier: on Mesa 26.2 the tiled density stage took 1.3
+// times as long as the forces with them, 0.7-0.9 times without (BENCHMARKS.md). Each key only
+// grows, so a subgroup whose largest does not pass the step's word reads it and writes nothing.
 
 // Every invocation of the subgroup, in uniform control flow, after its offer_density.
 fn finish_densities_in_subgroup(lane: u32) {
