@@ -7,6 +7,7 @@
 // with subgroups, which integrate.wgsl does not.
 
 //! include sim/integrate.wgsl
+//! include shared/status_max.wgsl
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn integrate_tiled(
@@ -19,10 +20,9 @@ fn integrate_tiled(
     if (i < params.fluid_count) {
         speed = advance_particle(i, accelerations_at(i), step_dt());
     }
-    // The speeds' bits order like them (infinity above every finite speed); a key only grows,
-    // so a subgroup below the step's word reads it and writes nothing.
+    // The speeds' bits order like them (infinity above every finite speed).
     let largest = subgroupMax(bitcast<u32>(speed));
-    if (lane == 0u && largest > atomicLoad(&status[STATUS_STEP_MAX_SPEED])) {
-        atomicMax(&status[STATUS_STEP_MAX_SPEED], largest);
+    if (lane == 0u) {
+        raise_status_word(STATUS_STEP_MAX_SPEED, largest);
     }
 }

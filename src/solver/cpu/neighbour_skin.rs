@@ -8,10 +8,15 @@ use crate::model::real::{Real, V3};
 /// of the lists (h (1 + skin)) or of the rebuild's cells.
 pub const SKIN_MARGIN: f64 = 0.99;
 
+/// The skin as the check tests it, a fraction of h less the margin (the GPU check's `SKIN`).
+pub fn checked_skin(skin: f64) -> f64 {
+    skin * SKIN_MARGIN
+}
+
 /// The distance `check_skin` tests against: `skin` h, less the margin (in `R` as the GPU
 /// computes it, its override times h).
 pub fn skin_reach<R: Real>(skin: f64, h: f64) -> R {
-    R::of(skin * SKIN_MARGIN) * R::of(h)
+    R::of(checked_skin(skin)) * R::of(h)
 }
 
 /// What `check_skin` gathers over the fluid particles.

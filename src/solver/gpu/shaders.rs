@@ -19,6 +19,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("shared/adaptive_dt.wgsl", include_str!("../../../wgsl/shared/adaptive_dt.wgsl")),
     ("shared/density_write.wgsl", include_str!("../../../wgsl/shared/density_write.wgsl")),
     ("shared/density_write_tiled.wgsl", include_str!("../../../wgsl/shared/density_write_tiled.wgsl")),
+    ("shared/status_max.wgsl", include_str!("../../../wgsl/shared/status_max.wgsl")),
     ("shared/tiles.wgsl", include_str!("../../../wgsl/shared/tiles.wgsl")),
     ("shared/tiles_walls.wgsl", include_str!("../../../wgsl/shared/tiles_walls.wgsl")),
     ("shared/neighbour_lists.wgsl", include_str!("../../../wgsl/shared/neighbour_lists.wgsl")),

@@ -624,7 +624,7 @@ impl GpuSolver {
                     other => len(other),
                 };
                 let mut c = sized(ws.integrate);
-                c.push(("SKIN", fraction * crate::solver::cpu::neighbour_skin::SKIN_MARGIN));
+                c.push(("SKIN", crate::solver::cpu::neighbour_skin::checked_skin(fraction)));
                 let check = stage("neighbour_skin", "check_skin", &skin_len, &c)?;
                 let groups = (0..store.phases())
                     .map(|c| {
