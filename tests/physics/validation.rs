@@ -133,6 +133,11 @@ fn buchner_p1_wall_pressure() {
         assert!(first_wet(4) <= first_wet(2), "{backend}: 0.2 H wet at {}, P1 at {}", first_wet(4), first_wet(2));
         let lower = r.figure("at 0.2 H: arrival (first p > 0.1 rho g H), t sqrt(g/H)").unwrap();
         assert!(lower.value < r.figure("simulated arrival, t sqrt(g/H)").unwrap().value, "{backend}: {lower:?}");
+        // The window's RMS is a weighted mean of its two parts' squares, so it lies between them.
+        let rms = |name: &str| r.figure(name).unwrap().value;
+        let (first, after) = (rms("RMS difference over the first impact (t sqrt(g/H) < 4) / rho g H (20 ms mean)"), rms("RMS difference after the first impact (t sqrt(g/H) >= 4) / rho g H (20 ms mean)"));
+        let whole = rms("RMS difference over the measured window / rho g H (20 ms mean)");
+        assert!(first.min(after) <= whole && whole <= first.max(after), "{backend}: {first} {after} {whole}");
     }
 }
 
