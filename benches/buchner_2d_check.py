@@ -60,6 +60,9 @@ TAIT, CLAMP = args.tait, args.clamp
 B_TAIT = RHO0 * C0 * C0 / 7.0
 SIGMA = 10.0 / (7.0 * math.pi * H * H)  # cubic spline, 2D
 LAYERS = 5
+# More than the particles a support of radius 2h = 4 spacings can hold (about 50, more when
+# compressed).
+NEIGHBOURS_MAX = 256
 
 fluid = np.array([(x, y) for x in np.arange(DX / 2, WIDTH, DX) for y in np.arange(DX / 2, HEIGHT, DX)])
 walls = []
@@ -115,6 +118,24 @@ def cell_of(x, y):
 
 
 @numba.njit
+def within_support(pos, order, start, x, y, found):
+    """Writes the indices of the particles closer than 2h to (x, y) into `found`; their number."""
+    cx, cy = cell_of(x, y)
+    count = 0
+    for ix in range(max(cx - 1, 0), min(cx + 2, NCX)):
+        for iy in range(max(cy - 1, 0), min(cy + 2, NCY)):
+            c = ix * NCY + iy
+            for k in range(start[c], start[c + 1]):
+                j = order[k]
+                if (pos[j, 0] - x) ** 2 + (pos[j, 1] - y) ** 2 < 4.0 * H * H:
+                    if count == found.shape[0]:
+                        raise ValueError('more neighbours than NEIGHBOURS_MAX')
+                    found[count] = j
+                    count += 1
+    return count
+
+
+@numba.njit
 def bin_particles(pos):
     cells = np.empty(pos.shape[0], np.int64)
     for i in range(pos.shape[0]):
@@ -132,22 +153,18 @@ def bin_particles(pos):
 @numba.njit
 def wall_pressure(pos, rho, p, order, start):
     """Adami, Hu & Adams (2012) Eq. 27 with a wall at rest: the fluid's pressure and weight."""
+    found = np.empty(NEIGHBOURS_MAX, np.int64)
     for w in range(N_FLUID, pos.shape[0]):
-        cx, cy = cell_of(pos[w, 0], pos[w, 1])
         weight = 0.0
         summed = 0.0
-        for ix in range(max(cx - 1, 0), min(cx + 2, NCX)):
-            for iy in range(max(cy - 1, 0), min(cy + 2, NCY)):
-                c = ix * NCY + iy
-                for k in range(start[c], start[c + 1]):
-                    j = order[k]
-                    if j >= N_FLUID:
-                        continue
-                    dy = pos[w, 1] - pos[j, 1]
-                    r = math.hypot(pos[w, 0] - pos[j, 0], dy)
-                    wk = kernel(r)
-                    weight += wk
-                    summed += (p[j] - GRAVITY * rho[j] * dy) * wk
+        for k in range(within_support(pos, order, start, pos[w, 0], pos[w, 1], found)):
+            j = found[k]
+            if j >= N_FLUID:
+                continue
+            dy = pos[w, 1] - pos[j, 1]
+            wk = kernel(math.hypot(pos[w, 0] - pos[j, 0], dy))
+            weight += wk
+            summed += (p[j] - GRAVITY * rho[j] * dy) * wk
         p[w] = summed / weight if weight > 0.0 else 0.0
         if TAIT:
             rho[w] = RHO0 * max(1.0 + p[w] / B_TAIT, 1e-3) ** (1.0 / 7.0)
@@ -158,50 +175,45 @@ def wall_pressure(pos, rho, p, order, start):
 @numba.njit
 def interactions(pos, vel, rho, p, order, start, acceleration, density_rate, forces):
     """The forces (when `forces`) or the density rate of each fluid particle."""
+    found = np.empty(NEIGHBOURS_MAX, np.int64)
     for i in range(N_FLUID):
-        cx, cy = cell_of(pos[i, 0], pos[i, 1])
         ax, ay, drho = 0.0, -GRAVITY, 0.0
-        for ix in range(max(cx - 1, 0), min(cx + 2, NCX)):
-            for iy in range(max(cy - 1, 0), min(cy + 2, NCY)):
-                c = ix * NCY + iy
-                for k in range(start[c], start[c + 1]):
-                    j = order[k]
-                    if j == i:
-                        continue
-                    rx, ry = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
-                    r2 = rx * rx + ry * ry
-                    if r2 >= 4.0 * H * H:
-                        continue
-                    f = gradient_over_r(math.sqrt(r2))
-                    gx, gy = f * rx, f * ry
-                    fluid_j = j < N_FLUID
-                    vx = vel[i, 0] - (vel[j, 0] if fluid_j else 0.0)
-                    vy = vel[i, 1] - (vel[j, 1] if fluid_j else 0.0)
-                    volume = MASS / rho[j]
-                    if forces:
-                        pf = (p[i] + p[j]) / (rho[i] * rho[j])
-                        ax -= MASS * pf * gx
-                        ay -= MASS * pf * gy
-                        if fluid_j:
-                            vr = vx * rx + vy * ry
-                            if ALPHA > 0.0 and vr < 0.0:
-                                # Monaghan (1992): Pi_ij = -alpha c0 mu_ij / rho_ij
-                                mu = H * vr / (r2 + 0.01 * H * H)
-                                pi_ij = -ALPHA * C0 * mu / (0.5 * (rho[i] + rho[j]))
-                                ax -= MASS * pi_ij * gx
-                                ay -= MASS * pi_ij * gy
-                            if NU > 0.0:
-                                # Morris, Fox & Zhu (1997)
-                                coef = 2.0 * NU * volume * (rx * gx + ry * gy) / (r2 + 0.01 * H * H)
-                                ax += coef * vx
-                                ay += coef * vy
-                    else:
-                        drho += rho[i] * (vx * gx + vy * gy) * volume
-                        if fluid_j:
-                            # Molteni & Colagrossi (2009), less the hydrostatic difference
-                            # rho0 g (y_i - y_j) / c0^2 (Fourtakas et al. 2019)
-                            diff = (rho[j] - rho[i]) - RHO0 * GRAVITY * ry / (C0 * C0)
-                            drho += DELTA * H * C0 * 2.0 * diff / r2 * (-(rx * gx + ry * gy)) * volume
+        for k in range(within_support(pos, order, start, pos[i, 0], pos[i, 1], found)):
+            j = found[k]
+            if j == i:
+                continue
+            rx, ry = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
+            r2 = rx * rx + ry * ry
+            f = gradient_over_r(math.sqrt(r2))
+            gx, gy = f * rx, f * ry
+            fluid_j = j < N_FLUID
+            vx = vel[i, 0] - (vel[j, 0] if fluid_j else 0.0)
+            vy = vel[i, 1] - (vel[j, 1] if fluid_j else 0.0)
+            volume = MASS / rho[j]
+            if forces:
+                pf = (p[i] + p[j]) / (rho[i] * rho[j])
+                ax -= MASS * pf * gx
+                ay -= MASS * pf * gy
+                if fluid_j:
+                    vr = vx * rx + vy * ry
+                    if ALPHA > 0.0 and vr < 0.0:
+                        # Monaghan (1992): Pi_ij = -alpha c0 mu_ij / rho_ij
+                        mu = H * vr / (r2 + 0.01 * H * H)
+                        pi_ij = -ALPHA * C0 * mu / (0.5 * (rho[i] + rho[j]))
+                        ax -= MASS * pi_ij * gx
+                        ay -= MASS * pi_ij * gy
+                    if NU > 0.0:
+                        # Morris, Fox & Zhu (1997)
+                        coef = 2.0 * NU * volume * (rx * gx + ry * gy) / (r2 + 0.01 * H * H)
+                        ax += coef * vx
+                        ay += coef * vy
+            else:
+                drho += rho[i] * (vx * gx + vy * gy) * volume
+                if fluid_j:
+                    # Molteni & Colagrossi (2009), less the hydrostatic difference
+                    # rho0 g (y_i - y_j) / c0^2 (Fourtakas et al. 2019)
+                    diff = (rho[j] - rho[i]) - RHO0 * GRAVITY * ry / (C0 * C0)
+                    drho += DELTA * H * C0 * 2.0 * diff / r2 * (-(rx * gx + ry * gy)) * volume
         if forces:
             acceleration[i, 0] = ax
             acceleration[i, 1] = ay
@@ -213,20 +225,17 @@ def interactions(pos, vel, rho, p, order, start, acceleration, density_rate, for
 def wall_readings(pos, rho, p, order, start, heights):
     """Shepard-normalised kernel average of the fluid's pressure on the far wall."""
     out = np.zeros(heights.shape[0])
+    found = np.empty(NEIGHBOURS_MAX, np.int64)
     for q in range(heights.shape[0]):
-        cx, cy = cell_of(LENGTH, heights[q])
         weight = 0.0
         summed = 0.0
-        for ix in range(max(cx - 1, 0), min(cx + 2, NCX)):
-            for iy in range(max(cy - 1, 0), min(cy + 2, NCY)):
-                c = ix * NCY + iy
-                for k in range(start[c], start[c + 1]):
-                    j = order[k]
-                    if j >= N_FLUID:
-                        continue
-                    wk = kernel(math.hypot(LENGTH - pos[j, 0], heights[q] - pos[j, 1])) * MASS / rho[j]
-                    weight += wk
-                    summed += wk * p[j]
+        for k in range(within_support(pos, order, start, LENGTH, heights[q], found)):
+            j = found[k]
+            if j >= N_FLUID:
+                continue
+            wk = kernel(math.hypot(LENGTH - pos[j, 0], heights[q] - pos[j, 1])) * MASS / rho[j]
+            weight += wk
+            summed += wk * p[j]
         out[q] = summed / weight if weight > 0.0 else 0.0
     return out
 
