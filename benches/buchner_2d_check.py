@@ -26,6 +26,9 @@ Output: a CSV of the time (s) and the fluid's pressure (Pa) on the far wall at h
 
     pip install numpy numba
     python3 benches/buchner_2d_check.py --per-height 30 --out buchner_2d.csv   # about 2 minutes
+    # the settings of wgsph's buchner_p1 case instead of Marrone et al.'s:
+    python3 benches/buchner_2d_check.py --tait --clamp --laplacian-alpha 0.05 \
+        --artificial-viscosity 0 --sound-speed 14.1421356 --out buchner_2d_case.csv
 """
 import argparse
 import math
