@@ -71,7 +71,9 @@ fn a_still_tank_with_diffusion_keeps_its_hydrostatic_density() {
     let steps = (0.4 / scene.time.dt) as u64;
     let rho0 = scene.physics.rest_density;
     let mut backends: Vec<(String, Box<dyn Backend>)> = vec![];
-    for ctx in common::contexts() {
+    // The first adapter found: what a second adapter would add (the same WGSL through another
+    // driver) tests/parity checks on every adapter (docs/testing.md: the suite's time budget).
+    for ctx in common::contexts().into_iter().take(1) {
         backends.push((ctx.describe(), Box::new(common::gpu(GpuContext::from_adapter(ctx.adapter.clone()).unwrap(), &scene))));
     }
     if backends.is_empty() {
