@@ -58,9 +58,8 @@ fn a_skin_keeps_every_neighbour() {
     for (k, ctx) in common::contexts().into_iter().enumerate() {
         let tiles = ctx.subgroup_tiles_unavailable().is_none();
         for (i, (name, scene)) in scenes().into_iter().enumerate() {
-            // The first adapter runs every scene; another (the same WGSL through another
-            // driver; OpenGL's llvmpipe steps about three times slower than lavapipe) the
-            // scenes whose terms cover the others' (docs/testing.md: the suite's time budget).
+            // The first adapter runs every scene, another (the same WGSL through another
+            // driver) those of `WALKS_COMPARED_ON` (docs/testing.md: the suite's time budget).
             if k > 0 && !WALKS_COMPARED_ON.contains(&i) {
                 continue;
             }
@@ -76,11 +75,10 @@ fn a_skin_keeps_every_neighbour() {
             // The first step rebuilds; the particles move, so some later ones do, but not all.
             assert!(rebuilds >= 1 && rebuilds < steps, "{name} on {}: {rebuilds} rebuilds in {steps} steps", ctx.describe());
             // The lists of the last rebuild, the tiles on its cells and one particle per
-            // invocation on them: the same neighbours in the same order, the same bits. On the
-            // scenes whose terms cover the others' (Adami wall pressure with artificial
-            // viscosity, continuity density with diffusion, the dam break's walls and
-            // viscosity): the walks are the same code for every scene, and each walk against
-            // the others on every term is tests/parity/tiles.rs's (the suite's time budget).
+            // invocation on them: the same neighbours in the same order, the same bits. The
+            // walks are the same code for every scene, so they are compared on the scenes whose
+            // terms cover the others'; each walk against the others on every term without a
+            // skin is tests/parity/tiles.rs's.
             let mut others = vec![];
             if WALKS_COMPARED_ON.contains(&i) {
                 others.push((skin(GpuOptions { subgroup_tiles: Some(false), ..GpuOptions::default() }), "one particle per invocation"));
