@@ -197,24 +197,29 @@ pub fn compare(
     }
 }
 
-/// Advances both backends by `steps` more steps and compares them there: the fields of the last
-/// step, then the state after it (in that order, since a snapshot re-evaluates density).
+/// Advances a backend by `steps` more steps and reads what `compare` compares: the fields of the
+/// last step, then the state after it (in that order, since a snapshot re-evaluates density).
+pub fn step_and_read(backend: &mut dyn Backend, steps: u64) -> anyhow::Result<(StepFields, Snapshot)> {
+    backend.step(steps)?;
+    let fields = backend.step_fields()?;
+    Ok((fields, backend.snapshot()?))
+}
+
+/// Advances both backends by `steps` more steps and compares them there.
 pub fn step_and_compare(
     test: &mut dyn Backend,
     reference: &mut dyn Backend,
     steps: u64,
     tol: &Tolerances,
 ) -> anyhow::Result<Comparison> {
-    test.step(steps)?;
-    reference.step(steps)?;
+    let (tf, ts) = step_and_read(test, steps)?;
+    let (rf, rs) = step_and_read(reference, steps)?;
     anyhow::ensure!(
         test.steps_done() == reference.steps_done(),
         "the backends stopped at different steps ({} and {})",
         test.steps_done(),
         reference.steps_done()
     );
-    let (tf, rf) = (test.step_fields()?, reference.step_fields()?);
-    let (ts, rs) = (test.snapshot()?, reference.snapshot()?);
     let params = reference.params().clone();
     Ok(compare(&params, reference.steps_done(), tol, (&tf, &ts), (&rf, &rs)))
 }

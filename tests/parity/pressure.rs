@@ -6,8 +6,7 @@ use crate::common;
 use crate::common::TestScene;
 
 use wgsph::model::scene::{BoundaryPressure, Scene};
-use wgsph::model::state::{Snapshot, StepFields};
-use wgsph::solver::compare::{compare, MANY_STEPS, ONE_STEP};
+use wgsph::solver::compare::{compare, step_and_read, MANY_STEPS, ONE_STEP};
 use wgsph::solver::gpu::{GpuContext, GpuOptions};
 use wgsph::solver::Backend;
 
@@ -25,12 +24,6 @@ fn variants() -> Vec<(&'static str, Scene)> {
     ]
 }
 
-/// The fields of the next `steps` steps' last one and the state after them.
-fn after(b: &mut dyn Backend, steps: u64) -> (StepFields, Snapshot) {
-    b.step(steps).unwrap();
-    (b.step_fields().unwrap(), b.snapshot().unwrap())
-}
-
 /// The variants (indices into `variants`) whose fused form runs on every adapter: the two that
 /// carry every term between them (Adami's wall pressure with continuity density and diffusion,
 /// and everything else). The first adapter runs every variant in both forms.
@@ -42,7 +35,7 @@ fn each_option_agrees_with_the_f64_cpu_path_fused_and_in_two_passes() {
     for (i, (name, scene)) in variants().into_iter().enumerate() {
         // The reference after 1 and after 100 steps, computed once for every GPU run.
         let mut cpu = common::cpu::<f64>(&scene);
-        let (one, hundred) = (after(&mut cpu, 1), after(&mut cpu, 99));
+        let (one, hundred) = (step_and_read(&mut cpu, 1).unwrap(), step_and_read(&mut cpu, 99).unwrap());
         let params = cpu.params().clone();
         for (k, ctx) in contexts.iter().enumerate() {
             // Another adapter (the same WGSL through another driver; OpenGL's llvmpipe steps
@@ -54,11 +47,11 @@ fn each_option_agrees_with_the_f64_cpu_path_fused_and_in_two_passes() {
                 let device = GpuContext::from_adapter(ctx.adapter.clone()).unwrap();
                 let mut gpu = common::gpu_with(device, &scene, None, options).unwrap();
                 let who = format!("{name} (fused {fuse}) on {}", ctx.describe());
-                let (fields, state) = after(&mut gpu, 1);
+                let (fields, state) = step_and_read(&mut gpu, 1).unwrap();
                 let c = compare(&params, 1, &ONE_STEP, (&fields, &state), (&one.0, &one.1));
                 assert!(c.field("density").max < 1e-5, "{who}\n{}", c.table());
                 assert!(c.passed(), "{who}\n{}", c.table());
-                let (fields, state) = after(&mut gpu, 99);
+                let (fields, state) = step_and_read(&mut gpu, 99).unwrap();
                 assert_eq!(gpu.steps_done(), 100, "{who}");
                 let c = compare(&params, 100, &MANY_STEPS, (&fields, &state), (&hundred.0, &hundred.1));
                 assert!(c.passed(), "{who}\n{}", c.table());
