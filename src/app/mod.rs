@@ -1,5 +1,6 @@
-//! The `wgsph` command line: parsing, the commands, and the exit codes. Nothing imports this
-//! floor; it imports every other.
+//! The `wgsph` command line: parsing, the commands, and the exit codes. Nothing but the
+//! executables (src/main.rs, and mpi/src/main.rs for `wgsph-mpi`) imports this floor; it
+//! imports every other.
 
 pub mod args;
 pub mod bench;
@@ -23,13 +24,18 @@ use errors::InputError;
 /// 0 success, 1 a run that went bad or a failed check, 2 bad input, 130 / 143 a run stopped
 /// by SIGINT / SIGTERM.
 pub fn main() -> i32 {
+    main_joining_ranks(None)
+}
+
+/// [`main`] for an executable that can join the ranks an MPI launcher started (`wgsph-mpi`).
+pub fn main_joining_ranks(join: Option<ranks::Join>) -> i32 {
     quiet_wayland_probe();
     let cli = Cli::parse();
     let quiet = matches!(&cli.command, Some(Command::Run(a)) if a.quiet);
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(if quiet { "error" } else { "warn" })).init();
     let result = match cli.command {
         None => first_run::cmd_first_run(),
-        Some(command) => run_command(command),
+        Some(command) => run_command(command, join),
     };
     match result {
         Ok(code) => code,
@@ -65,7 +71,7 @@ fn quiet_wayland_probe() {
 #[cfg(not(unix))]
 fn quiet_wayland_probe() {}
 
-fn run_command(command: Command) -> anyhow::Result<i32> {
+fn run_command(command: Command, join: Option<ranks::Join>) -> anyhow::Result<i32> {
     let name = match &command {
         Command::Run(_) => "run",
         Command::Compare(_) => "compare",
@@ -77,7 +83,7 @@ fn run_command(command: Command) -> anyhow::Result<i32> {
         Command::Adapters => "adapters",
         Command::Scenes => "scenes",
     };
-    let ranks = ranks::start(name)?;
+    let ranks = ranks::start(name, join)?;
     match command {
         Command::Run(args) => ranks::run_as_rank(ranks, |ranks| match &args.resume {
             Some(dir) => resume::resume_run(dir, &args, ranks),

@@ -1,32 +1,29 @@
-//! `mpirun -np N wgsph run ...`: the ranks of a run started by an MPI launcher. A build with
-//! the `mpi` feature joins them into one simulation; a build without it says so instead of
-//! running N copies of the whole scene side by side. See docs/scale-out.md.
+//! `mpirun -np N wgsph-mpi run ...`: the ranks of a run started by an MPI launcher. `wgsph-mpi`
+//! joins them into one simulation; plain `wgsph` says so instead of running N copies of the
+//! whole scene side by side. See docs/scale-out.md.
 
 use super::errors::InputError;
 use crate::solver::communicator::launched_ranks;
 use crate::solver::Ranks;
 
+/// How an executable joins the ranks an MPI launcher started: `wgsph-mpi` (the `mpi/` crate)
+/// passes one that initialises MPI; plain `wgsph` has none and refuses a multi-rank launch. The
+/// MPI binding lives outside this crate so that the simulator builds once, with or without MPI.
+pub type Join = fn(ranks: usize) -> anyhow::Result<Ranks>;
+
 /// The ranks of this process: `None` alone, else its rank of the simulation across all of them.
-pub fn start(command: &str) -> anyhow::Result<Option<Ranks>> {
+pub fn start(command: &str, join: Option<Join>) -> anyhow::Result<Option<Ranks>> {
     let Some(n) = launched_ranks() else { return Ok(None) };
     if command != "run" {
         return Err(InputError(format!("`wgsph {command}` was started as one of {n} processes by an MPI launcher; only `wgsph run` runs across ranks: start it without mpirun")).into());
     }
-    join(n)
-}
-
-#[cfg(feature = "mpi")]
-fn join(_n: usize) -> anyhow::Result<Option<Ranks>> {
-    let comm = crate::solver::mpi::MpiCommunicator::init()?;
-    Ok(Some(Ranks::new(std::sync::Arc::new(comm))))
-}
-
-#[cfg(not(feature = "mpi"))]
-fn join(n: usize) -> anyhow::Result<Option<Ranks>> {
-    Err(InputError(format!(
-        "this wgsph was started as one of {n} processes by an MPI launcher (OMPI_COMM_WORLD_SIZE / PMI_SIZE is set), but it was built without MPI, so each process would run the whole scene on its own: build it with `cargo build --release --features mpi` (needs Open MPI and libclang), or run it without mpirun"
-    ))
-    .into())
+    match join {
+        Some(join) => Ok(Some(join(n)?)),
+        None => Err(InputError(format!(
+            "this wgsph was started as one of {n} processes by an MPI launcher (OMPI_COMM_WORLD_SIZE / PMI_SIZE is set), but it is built without MPI, so each process would run the whole scene on its own: build wgsph-mpi with `cargo build --release -p wgsph-mpi` (needs Open MPI and libclang) and start target/release/wgsph-mpi with mpirun, or run wgsph without mpirun"
+        ))
+        .into()),
+    }
 }
 
 /// Runs `work` as this rank. Across ranks an error on one rank stops every rank (MPI_Abort),

@@ -1,7 +1,7 @@
 //! How the ranks of one simulation talk: the [`Communicator`] trait the exchange stage and the
 //! global decisions use, and [`LocalGroup`], ranks as threads of one process (the tests run N
 //! ranks against one rank with it, without MPI). The MPI implementation is
-//! `solver::mpi` (cargo feature `mpi`). See docs/scale-out.md.
+//! the `wgsph-mpi` crate's (`mpi/src/communicator.rs`), outside this crate. See docs/scale-out.md.
 
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};

@@ -9,8 +9,6 @@ pub mod compare;
 pub mod cpu;
 pub mod decomposition;
 pub mod gpu;
-#[cfg(feature = "mpi")]
-pub mod mpi;
 pub mod simulation;
 
 pub use backend::{id_block, Backend, DfsphStage, SnapshotPiece, SnapshotRow, StateArray, StatePiece, StateSource, WholeState};

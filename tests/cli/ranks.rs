@@ -5,8 +5,8 @@
 //! seconds with a resumable checkpoint, an error on one rank stops all of them naming it, and a
 //! build without MPI refuses a multi-rank launch.
 //!
-//! MPI starts once per process, so these run `mpirun` on a wgsph built with `--features mpi`,
-//! found through WGSPH_MPI_BIN (.ci/run builds it). Without mpirun or that binary the tests say
+//! MPI starts once per process, so these run `mpirun` on `wgsph-mpi` (the mpi/ crate), found
+//! through WGSPH_MPI_BIN (.ci/run builds it). Without mpirun or that binary the tests say
 //! SKIPPED, unless WGSPH_REQUIRE_MPI is set (CI sets it): then they fail.
 
 use std::path::{Path, PathBuf};
@@ -31,7 +31,7 @@ fn mpi() -> Option<(PathBuf, PathBuf)> {
     match std::env::var_os("WGSPH_MPI_BIN").map(PathBuf::from) {
         Some(bin) if bin.is_file() => Some((mpirun, bin)),
         Some(bin) => missing(format!("WGSPH_MPI_BIN names {}, which is not a file", bin.display())),
-        None => missing("WGSPH_MPI_BIN does not name a wgsph built with --features mpi".into()),
+        None => missing("WGSPH_MPI_BIN does not name a wgsph-mpi (cargo build --release -p wgsph-mpi)".into()),
     }
 }
 
@@ -285,11 +285,7 @@ fn a_killed_rank_stops_every_rank_and_the_checkpoint_resumes() {
 
 #[test]
 fn a_build_without_mpi_refuses_a_multi_rank_launch() {
-    // As mpirun would start it: the launcher's variables set, this test's wgsph built without
-    // the feature.
-    if cfg!(feature = "mpi") {
-        return;
-    }
+    // As mpirun would start it: the launcher's variables set, plain wgsph (not wgsph-mpi).
     let tmp = tempfile::tempdir().unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_wgsph"))
         .args(["run", "dam_break", "--steps", "1", "--out", "o"])
@@ -299,7 +295,7 @@ fn a_build_without_mpi_refuses_a_multi_rank_launch() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("built without MPI") && err.contains("--features mpi"), "{err}");
+    assert!(err.contains("built without MPI") && err.contains("cargo build --release -p wgsph-mpi"), "{err}");
     assert!(!tmp.path().join("o").exists(), "nothing written");
 }
 

@@ -1,7 +1,8 @@
-//! The ranks' [`super::communicator::Communicator`] over MPI (cargo feature `mpi`): one rank per process, started by
-//! `mpirun` (Open MPI, MPICH or any MPI the `mpi` crate builds against). See docs/scale-out.md.
+//! The ranks' [`Communicator`](wgsph::solver::Communicator) over MPI: one rank per process,
+//! started by `mpirun` (Open MPI, MPICH or any MPI the `mpi` crate builds against). See
+//! docs/scale-out.md.
 
-use super::communicator::Communicator as RankCommunicator;
+use wgsph::solver::Communicator as RankCommunicator;
 use mpi::datatype::{Partition, PartitionMut};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
