@@ -194,15 +194,19 @@ fn run_bits(ctx: &GpuContext, scene: &Scene, steps: u64, options: GpuOptions) ->
 
 /// The solves' errors are integer sums, so a GPU run repeats bit for bit; every way of ending
 /// the loop (blocks sized by the last step's solve, every iteration recorded, blocks of k)
-/// runs the same iterations, so it gives the same bits.
+/// runs the same iterations, so it gives the same bits. The modes differ only in how many
+/// iterations the host records between readbacks, so adapters after the first run the one
+/// that records them all (every empty iteration past the end on the driver) and not the
+/// readbacks by blocks of 1 and 3, which the first adapter checks.
 #[test]
 fn dfsph_runs_repeat_bit_for_bit_whichever_way_the_loop_ends() {
     let scene = small_tank(Kernel::CubicSpline).build();
-    for ctx in common::contexts() {
+    for (k, ctx) in common::contexts().into_iter().enumerate() {
         let (a, ia) = run_bits(&ctx, &scene, 30, GpuOptions::default());
         let (b, ib) = run_bits(&ctx, &scene, 30, GpuOptions::default());
         assert!(a == b && ia == ib, "{}: two runs differ", ctx.describe());
-        for solver_loop in [SolverLoop::Indirect, SolverLoop::Readback(1), SolverLoop::Readback(3)] {
+        let loops: &[SolverLoop] = if k == 0 { &[SolverLoop::Indirect, SolverLoop::Readback(1), SolverLoop::Readback(3)] } else { &[SolverLoop::Indirect] };
+        for &solver_loop in loops {
             let options = GpuOptions { solver_loop, ..Default::default() };
             let (c, ic) = run_bits(&ctx, &scene, 30, options);
             assert!(a == c && ia == ic, "{}: {solver_loop} differs from the adaptive loop", ctx.describe());
