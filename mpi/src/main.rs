@@ -7,7 +7,7 @@ mod communicator;
 use std::sync::Arc;
 use wgsph::solver::Ranks;
 
-fn join(_ranks: usize) -> anyhow::Result<Ranks> {
+fn join() -> anyhow::Result<Ranks> {
     Ok(Ranks::new(Arc::new(communicator::MpiCommunicator::init()?)))
 }
 

@@ -9,7 +9,7 @@ use crate::solver::Ranks;
 /// How an executable joins the ranks an MPI launcher started: `wgsph-mpi` (the `mpi/` crate)
 /// passes one that initialises MPI; plain `wgsph` has none and refuses a multi-rank launch. The
 /// MPI binding lives outside this crate so that the simulator builds once, with or without MPI.
-pub type Join = fn(ranks: usize) -> anyhow::Result<Ranks>;
+pub type Join = fn() -> anyhow::Result<Ranks>;
 
 /// The ranks of this process: `None` alone, else its rank of the simulation across all of them.
 pub fn start(command: &str, join: Option<Join>) -> anyhow::Result<Option<Ranks>> {
@@ -18,7 +18,7 @@ pub fn start(command: &str, join: Option<Join>) -> anyhow::Result<Option<Ranks>>
         return Err(InputError(format!("`wgsph {command}` was started as one of {n} processes by an MPI launcher; only `wgsph run` runs across ranks: start it without mpirun")).into());
     }
     match join {
-        Some(join) => Ok(Some(join(n)?)),
+        Some(join) => Ok(Some(join()?)),
         None => Err(InputError(format!(
             "this wgsph was started as one of {n} processes by an MPI launcher (OMPI_COMM_WORLD_SIZE / PMI_SIZE is set), but it is built without MPI, so each process would run the whole scene on its own: build wgsph-mpi with `cargo build --release -p wgsph-mpi` (needs Open MPI and libclang) and start target/release/wgsph-mpi with mpirun, or run wgsph without mpirun"
         ))

@@ -1,9 +1,9 @@
-//! `mpirun -np N wgsph run ...` as a user launches it: 1, 2 and 4 ranks on the dam break and the
+//! `mpirun -np N wgsph-mpi run ...` as a user launches it: 1, 2 and 4 ranks on the dam break and the
 //! hydrostatic tank give the same snapshots byte for byte (on the CPU path and on a software GPU
 //! adapter), particles migrate, a rank may hold no particle, a checkpoint of 2 ranks continues
 //! on 4 or 1, a killed rank stops the run within
-//! seconds with a resumable checkpoint, an error on one rank stops all of them naming it, and a
-//! build without MPI refuses a multi-rank launch.
+//! seconds with a resumable checkpoint, an error on one rank stops all of them naming it, and plain
+//! `wgsph` (not `wgsph-mpi`) refuses a multi-rank launch.
 //!
 //! MPI starts once per process, so these run `mpirun` on `wgsph-mpi` (the mpi/ crate), found
 //! through WGSPH_MPI_BIN (.ci/run builds it). Without mpirun or that binary the tests say
