@@ -26,32 +26,34 @@ enum Adapters {
     Last,
 }
 
-/// Runs `case` on the adapters chosen (or the CPU when there is none) and returns the reports.
-fn run_on(case: Case, which: Adapters) -> Vec<(String, CaseReport, tempfile::TempDir)> {
-    let mut adapters: Vec<wgpu::Adapter> = common::contexts().into_iter().map(|c| c.adapter).collect();
-    match which {
-        Adapters::First => adapters.truncate(1),
-        Adapters::Last => {
-            adapters.drain(..adapters.len().saturating_sub(1));
-        }
-    }
-    let mut out = Vec::new();
-    let makers: Vec<Option<wgpu::Adapter>> = if adapters.is_empty() { vec![None] } else { adapters.into_iter().map(Some).collect() };
-    for adapter in makers {
-        let dir = tempfile::tempdir().unwrap();
-        let mut make = |scene: &Scene, init: Option<InitialState>| -> anyhow::Result<Box<dyn Backend>> {
-            let choice = match &adapter {
-                Some(a) => BackendChoice::gpu_on(GpuContext::from_adapter(a.clone())?),
-                None => BackendChoice::cpu(Precision::F64),
-            };
-            Ok(open_with(scene, init, &choice)?.into_backend())
-        };
-        let r = run_case(case, Resolution::Coarse, dir.path(), &mut make).unwrap();
-        let name = adapter.as_ref().map(|a| format!("{:?}", a.get_info().backend)).unwrap_or_else(|| "cpu".into());
-        eprintln!("{} on {name}: {}", case.name(), r.markdown_row());
-        out.push((name, r, dir));
-    }
-    out
+/// The adapter chosen, or `None` (the CPU path) where there is none.
+fn chosen_adapter(which: Adapters) -> Option<wgpu::Adapter> {
+    let mut contexts = common::contexts();
+    let ctx = match which {
+        Adapters::First => contexts.into_iter().next(),
+        Adapters::Last => contexts.pop(),
+    };
+    ctx.map(|c| c.adapter)
+}
+
+/// A backend for `scene` on `adapter` (a device of its own), or on the f64 CPU path.
+fn open_on(adapter: Option<&wgpu::Adapter>, scene: &Scene, init: Option<InitialState>) -> anyhow::Result<Box<dyn Backend>> {
+    let choice = match adapter {
+        Some(a) => BackendChoice::gpu_on(GpuContext::from_adapter(a.clone())?),
+        None => BackendChoice::cpu(Precision::F64),
+    };
+    Ok(open_with(scene, init, &choice)?.into_backend())
+}
+
+/// Runs `case` on the adapter chosen (or the CPU when there is none) and returns the backend's
+/// name, the report and the directory it wrote.
+fn run_on(case: Case, which: Adapters) -> (String, CaseReport, tempfile::TempDir) {
+    let adapter = chosen_adapter(which);
+    let dir = tempfile::tempdir().unwrap();
+    let r = run_case(case, Resolution::Coarse, dir.path(), &mut |scene, init| open_on(adapter.as_ref(), scene, init)).unwrap();
+    let name = adapter.as_ref().map(|a| format!("{:?}", a.get_info().backend)).unwrap_or_else(|| "cpu".into());
+    eprintln!("{} on {name}: {}", case.name(), r.markdown_row());
+    (name, r, dir)
 }
 
 fn check_outputs(r: &CaseReport, dir: &std::path::Path) {
@@ -64,18 +66,16 @@ fn check_outputs(r: &CaseReport, dir: &std::path::Path) {
     assert!(md.contains(&format!("| {} | coarse |", r.case.name())), "{md}");
 }
 
-fn assert_passed_on(case: Case, which: Adapters) -> Vec<(String, CaseReport, tempfile::TempDir)> {
-    let runs = run_on(case, which);
-    for (backend, r, dir) in &runs {
-        assert!(r.failure.is_none(), "{} on {backend}: {:?}", case.name(), r.failure);
-        for f in &r.figures {
-            assert!(f.passed(), "{} on {backend}: {} = {} over the tolerance {}", case.name(), f.name, f.value, f.tolerance);
-        }
-        assert_eq!(r.wall_leaks, 0, "{} on {backend}: fluid particles inside walls", case.name());
-        assert!(r.passed());
-        check_outputs(r, dir.path());
+fn assert_passed_on(case: Case, which: Adapters) -> (String, CaseReport, tempfile::TempDir) {
+    let (backend, r, dir) = run_on(case, which);
+    assert!(r.failure.is_none(), "{} on {backend}: {:?}", case.name(), r.failure);
+    for f in &r.figures {
+        assert!(f.passed(), "{} on {backend}: {} = {} over the tolerance {}", case.name(), f.name, f.value, f.tolerance);
     }
-    runs
+    assert_eq!(r.wall_leaks, 0, "{} on {backend}: fluid particles inside walls", case.name());
+    assert!(r.passed());
+    check_outputs(&r, dir.path());
+    (backend, r, dir)
 }
 
 #[test]
@@ -92,64 +92,60 @@ fn martin_moyce_front_and_height() {
 /// every 5 ms through and after the impact, no fluid particle is inside a wall.
 #[test]
 fn koshizuka_oka_front_and_walls_that_hold_through_the_impact() {
-    for (backend, r, _dir) in assert_passed_on(Case::DamBreakKoshizukaOka, Adapters::First) {
-        let csv = std::fs::read_to_string(&r.csv).unwrap();
-        let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
-        let impact = rows.iter().find(|r| r[1] >= 3.9).map(|r| r[0]).expect("the front reaches the far wall");
-        let after: Vec<_> = rows.iter().filter(|r| r[0] > impact).collect();
-        assert!(after.len() >= 10, "{backend}: {} samples after the impact at t = {impact}", after.len());
-        assert!(r.checked_steps.len() >= rows.len() - 1, "{backend}: every sample is a checked step");
-        assert_eq!(r.wall_leaks, 0);
-    }
+    let (backend, r, _dir) = assert_passed_on(Case::DamBreakKoshizukaOka, Adapters::First);
+    let csv = std::fs::read_to_string(&r.csv).unwrap();
+    let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    let impact = rows.iter().find(|r| r[1] >= 3.9).map(|r| r[0]).expect("the front reaches the far wall");
+    let after: Vec<_> = rows.iter().filter(|r| r[0] > impact).collect();
+    assert!(after.len() >= 10, "{backend}: {} samples after the impact at t = {impact}", after.len());
+    assert!(r.checked_steps.len() >= rows.len() - 1, "{backend}: every sample is a checked step");
+    assert_eq!(r.wall_leaks, 0);
 }
 
 /// Also the sloshing tank: with the consistent wall pressure its energy never rises and decays
 /// faster with more viscosity; with the mirrored one (the CSV's fifth column) it rises.
 #[test]
 fn conservation_of_mass_momentum_and_energy() {
-    for (backend, r, _dir) in assert_passed_on(Case::Conservation, Adapters::First) {
-        for name in ["sloshing: largest rise of E above E(0) / K(0)", "sloshing: largest change without viscosity / K(0)"] {
-            assert!(r.figure(name).is_some(), "{backend}: no figure {name}");
-        }
-        let csv = std::fs::read_to_string(&r.csv).unwrap();
-        assert!(csv.lines().next().unwrap().split(',').nth(4) == Some("dE_over_K0_mirrored_walls_alpha_0"));
-        let mirrored_rise = csv.lines().skip(1).filter_map(|l| l.split(',').nth(4).unwrap().parse::<f64>().ok()).fold(f64::MIN, f64::max);
-        assert!(mirrored_rise > 1.0, "{backend}: with mirrored wall pressure the energy rose by only {mirrored_rise} K(0)");
+    let (backend, r, _dir) = assert_passed_on(Case::Conservation, Adapters::First);
+    for name in ["sloshing: largest rise of E above E(0) / K(0)", "sloshing: largest change without viscosity / K(0)"] {
+        assert!(r.figure(name).is_some(), "{backend}: no figure {name}");
     }
+    let csv = std::fs::read_to_string(&r.csv).unwrap();
+    assert!(csv.lines().next().unwrap().split(',').nth(4) == Some("dE_over_K0_mirrored_walls_alpha_0"));
+    let mirrored_rise = csv.lines().skip(1).filter_map(|l| l.split(',').nth(4).unwrap().parse::<f64>().ok()).fold(f64::MIN, f64::max);
+    assert!(mirrored_rise > 1.0, "{backend}: with mirrored wall pressure the energy rose by only {mirrored_rise} K(0)");
 }
 
 /// The wall pressure at Buchner's P1 through a point probe on the wall (Adami wall pressure,
 /// continuity density with diffusion): the coarse run's guard bounds (docs/validation.md).
 #[test]
 fn buchner_p1_wall_pressure() {
-    for (backend, r, _dir) in assert_passed_on(Case::BuchnerP1, Adapters::First) {
-        let csv = std::fs::read_to_string(&r.csv).unwrap();
-        // Every step sampled, from t = 0 past the last measured time, 7.3 sqrt(H/g).
-        let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
-        assert!(rows.len() > 1000 && rows.last().unwrap()[1] > 7.3, "{backend}: {} rows", rows.len());
-        // Dry before the surge arrives.
-        assert!(rows.iter().filter(|r| r[1] < 2.0).all(|r| r[2] == 0.0 && r[4] == 0.0), "{backend}: pressure on the wall before the surge");
-        // The surge wets the wall from the floor up: 0.2 H (0.12 m) no later than P1 (0.16 m).
-        let first_wet = |column: usize| rows.iter().find(|r| r[column] > 0.0).map(|r| r[1]).unwrap();
-        assert!(first_wet(4) <= first_wet(2), "{backend}: 0.2 H wet at {}, P1 at {}", first_wet(4), first_wet(2));
-        let lower = r.figure("at 0.2 H: arrival (first p > 0.1 rho g H), t sqrt(g/H)").unwrap();
-        assert!(lower.value < r.figure("simulated arrival, t sqrt(g/H)").unwrap().value, "{backend}: {lower:?}");
-        // The window's RMS is a weighted mean of its two parts' squares, so it lies between them.
-        let rms = |name: &str| r.figure(name).unwrap().value;
-        let (first, after) = (rms("RMS difference over the first impact (t sqrt(g/H) < 4) / rho g H (20 ms mean)"), rms("RMS difference after the first impact (t sqrt(g/H) >= 4) / rho g H (20 ms mean)"));
-        let whole = rms("RMS difference over the measured window / rho g H (20 ms mean)");
-        assert!(first.min(after) <= whole && whole <= first.max(after), "{backend}: {first} {after} {whole}");
-    }
+    let (backend, r, _dir) = assert_passed_on(Case::BuchnerP1, Adapters::First);
+    let csv = std::fs::read_to_string(&r.csv).unwrap();
+    // Every step sampled, from t = 0 past the last measured time, 7.3 sqrt(H/g).
+    let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    assert!(rows.len() > 1000 && rows.last().unwrap()[1] > 7.3, "{backend}: {} rows", rows.len());
+    // Dry before the surge arrives.
+    assert!(rows.iter().filter(|r| r[1] < 2.0).all(|r| r[2] == 0.0 && r[4] == 0.0), "{backend}: pressure on the wall before the surge");
+    // The surge wets the wall from the floor up: 0.2 H (0.12 m) no later than P1 (0.16 m).
+    let first_wet = |column: usize| rows.iter().find(|r| r[column] > 0.0).map(|r| r[1]).unwrap();
+    assert!(first_wet(4) <= first_wet(2), "{backend}: 0.2 H wet at {}, P1 at {}", first_wet(4), first_wet(2));
+    let lower = r.figure("at 0.2 H: arrival (first p > 0.1 rho g H), t sqrt(g/H)").unwrap();
+    assert!(lower.value < r.figure("simulated arrival, t sqrt(g/H)").unwrap().value, "{backend}: {lower:?}");
+    // The window's RMS is a weighted mean of its two parts' squares, so it lies between them.
+    let rms = |name: &str| r.figure(name).unwrap().value;
+    let (first, after) = (rms("RMS difference over the first impact (t sqrt(g/H) < 4) / rho g H (20 ms mean)"), rms("RMS difference after the first impact (t sqrt(g/H) >= 4) / rho g H (20 ms mean)"));
+    let whole = rms("RMS difference over the measured window / rho g H (20 ms mean)");
+    assert!(first.min(after) <= whole && whole <= first.max(after), "{backend}: {first} {after} {whole}");
 }
 
 /// DFSPH in the still tank: the pressure against depth, and the density error within the set
 /// tolerance (the figures of the case, docs/validation.md).
 #[test]
 fn hydrostatic_pressure_with_dfsph() {
-    for (backend, r, _dir) in assert_passed_on(Case::HydrostaticDfsph, Adapters::First) {
-        for name in ["last constant-density solve's average error / set density_error", "largest mean compression over the window / set density_error"] {
-            assert!(r.figure(name).is_some_and(|f| f.tolerance.is_finite()), "{backend}: no bounded figure {name}");
-        }
+    let (backend, r, _dir) = assert_passed_on(Case::HydrostaticDfsph, Adapters::First);
+    for name in ["last constant-density solve's average error / set density_error", "largest mean compression over the window / set density_error"] {
+        assert!(r.figure(name).is_some_and(|f| f.tolerance.is_finite()), "{backend}: no bounded figure {name}");
     }
 }
 
@@ -184,32 +180,16 @@ fn the_leak_count_sees_a_particle_inside_a_wall() {
 fn wall_particles_alone_stop_every_particle_before_their_first_layer() {
     let mut tank = wgsph::app::validate::dam_break::column_tank("walls_only", 1.0, 4.0, Resolution::Coarse, 0.8);
     tank.planes = false;
-    let adapters: Vec<Option<wgpu::Adapter>> = {
-        // The first adapter: the walls' hold is the stages' arithmetic, which tests/parity
-        // checks on every adapter (docs/testing.md: the suite's time budget).
-        let a: Vec<_> = common::contexts().into_iter().take(1).map(|c| Some(c.adapter)).collect();
-        if a.is_empty() {
-            vec![None]
-        } else {
-            a
-        }
-    };
-    for adapter in adapters {
-        let mut make = |scene: &Scene, init: Option<InitialState>| -> anyhow::Result<Box<dyn Backend>> {
-            let choice = match &adapter {
-                Some(a) => BackendChoice::gpu_on(GpuContext::from_adapter(a.clone())?),
-                None => BackendChoice::cpu(Precision::F64),
-            };
-            Ok(open_with(scene, init, &choice)?.into_backend())
-        };
-        let run = wgsph::app::validate::dam_break::collapse(&tank, 0.005, &mut make).unwrap();
-        assert!(run.failure.is_none(), "{:?}", run.failure);
-        assert!(run.samples.iter().any(|s| s.front >= 3.9), "the front reaches the far wall");
-        assert!(run.sampler.checked_steps.len() >= 150);
-        let deepest = run.sampler.deepest / tank.spacing;
-        eprintln!("wall particles alone: deepest {deepest:.3} spacings past a face, {} particle-steps past a face", run.sampler.wall_leaks);
-        assert!(deepest < 0.5, "a particle reached the first wall layer: {deepest} spacings past the face");
-    }
+    // The first adapter: the walls' hold is the stages' arithmetic, which tests/parity checks
+    // on every adapter (docs/testing.md: the suite's time budget).
+    let adapter = chosen_adapter(Adapters::First);
+    let run = wgsph::app::validate::dam_break::collapse(&tank, 0.005, &mut |scene, init| open_on(adapter.as_ref(), scene, init)).unwrap();
+    assert!(run.failure.is_none(), "{:?}", run.failure);
+    assert!(run.samples.iter().any(|s| s.front >= 3.9), "the front reaches the far wall");
+    assert!(run.sampler.checked_steps.len() >= 150);
+    let deepest = run.sampler.deepest / tank.spacing;
+    eprintln!("wall particles alone: deepest {deepest:.3} spacings past a face, {} particle-steps past a face", run.sampler.wall_leaks);
+    assert!(deepest < 0.5, "a particle reached the first wall layer: {deepest} spacings past the face");
 }
 
 #[test]
