@@ -387,7 +387,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         // Over the whole run (a resumed run's counts continue from its checkpoint).
         dfsph: health.iterations.map(|it| DfsphSummary::of(&it, backend.steps_done())),
         max_mach: (params.speed_of_sound() > 0.0).then(|| health.max_speed / params.speed_of_sound()),
-        warnings: regime_warnings(&params, &health),
+        warnings: regime_warnings(scene, &health),
         probes: params.probes.probes.iter().map(|p| p.name.clone()).collect(),
         ranks: backend.rank_reports()?.map(|reports| RanksSummary::of(&reports, wall_seconds)),
     };

@@ -437,27 +437,67 @@ impl Scene {
         super::kernels::lattice_kernel_sum(p.kernel, p.smoothing_length / p.particle_spacing) * mass / (p.rest_density * p.particle_spacing.powi(3))
     }
 
+    /// Whether a fluid particle inside a block starts more than 2 % off its rest density: its
+    /// ratio to rho0 (see [`Scene::lattice_rest_density_ratio`]) where it does.
+    pub fn start_off_rest_density(&self) -> Option<f64> {
+        let ratio = self.lattice_rest_density_ratio();
+        ((ratio - 1.0).abs() > 0.02).then_some(ratio)
+    }
+
+    /// What starts the fluid at rest with the scene's kernel: the smoothing length (in
+    /// spacings) whose lattice sum is within 0.5 % of 1, where one up to 5 spacings is, and the
+    /// particle mass that makes today's sum 1.
+    pub fn rest_density_fix(&self) -> String {
+        let p = &self.physics;
+        let ratio = self.lattice_rest_density_ratio();
+        let suits = (4..=10).map(|k| k as f64 * 0.5).find(|&r| (super::kernels::lattice_kernel_sum(p.kernel, r) - 1.0).abs() <= 0.005);
+        format!(
+            "{}or set physics.particle_mass = {} to start at rho0",
+            suits.map(|r| format!("with this kernel a smoothing length of {} spacings ({} rho0) starts at rest, ", short(r), short(super::kernels::lattice_kernel_sum(p.kernel, r)))).unwrap_or_default(),
+            short(p.fluid_mass() / ratio)
+        )
+    }
+
+    /// The depth of the deepest fluid block along gravity (its largest extent without gravity).
+    pub fn fluid_depth(&self) -> f64 {
+        let g = self.physics.gravity;
+        let g_norm = g.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let extent = |b: &super::scene::FluidBlock| -> f64 {
+            let size: [f64; 3] = std::array::from_fn(|a| b.max[a] - b.min[a]);
+            match g_norm > 0.0 {
+                true => (0..3).map(|a| size[a] * g[a].abs() / g_norm).sum(),
+                false => size.iter().cloned().fold(0.0, f64::max),
+            }
+        };
+        self.fluid.iter().map(extent).fold(0.0, f64::max)
+    }
+
     /// A warning when a fluid particle inside a block starts more than 2 % off its rest density
     /// (see [`Scene::lattice_rest_density_ratio`]): the equation of state (or DFSPH's solve)
     /// then pushes the fluid apart, or pulls it together, from the first step.
     pub fn rest_density_warning(&self) -> Option<String> {
-        let ratio = self.lattice_rest_density_ratio();
-        if (ratio - 1.0).abs() <= 0.02 {
-            return None;
-        }
+        let ratio = self.start_off_rest_density()?;
         let p = &self.physics;
         let over = p.smoothing_length / p.particle_spacing;
         let kernel = serde_json::to_string(&p.kernel).unwrap_or_default();
-        let suits = (4..=10).map(|k| k as f64 * 0.5).find(|&r| (super::kernels::lattice_kernel_sum(p.kernel, r) - 1.0).abs() <= 0.005);
-        let mass = p.fluid_mass() / ratio;
+        // DFSPH's constant-density solve takes the whole excess out in its first steps, however
+        // small dt is: the deeper the fluid in smoothing lengths, the more violently.
+        let dfsph = match p.solver == PressureSolver::Dfsph {
+            true => format!(
+                " (DFSPH's constant-density solve does it within its first steps: a column {} deep has to change its height by {}, {} smoothing lengths, at once)",
+                short(self.fluid_depth()),
+                short((ratio - 1.0).abs() * self.fluid_depth()),
+                short((ratio - 1.0).abs() * self.fluid_depth() / p.smoothing_length)
+            ),
+            false => String::new(),
+        };
         Some(format!(
-            "physics.kernel = {kernel} with physics.smoothing_length = {} ({} particle spacings): a fluid particle inside a block starts at {} rho0 (the kernel's sum over the lattice), not at its rest density, so the fluid is pushed {} from the first step; {}or set physics.particle_mass = {} to start at rho0",
+            "physics.kernel = {kernel} with physics.smoothing_length = {} ({} particle spacings): a fluid particle inside a block starts at {} rho0 (the kernel's sum over the lattice), not at its rest density, so the fluid is pushed {} from the first step{dfsph}; {}",
             short(p.smoothing_length),
             short(over),
             short(ratio),
             if ratio > 1.0 { "apart" } else { "together" },
-            suits.map(|r| format!("with this kernel a smoothing length of {} spacings ({} rho0) starts at rest, ", short(r), short(super::kernels::lattice_kernel_sum(p.kernel, r)))).unwrap_or_default(),
-            short(mass)
+            self.rest_density_fix()
         ))
     }
 }

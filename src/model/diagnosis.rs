@@ -18,6 +18,9 @@ pub const CFL_LIMIT: f64 = 0.4;
 /// The CFL number dt |v|max / h (h the support radius) DFSPH should stay below: with no sound
 /// to outrun, its condition is on the flow speed alone.
 pub const DFSPH_CFL_LIMIT: f64 = 0.25;
+/// A DFSPH run that goes bad within this many steps of its start, from fluid that starts off
+/// its rest density, is named as thrown apart by its start.
+pub const START_STEPS: u64 = 20;
 /// The viscous condition dt <= 0.125 h^2 / nu (Morris et al. 1997, Eq. 27).
 pub const VISCOUS_NUMBER: f64 = 0.125;
 /// The force condition dt <= 0.25 sqrt(h / |a|) (Monaghan 1992).
@@ -186,6 +189,22 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
     }
     // Then what the failing step measured.
     if causes.is_empty() {
+        // A DFSPH fluid that starts off its rest density (the kernel's sum over the lattice) is
+        // taken to it within the first steps, whatever dt: what the early step measured follows.
+        if let Some(start) = scene.start_off_rest_density().filter(|_| dfsph && step <= START_STEPS) {
+            let depth = scene.fluid_depth();
+            causes.push(format!(
+                "the fluid started at {} rho0, not at rest (physics.kernel's sum over the particle lattice at physics.smoothing_length = {} spacings; \
+                 the warning at load), and DFSPH's constant-density solve takes it to rest density within its first steps, whatever dt: \
+                 a column {} deep has to change its height by {} ({} smoothing lengths) at once, which throws the fluid about; {}",
+                short(start),
+                short(params.h / scene.physics.particle_spacing),
+                short(depth),
+                short((start - 1.0).abs() * depth),
+                short((start - 1.0).abs() * depth / h),
+                scene.rest_density_fix()
+            ));
+        }
         if dfsph && cfl > DFSPH_CFL_LIMIT {
             causes.push(format!(
                 "the CFL condition: the flow's speed |v|max = {} made dt |v|max / h = {} go over {DFSPH_CFL_LIMIT}, which DFSPH needs (dt = {}, h = {}): lower time.dt below {}{}",
@@ -280,15 +299,29 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
     msg
 }
 
-/// Where a run left the weakly compressible regime without stopping: its largest density and
-/// speed against `limits.warn_density_ratio` and `limits.warn_mach`, one line each.
-pub fn regime_warnings(params: &Params, health: &Health) -> Vec<String> {
+/// Where a run left the regime its method holds without stopping: its largest density and
+/// speed against `limits.warn_density_ratio` and `limits.warn_mach`, one line each (a DFSPH
+/// run has no Mach number, and its density is its solve's).
+pub fn regime_warnings(scene: &Scene, health: &Health) -> Vec<String> {
+    let params = &scene.params();
+    let start = scene.start_off_rest_density();
     let limits = &params.limits;
     let c0 = params.speed_of_sound();
     let ratio = health.max_density / params.rest_density;
     let mach = health.max_speed / c0;
     let mut out = Vec::new();
-    if ratio > limits.warn_density_ratio {
+    if let (true, Some(dfsph)) = (ratio > limits.warn_density_ratio, &params.dfsph) {
+        // No equation of state to stiffen: the solve holds the density where it converges.
+        out.push(format!(
+            "the density reached {} rho0, over limits.warn_density_ratio = {}: DFSPH's constant-density solve holds the average density error within \
+             physics.dfsph.density_error = {} where it converges, so some step's solve stopped before it did or dt let the flow run past it; \
+             lower time.dt (or time.cfl_number with adaptive dt) or raise physics.dfsph.max_iterations{}",
+            short(ratio),
+            short(limits.warn_density_ratio),
+            short(dfsph.density_error),
+            start.map(|r| format!(" (the fluid also started at {} rho0: the warning at load)", short(r))).unwrap_or_default()
+        ));
+    } else if ratio > limits.warn_density_ratio {
         out.push(format!(
             "the density reached {} rho0, over limits.warn_density_ratio = {}: weakly compressible SPH stands in for a liquid while density varies by a few per cent, \
              so the results are less accurate where it was compressed; a higher physics.speed_of_sound (c0 = {}) keeps density closer to rho0",

@@ -285,3 +285,58 @@ fn only_fluid_below_half_its_rest_density_at_negative_pressure_counts_as_torn() 
         assert_eq!(f.contains("Cause unknown"), !torn, "{case}: {f}");
     }
 }
+
+/// The dam break's column (0.4 m x 0.8 m x 0.1 m in a closed tank 1.6 m long, 1 m high) with
+/// DFSPH and Wendland's kernel at 2 spacings, whose sum over the particle lattice starts the
+/// fluid at 1.034 rho0; dt = 2 ms (CFL number 0.2 at 4 m/s).
+fn dfsph_column_off_rest_density() -> Scene {
+    TestScene::new()
+        .named("column")
+        .domain([-0.07; 3], [1.67, 1.07, 0.17])
+        .kernel(wgsph::model::scene::Kernel::Wendland)
+        .dfsph()
+        .viscosity(0.01)
+        .dt(0.002)
+        .fluid([0.0; 3], [0.4, 0.8, 0.1])
+        .jitter(0.02)
+        .closed_container([0.0; 3], [1.6, 1.0, 0.1])
+        .build()
+}
+
+#[test]
+fn a_dfsph_fluid_started_off_its_rest_density_is_named_as_what_threw_it_apart() {
+    // DFSPH's constant-density solve takes the 3.4 % excess out within the first steps: the
+    // column's top moves 2.7 cm (0.68 h) at once, and the run stops within them on its density.
+    // The diagnosis names the start and what starts the fluid at rest (the load warns of it
+    // too); with the particle mass it names, the same column runs on.
+    let scene = dfsph_column_off_rest_density();
+    assert!(scene.rest_density_warning().is_some_and(|w| w.contains("DFSPH's constant-density solve does it within its first steps")));
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 40, 1);
+        assert!(f.contains("Cause: the fluid started at 1.03384 rho0, not at rest"), "{who}: {f}");
+        assert!(f.contains("or set physics.particle_mass = 0.00773812 to start at rho0"), "{who}: {f}");
+    }
+    let mut at_rest = scene.clone();
+    at_rest.physics.particle_mass = Some(0.00773812);
+    assert_eq!(at_rest.start_off_rest_density(), None);
+    let mut cpu = common::cpu::<f64>(&at_rest);
+    let summary = run_checked(&mut cpu, &at_rest, 40, 1);
+    assert_eq!(summary.failure, None);
+    assert!(summary.max_density_ratio < 1.1, "{}", summary.max_density_ratio);
+}
+
+#[test]
+fn a_dfsph_run_too_dense_is_told_of_its_solve_not_of_a_speed_of_sound() {
+    // DFSPH has no equation of state: its density warning speaks of its solve's tolerance and
+    // limits (and of a start off rest density), the weakly compressible one of c0.
+    use wgsph::model::diagnosis::regime_warnings;
+    use wgsph::model::state::Health;
+    let health = Health { max_density: 1300.0, ..Default::default() };
+    let dfsph = regime_warnings(&dfsph_column_off_rest_density(), &health);
+    assert_eq!(dfsph.len(), 1, "{dfsph:?}");
+    assert!(dfsph[0].contains("DFSPH's constant-density solve holds the average density error within physics.dfsph.density_error = 0.0001"), "{dfsph:?}");
+    assert!(dfsph[0].contains("the fluid also started at 1.03384 rho0") && !dfsph[0].contains("speed_of_sound"), "{dfsph:?}");
+    let wcsph = regime_warnings(&tank().build(), &health);
+    assert!(wcsph[0].contains("a higher physics.speed_of_sound (c0 = 20)"), "{wcsph:?}");
+}
