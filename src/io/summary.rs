@@ -122,6 +122,12 @@ pub struct RankSummary {
     /// rank took it (by its place on its machine).
     #[serde(default)]
     pub adapter: String,
+    /// On a GPU: the steps whose particles stayed on the device (only the band next to the
+    /// faces crossed the bus), and the bytes of particles that crossed it, both ways.
+    #[serde(default)]
+    pub resident_steps: u64,
+    #[serde(default)]
+    pub bus_bytes: u64,
 }
 
 impl RanksSummary {
@@ -150,6 +156,8 @@ impl RanksSummary {
                     node_ranks: r.node_ranks,
                     threads: r.threads,
                     adapter: r.adapter.clone(),
+                    resident_steps: r.stats.resident_steps,
+                    bus_bytes: r.stats.bus_bytes,
                 })
                 .collect(),
         }

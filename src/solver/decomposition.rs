@@ -140,6 +140,10 @@ pub struct RankStats {
     pub last_imbalance: f64,
     /// The largest such ratio seen so far.
     pub max_imbalance: f64,
+    /// On a device: steps whose particles stayed on it (src/solver/cpu/resident_steps.rs).
+    pub resident_steps: u64,
+    /// On a device: bytes of particles that crossed between the host and the device, both ways.
+    pub bus_bytes: u64,
 }
 
 /// One rank's part of a simulation across ranks, as the backend reports it.

@@ -692,3 +692,110 @@ fn the_ghost_velocities_stage_agrees_with_its_cpu_twin() {
         assert!(xyz(&after) == twin, "{}: scattered", ctx.describe());
     }
 }
+
+/// The resident exchange's stage (wgsl/sim/resident_exchange.wgsl), with which a GPU rank keeps
+/// its particles on the device between steps, against its CPU twin on the same state: the
+/// slots dropped (ghosts and particles outside the slab) and the band listed (with their places
+/// in the one-process order), the own particles' health, and the merge of the kept particles
+/// with received ones, which must put every particle where the twin puts it. On the dam break
+/// (summed density in the velocities' w) and a tank with continuity density (its own array),
+/// a slab that ends inside the fluid, every seventh slot marked a ghost.
+#[test]
+fn the_resident_exchange_stage_agrees_with_its_cpu_twin() {
+    use wgsph::solver::cpu::resident_exchange::{merge_kept, own_health, place_inserts, select_band, SlabFaces};
+    let bits = |v: &[[f32; 4]]| v.iter().map(|x| x.map(f32::to_bits)).collect::<Vec<_>>();
+    for ctx in common::contexts() {
+        for scene in [dam_break(1000), TestScene::small_tank().continuity().build()] {
+            let mut gpu = common::gpu(ctx.clone(), &scene);
+            gpu.step(5).expect("steps");
+            let params = scene.params();
+            let grid = params.grid.cast::<f32>();
+            let dims = grid.dims;
+            // The slab ends at the layer of the fluid's far end: the particles beyond leave, those
+            // of the layer before it are the upper neighbour's ghosts.
+            let end = grid.cell_coords(wgsph::model::real::V3(scene.fluid[0].max.map(|x| x as f32)))[0];
+            let faces = SlabFaces { axis: 0, slab: 1..end, halo: 1, lower: true, upper: true };
+            let n = gpu.fluid_count() as u32;
+            let ghosts: Vec<u32> = (0..n).filter(|i| i % 7 == 3).collect();
+            // Received particles in cells outside the slab (which hold only dropped slots), at
+            // places inside and past each cell's particles, sorted by place.
+            let mut received = Vec::new();
+            for (k, x) in [faces.slab.start - 1, faces.slab.end].into_iter().enumerate() {
+                for y in [0, dims[1] / 4] {
+                    for place in [0u64, 1, 40] {
+                        let cell = (x + dims[0] * (y + dims[1])) as u64;
+                        let id = 100_000 + received.len() as u32;
+                        received.push(([0.1 * k as f32, y as f32, place as f32, f32::from_bits(id | 0x8000_0000)], [1.0, 2.0, 3.0, 1000.0 + place as f32], cell << 32 | place));
+                    }
+                }
+            }
+            received.sort_by_key(|r| r.2);
+            let run = gpu.resident_exchange_alone(&faces, &ghosts, &received).expect("the stage runs");
+            let who = format!("{} on {}", scene.name, ctx.describe());
+            // The band and the dropped slots, in slot order (the device lists them in any order).
+            let (dropped, band) = select_band(&run.positions, &run.starts, &grid, &faces);
+            let mut device_dropped = run.band.dropped.clone();
+            device_dropped.sort_unstable();
+            assert_eq!(device_dropped, dropped, "{who}: dropped slots");
+            assert!(dropped.len() > ghosts.len() && !band.is_empty(), "{who}: the slab leaves particles outside it and near its faces");
+            let mut device_band: Vec<(u32, u64)> = run.band.slots.iter().copied().zip(run.band.keys.iter().copied()).collect();
+            device_band.sort_unstable();
+            assert_eq!(device_band, band, "{who}: the band's slots and places");
+            for (k, &slot) in run.band.slots.iter().enumerate() {
+                assert_eq!(bits(&[run.band.positions[k], run.band.velocities[k]]), bits(&[run.positions[slot as usize], run.velocities[slot as usize]]), "{who}: band slot {slot}");
+            }
+            // The health of the own particles.
+            let domain = (params.domain_min.map(|x| x as f32), params.domain_max.map(|x| x as f32));
+            assert_eq!(run.health, own_health(&run.positions, &run.velocities, run.densities.as_deref(), domain), "{who}: health");
+            assert!(run.health.max_density > 900.0 && run.health.max_speed2 > 0.0, "{who}: {:?}", run.health);
+            // The merge: every kept particle and every received one where the twin puts it.
+            let keys: Vec<u64> = received.iter().map(|r| r.2).collect();
+            let (places, slots) = place_inserts(&run.starts, &dropped, &keys);
+            let kept = merge_kept(n as usize, &dropped, &places);
+            let total = n as usize - dropped.len() + received.len();
+            let (mut positions, mut velocities) = (vec![[f32::NAN; 4]; total], vec![[f32::NAN; 4]; total]);
+            for (i, slot) in kept.iter().enumerate() {
+                if let Some(slot) = slot {
+                    positions[*slot as usize] = run.positions[i];
+                    velocities[*slot as usize] = run.velocities[i];
+                }
+            }
+            for (j, &slot) in slots.iter().enumerate() {
+                positions[slot as usize] = received[j].0;
+                velocities[slot as usize] = received[j].1;
+            }
+            assert!(positions.iter().all(|p| !p[0].is_nan()), "{who}: the twin fills every slot once");
+            assert_eq!(bits(&run.merged_positions), bits(&positions), "{who}: merged positions");
+            assert_eq!(bits(&run.merged_velocities), bits(&velocities), "{who}: merged velocities");
+        }
+    }
+}
+
+/// The steps of a GPU rank that keep its particles on the device (only the band next to the
+/// faces read back, the neighbours' particles merged in on the device: src/solver/cpu/
+/// resident_steps.rs) compute what one GPU computes, bit for bit: with summed and with
+/// continuity density, fixed and adaptive dt, bounds moving every 10 steps (those steps, and the
+/// first of each batch, take the full path). Every rank runs resident steps, and moves fewer
+/// bytes over the bus than reading back and uploading every held particle each step would.
+#[test]
+fn resident_gpu_rank_steps_compute_what_one_gpu_computes() {
+    let Some(ctx) = common::contexts().into_iter().next() else { return };
+    let mut adaptive = dam_break(4000);
+    adaptive.time.adaptive = true;
+    for (scene, ranks) in [(dam_break(4000), 2), (TestScene::small_tank().continuity().density_diffusion(0.1).build(), 2), (adaptive, 3)] {
+        let steps = 45;
+        let one = one_gpu(&ctx, &scene, steps);
+        let runs = gpu_on_ranks(&ctx, &scene, ranks, 10, &|b: &mut dyn Backend| {
+            b.step(steps)?;
+            Ok((b.rank_report().expect("across ranks"), b.snapshot()?))
+        });
+        let many = Snapshot { time: one.time, ..runs[0].1.clone() };
+        assert!(many == one, "{}: {ranks} GPU ranks with resident steps against one GPU, bit for bit", scene.name);
+        for (rank, (report, _)) in runs.iter().enumerate() {
+            let stats = &report.stats;
+            let held = (report.own_particles + stats.ghosts) as u64;
+            assert!(stats.resident_steps > 0, "{}: rank {rank} ran no resident step", scene.name);
+            assert!(stats.bus_bytes < 64 * held * steps, "{}: rank {rank} moved {} bytes, as many as {} held particles read and written each step", scene.name, stats.bus_bytes, held);
+        }
+    }
+}

@@ -11,6 +11,7 @@
 //! the same order, and N ranks compute bit for bit what one computes.
 
 use super::ghost_velocities::{gather_ghost_velocities, scatter_ghost_velocities};
+use super::resident_exchange::{OwnHealth, SlabFaces};
 use super::CpuSolver;
 use crate::model::initial::{FluidParticle, InitialState};
 use crate::model::real::{Real, V3};
@@ -237,12 +238,12 @@ impl GhostLink {
 
 /// What a particle carries through the exchange besides its position, velocity, id and place.
 #[derive(Clone, Copy)]
-struct Carried {
+pub struct Carried {
     /// The carried density (continuity density).
-    density: bool,
+    pub density: bool,
     /// DFSPH's warm-start stiffnesses (constant-density and divergence solves), kept by the
     /// particle's owner.
-    warm: bool,
+    pub warm: bool,
 }
 
 /// Words per particle in a message: position, velocity, id, place in the one-process order (two
@@ -252,23 +253,29 @@ fn words(carried: Carried) -> usize {
     9 + carried.density as usize + 2 * carried.warm as usize
 }
 
-/// Particles on their way through the exchange, as a structure of arrays.
+/// Particles on their way through the exchange, as a structure of arrays: position, velocity,
+/// id, with continuity density the carried density, with DFSPH the warm starts, and each
+/// particle's place in the one-process order (cell << 32 | place in the cell of the last
+/// binning, or its place in the initial or restored state before the first).
 #[derive(Default)]
-struct Held<R: Real> {
-    x: Vec<V3<R>>,
-    v: Vec<V3<R>>,
-    id: Vec<u32>,
-    rho: Vec<R>,
+pub struct Held<R: Real> {
+    pub x: Vec<V3<R>>,
+    pub v: Vec<V3<R>>,
+    pub id: Vec<u32>,
+    pub rho: Vec<R>,
     /// DFSPH: the warm-start stiffnesses (constant density, divergence).
-    warm: Vec<[R; 2]>,
-    order: Vec<u64>,
+    pub warm: Vec<[R; 2]>,
+    pub order: Vec<u64>,
 }
 
 impl<R: Real> Held<R> {
-    fn len(&self) -> usize {
+    pub fn len(&self) -> usize {
         self.x.len()
     }
-    fn push_from(&mut self, o: &Held<R>, i: usize) {
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+    pub(super) fn push_from(&mut self, o: &Held<R>, i: usize) {
         self.x.push(o.x[i]);
         self.v.push(o.v[i]);
         self.id.push(o.id[i]);
@@ -280,7 +287,7 @@ impl<R: Real> Held<R> {
         }
         self.order.push(o.order[i]);
     }
-    fn encode(&self, which: &[usize], carried: Carried) -> Vec<f64> {
+    pub(super) fn encode(&self, which: &[usize], carried: Carried) -> Vec<f64> {
         let mut out = Vec::with_capacity(which.len() * words(carried));
         for &i in which {
             out.extend_from_slice(&self.x[i].to64());
@@ -297,7 +304,7 @@ impl<R: Real> Held<R> {
         }
         out
     }
-    fn decode(&mut self, words_in: &[f64], carried: Carried) -> anyhow::Result<()> {
+    pub(super) fn decode(&mut self, words_in: &[f64], carried: Carried) -> anyhow::Result<()> {
         let w = words(carried);
         anyhow::ensure!(words_in.len() % w == 0, "a neighbour sent {} words, not a whole number of particles of {w} words", words_in.len());
         for p in words_in.chunks_exact(w) {
@@ -315,12 +322,16 @@ impl<R: Real> Held<R> {
         Ok(())
     }
     /// Sorted by the one-process order (the places are unique).
-    fn sorted(self) -> Held<R> {
+    pub(super) fn sorted(self) -> Held<R> {
         let mut idx: Vec<usize> = (0..self.len()).collect();
         idx.sort_unstable_by_key(|&i| self.order[i]);
+        self.picked(&idx)
+    }
+    /// The particles `which`, in that order.
+    pub(super) fn picked(&self, which: &[usize]) -> Held<R> {
         let mut out = Held::default();
-        for i in idx {
-            out.push_from(&self, i);
+        for &i in which {
+            out.push_from(self, i);
         }
         out
     }
@@ -343,6 +354,42 @@ pub trait DeviceStages<R: Real>: Send {
     /// The binning and density stage of `held` at step `step`, without advancing it (for a
     /// snapshot), written back the same way.
     fn run_fields(&mut self, step: u64, held: HeldArrays<'_, R>) -> anyhow::Result<()>;
+    /// A device that keeps the held particles after a step (src/solver/cpu/resident_steps.rs):
+    /// the band of the state its last step left, for the rank's slab `faces` (`None` where it
+    /// keeps none, or the band outgrows its room).
+    fn resident_band(&mut self, _faces: &SlabFaces) -> anyhow::Result<Option<ResidentBand<R>>> {
+        Ok(None)
+    }
+    /// Step `step` from the state the device kept, without its `dropped` slots (sorted) and with
+    /// the `received` particles (sorted in the one-process order; `ghosts` says which are
+    /// ghosts); `None`, and nothing changed, where they do not fit the device's arrays.
+    fn run_resident_step(&mut self, _step: u64, _dropped: &[u32], _received: &Held<R>, _ghosts: &[bool]) -> anyhow::Result<Option<ResidentStep>> {
+        Ok(None)
+    }
+    /// The state the device kept, read back into `held` as a step writes it back.
+    fn read_held(&mut self, _held: HeldArrays<'_, R>) -> anyhow::Result<()> {
+        anyhow::bail!("this device keeps no particles between steps")
+    }
+    /// Bytes of particles that crossed between the host and the device so far, both ways.
+    fn bus_bytes(&self) -> u64 {
+        0
+    }
+}
+
+/// The band of a resident step (see [`DeviceStages::resident_band`]): the slots the rank drops
+/// (its ghosts and the own particles that left its slab), sorted, and the band's particles (the
+/// leaving ones and those next to a face), in the one-process order, with their slots.
+pub struct ResidentBand<R: Real> {
+    pub dropped: Vec<u32>,
+    pub slots: Vec<u32>,
+    pub particles: Held<R>,
+}
+
+/// What a resident step gives back: its dt, the own particles' health, and the held count.
+pub struct ResidentStep {
+    pub dt: f64,
+    pub health: OwnHealth,
+    pub held: usize,
 }
 
 /// Shared so that a cloned solver stays cloneable; a rank's solver is never cloned mid-run.
@@ -446,7 +493,7 @@ impl<R: Real> CpuSolver<R> {
     /// The held arrays, lent to the device stages, with which of them are `ghosts` (and with
     /// DFSPH, the step's ghost link, and the room for the velocities the prediction started
     /// from where the step samples probes).
-    fn held_arrays<'a>(&'a mut self, ghosts: &'a [bool], with_link: bool, prediction_start: bool) -> HeldArrays<'a, R> {
+    pub(super) fn held_arrays<'a>(&'a mut self, ghosts: &'a [bool], with_link: bool, prediction_start: bool) -> HeldArrays<'a, R> {
         let particles = self.ranks.as_ref().map_or(self.positions.len(), |part| part.total_fluid);
         let link = match with_link {
             true => self.ranks.as_deref_mut().and_then(|part| part.link.as_mut()),
@@ -531,6 +578,8 @@ impl<R: Real> CpuSolver<R> {
                 return;
             }
         };
+        // The device keeps what it gave back: the next step may start from it.
+        self.device_held = super::resident_steps::DeviceHeld::Same;
         if let Some(d) = &mut self.dfsph {
             d.last_dt = dt;
             d.dt = dt;
@@ -751,7 +800,7 @@ impl<R: Real> CpuSolver<R> {
             node_ranks: p.comm.node_rank().1,
             threads: rayon::current_num_threads(),
             adapter: crate::solver::backend::Backend::adapter(self),
-            stats: p.stats.clone(),
+            stats: RankStats { bus_bytes: self.device.as_ref().map_or(0, |d| lock(d).bus_bytes()), ..p.stats.clone() },
         })
     }
 
@@ -885,7 +934,18 @@ impl<R: Real> CpuSolver<R> {
         all.decode(&from_lower, carried)?;
         all.decode(&from_upper, carried)?;
         part.stats.ghosts = all.len() - own_count;
-        let all = all.sorted();
+        self.install_held(all.sorted());
+        if slab_moved {
+            // The walls near the new bounds (the ones near the old are dropped).
+            let walls = self.walls_near_slab();
+            self.install_walls(&walls);
+        }
+        Ok(())
+    }
+
+    /// `all` (in the one-process order) as the particles the rank holds, the arrays that follow
+    /// them sized to match.
+    pub(super) fn install_held(&mut self, all: Held<R>) {
         let n = all.len();
         self.positions = all.x;
         self.velocities = all.v;
@@ -898,18 +958,18 @@ impl<R: Real> CpuSolver<R> {
             d.resize(n);
             self.warm_keys = (0..n as u32).collect();
         }
+        self.size_held_arrays();
+    }
+
+    /// The arrays that follow the held particles sized to their count.
+    pub(super) fn size_held_arrays(&mut self) {
+        let n = self.positions.len();
         for v in [&mut self.densities, &mut self.pressures] {
             v.resize(n, R::zero());
         }
         self.accelerations.resize(n, V3::zero());
         self.keys.resize(n, 0);
         self.sorted.resize(n, 0);
-        if slab_moved {
-            // The walls near the new bounds (the ones near the old are dropped).
-            let walls = self.walls_near_slab();
-            self.install_walls(&walls);
-        }
-        Ok(())
     }
 
     /// The own slots with their places in the one-process order.
@@ -1042,7 +1102,7 @@ impl<R: Real> CpuSolver<R> {
         let Some(mine) = self.rank_report() else { return Ok(None) };
         let comm = self.ranks.as_ref().expect("across ranks").comm.clone();
         let s = &mine.stats;
-        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64, mine.walls as f64])?;
+        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64, mine.walls as f64, s.resident_steps as f64, s.bus_bytes as f64])?;
         // The adapters' names travel as bytes, padded to the longest.
         let longest = all_max(comm.as_ref(), &[mine.adapter.len() as f64])?[0] as usize;
         let mut name: Vec<f64> = mine.adapter.bytes().map(f64::from).collect();
@@ -1059,7 +1119,7 @@ impl<R: Real> CpuSolver<R> {
                     node_ranks: r[5] as usize,
                     threads: r[6] as usize,
                     adapter: names[rank].clone(),
-                    stats: RankStats { exchange_seconds: r[1], migrated: r[2] as u64, ghosts: r[3] as usize, ..s.clone() },
+                    stats: RankStats { exchange_seconds: r[1], migrated: r[2] as u64, ghosts: r[3] as usize, resident_steps: r[8] as u64, bus_bytes: r[9] as u64, ..s.clone() },
                     ..mine.clone()
                 })
                 .collect(),

@@ -25,6 +25,8 @@ pub mod neighbour_skin;
 pub mod prefix_sum;
 pub mod probes;
 pub mod reorder;
+pub mod resident_exchange;
+mod resident_steps;
 pub mod wall_pressure;
 
 use super::backend::{Backend, StateArray, StatePiece};
@@ -101,6 +103,8 @@ pub struct CpuSolver<R: Real> {
     ranks: Option<Box<exchange::RankPart>>,
     /// Across ranks on a device: the stages between the exchange and the step's bookkeeping.
     device: Option<exchange::SharedDeviceStages<R>>,
+    /// Across ranks on a device: whether it holds what the host holds (resident steps).
+    device_held: resident_steps::DeviceHeld,
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -150,6 +154,7 @@ impl<R: Real> CpuSolver<R> {
             probe_samples: Vec::new(),
             ranks: None,
             device: None,
+            device_held: Default::default(),
         };
         solver.install_walls(initial);
         solver
@@ -530,6 +535,12 @@ impl<R: Real> CpuSolver<R> {
     /// Across ranks the exchange stage comes first; alone it does nothing.
     pub fn step_once(&mut self) {
         if self.step % self.params.rebuild_every.max(1) as u64 == 0 {
+            // Across ranks on a device that kept the last step's particles: the exchange on the
+            // band alone, where the step allows it (resident_steps.rs).
+            if self.step_resident() {
+                return;
+            }
+            self.sync_held();
             self.exchange(true);
             if self.rank_failure().is_some() {
                 return;
@@ -734,14 +745,19 @@ impl<R: Real> CpuSolver<R> {
         integrate::finish_step(&mut self.step, &mut self.health, found, max_density, dt, end_time, self.params.stop_levels());
     }
 
-    /// Runs up to `n` steps, stopping early after a step that went wrong.
+    /// Runs up to `n` steps, stopping early after a step that went wrong. Across ranks on a
+    /// device, the steps after the first may leave the particles on the device; they are read
+    /// back at the end, so the host's arrays are whole between calls.
     pub fn step(&mut self, n: u64) {
+        self.device_held = resident_steps::DeviceHeld::Nothing;
         for _ in 0..n {
             self.step_once();
             if !self.health.is_ok() || self.rank_failure().is_some() {
                 break;
             }
         }
+        self.sync_held();
+        self.device_held = resident_steps::DeviceHeld::Nothing;
     }
 
     /// A snapshot's fields for the current positions: the binning, then the density (and the

@@ -11,6 +11,7 @@ pub mod prefix_sum;
 pub mod probes;
 pub mod ranks;
 pub mod readback;
+pub mod resident;
 pub mod schedule;
 pub mod shaders;
 pub mod skin;

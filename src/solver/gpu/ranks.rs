@@ -14,7 +14,9 @@ use crate::model::params::Params;
 use crate::model::kernels::sort_by_cell;
 use crate::model::real::V3;
 use crate::solver::communicator::Communicator;
-use crate::solver::cpu::exchange::{DeviceStages, DfsphHeld, HeldArrays};
+use crate::solver::cpu::exchange::{DeviceStages, DfsphHeld, Held, HeldArrays, ResidentBand, ResidentStep};
+use crate::solver::cpu::resident_exchange::SlabFaces;
+use super::resident::{received_w, ResidentExchange};
 use super::dfsph::RankSolves;
 use super::params::status;
 use std::sync::Arc;
@@ -37,13 +39,24 @@ pub struct GpuRankStages {
     why: String,
     /// The ranks, for the adaptive step's maxima.
     comm: Arc<dyn Communicator>,
+    /// The resident exchange's stages and arrays (src/solver/gpu/resident.rs), made on first
+    /// use for the current solver.
+    resident: Option<ResidentExchange>,
+    /// Whether the device holds the state its last step left (a resident step may start from
+    /// it).
+    keeps_step: bool,
+    /// Bytes of particles that crossed between the host and the device (both ways), so far.
+    bus_bytes: u64,
+    /// Band and received particles the resident exchange makes room for: an eighth of the
+    /// held particles at first, more once a step needed more.
+    list_room: u64,
 }
 
 impl GpuRankStages {
     /// The stages on `ctx` for the scene's `params`, for a rank of `comm` (the walls come
     /// with [`DeviceStages::set_walls`]). `why`: how the adapter was chosen.
     pub fn new(ctx: GpuContext, params: &Params, options: GpuOptions, why: String, comm: Arc<dyn Communicator>) -> Self {
-        GpuRankStages { ctx, params: params.clone(), options, walls: InitialState::default(), solver: None, capacity: 0, why, comm }
+        GpuRankStages { ctx, params: params.clone(), options, walls: InitialState::default(), solver: None, capacity: 0, why, comm, resident: None, keeps_step: false, bus_bytes: 0, list_room: 0 }
     }
 
     /// A solver with buffers for `capacity` particles (placeholders at the domain's lower
@@ -88,6 +101,8 @@ impl DeviceStages<f32> for GpuRankStages {
         // Loaded where they fit; otherwise made again, with these walls, at the next step.
         if !self.solver.as_mut().is_some_and(|solver| solver.load_walls(walls)) {
             self.solver = None;
+            self.resident = None;
+            self.keeps_step = false;
         }
     }
 
@@ -98,6 +113,89 @@ impl DeviceStages<f32> for GpuRankStages {
     fn run_fields(&mut self, step: u64, held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
         self.run(step, held, false).map(|_| ())
     }
+
+    fn resident_band(&mut self, faces: &SlabFaces) -> anyhow::Result<Option<ResidentBand<f32>>> {
+        if !self.keeps_step || self.params.dfsph.is_some() {
+            return Ok(None);
+        }
+        let solver = self.solver.as_ref().expect("kept by a step");
+        if self.resident.is_none() {
+            let room = self.list_room.max(solver.fluid_count as u64 / 8);
+            self.resident = Some(ResidentExchange::new(solver, room)?);
+        }
+        let band = match self.resident.as_ref().expect("made above").band(solver, faces)? {
+            Ok(band) => band,
+            Err(size) => {
+                // This step takes the full path; the next has room for this band and a quarter more.
+                self.grow_lists(size);
+                return Ok(None);
+            }
+        };
+        self.bus_bytes += 4 * band.dropped.len() as u64 + 48 * band.slots.len() as u64;
+        // In slot order, which is the one-process order (the state is in the cell order of its
+        // binning).
+        let mut by_slot: Vec<usize> = (0..band.slots.len()).collect();
+        by_slot.sort_unstable_by_key(|&k| band.slots[k]);
+        let mut dropped = band.dropped;
+        dropped.sort_unstable();
+        let continuity = self.params.continuity_density;
+        let mut particles = Held::default();
+        for &k in &by_slot {
+            let (p, v) = (band.positions[k], band.velocities[k]);
+            particles.x.push(V3([p[0], p[1], p[2]]));
+            particles.v.push(V3([v[0], v[1], v[2]]));
+            particles.id.push(p[3].to_bits() & !GHOST_BIT);
+            if continuity {
+                particles.rho.push(v[3]);
+            }
+            particles.order.push(band.keys[k]);
+        }
+        Ok(Some(ResidentBand { dropped, slots: by_slot.iter().map(|&k| band.slots[k]).collect(), particles }))
+    }
+
+    fn run_resident_step(&mut self, step: u64, dropped: &[u32], received: &Held<f32>, ghosts: &[bool]) -> anyhow::Result<Option<ResidentStep>> {
+        let (Some(solver), Some(resident)) = (self.solver.as_mut(), self.resident.as_ref()) else { return Ok(None) };
+        if !self.keeps_step {
+            return Ok(None);
+        }
+        let positions: Vec<[f32; 4]> = (0..received.len()).map(|k| {
+            let x = received.x[k].0;
+            [x[0], x[1], x[2], received_w(received.id[k], ghosts[k])]
+        }).collect();
+        let velocities: Vec<[f32; 4]> = (0..received.len()).map(|k| {
+            let v = received.v[k].0;
+            [v[0], v[1], v[2], received.rho.get(k).copied().unwrap_or(0.0)]
+        }).collect();
+        if !resident.merge(solver, dropped, &positions, &velocities, &received.order) {
+            if received.len() as u64 > resident.list_capacity() {
+                self.grow_lists(received.len() as u64);
+            }
+            return Ok(None);
+        }
+        self.bus_bytes += 4 * dropped.len() as u64 + 48 * received.len() as u64;
+        self.keeps_step = false;
+        solver.steps = step;
+        solver.accelerations_valid = false;
+        solver.advance(1);
+        if let Some(e) = solver.rank_error.borrow_mut().take() {
+            anyhow::bail!("the adaptive step's maxima across ranks: {e}");
+        }
+        let health = resident.own_health(solver)?;
+        let words = read_buffers(&self.ctx, &[(&solver.status, (status::DT as u64 + 1) * 4)])?;
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&words[0]);
+        let held = solver.fluid_count as usize;
+        self.keeps_step = true;
+        Ok(Some(ResidentStep { dt: self.step_dt(&words), health, held }))
+    }
+
+    fn read_held(&mut self, held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
+        anyhow::ensure!(self.keeps_step && self.params.dfsph.is_none(), "the device keeps no step's particles");
+        self.read_back(held, None).map(|_| ())
+    }
+
+    fn bus_bytes(&self) -> u64 {
+        self.bus_bytes
+    }
 }
 
 impl GpuRankStages {
@@ -107,16 +205,22 @@ impl GpuRankStages {
     fn run(&mut self, step: u64, mut held: HeldArrays<'_, f32>, advance: bool) -> anyhow::Result<f64> {
         let n = held.positions.len();
         let mut dfsph = held.dfsph.take();
+        self.keeps_step = false;
         if self.solver.is_none() || n > self.capacity {
             let capacity = ((n.max(1) as f64) * CAPACITY_MARGIN).ceil() as usize;
             self.solver = Some(self.make_solver(capacity)?);
+            self.resident = None;
             self.capacity = capacity;
         }
         let solver = self.solver.as_mut().expect("made above");
         let wide = |v: &V3<f32>| [v.0[0] as f64, v.0[1] as f64, v.0[2] as f64];
         let positions: Vec<[f64; 3]> = held.positions.iter().map(wide).collect();
         let velocities: Vec<[f64; 3]> = held.velocities.iter().map(wide).collect();
-        solver.load_held(&positions, &velocities, held.carried_densities, held.ghosts, step);
+        // DFSPH finds each particle's warm starts by its place in the upload; the weakly
+        // compressible step keeps its id, which a resident step's merge carries along.
+        let ids = if dfsph.is_some() { None } else { Some(held.ids.as_slice()) };
+        solver.load_held(&positions, &velocities, held.carried_densities, held.ghosts, ids, step);
+        self.bus_bytes += 32 * n as u64;
         if let Some(d) = &dfsph {
             solver.load_dfsph_held(d);
         }
@@ -141,6 +245,17 @@ impl GpuRankStages {
         if let Some(e) = solver.rank_error.borrow_mut().take() {
             anyhow::bail!("the adaptive step's maxima across ranks: {e}");
         }
+        let dt = self.read_back(held, dfsph)?;
+        self.keeps_step = advance;
+        Ok(dt)
+    }
+
+    /// Reads the device's state back into `held` in cell order (positions, velocities, ids, the
+    /// carried densities, the densities and pressures, the cell starts; with DFSPH the warm
+    /// starts); returns the last step's dt.
+    fn read_back(&mut self, held: HeldArrays<'_, f32>, dfsph: Option<DfsphHeld<'_, f32>>) -> anyhow::Result<f64> {
+        let solver = self.solver.as_ref().expect("made by a step");
+        let n = solver.fluid_count as usize;
         let cells = self.params.grid.cell_count() as u64;
         let st = solver.store.state(solver.current);
         let bytes = n as u64;
@@ -150,15 +265,22 @@ impl GpuRankStages {
             (&solver.starts, (cells + 1) * 4),
             (&solver.status, (status::DT as u64 + 1) * 4),
         ])?;
+        self.bus_bytes += 32 * bytes;
         let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
         let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
-        // The w of a position is the particle's place in the upload (and the ghost bit): its id
-        // comes from there.
-        let uploaded = std::mem::take(held.ids);
-        *held.ids = ids_of(&pos).iter().map(|&slot| uploaded[(slot & !GHOST_BIT) as usize]).collect();
+        // The w of a position is the particle's id (DFSPH: its place in the upload), with the
+        // ghost bit.
+        let slots = ids_of(&pos).into_iter().map(|w| w & !GHOST_BIT);
+        *held.ids = match dfsph {
+            Some(_) => {
+                let uploaded = std::mem::take(held.ids);
+                slots.map(|slot| uploaded[slot as usize]).collect()
+            }
+            None => slots.collect(),
+        };
         *held.positions = pos.iter().map(|p| V3([p[0], p[1], p[2]])).collect();
         *held.velocities = vel.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
-        if !held.carried_densities.is_empty() {
+        if self.params.continuity_density {
             *held.carried_densities = vel.iter().map(|v| v[3]).collect();
         }
         if let (Some(d), Some(gpu)) = (dfsph, &solver.dfsph) {
@@ -173,10 +295,21 @@ impl GpuRankStages {
         (*held.densities, *held.pressures) = solver.read_fields(solver.current)?;
         *held.starts = bytemuck::pod_collect_to_vec(&data[2]);
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[3]);
-        Ok(match self.params.adaptive {
+        Ok(self.step_dt(&words))
+    }
+
+    /// Room for `needed` band or received particles and a quarter more, from the next step on.
+    fn grow_lists(&mut self, needed: u64) {
+        self.list_room = self.list_room.max(needed + needed / 4);
+        self.resident = None;
+    }
+
+    /// The last step's dt: the GPU's choice (in the status words) with adaptive dt.
+    fn step_dt(&self, words: &[u32]) -> f64 {
+        match self.params.adaptive {
             Some(_) => f32::from_bits(words[status::DT]) as f64,
             None => self.params.dt,
-        })
+        }
     }
 }
 
@@ -245,19 +378,13 @@ impl GpuSolver {
     }
 
     /// Puts `positions`, `velocities` (and with continuity density `carried` densities) in the
-    /// buffers as the current state of step `step`, each particle's id its index with
-    /// [`GHOST_BIT`] where `ghosts` says so, and binds the stages to that many particles (at most
-    /// the buffers' capacity).
-    pub(super) fn load_held(&mut self, positions: &[[f64; 3]], velocities: &[[f64; 3]], carried: &[f32], ghosts: &[bool], step: u64) {
-        let n = positions.len() as u32;
-        if n != self.fluid_count {
-            self.fluid_count = n;
-            // Every stage reads the count from the uniform block: rewrite it.
-            let p = super::params::GpuParams::new(&self.params, n, self.wall_count, self.uniform_viscosity);
-            self.ctx.queue.write_buffer(&self.uniform, 0, &p.bytes());
-        }
+    /// buffers as the current state of step `step`, each particle's w its id (`ids`; without
+    /// them its index) with [`GHOST_BIT`] where `ghosts` says so, and binds the stages to that
+    /// many particles (at most the buffers' capacity).
+    pub(super) fn load_held(&mut self, positions: &[[f64; 3]], velocities: &[[f64; 3]], carried: &[f32], ghosts: &[bool], ids: Option<&[u32]>, step: u64) {
+        self.set_held_count(positions.len() as u32);
         let carried_of = |i: usize| carried.get(i).copied().unwrap_or(0.0);
-        let id_of = |i: usize| i as u32 | if ghosts.get(i).copied().unwrap_or(false) { GHOST_BIT } else { 0 };
+        let id_of = |i: usize| ids.map_or(i as u32, |ids| ids[i]) | if ghosts.get(i).copied().unwrap_or(false) { GHOST_BIT } else { 0 };
         self.store.state(0).upload(&self.ctx, positions, velocities, id_of, &carried_of);
         self.current = 0;
         self.fields_state = 0;

@@ -1,0 +1,227 @@
+//! Steps across ranks whose device keeps the rank's particles from one step to the next
+//! (docs/scale-out.md, "The GPU across ranks"). The full path reads every held particle back
+//! after a step and uploads them all before the next; a resident step reads back only the band
+//! the exchange touches (the particles that left the slab, and those in the layers next to a
+//! face that the neighbours take as ghosts), runs the same exchange on it (the same messages
+//! and collectives as the full path, so each rank may take either), and has the device merge
+//! what the neighbours sent into the particles it kept, in the one-process order: the step's
+//! stable binning then sees what the full path gives it, and computes the same bits.
+//!
+//! A step takes the full path where the host needs the particles: the first step of each batch
+//! (`CpuSolver::step`), a step that moves the slab bounds or samples probes, DFSPH, or a band
+//! or merge that outgrows the device's room. The host's arrays are read back from the device
+//! before the full path and at the end of every batch, so nothing outside the batch sees them
+//! stale.
+
+use super::exchange::{lock, Carried, Held, ResidentBand, ResidentStep};
+use super::resident_exchange::SlabFaces;
+use super::CpuSolver;
+use crate::model::real::{Real, V3};
+use crate::solver::communicator::all_sum;
+use std::time::Instant;
+
+/// Whether the device holds what the host holds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DeviceHeld {
+    /// Nothing the next step may start from (outside a batch, or before its first step).
+    #[default]
+    Nothing,
+    /// The state the last step left, which the host's arrays hold too.
+    Same,
+    /// The state the last step left, which the host's arrays lag behind.
+    Ahead,
+}
+
+impl<R: Real> CpuSolver<R> {
+    /// Runs this step from the state the device kept, where it can; false where the step takes
+    /// the full path (nothing done, or, where the merge did not fit the device, the exchange
+    /// done and the full path's arrays made on the host).
+    pub(super) fn step_resident(&mut self) -> bool {
+        let Some(device) = self.device.clone() else { return false };
+        if self.device_held == DeviceHeld::Nothing || self.dfsph.is_some() {
+            return false;
+        }
+        let Some(part) = self.ranks.as_deref() else { return false };
+        let balance = part.balance_every > 0 && self.step > 0 && self.step % part.balance_every == 0;
+        let probes = !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
+        if part.first_order.is_some() || balance || probes {
+            return false;
+        }
+        let (rank, size) = (part.comm.rank(), part.comm.size());
+        let faces = SlabFaces { axis: part.axis, slab: part.slabs.layers_of(rank), halo: part.slabs.halo, lower: rank > 0, upper: rank + 1 < size };
+        let t0 = Instant::now();
+        let band = match lock(&device).resident_band(&faces) {
+            Ok(Some(band)) => band,
+            Ok(None) => return false,
+            Err(e) => {
+                // The full path still runs the step's collectives, so no rank waits.
+                self.note_failure(Some(format!("rank {rank} of {size}: reading the band back failed: {e:#}")));
+                return false;
+            }
+        };
+        let exchanged = self.exchange_band(&faces, &band);
+        if let Some(part) = self.ranks.as_deref_mut() {
+            part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+        }
+        let (received, ghosts) = match exchanged {
+            Ok(done) => done,
+            Err(e) => {
+                // A failed collective stops every rank after this step.
+                self.note_failure(Some(format!("{e:#}")));
+                return true;
+            }
+        };
+        self.lists.clear();
+        let ran = lock(&device).run_resident_step(self.step, &band.dropped, &received, &ghosts);
+        match ran {
+            Ok(Some(done)) => {
+                if let Some(part) = self.ranks.as_deref_mut() {
+                    part.stats.ghosts = ghosts.iter().filter(|&&g| g).count();
+                    part.stats.resident_steps += 1;
+                }
+                self.device_held = DeviceHeld::Ahead;
+                self.record_resident_step(&done);
+            }
+            Ok(None) => {
+                // The merge does not fit the device's room: the host makes the held arrays from
+                // the state the device kept and the particles received, and the full path runs.
+                if let Err(e) = self.merge_on_host(&band, received, &ghosts) {
+                    self.note_failure(Some(format!("rank {rank} of {size}: {e:#}")));
+                }
+                self.step_on_device();
+            }
+            Err(e) => {
+                self.note_failure(Some(format!("rank {rank} of {size}: the device step failed: {e:#}")));
+            }
+        }
+        true
+    }
+
+    /// The exchange of the full path (migration, then ghosts) on the band: the particles the
+    /// neighbours sent, sorted in the one-process order, and which of them are ghosts.
+    fn exchange_band(&mut self, faces: &SlabFaces, band: &ResidentBand<R>) -> anyhow::Result<(Held<R>, Vec<bool>)> {
+        let carried = Carried { density: self.params.continuity_density, warm: false };
+        let grid = self.grid;
+        let part = self.ranks.as_deref_mut().expect("across ranks");
+        let comm = part.comm.clone();
+        let rank = comm.rank();
+        let layer_of = |p: V3<R>| grid.cell_coords(p)[faces.axis];
+        // The band's particles that left are the dropped slots that are not ghosts: the host
+        // and the device must agree on them, or a particle would be lost or held twice.
+        for (k, &slot) in band.slots.iter().enumerate() {
+            let leaves = part.slabs.owner(layer_of(band.particles.x[k])) != rank;
+            anyhow::ensure!(leaves == band.dropped.binary_search(&slot).is_ok(), "rank {rank}: the device and the host disagree on whether the particle in slot {slot} leaves the slab");
+        }
+        // Migration, as the full path's: one neighbour per round, until every particle is home.
+        let mut held = band.particles.picked(&(0..band.particles.len()).collect::<Vec<_>>());
+        let mut from_device = vec![true; held.len()];
+        for round in 0.. {
+            let (mut stay, mut down, mut up) = (Vec::new(), Vec::new(), Vec::new());
+            for i in 0..held.len() {
+                match part.slabs.owner(layer_of(held.x[i])).cmp(&rank) {
+                    std::cmp::Ordering::Equal => stay.push(i),
+                    std::cmp::Ordering::Less => down.push(i),
+                    std::cmp::Ordering::Greater => up.push(i),
+                }
+            }
+            let moving = (down.len() + up.len()) as f64;
+            if all_sum(&*comm, &[moving])?[0] == 0.0 {
+                break;
+            }
+            anyhow::ensure!(round < comm.size(), "particles still lie outside their rank's slab after {round} rounds of migration");
+            part.stats.migrated += moving as u64;
+            let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
+            let mut next = held.picked(&stay);
+            from_device = stay.iter().map(|&i| from_device[i]).collect();
+            next.decode(&from_lower, carried)?;
+            next.decode(&from_upper, carried)?;
+            from_device.resize(next.len(), false);
+            held = next;
+        }
+        // Ghosts: the own particles of the layers next to each face, in the one-process order.
+        let mut order: Vec<usize> = (0..held.len()).collect();
+        order.sort_unstable_by_key(|&i| held.order[i]);
+        let (mut down, mut up) = (Vec::new(), Vec::new());
+        for &i in &order {
+            let l = layer_of(held.x[i]);
+            if faces.lower && l < faces.slab.start + faces.halo {
+                down.push(i);
+            }
+            if faces.upper && l + faces.halo >= faces.slab.end {
+                up.push(i);
+            }
+        }
+        let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
+        // What the device does not hold: the migrants that arrived, and the ghosts.
+        let arrived: Vec<usize> = order.iter().copied().filter(|&i| !from_device[i]).collect();
+        let mut received = held.picked(&arrived);
+        let migrants = received.len();
+        received.decode(&from_lower, carried)?;
+        received.decode(&from_upper, carried)?;
+        let mut sorted: Vec<usize> = (0..received.len()).collect();
+        sorted.sort_unstable_by_key(|&i| received.order[i]);
+        let ghosts = sorted.iter().map(|&i| i >= migrants).collect();
+        Ok((received.picked(&sorted), ghosts))
+    }
+
+    /// The bookkeeping of a resident step: the own particles' health the device counted, over
+    /// every rank, as after a full step.
+    fn record_resident_step(&mut self, done: &ResidentStep) {
+        let h = done.health;
+        let found = super::integrate::StepHealth { non_finite: h.non_finite, escaped: h.escaped, max_speed: h.max_speed2.sqrt() as f64 };
+        let (found, max_density) = self.all_step_health(found, h.max_density as f64);
+        self.health.max_density = self.health.max_density.max(max_density);
+        self.record_step(done.dt, found, max_density);
+    }
+
+    /// Where the merge does not fit the device: the held arrays made on the host from the
+    /// state the device kept (read back) less the `band`'s dropped slots, and the `received`
+    /// particles, in the one-process order, for the full path's upload.
+    fn merge_on_host(&mut self, band: &ResidentBand<R>, received: Held<R>, ghosts: &[bool]) -> anyhow::Result<()> {
+        let device = self.device.clone().expect("with device stages");
+        lock(&device).read_held(self.held_arrays(&[], false, false))?;
+        let mut all = Held::default();
+        for cell in 0..self.starts.len() - 1 {
+            for slot in self.starts[cell]..self.starts[cell + 1] {
+                if band.dropped.binary_search(&slot).is_err() {
+                    let i = slot as usize;
+                    all.x.push(self.positions[i]);
+                    all.v.push(self.velocities[i]);
+                    all.id.push(self.ids[i]);
+                    if !self.carried_densities.is_empty() {
+                        all.rho.push(self.carried_densities[i]);
+                    }
+                    all.order.push((cell as u64) << 32 | (slot - self.starts[cell]) as u64);
+                }
+            }
+        }
+        let own = all.len();
+        for i in 0..received.len() {
+            all.push_from(&received, i);
+        }
+        if let Some(part) = self.ranks.as_deref_mut() {
+            part.stats.ghosts = ghosts.iter().filter(|&&g| g).count();
+        }
+        debug_assert!(own + received.len() == all.len());
+        self.install_held(all.sorted());
+        self.device_held = DeviceHeld::Nothing;
+        Ok(())
+    }
+
+    /// The host's arrays read back from the device where they lag behind it.
+    pub(super) fn sync_held(&mut self) {
+        if self.device_held != DeviceHeld::Ahead {
+            return;
+        }
+        let Some(device) = self.device.clone() else { return };
+        let read = lock(&device).read_held(self.held_arrays(&[], false, false));
+        self.size_held_arrays();
+        self.device_held = DeviceHeld::Same;
+        if let Err(e) = read {
+            if let Some(part) = self.ranks.as_deref() {
+                let e = format!("rank {} of {}: reading the particles back failed: {e:#}", part.comm.rank(), part.comm.size());
+                self.note_failure(Some(e));
+            }
+        }
+    }
+}

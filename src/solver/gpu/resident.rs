@@ -1,0 +1,306 @@
+//! A rank's step on the GPU with its interior left on the device (docs/scale-out.md, "The GPU
+//! across ranks"): after a step the device keeps the held particles, and the next exchange
+//! reads back only the band the exchange touches (the particles that left the slab and those in
+//! the layers next to a face), uploads only what the neighbours sent (migrants and ghosts), and
+//! merges the two on the device in the one-process order (wgsl/sim/resident_exchange.wgsl, whose
+//! CPU twin is src/solver/cpu/resident_exchange.rs). The full readback and upload
+//! (src/solver/gpu/ranks.rs) remain for the steps that need the particles on the host.
+
+use super::buffers::{storage, GHOST_BIT};
+use super::readback::read_ranges;
+use super::schedule::{PlainRecorder, Recorder};
+use super::shaders::{stage_with_aliases, Stage, WORKGROUP_SIZE};
+use super::GpuSolver;
+use crate::solver::cpu::resident_exchange::{OwnHealth, SlabFaces};
+
+/// The words of `exchange_words` (`EXCHANGE_*` in wgsl/sim/resident_exchange.wgsl).
+pub mod words {
+    pub const AXIS: usize = 0;
+    pub const SLAB_START: usize = 1;
+    pub const SLAB_END: usize = 2;
+    pub const HALO: usize = 3;
+    pub const NEIGHBOURS: usize = 4;
+    pub const DROPPED: usize = 5;
+    pub const BAND: usize = 6;
+    pub const INSERTS: usize = 7;
+    pub const HELD: usize = 8;
+    pub const NON_FINITE: usize = 9;
+    pub const ESCAPED: usize = 10;
+    pub const MAX_SPEED2: usize = 11;
+    pub const MAX_DENSITY: usize = 12;
+    /// Words in the buffer.
+    pub const COUNT: usize = 16;
+}
+
+/// The band a step's exchange reads back: the dropped slots (unsorted), and for each band
+/// particle its slot, position and velocity (the device's vectors, w included) and its place in
+/// the one-process order (cell and place in the cell of the last binning).
+pub struct DeviceBand {
+    pub dropped: Vec<u32>,
+    pub slots: Vec<u32>,
+    pub positions: Vec<[f32; 4]>,
+    pub velocities: Vec<[f32; 4]>,
+    pub keys: Vec<u64>,
+}
+
+/// The stages and arrays of the resident exchange, made for a solver's capacity, with room for
+/// `list_capacity` band and received particles each (a step whose band or received particles
+/// outgrow it takes the full path, and the rank makes the room larger).
+pub struct ResidentExchange {
+    select_band: Stage,
+    place_inserts: Stage,
+    merge_kept: Stage,
+    own_health: Stage,
+    /// Per phase of the state: the bind groups of the four entry points, in that order.
+    groups: Vec<[wgpu::BindGroup; 4]>,
+    words: wgpu::Buffer,
+    dropped: wgpu::Buffer,
+    band: wgpu::Buffer,
+    inserts: wgpu::Buffer,
+    merged_positions: wgpu::Buffer,
+    merged_velocities: wgpu::Buffer,
+    /// Held particles the arrays hold (the solver's capacity).
+    capacity: u64,
+    /// Band and received particles each.
+    list_capacity: u64,
+}
+
+impl ResidentExchange {
+    pub fn new(solver: &GpuSolver, list_capacity: u64) -> anyhow::Result<Self> {
+        let ctx = &solver.ctx;
+        let capacity = solver.store.capacity();
+        let list_capacity = list_capacity.clamp(64, capacity.max(64));
+        let cells = solver.params.grid.cell_count() as u64 + 1;
+        let with_densities = solver.densities.is_some();
+        let lens = move |name: &str| match name {
+            "starts" => cells,
+            "exchange_words" => words::COUNT as u64,
+            "band" | "inserts" => 3 * list_capacity,
+            "insert_places" => list_capacity,
+            "densities" if !with_densities => 0,
+            _ => capacity,
+        };
+        // Ghosts are marked in the w of their positions (always so across ranks, where this
+        // runs; one GPU's stage tests mark some themselves).
+        let mut constants: Vec<(&'static str, f64)> = solver.constants_sized(WORKGROUP_SIZE).into_iter().filter(|c| c.0 != "GHOSTS").collect();
+        constants.push(("GHOSTS", 1.0));
+        let stage = |entry: &str| stage_with_aliases(ctx, "resident_exchange", entry, &lens, &constants, &[]);
+        let [select_band, place_inserts, merge_kept, own_health] = ["select_band", "place_inserts", "merge_kept", "own_health"].map(stage);
+        let (select_band, place_inserts, merge_kept, own_health) = (select_band?, place_inserts?, merge_kept?, own_health?);
+        let device = &ctx.device;
+        let words = storage(device, "exchange words", words::COUNT as u64 * 4);
+        let dropped = storage(device, "dropped slots", capacity * 4);
+        let band = storage(device, "band", 3 * list_capacity * 16);
+        let inserts = storage(device, "received particles", 3 * list_capacity * 16);
+        let places = storage(device, "received particles' places", list_capacity * 4);
+        let merged_positions = storage(device, "merged positions", capacity * 16);
+        let merged_velocities = storage(device, "merged velocities", capacity * 16);
+        let groups = (0..solver.store.phases())
+            .map(|c| {
+                let state = solver.store.state(c);
+                let buffers = |name: &str| match name {
+                    "positions" => state.positions.clone(),
+                    "velocities" => state.velocities.clone(),
+                    "densities" => solver.densities.clone().expect("bound only where the step keeps densities"),
+                    "starts" => solver.starts.clone(),
+                    "exchange_words" => words.clone(),
+                    "dropped" => dropped.clone(),
+                    "band" => band.clone(),
+                    "inserts" => inserts.clone(),
+                    "insert_places" => places.clone(),
+                    "merged_positions" => merged_positions.clone(),
+                    "merged_velocities" => merged_velocities.clone(),
+                    other => panic!("no buffer holds the array '{other}'"),
+                };
+                [&select_band, &place_inserts, &merge_kept, &own_health].map(|s| s.bind_group(device, "resident exchange", &solver.uniform, &buffers))
+            })
+            .collect();
+        Ok(ResidentExchange { select_band, place_inserts, merge_kept, own_health, groups, words, dropped, band, inserts, merged_positions, merged_velocities, capacity, list_capacity })
+    }
+
+    /// Bytes of the arrays.
+    pub fn bytes(&self) -> u64 {
+        [&self.words, &self.dropped, &self.band, &self.inserts, &self.merged_positions, &self.merged_velocities].iter().map(|b| b.size()).sum::<u64>() + self.list_capacity * 4
+    }
+
+    /// Band and received particles the arrays have room for.
+    pub fn list_capacity(&self) -> u64 {
+        self.list_capacity
+    }
+
+    /// Lists the dropped slots and reads back the band of the state the last step left
+    /// (`faces`: the rank's slab), or `Err` with the band's size where it outgrows its array.
+    pub fn band(&self, solver: &GpuSolver, faces: &SlabFaces) -> anyhow::Result<Result<DeviceBand, u64>> {
+        let ctx = &solver.ctx;
+        let mut control = [0u32; words::COUNT];
+        control[words::AXIS] = faces.axis as u32;
+        control[words::SLAB_START] = faces.slab.start;
+        control[words::SLAB_END] = faces.slab.end;
+        control[words::HALO] = faces.halo;
+        control[words::NEIGHBOURS] = faces.lower as u32 | (faces.upper as u32) << 1;
+        ctx.queue.write_buffer(&self.words, 0, bytemuck::cast_slice(&control));
+        let mut rec = PlainRecorder::new(&ctx.device, "band");
+        solver.dispatch_particles(&mut rec, &self.select_band, &self.groups[solver.current][0]);
+        ctx.queue.submit([rec.finish()]);
+        let counts = read_ranges(ctx, &[(&self.words, 0, words::COUNT as u64 * 4)])?;
+        let counts: Vec<u32> = bytemuck::pod_collect_to_vec(&counts[0]);
+        let (dropped, band) = (counts[words::DROPPED] as u64, counts[words::BAND] as u64);
+        if band > self.list_capacity {
+            return Ok(Err(band));
+        }
+        // Only the ranges that hold something (a copy of no bytes is not a copy).
+        let ranges: Vec<(&wgpu::Buffer, u64, u64)> = [(&self.dropped, 0, dropped * 4), (&self.band, 0, band * 48)].into_iter().filter(|r| r.2 > 0).collect();
+        let mut data = read_ranges(ctx, &ranges)?.into_iter();
+        let dropped: Vec<u32> = if dropped > 0 { bytemuck::pod_collect_to_vec(&data.next().expect("read")) } else { Vec::new() };
+        let vectors: Vec<[f32; 4]> = if band > 0 { bytemuck::pod_collect_to_vec(&data.next().expect("read")) } else { Vec::new() };
+        let mut out = DeviceBand { dropped, slots: Vec::new(), positions: Vec::new(), velocities: Vec::new(), keys: Vec::new() };
+        for entry in vectors.chunks_exact(3) {
+            let key = entry[2].map(f32::to_bits);
+            out.slots.push(key[0]);
+            out.positions.push(entry[0]);
+            out.velocities.push(entry[1]);
+            out.keys.push((key[1] as u64) << 32 | key[2] as u64);
+        }
+        Ok(Ok(out))
+    }
+
+    /// The held particles written again without the `dropped` slots (sorted) and with the
+    /// received particles (positions and velocities, w included, sorted by their places in the
+    /// one-process order `keys`), in that order; the solver then holds them. False, and nothing
+    /// changed, where they do not fit the arrays.
+    pub fn merge(&self, solver: &mut GpuSolver, dropped: &[u32], positions: &[[f32; 4]], velocities: &[[f32; 4]], keys: &[u64]) -> bool {
+        let held = solver.fluid_count as u64;
+        let merged = held - dropped.len() as u64 + positions.len() as u64;
+        if merged > self.capacity || positions.len() as u64 > self.list_capacity || merged == 0 {
+            return false;
+        }
+        let ctx = solver.ctx.clone();
+        let mut control = [0u32; words::COUNT];
+        control[words::DROPPED] = dropped.len() as u32;
+        control[words::INSERTS] = positions.len() as u32;
+        control[words::HELD] = held as u32;
+        ctx.queue.write_buffer(&self.words, 0, bytemuck::cast_slice(&control));
+        if !dropped.is_empty() {
+            ctx.queue.write_buffer(&self.dropped, 0, bytemuck::cast_slice(dropped));
+        }
+        if !positions.is_empty() {
+            let mut vectors = Vec::with_capacity(3 * positions.len());
+            for k in 0..positions.len() {
+                let key = [(keys[k] >> 32) as u32, keys[k] as u32, 0, 0].map(f32::from_bits);
+                vectors.extend([positions[k], velocities[k], key]);
+            }
+            ctx.queue.write_buffer(&self.inserts, 0, bytemuck::cast_slice(&vectors));
+        }
+        let groups = &self.groups[solver.current];
+        let mut rec = PlainRecorder::new(&ctx.device, "merge");
+        solver.dispatch_threads(&mut rec, &self.place_inserts, &groups[1], positions.len() as u64);
+        solver.dispatch_threads(&mut rec, &self.merge_kept, &groups[2], held);
+        let state = solver.store.state(solver.current);
+        rec.copy(&self.merged_positions, &state.positions, merged * 16);
+        rec.copy(&self.merged_velocities, &state.velocities, merged * 16);
+        ctx.queue.submit([rec.finish()]);
+        solver.set_held_count(merged as u32);
+        true
+    }
+
+    /// The own particles' health after the step just run.
+    pub fn own_health(&self, solver: &GpuSolver) -> anyhow::Result<OwnHealth> {
+        let ctx = &solver.ctx;
+        ctx.queue.write_buffer(&self.words, 0, bytemuck::cast_slice(&[0u32; words::COUNT]));
+        let mut rec = PlainRecorder::new(&ctx.device, "own health");
+        solver.dispatch_particles(&mut rec, &self.own_health, &self.groups[solver.current][3]);
+        ctx.queue.submit([rec.finish()]);
+        let data = read_ranges(ctx, &[(&self.words, 0, words::COUNT as u64 * 4)])?;
+        let w: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
+        Ok(OwnHealth {
+            non_finite: w[words::NON_FINITE],
+            escaped: w[words::ESCAPED],
+            max_speed2: f32::from_bits(w[words::MAX_SPEED2]),
+            max_density: f32::from_bits(w[words::MAX_DENSITY]),
+        })
+    }
+}
+
+impl GpuSolver {
+    /// Binds the stages to `n` held particles (every stage reads the count from the uniform
+    /// block).
+    pub(super) fn set_held_count(&mut self, n: u32) {
+        if n != self.fluid_count {
+            self.fluid_count = n;
+            let p = super::params::GpuParams::new(&self.params, n, self.wall_count, self.uniform_viscosity);
+            self.ctx.queue.write_buffer(&self.uniform, 0, &p.bytes());
+        }
+    }
+}
+
+/// The w of a received particle's position: its id, with [`GHOST_BIT`] for a ghost.
+pub fn received_w(id: u32, ghost: bool) -> f32 {
+    f32::from_bits(id | if ghost { GHOST_BIT } else { 0 })
+}
+
+/// What [`GpuSolver::resident_exchange_alone`] gives back.
+pub struct ResidentExchangeRun {
+    /// The state before, in slot order (w included), and the cell starts of its binning.
+    pub positions: Vec<[f32; 4]>,
+    pub velocities: Vec<[f32; 4]>,
+    pub starts: Vec<u32>,
+    /// The band as the device listed it.
+    pub band: DeviceBand,
+    /// The held particles after the merge, in slot order.
+    pub merged_positions: Vec<[f32; 4]>,
+    pub merged_velocities: Vec<[f32; 4]>,
+    /// `own_health` of the state before (with its densities where the step keeps them).
+    pub health: OwnHealth,
+    pub densities: Option<Vec<f32>>,
+}
+
+impl GpuSolver {
+    /// The resident exchange's stage alone on the current state (for the stage tests): the
+    /// slots `ghosts` marked as ghosts, the band of `faces` listed, the own particles' health
+    /// counted, then the held particles merged without the dropped slots and with `received`
+    /// (position, velocity and place in the one-process order each, sorted by place). The
+    /// solver holds the merged particles afterwards.
+    pub fn resident_exchange_alone(&mut self, faces: &SlabFaces, ghosts: &[u32], received: &[([f32; 4], [f32; 4], u64)]) -> anyhow::Result<ResidentExchangeRun> {
+        let n = self.fluid_count as u64;
+        let state = self.store.state(self.current);
+        let cells = self.params.grid.cell_count() as u64 + 1;
+        let data = read_ranges(&self.ctx, &[(&state.positions, 0, n * 16), (&state.velocities, 0, n * 16), (&self.starts, 0, cells * 4)])?;
+        let mut positions: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
+        let velocities: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
+        let starts: Vec<u32> = bytemuck::pod_collect_to_vec(&data[2]);
+        for &slot in ghosts {
+            let p = &mut positions[slot as usize];
+            p[3] = f32::from_bits(p[3].to_bits() | GHOST_BIT);
+        }
+        self.ctx.queue.write_buffer(&state.positions, 0, bytemuck::cast_slice(&positions));
+        let densities = match &self.densities {
+            Some(d) => Some(bytemuck::pod_collect_to_vec(&read_ranges(&self.ctx, &[(d, 0, n * 4)])?.remove(0))),
+            None => None,
+        };
+        let stage = ResidentExchange::new(self, n.max(received.len() as u64))?;
+        let health = stage.own_health(self)?;
+        let band = stage.band(self, faces)?.map_err(|size| anyhow::anyhow!("the band of {size} particles outgrows its array"))?;
+        let mut dropped = band.dropped.clone();
+        dropped.sort_unstable();
+        let (p, v, keys): (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<u64>) = received.iter().fold((Vec::new(), Vec::new(), Vec::new()), |mut acc, r| {
+            acc.0.push(r.0);
+            acc.1.push(r.1);
+            acc.2.push(r.2);
+            acc
+        });
+        anyhow::ensure!(stage.merge(self, &dropped, &p, &v, &keys), "the merge does not fit the arrays");
+        let m = self.fluid_count as u64;
+        let state = self.store.state(self.current);
+        let data = read_ranges(&self.ctx, &[(&state.positions, 0, m * 16), (&state.velocities, 0, m * 16)])?;
+        Ok(ResidentExchangeRun {
+            positions,
+            velocities,
+            starts,
+            band,
+            merged_positions: bytemuck::pod_collect_to_vec(&data[0]),
+            merged_velocities: bytemuck::pod_collect_to_vec(&data[1]),
+            health,
+            densities,
+        })
+    }
+}

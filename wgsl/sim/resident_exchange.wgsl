@@ -1,0 +1,188 @@
+// Across ranks on a GPU, the exchange with the rank's interior left on the device
+// (src/solver/gpu/resident.rs, docs/scale-out.md "The GPU across ranks"). After a step the
+// device holds the rank's particles in the cell order of that step's binning, integrated;
+// only the particles the exchange touches cross the bus:
+//
+// - `select_band` lists the slots the rank drops (its ghosts, and its own particles that left
+//   its slab) and copies out the band: the leaving particles and those in the layers next to a
+//   face, which the neighbour takes as ghosts, each with its place in the one-process order
+//   (cell and place in the cell of the last binning, found in the cell starts);
+// - the host exchanges the band with the neighbours and uploads the dropped slots, sorted, and
+//   what it received (migrants and ghosts), sorted by their places in the one-process order;
+// - `place_inserts` and `merge_kept` write the held particles again in that order: a kept
+//   particle moves up by the received particles that come before it and down by the dropped
+//   slots before it (two binary searches in short sorted lists), so the stable binning of the
+//   step gives every cell the particles and order one process gives it, as the full upload does;
+// - `own_health` counts the rank's own particles' health after the step (ghosts left out).
+//
+// Twin of src/solver/cpu/resident_exchange.rs.
+
+//! include shared/common.wgsl
+//! array positions: vec4<f32>, read
+//! array velocities: vec4<f32>, read
+//! array densities: f32, read, optional
+//! array starts: u32, read
+// The words below (EXCHANGE_*), read and counted atomically.
+//! array exchange_words: u32, atomic, whole
+//! array dropped: u32, read_write
+// Per band particle three vectors: position, velocity, (slot, cell, place in the cell, 0) as bits.
+//! array band: vec4<f32>, read_write
+// Per received particle three vectors: position, velocity, (cell, place in the cell, 0, 0) as bits.
+//! array inserts: vec4<f32>, read
+//! array insert_places: u32, read_write
+//! array merged_positions: vec4<f32>, read_write
+//! array merged_velocities: vec4<f32>, read_write
+
+const EXCHANGE_AXIS: u32 = 0u;            // the axis the slabs cut
+const EXCHANGE_SLAB_START: u32 = 1u;      // the rank's cell layers along it, [start, end)
+const EXCHANGE_SLAB_END: u32 = 2u;
+const EXCHANGE_HALO: u32 = 3u;            // ghost layers on each side of a face
+const EXCHANGE_NEIGHBOURS: u32 = 4u;      // bit 0: a lower neighbour, bit 1: an upper one
+const EXCHANGE_DROPPED: u32 = 5u;         // dropped slots listed
+const EXCHANGE_BAND: u32 = 6u;            // band particles copied out
+const EXCHANGE_INSERTS: u32 = 7u;         // received particles uploaded
+const EXCHANGE_HELD: u32 = 8u;            // held particles before the merge
+const EXCHANGE_NON_FINITE: u32 = 9u;      // own_health: own particles not finite
+const EXCHANGE_ESCAPED: u32 = 10u;        // finite, outside the domain
+const EXCHANGE_MAX_SPEED2: u32 = 11u;     // the largest |v|^2 (bits of a positive f32)
+const EXCHANGE_MAX_DENSITY: u32 = 12u;    // the largest finite positive density (bits)
+
+fn word(k: u32) -> u32 {
+    return atomicLoad(&exchange_words[k]);
+}
+
+// The slot's cell in the last binning: the last cell whose start is at or below the slot.
+fn cell_of_slot(slot: u32) -> u32 {
+    var low = 0u;
+    var high = params.grid_dims.x * params.grid_dims.y * params.grid_dims.z;
+    // starts[low] <= slot < starts[high + 1] holds throughout.
+    while (low < high) {
+        let mid = (low + high + 1u) / 2u;
+        if (starts_at(mid) <= slot) {
+            low = mid;
+        } else {
+            high = mid - 1u;
+        }
+    }
+    return low;
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn select_band(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i >= params.fluid_count) {
+        return;
+    }
+    let p = positions_at(i);
+    if (is_ghost(p.w)) {
+        dropped_set(atomicAdd(&exchange_words[EXCHANGE_DROPPED], 1u), i);
+        return;
+    }
+    let layer = cell_coords(p.xyz)[word(EXCHANGE_AXIS)];
+    let start = word(EXCHANGE_SLAB_START);
+    let end = word(EXCHANGE_SLAB_END);
+    let halo = word(EXCHANGE_HALO);
+    let neighbours = word(EXCHANGE_NEIGHBOURS);
+    let leaving = layer < start || layer >= end;
+    let near_face = ((neighbours & 1u) != 0u && layer < start + halo) || ((neighbours & 2u) != 0u && layer + halo >= end);
+    if (leaving) {
+        dropped_set(atomicAdd(&exchange_words[EXCHANGE_DROPPED], 1u), i);
+    }
+    if (leaving || near_face) {
+        let k = atomicAdd(&exchange_words[EXCHANGE_BAND], 1u);
+        let cell = cell_of_slot(i);
+        band_set(3u * k, p);
+        band_set(3u * k + 1u, velocities_at(i));
+        band_set(3u * k + 2u, bitcast<vec4<f32>>(vec4<u32>(i, cell, i - starts_at(cell), 0u)));
+    }
+}
+
+// How many of the first `count` dropped slots (sorted) lie below `slot`.
+fn dropped_below(slot: u32, count: u32) -> u32 {
+    var low = 0u;
+    var high = count;
+    while (low < high) {
+        let mid = (low + high) / 2u;
+        if (dropped_at(mid) < slot) {
+            low = mid + 1u;
+        } else {
+            high = mid;
+        }
+    }
+    return low;
+}
+
+// Each received particle j goes before the first held slot whose place in the one-process order
+// is after its own: a slot of its cell at its place or, past the cell's end, the next cell's
+// first. Its new slot: the kept slots before that one, and the j received before it.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn place_inserts(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let j = thread_index(gid, groups);
+    if (j >= word(EXCHANGE_INSERTS)) {
+        return;
+    }
+    let key = bitcast<vec4<u32>>(inserts_at(3u * j + 2u));
+    let before = min(starts_at(key.x) + key.y, starts_at(key.x + 1u));
+    insert_places_set(j, before);
+    let slot = before - dropped_below(before, word(EXCHANGE_DROPPED)) + j;
+    merged_positions_set(slot, inserts_at(3u * j));
+    merged_velocities_set(slot, inserts_at(3u * j + 1u));
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn merge_kept(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i >= word(EXCHANGE_HELD)) {
+        return;
+    }
+    let dropped_count = word(EXCHANGE_DROPPED);
+    let below = dropped_below(i, dropped_count);
+    if (below < dropped_count && dropped_at(below) == i) {
+        return;
+    }
+    // The received particles placed at or before this slot.
+    var low = 0u;
+    var high = word(EXCHANGE_INSERTS);
+    while (low < high) {
+        let mid = (low + high) / 2u;
+        if (insert_places_at(mid) <= i) {
+            low = mid + 1u;
+        } else {
+            high = mid;
+        }
+    }
+    let slot = i - below + low;
+    merged_positions_set(slot, positions_at(i));
+    merged_velocities_set(slot, velocities_at(i));
+}
+
+// The health the host takes from its own particles after a step (CpuSolver::step_on_device):
+// the counts of non-finite and escaped particles, the largest |v|^2 and the largest density.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn own_health(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i >= params.fluid_count) {
+        return;
+    }
+    let p = positions_at(i);
+    if (is_ghost(p.w)) {
+        return;
+    }
+    let v = velocities_at(i);
+    let finite = is_finite_vec3(p.xyz) && is_finite_vec3(v.xyz);
+    let inside = all(p.xyz >= params.domain_min.xyz) && all(p.xyz <= params.domain_max.xyz);
+    if (!finite) {
+        atomicAdd(&exchange_words[EXCHANGE_NON_FINITE], 1u);
+    } else {
+        if (!inside) {
+            atomicAdd(&exchange_words[EXCHANGE_ESCAPED], 1u);
+        }
+        let speed2 = v.x * v.x + v.y * v.y + v.z * v.z;
+        atomicMax(&exchange_words[EXCHANGE_MAX_SPEED2], bitcast<u32>(speed2));
+    }
+    // The density of the step's fields: carried in their own array, or summed into the w.
+    let density = select(v.w, densities_at(i), CONTINUITY);
+    if (is_finite_f32(density) && density > 0.0) {
+        atomicMax(&exchange_words[EXCHANGE_MAX_DENSITY], bitcast<u32>(density));
+    }
+}
