@@ -18,6 +18,7 @@
 // Twin of src/solver/cpu/resident_exchange.rs.
 
 //! include shared/common.wgsl
+//! include shared/reduce.wgsl
 //! array positions: vec4<f32>, read
 //! array velocities: vec4<f32>, read
 //! array densities: f32, read, optional
@@ -67,29 +68,64 @@ fn cell_of_slot(slot: u32) -> u32 {
     return low;
 }
 
+// A workgroup's dropped slots and band particles are appended together: each invocation takes
+// its place within the workgroup, and one invocation reserves the workgroup's run in each list
+// (one global atomic per workgroup and list, not per particle).
+var<workgroup> dropped_in_group: atomic<u32>;
+var<workgroup> band_in_group: atomic<u32>;
+var<workgroup> dropped_base: u32;
+var<workgroup> band_base: u32;
+
 @compute @workgroup_size(WORKGROUP_SIZE)
-fn select_band(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+fn select_band(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    if (lid == 0u) {
+        atomicStore(&dropped_in_group, 0u);
+        atomicStore(&band_in_group, 0u);
+    }
+    workgroupBarrier();
     let i = thread_index(gid, groups);
-    if (i >= params.fluid_count) {
-        return;
+    var drop = false;
+    var in_band = false;
+    var p = vec4<f32>();
+    if (i < params.fluid_count) {
+        p = positions_at(i);
+        if (is_ghost(p.w)) {
+            drop = true;
+        } else {
+            let layer = cell_coords(p.xyz)[word(EXCHANGE_AXIS)];
+            let start = word(EXCHANGE_SLAB_START);
+            let end = word(EXCHANGE_SLAB_END);
+            let halo = word(EXCHANGE_HALO);
+            let neighbours = word(EXCHANGE_NEIGHBOURS);
+            let leaving = layer < start || layer >= end;
+            let near_face = ((neighbours & 1u) != 0u && layer < start + halo) || ((neighbours & 2u) != 0u && layer + halo >= end);
+            drop = leaving;
+            in_band = leaving || near_face;
+        }
     }
-    let p = positions_at(i);
-    if (is_ghost(p.w)) {
-        dropped_set(atomicAdd(&exchange_words[EXCHANGE_DROPPED], 1u), i);
-        return;
+    var dropped_place = 0u;
+    var band_place = 0u;
+    if (drop) {
+        dropped_place = atomicAdd(&dropped_in_group, 1u);
     }
-    let layer = cell_coords(p.xyz)[word(EXCHANGE_AXIS)];
-    let start = word(EXCHANGE_SLAB_START);
-    let end = word(EXCHANGE_SLAB_END);
-    let halo = word(EXCHANGE_HALO);
-    let neighbours = word(EXCHANGE_NEIGHBOURS);
-    let leaving = layer < start || layer >= end;
-    let near_face = ((neighbours & 1u) != 0u && layer < start + halo) || ((neighbours & 2u) != 0u && layer + halo >= end);
-    if (leaving) {
-        dropped_set(atomicAdd(&exchange_words[EXCHANGE_DROPPED], 1u), i);
+    if (in_band) {
+        band_place = atomicAdd(&band_in_group, 1u);
     }
-    if (leaving || near_face) {
-        let k = atomicAdd(&exchange_words[EXCHANGE_BAND], 1u);
+    workgroupBarrier();
+    if (lid == 0u) {
+        dropped_base = atomicAdd(&exchange_words[EXCHANGE_DROPPED], atomicLoad(&dropped_in_group));
+        band_base = atomicAdd(&exchange_words[EXCHANGE_BAND], atomicLoad(&band_in_group));
+    }
+    workgroupBarrier();
+    if (drop) {
+        dropped_set(dropped_base + dropped_place, i);
+    }
+    if (in_band) {
+        let k = band_base + band_place;
         let cell = cell_of_slot(i);
         band_set(3u * k, p);
         band_set(3u * k + 1u, velocities_at(i));
@@ -157,32 +193,42 @@ fn merge_kept(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
 }
 
 // The health the host takes from its own particles after a step (CpuSolver::step_on_device):
-// the counts of non-finite and escaped particles, the largest |v|^2 and the largest density.
+// the counts of non-finite and escaped particles (a bad particle's own atomic: they are rare),
+// the largest |v|^2 and the largest density (each reduced over the workgroup first).
 @compute @workgroup_size(WORKGROUP_SIZE)
-fn own_health(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+fn own_health(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    reduce_begin(lid);
     let i = thread_index(gid, groups);
-    if (i >= params.fluid_count) {
-        return;
-    }
-    let p = positions_at(i);
-    if (is_ghost(p.w)) {
-        return;
-    }
-    let v = velocities_at(i);
-    let finite = is_finite_vec3(p.xyz) && is_finite_vec3(v.xyz);
-    let inside = all(p.xyz >= params.domain_min.xyz) && all(p.xyz <= params.domain_max.xyz);
-    if (!finite) {
-        atomicAdd(&exchange_words[EXCHANGE_NON_FINITE], 1u);
-    } else {
-        if (!inside) {
-            atomicAdd(&exchange_words[EXCHANGE_ESCAPED], 1u);
+    var speed2 = 0.0;
+    var density = 0.0;
+    if (i < params.fluid_count && !is_ghost(positions_at(i).w)) {
+        let p = positions_at(i);
+        let v = velocities_at(i);
+        let finite = is_finite_vec3(p.xyz) && is_finite_vec3(v.xyz);
+        let inside = all(p.xyz >= params.domain_min.xyz) && all(p.xyz <= params.domain_max.xyz);
+        if (!finite) {
+            atomicAdd(&exchange_words[EXCHANGE_NON_FINITE], 1u);
+        } else {
+            if (!inside) {
+                atomicAdd(&exchange_words[EXCHANGE_ESCAPED], 1u);
+            }
+            speed2 = v.x * v.x + v.y * v.y + v.z * v.z;
         }
-        let speed2 = v.x * v.x + v.y * v.y + v.z * v.z;
-        atomicMax(&exchange_words[EXCHANGE_MAX_SPEED2], bitcast<u32>(speed2));
+        // The density of the step's fields: carried in their own array, or summed into the w.
+        let rho = select(v.w, densities_at(i), CONTINUITY);
+        if (is_finite_f32(rho) && rho > 0.0) {
+            density = rho;
+        }
     }
-    // The density of the step's fields: carried in their own array, or summed into the w.
-    let density = select(v.w, densities_at(i), CONTINUITY);
-    if (is_finite_f32(density) && density > 0.0) {
-        atomicMax(&exchange_words[EXCHANGE_MAX_DENSITY], bitcast<u32>(density));
+    reduce_offer(0u, bitcast<u32>(speed2));
+    reduce_offer(1u, bitcast<u32>(density));
+    reduce_end();
+    if (lid == 0u) {
+        atomicMax(&exchange_words[EXCHANGE_MAX_SPEED2], reduce_result(0u));
+        atomicMax(&exchange_words[EXCHANGE_MAX_DENSITY], reduce_result(1u));
     }
 }

@@ -21,6 +21,9 @@ use super::dfsph::RankSolves;
 use super::params::status;
 use std::sync::Arc;
 
+/// Bytes of the resident exchange's control and health words.
+const WORDS_BYTES: u64 = super::resident::words::COUNT as u64 * 4;
+
 /// Room made above the held count when the buffers are (re)made: migration and moving bounds
 /// change the count a little from step to step.
 const CAPACITY_MARGIN: f64 = 1.25;
@@ -131,7 +134,8 @@ impl DeviceStages<f32> for GpuRankStages {
                 return Ok(None);
             }
         };
-        self.bus_bytes += 4 * band.dropped.len() as u64 + 48 * band.slots.len() as u64;
+        // The control words written and read, then the dropped slots and the band.
+        self.bus_bytes += 2 * WORDS_BYTES + 4 * band.dropped.len() as u64 + 48 * band.slots.len() as u64;
         // In slot order, which is the one-process order (the state is in the cell order of its
         // binning).
         let mut by_slot: Vec<usize> = (0..band.slots.len()).collect();
@@ -172,7 +176,9 @@ impl DeviceStages<f32> for GpuRankStages {
             }
             return Ok(None);
         }
-        self.bus_bytes += 4 * dropped.len() as u64 + 48 * received.len() as u64;
+        // The control words, the dropped slots and the received particles; after the step the
+        // health's words (written and read) and the status words up to dt.
+        self.bus_bytes += 3 * WORDS_BYTES + 4 * dropped.len() as u64 + 48 * received.len() as u64 + (status::DT as u64 + 1) * 4;
         self.keeps_step = false;
         solver.steps = step;
         solver.accelerations_valid = false;
@@ -180,9 +186,7 @@ impl DeviceStages<f32> for GpuRankStages {
         if let Some(e) = solver.rank_error.borrow_mut().take() {
             anyhow::bail!("the adaptive step's maxima across ranks: {e}");
         }
-        let health = resident.own_health(solver)?;
-        let words = read_buffers(&self.ctx, &[(&solver.status, (status::DT as u64 + 1) * 4)])?;
-        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&words[0]);
+        let (health, words) = resident.own_health(solver, status::DT as u64 + 1)?;
         let held = solver.fluid_count as usize;
         self.keeps_step = true;
         Ok(Some(ResidentStep { dt: self.step_dt(&words), health, held }))
@@ -223,6 +227,7 @@ impl GpuRankStages {
         self.bus_bytes += 32 * n as u64;
         if let Some(d) = &dfsph {
             solver.load_dfsph_held(d);
+            self.bus_bytes += 8 * n as u64;
         }
         if advance {
             solver.advance(1);
@@ -265,7 +270,7 @@ impl GpuRankStages {
             (&solver.starts, (cells + 1) * 4),
             (&solver.status, (status::DT as u64 + 1) * 4),
         ])?;
-        self.bus_bytes += 32 * bytes;
+        self.bus_bytes += 32 * bytes + (cells + 1) * 4 + (status::DT as u64 + 1) * 4;
         let pos: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[0]);
         let vel: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[1]);
         // The w of a position is the particle's id (DFSPH: its place in the upload), with the
@@ -291,8 +296,11 @@ impl GpuRankStages {
             *d.warm_pressure = bytemuck::pod_collect_to_vec(&data[0]);
             *d.warm_divergence = bytemuck::pod_collect_to_vec(&data[1]);
             *d.warm_keys = ids_of(&pos).iter().map(|&slot| slot & !GHOST_BIT).collect();
+            self.bus_bytes += 8 * bytes;
         }
         (*held.densities, *held.pressures) = solver.read_fields(solver.current)?;
+        // Where the step keeps no densities, they come from the w of the velocities, read again.
+        self.bus_bytes += bytes * if solver.densities.is_some() { 4 } else { 16 } + bytes * 4 * solver.pressures.is_some() as u64;
         *held.starts = bytemuck::pod_collect_to_vec(&data[2]);
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[3]);
         Ok(self.step_dt(&words))

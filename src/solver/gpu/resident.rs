@@ -203,21 +203,23 @@ impl ResidentExchange {
         true
     }
 
-    /// The own particles' health after the step just run.
-    pub fn own_health(&self, solver: &GpuSolver) -> anyhow::Result<OwnHealth> {
+    /// The own particles' health after the step just run, read back in one wait with the
+    /// first `status_words` status words.
+    pub fn own_health(&self, solver: &GpuSolver, status_words: u64) -> anyhow::Result<(OwnHealth, Vec<u32>)> {
         let ctx = &solver.ctx;
         ctx.queue.write_buffer(&self.words, 0, bytemuck::cast_slice(&[0u32; words::COUNT]));
         let mut rec = PlainRecorder::new(&ctx.device, "own health");
         solver.dispatch_particles(&mut rec, &self.own_health, &self.groups[solver.current][3]);
         ctx.queue.submit([rec.finish()]);
-        let data = read_ranges(ctx, &[(&self.words, 0, words::COUNT as u64 * 4)])?;
+        let data = read_ranges(ctx, &[(&self.words, 0, words::COUNT as u64 * 4), (&solver.status, 0, status_words.max(1) * 4)])?;
         let w: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
-        Ok(OwnHealth {
+        let health = OwnHealth {
             non_finite: w[words::NON_FINITE],
             escaped: w[words::ESCAPED],
             max_speed2: f32::from_bits(w[words::MAX_SPEED2]),
             max_density: f32::from_bits(w[words::MAX_DENSITY]),
-        })
+        };
+        Ok((health, bytemuck::pod_collect_to_vec(&data[1])))
     }
 }
 
@@ -278,7 +280,7 @@ impl GpuSolver {
             None => None,
         };
         let stage = ResidentExchange::new(self, n.max(received.len() as u64))?;
-        let health = stage.own_health(self)?;
+        let (health, _) = stage.own_health(self, 1)?;
         let band = stage.band(self, faces)?.map_err(|size| anyhow::anyhow!("the band of {size} particles outgrows its array"))?;
         let mut dropped = band.dropped.clone();
         dropped.sort_unstable();
