@@ -52,6 +52,42 @@ pub struct RankPart {
     pub(super) total_walls: usize,
 }
 
+impl RankPart {
+    /// Migration: towards the owner's side, one neighbour per round, until no rank holds a
+    /// particle of another's slab (one round unless a particle crossed a whole slab). Returns the
+    /// particles this rank keeps (those of `held` that stay, in their order, then those that
+    /// arrived) and which of them arrived. Collective.
+    pub(super) fn migrate<R: Real>(&mut self, mut held: Held<R>, grid: &crate::model::params::Grid<R>, carried: Carried) -> anyhow::Result<(Held<R>, Vec<bool>)> {
+        let comm = self.comm.clone();
+        let rank = comm.rank();
+        let mut arrived = vec![false; held.len()];
+        for round in 0.. {
+            let (mut stay, mut down, mut up) = (Vec::new(), Vec::new(), Vec::new());
+            for i in 0..held.len() {
+                match self.slabs.owner(grid.cell_coords(held.x[i])[self.axis]).cmp(&rank) {
+                    std::cmp::Ordering::Equal => stay.push(i),
+                    std::cmp::Ordering::Less => down.push(i),
+                    std::cmp::Ordering::Greater => up.push(i),
+                }
+            }
+            let moving = (down.len() + up.len()) as f64;
+            if all_sum(&*comm, &[moving])?[0] == 0.0 {
+                break;
+            }
+            anyhow::ensure!(round < comm.size(), "particles still lie outside their rank's slab after {round} rounds of migration");
+            self.stats.migrated += moving as u64;
+            let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
+            let mut next = held.picked(&stay);
+            arrived = stay.iter().map(|&i| arrived[i]).collect();
+            next.decode(&from_lower, carried)?;
+            next.decode(&from_upper, carried)?;
+            arrived.resize(next.len(), true);
+            held = next;
+        }
+        Ok((held, arrived))
+    }
+}
+
 /// Where a rank takes the wall particles near its slab from ([`WallSource::near`]).
 #[derive(Clone)]
 pub enum WallSource {
@@ -385,11 +421,10 @@ pub struct ResidentBand<R: Real> {
     pub particles: Held<R>,
 }
 
-/// What a resident step gives back: its dt, the own particles' health, and the held count.
+/// What a resident step gives back: its dt and the own particles' health.
 pub struct ResidentStep {
     pub dt: f64,
     pub health: OwnHealth,
-    pub held: usize,
 }
 
 /// Shared so that a cloned solver stays cloneable; a rank's solver is never cloned mid-run.
@@ -536,8 +571,9 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// A step whose stages after the exchange run on the device; the health is taken from the
-    /// own particles the device gave back, and reduced over the ranks as on the host.
-    pub(super) fn step_on_device(&mut self) {
+    /// own particles the device gave back, and reduced over the ranks as on the host. True
+    /// where the device ran it (and keeps what it gave back).
+    pub(super) fn step_on_device(&mut self) -> bool {
         let device = self.device.clone().expect("only with device stages");
         // Probes are sampled on the host from the state the step starts from: the device bins it
         // and evaluates its density stage (as for a snapshot), and the CPU path's probe stage
@@ -575,11 +611,10 @@ impl<R: Real> CpuSolver<R> {
                 if let Some(part) = &mut self.ranks {
                     part.failure.get_or_insert(format!("rank {} of {}: the device step failed: {e:#}", part.comm.rank(), part.comm.size()));
                 }
-                return;
+                return false;
             }
         };
-        // The device keeps what it gave back: the next step may start from it.
-        self.device_held = super::resident_steps::DeviceHeld::Same;
+
         if let Some(d) = &mut self.dfsph {
             d.last_dt = dt;
             d.dt = dt;
@@ -604,6 +639,7 @@ impl<R: Real> CpuSolver<R> {
         let (found, max_density) = self.all_step_health(found, max_density);
         self.health.max_density = self.health.max_density.max(max_density);
         self.record_step(dt, found, max_density);
+        true
     }
 
     /// DFSPH on device ranks, after a step that samples the probes: the force and front probes
@@ -862,7 +898,7 @@ impl<R: Real> CpuSolver<R> {
 
     fn exchange_across_ranks(&mut self, balance: bool) -> anyhow::Result<()> {
         let carried = Carried { density: self.params.continuity_density, warm: self.dfsph.is_some() };
-        let mut held = self.own_particles();
+        let held = self.own_particles();
         let grid = self.grid;
         let step = self.step;
         let part = self.ranks.as_mut().expect("only across ranks");
@@ -888,33 +924,7 @@ impl<R: Real> CpuSolver<R> {
                 slab_moved = true;
             }
         }
-        // Migration: towards the owner's side, one neighbour per round, until no rank holds a
-        // particle of another's slab (one round unless a particle crossed a whole slab).
-        for round in 0.. {
-            let (mut stay, mut down, mut up) = (Vec::new(), Vec::new(), Vec::new());
-            for i in 0..held.len() {
-                let owner = part.slabs.owner(layer_of(&grid, held.x[i]));
-                match owner.cmp(&rank) {
-                    std::cmp::Ordering::Equal => stay.push(i),
-                    std::cmp::Ordering::Less => down.push(i),
-                    std::cmp::Ordering::Greater => up.push(i),
-                }
-            }
-            let moving = (down.len() + up.len()) as f64;
-            if all_sum(&*comm, &[moving])?[0] == 0.0 {
-                break;
-            }
-            anyhow::ensure!(round < comm.size(), "particles still lie outside their rank's slab after {round} rounds of migration");
-            part.stats.migrated += moving as u64;
-            let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
-            let mut next = Held::default();
-            for &i in &stay {
-                next.push_from(&held, i);
-            }
-            next.decode(&from_lower, carried)?;
-            next.decode(&from_upper, carried)?;
-            held = next;
-        }
+        let (held, _) = part.migrate(held, &grid, carried)?;
         let held = held.sorted();
         // Ghosts: the own particles of the layers next to each face.
         let mine = part.slabs.layers_of(rank);

@@ -546,7 +546,10 @@ impl<R: Real> CpuSolver<R> {
                 return;
             }
             if self.device.is_some() {
-                self.step_on_device();
+                if self.step_on_device() {
+                    // The device keeps what it gave back: the next step may start from it.
+                    self.device_held = resident_steps::DeviceHeld::Same;
+                }
                 return;
             }
             self.bin();

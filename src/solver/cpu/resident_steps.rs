@@ -17,7 +17,6 @@ use super::exchange::{lock, Carried, Held, ResidentBand, ResidentStep};
 use super::resident_exchange::SlabFaces;
 use super::CpuSolver;
 use crate::model::real::{Real, V3};
-use crate::solver::communicator::all_sum;
 use std::time::Instant;
 
 /// Whether the device holds what the host holds.
@@ -88,7 +87,9 @@ impl<R: Real> CpuSolver<R> {
                 if let Err(e) = self.merge_on_host(&band, received, &ghosts) {
                     self.note_failure(Some(format!("rank {rank} of {size}: {e:#}")));
                 }
-                self.step_on_device();
+                if self.step_on_device() {
+                    self.device_held = DeviceHeld::Same;
+                }
             }
             Err(e) => {
                 self.note_failure(Some(format!("rank {rank} of {size}: the device step failed: {e:#}")));
@@ -112,32 +113,8 @@ impl<R: Real> CpuSolver<R> {
             let leaves = part.slabs.owner(layer_of(band.particles.x[k])) != rank;
             anyhow::ensure!(leaves == band.dropped.binary_search(&slot).is_ok(), "rank {rank}: the device and the host disagree on whether the particle in slot {slot} leaves the slab");
         }
-        // Migration, as the full path's: one neighbour per round, until every particle is home.
-        let mut held = band.particles.picked(&(0..band.particles.len()).collect::<Vec<_>>());
-        let mut from_device = vec![true; held.len()];
-        for round in 0.. {
-            let (mut stay, mut down, mut up) = (Vec::new(), Vec::new(), Vec::new());
-            for i in 0..held.len() {
-                match part.slabs.owner(layer_of(held.x[i])).cmp(&rank) {
-                    std::cmp::Ordering::Equal => stay.push(i),
-                    std::cmp::Ordering::Less => down.push(i),
-                    std::cmp::Ordering::Greater => up.push(i),
-                }
-            }
-            let moving = (down.len() + up.len()) as f64;
-            if all_sum(&*comm, &[moving])?[0] == 0.0 {
-                break;
-            }
-            anyhow::ensure!(round < comm.size(), "particles still lie outside their rank's slab after {round} rounds of migration");
-            part.stats.migrated += moving as u64;
-            let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
-            let mut next = held.picked(&stay);
-            from_device = stay.iter().map(|&i| from_device[i]).collect();
-            next.decode(&from_lower, carried)?;
-            next.decode(&from_upper, carried)?;
-            from_device.resize(next.len(), false);
-            held = next;
-        }
+        // Migration, as the full path's.
+        let (held, arrived) = part.migrate(band.particles.picked(&(0..band.particles.len()).collect::<Vec<_>>()), &grid, carried)?;
         // Ghosts: the own particles of the layers next to each face, in the one-process order.
         let mut order: Vec<usize> = (0..held.len()).collect();
         order.sort_unstable_by_key(|&i| held.order[i]);
@@ -153,7 +130,7 @@ impl<R: Real> CpuSolver<R> {
         }
         let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
         // What the device does not hold: the migrants that arrived, and the ghosts.
-        let arrived: Vec<usize> = order.iter().copied().filter(|&i| !from_device[i]).collect();
+        let arrived: Vec<usize> = order.iter().copied().filter(|&i| arrived[i]).collect();
         let mut received = held.picked(&arrived);
         let migrants = received.len();
         received.decode(&from_lower, carried)?;

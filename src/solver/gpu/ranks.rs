@@ -187,9 +187,8 @@ impl DeviceStages<f32> for GpuRankStages {
             anyhow::bail!("the adaptive step's maxima across ranks: {e}");
         }
         let (health, words) = resident.own_health(solver, status::DT as u64 + 1)?;
-        let held = solver.fluid_count as usize;
         self.keeps_step = true;
-        Ok(Some(ResidentStep { dt: self.step_dt(&words), health, held }))
+        Ok(Some(ResidentStep { dt: self.step_dt(&words), health }))
     }
 
     fn read_held(&mut self, held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
