@@ -126,7 +126,11 @@ impl DeviceStages<f32> for GpuRankStages {
             let room = self.list_room.max(solver.fluid_count as u64 / 8);
             self.resident = Some(ResidentExchange::new(solver, room)?);
         }
-        let band = match self.resident.as_ref().expect("made above").band(solver, faces)? {
+        let resident = self.resident.as_ref().expect("made above");
+        let band = resident.band(solver, faces);
+        // The control words written, and what the reads took.
+        self.bus_bytes += WORDS_BYTES + resident.band_bytes_read();
+        let band = match band? {
             Ok(band) => band,
             Err(size) => {
                 // This step takes the full path; the next has room for this band and a quarter more.
@@ -134,8 +138,6 @@ impl DeviceStages<f32> for GpuRankStages {
                 return Ok(None);
             }
         };
-        // The control words written and read, then the dropped slots and the band.
-        self.bus_bytes += 2 * WORDS_BYTES + 4 * band.dropped.len() as u64 + 48 * band.slots.len() as u64;
         // In slot order, which is the one-process order (the state is in the cell order of its
         // binning).
         let mut by_slot: Vec<usize> = (0..band.slots.len()).collect();

@@ -63,6 +63,10 @@ pub struct ResidentExchange {
     capacity: u64,
     /// Band and received particles each.
     list_capacity: u64,
+    /// The last band's dropped slots and particles (how much the next read takes at once).
+    last_sizes: std::cell::Cell<(u64, u64)>,
+    /// Bytes the last band's reads took.
+    bytes_read: std::cell::Cell<u64>,
 }
 
 impl ResidentExchange {
@@ -115,7 +119,7 @@ impl ResidentExchange {
                 [&select_band, &place_inserts, &merge_kept, &own_health].map(|s| s.bind_group(device, "resident exchange", &solver.uniform, &buffers))
             })
             .collect();
-        Ok(ResidentExchange { select_band, place_inserts, merge_kept, own_health, groups, words, dropped, band, inserts, merged_positions, merged_velocities, capacity, list_capacity })
+        Ok(ResidentExchange { select_band, place_inserts, merge_kept, own_health, groups, words, dropped, band, inserts, merged_positions, merged_velocities, capacity, list_capacity, last_sizes: Default::default(), bytes_read: Default::default() })
     }
 
     /// Bytes of the arrays.
@@ -126,6 +130,11 @@ impl ResidentExchange {
     /// Band and received particles the arrays have room for.
     pub fn list_capacity(&self) -> u64 {
         self.list_capacity
+    }
+
+    /// Bytes the last band's reads took (the counts, and the lists as far as they were read).
+    pub fn band_bytes_read(&self) -> u64 {
+        self.bytes_read.get()
     }
 
     /// Lists the dropped slots and reads back the band of the state the last step left
@@ -142,17 +151,38 @@ impl ResidentExchange {
         let mut rec = PlainRecorder::new(&ctx.device, "band");
         solver.dispatch_particles(&mut rec, &self.select_band, &self.groups[solver.current][0]);
         ctx.queue.submit([rec.finish()]);
-        let counts = read_ranges(ctx, &[(&self.words, 0, words::COUNT as u64 * 4)])?;
-        let counts: Vec<u32> = bytemuck::pod_collect_to_vec(&counts[0]);
+        // The counts and, in the same wait, as much of the lists as the last step's sizes and a
+        // quarter more; the rest, where they grew past that, in a second wait.
+        let (last_dropped, last_band) = self.last_sizes.get();
+        let guess = |last: u64, room: u64| (last + last / 4 + 64).min(room);
+        let (guess_dropped, guess_band) = (guess(last_dropped, self.capacity), guess(last_band, self.list_capacity));
+        let mut data = read_ranges(ctx, &[(&self.words, 0, words::COUNT as u64 * 4), (&self.dropped, 0, guess_dropped * 4), (&self.band, 0, guess_band * 48)])?;
+        let counts: Vec<u32> = bytemuck::pod_collect_to_vec(&data[0]);
         let (dropped, band) = (counts[words::DROPPED] as u64, counts[words::BAND] as u64);
+        self.last_sizes.set((dropped, band));
+        self.bytes_read.set(words::COUNT as u64 * 4 + guess_dropped * 4 + guess_band * 48);
         if band > self.list_capacity {
             return Ok(Err(band));
         }
-        // Only the ranges that hold something (a copy of no bytes is not a copy).
-        let ranges: Vec<(&wgpu::Buffer, u64, u64)> = [(&self.dropped, 0, dropped * 4), (&self.band, 0, band * 48)].into_iter().filter(|r| r.2 > 0).collect();
-        let mut data = read_ranges(ctx, &ranges)?.into_iter();
-        let dropped: Vec<u32> = if dropped > 0 { bytemuck::pod_collect_to_vec(&data.next().expect("read")) } else { Vec::new() };
-        let vectors: Vec<[f32; 4]> = if band > 0 { bytemuck::pod_collect_to_vec(&data.next().expect("read")) } else { Vec::new() };
+        let rest: Vec<(&wgpu::Buffer, u64, u64)> = [(&self.dropped, guess_dropped * 4, dropped * 4), (&self.band, guess_band * 48, band * 48)]
+            .into_iter()
+            .filter(|r| r.2 > r.1)
+            .map(|(b, from, to)| (b, from, to - from))
+            .collect();
+        if !rest.is_empty() {
+            let more = read_ranges(ctx, &rest)?;
+            self.bytes_read.set(self.bytes_read.get() + rest.iter().map(|r| r.2).sum::<u64>());
+            let mut more = more.into_iter();
+            for (k, (from, to)) in [(guess_dropped * 4, dropped * 4), (guess_band * 48, band * 48)].into_iter().enumerate() {
+                if to > from {
+                    data[k + 1].extend(more.next().expect("read"));
+                }
+            }
+        }
+        data[1].truncate(dropped as usize * 4);
+        data[2].truncate(band as usize * 48);
+        let dropped: Vec<u32> = bytemuck::pod_collect_to_vec(&data[1]);
+        let vectors: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[2]);
         let mut out = DeviceBand { dropped, slots: Vec::new(), positions: Vec::new(), velocities: Vec::new(), keys: Vec::new() };
         for entry in vectors.chunks_exact(3) {
             let key = entry[2].map(f32::to_bits);
