@@ -293,7 +293,7 @@ fn words(carried: Carried) -> usize {
 /// id, with continuity density the carried density, with DFSPH the warm starts, and each
 /// particle's place in the one-process order (cell << 32 | place in the cell of the last
 /// binning, or its place in the initial or restored state before the first).
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub struct Held<R: Real> {
     pub x: Vec<V3<R>>,
     pub v: Vec<V3<R>>,

@@ -114,7 +114,7 @@ impl<R: Real> CpuSolver<R> {
             anyhow::ensure!(leaves == band.dropped.binary_search(&slot).is_ok(), "rank {rank}: the device and the host disagree on whether the particle in slot {slot} leaves the slab");
         }
         // Migration, as the full path's.
-        let (held, arrived) = part.migrate(band.particles.picked(&(0..band.particles.len()).collect::<Vec<_>>()), &grid, carried)?;
+        let (held, arrived) = part.migrate(band.particles.clone(), &grid, carried)?;
         // Ghosts: the own particles of the layers next to each face, in the one-process order.
         let mut order: Vec<usize> = (0..held.len()).collect();
         order.sort_unstable_by_key(|&i| held.order[i]);
@@ -172,14 +172,12 @@ impl<R: Real> CpuSolver<R> {
                 }
             }
         }
-        let own = all.len();
         for i in 0..received.len() {
             all.push_from(&received, i);
         }
         if let Some(part) = self.ranks.as_deref_mut() {
             part.stats.ghosts = ghosts.iter().filter(|&&g| g).count();
         }
-        debug_assert!(own + received.len() == all.len());
         self.install_held(all.sorted());
         self.device_held = DeviceHeld::Nothing;
         Ok(())

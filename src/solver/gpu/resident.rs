@@ -122,11 +122,6 @@ impl ResidentExchange {
         Ok(ResidentExchange { select_band, place_inserts, merge_kept, own_health, groups, words, dropped, band, inserts, merged_positions, merged_velocities, capacity, list_capacity, last_sizes: Default::default(), bytes_read: Default::default() })
     }
 
-    /// Bytes of the arrays.
-    pub fn bytes(&self) -> u64 {
-        [&self.words, &self.dropped, &self.band, &self.inserts, &self.merged_positions, &self.merged_velocities].iter().map(|b| b.size()).sum::<u64>() + self.list_capacity * 4
-    }
-
     /// Band and received particles the arrays have room for.
     pub fn list_capacity(&self) -> u64 {
         self.list_capacity
