@@ -19,8 +19,9 @@ override SOLID_BOXES: bool = false;             // the scene has box obstacles, 
 override GRAVITY: bool = true;                  // gravity is not zero
 override ADAPTIVE_DT: bool = false;             // dt chosen on the GPU every step (integrate.wgsl)
 // Across ranks: the top bit of a position's w marks a ghost (a neighbour rank's particle), which
-// the adaptive step's maxima and DFSPH's error sums leave out; the rest of w is the particle's
-// place in the upload.
+// the adaptive step's maxima, the resident exchange's health and DFSPH's error sums leave out;
+// the rest of w is the particle's id (with DFSPH its place in the upload, where its warm starts
+// are found).
 override GHOSTS: bool = false;
 const GHOST_BIT: u32 = 0x80000000u;
 
@@ -29,8 +30,8 @@ fn is_ghost(w: f32) -> bool {
     return GHOSTS && (bitcast<u32>(w) & GHOST_BIT) != 0u;
 }
 
-// A particle's id (the w of its position): across ranks its place in the upload, without the
-// ghost bit.
+// A particle's id (the w of its position) without the ghost bit: with DFSPH across ranks its
+// place in the upload.
 fn particle_id(w: f32) -> u32 {
     return select(bitcast<u32>(w), bitcast<u32>(w) & ~GHOST_BIT, GHOSTS);
 }

@@ -231,7 +231,8 @@ impl WallCellIndex {
 
 /// The ids carried in the w components of positions read back from the GPU.
 /// The top bit of a position's w marks a ghost across ranks (`GHOST_BIT` in
-/// wgsl/shared/common.wgsl); the rest is the particle's place in the rank's upload.
+/// wgsl/shared/common.wgsl); the rest is the particle's id (with DFSPH its place in the rank's
+/// upload).
 pub const GHOST_BIT: u32 = 0x8000_0000;
 
 pub fn ids_of(positions: &[[f32; 4]]) -> Vec<u32> {
