@@ -205,8 +205,11 @@ fn own_health(
     let i = thread_index(gid, groups);
     var speed2 = 0.0;
     var density = 0.0;
-    if (i < params.fluid_count && !is_ghost(positions_at(i).w)) {
-        let p = positions_at(i);
+    var p = vec4<f32>();
+    if (i < params.fluid_count) {
+        p = positions_at(i);
+    }
+    if (i < params.fluid_count && !is_ghost(p.w)) {
         let v = velocities_at(i);
         let finite = is_finite_vec3(p.xyz) && is_finite_vec3(v.xyz);
         let inside = all(p.xyz >= params.domain_min.xyz) && all(p.xyz <= params.domain_max.xyz);

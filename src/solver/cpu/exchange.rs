@@ -53,6 +53,30 @@ pub struct RankPart {
 }
 
 impl RankPart {
+    /// Where this rank's slab lies, and which neighbours it has.
+    pub(super) fn faces(&self) -> SlabFaces {
+        let (rank, size) = (self.comm.rank(), self.comm.size());
+        SlabFaces { axis: self.axis, slab: self.slabs.layers_of(rank), halo: self.slabs.halo, lower: rank > 0, upper: rank + 1 < size }
+    }
+
+    /// Ghosts: the own particles of `held` (taken in the order `which`) in the layers next to
+    /// each face go to the neighbour on that side; returns the words the lower and the upper
+    /// neighbour sent. Collective.
+    pub(super) fn exchange_ghosts<R: Real>(&self, held: &Held<R>, which: impl IntoIterator<Item = usize>, grid: &crate::model::params::Grid<R>, carried: Carried) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+        let faces = self.faces();
+        let (mut down, mut up) = (Vec::new(), Vec::new());
+        for i in which {
+            let l = grid.cell_coords(held.x[i])[faces.axis];
+            if faces.lower && l < faces.slab.start + faces.halo {
+                down.push(i);
+            }
+            if faces.upper && l + faces.halo >= faces.slab.end {
+                up.push(i);
+            }
+        }
+        self.comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))
+    }
+
     /// Migration: towards the owner's side, one neighbour per round, until no rank holds a
     /// particle of another's slab (one round unless a particle crossed a whole slab). Returns the
     /// particles this rank keeps (those of `held` that stay, in their order, then those that
@@ -905,7 +929,6 @@ impl<R: Real> CpuSolver<R> {
         let axis = part.axis;
         let layer_of = |grid: &crate::model::params::Grid<R>, p: V3<R>| grid.cell_coords(p)[axis];
         let comm = part.comm.clone();
-        let rank = comm.rank();
         let mut slab_moved = false;
         if balance && part.balance_every > 0 && step > 0 && step % part.balance_every == 0 {
             let mut layers = vec![0.0; grid.dims[axis] as usize];
@@ -926,19 +949,7 @@ impl<R: Real> CpuSolver<R> {
         }
         let (held, _) = part.migrate(held, &grid, carried)?;
         let held = held.sorted();
-        // Ghosts: the own particles of the layers next to each face.
-        let mine = part.slabs.layers_of(rank);
-        let (mut down, mut up) = (Vec::new(), Vec::new());
-        for i in 0..held.len() {
-            let l = layer_of(&grid, held.x[i]);
-            if rank > 0 && l < mine.start + part.slabs.halo {
-                down.push(i);
-            }
-            if rank + 1 < comm.size() && l + part.slabs.halo >= mine.end {
-                up.push(i);
-            }
-        }
-        let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
+        let (from_lower, from_upper) = part.exchange_ghosts(&held, 0..held.len(), &grid, carried)?;
         let own_count = held.len();
         let mut all = held;
         all.decode(&from_lower, carried)?;

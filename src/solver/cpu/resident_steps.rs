@@ -47,7 +47,7 @@ impl<R: Real> CpuSolver<R> {
             return false;
         }
         let (rank, size) = (part.comm.rank(), part.comm.size());
-        let faces = SlabFaces { axis: part.axis, slab: part.slabs.layers_of(rank), halo: part.slabs.halo, lower: rank > 0, upper: rank + 1 < size };
+        let faces = part.faces();
         let t0 = Instant::now();
         let band = match lock(&device).resident_band(&faces) {
             Ok(Some(band)) => band,
@@ -115,20 +115,10 @@ impl<R: Real> CpuSolver<R> {
         }
         // Migration, as the full path's.
         let (held, arrived) = part.migrate(band.particles.clone(), &grid, carried)?;
-        // Ghosts: the own particles of the layers next to each face, in the one-process order.
+        // Ghosts, as the full path's, in the one-process order.
         let mut order: Vec<usize> = (0..held.len()).collect();
         order.sort_unstable_by_key(|&i| held.order[i]);
-        let (mut down, mut up) = (Vec::new(), Vec::new());
-        for &i in &order {
-            let l = layer_of(held.x[i]);
-            if faces.lower && l < faces.slab.start + faces.halo {
-                down.push(i);
-            }
-            if faces.upper && l + faces.halo >= faces.slab.end {
-                up.push(i);
-            }
-        }
-        let (from_lower, from_upper) = comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
+        let (from_lower, from_upper) = part.exchange_ghosts(&held, order.iter().copied(), &grid, carried)?;
         // What the device does not hold: the migrants that arrived, and the ghosts.
         let arrived: Vec<usize> = order.iter().copied().filter(|&i| arrived[i]).collect();
         let mut received = held.picked(&arrived);
