@@ -104,6 +104,34 @@ fn every_probe_type_agrees_on(scene: Scene) {
     }
 }
 
+/// With adaptive dt a row's time is the device's: each sample is stamped with the time its step
+/// starts at (step 0 at 0) and the step before's, as the CPU path stamps it, under both
+/// methods (a DFSPH step chooses its dt between its point probes and the rest of its sample).
+#[test]
+fn probe_times_with_adaptive_dt_are_those_of_the_cpu_path() {
+    for (method, tank) in [("WCSPH", TestScene::small_tank()), ("DFSPH", TestScene::small_tank().dfsph())] {
+        let scene = probed(tank.adaptive().dt_max(0.002), true);
+        let mut cpu = common::cpu::<f64>(&scene);
+        let expected = samples(&mut cpu, 21);
+        assert_eq!(expected.iter().map(|s| s.step).collect::<Vec<_>>(), vec![0, 5, 10, 15, 20], "{method}");
+        assert_eq!((expected[0].time, expected[0].previous_time), (0.0, 0.0), "{method}");
+        for ctx in common::contexts() {
+            let name = format!("{method} on {}", ctx.describe());
+            let mut gpu = common::gpu(ctx, &scene);
+            let got = samples(&mut gpu, 21);
+            assert_eq!(got.iter().map(|s| s.step).collect::<Vec<_>>(), vec![0, 5, 10, 15, 20], "{name}");
+            for (g, c) in got.iter().zip(&expected) {
+                // The device chooses each dt in f32 from f32 maxima: the times agree to that.
+                for (what, a, b) in [("time", g.time, c.time), ("previous time", g.previous_time, c.previous_time)] {
+                    assert!((a - b).abs() <= 1e-4 * b.abs() + 1e-9, "{name}: the {what} of step {}'s sample: gpu {a}, cpu {b}", g.step);
+                }
+                // A step's time is its last step's end, not this one's.
+                assert!(g.step == 0 || g.previous_time < g.time, "{name}: step {} at {} after {}", g.step, g.time, g.previous_time);
+            }
+        }
+    }
+}
+
 #[test]
 fn probes_change_no_trajectory() {
     probes_change_no_trajectory_of(probed_tank());

@@ -1,5 +1,6 @@
-// Probes sampled on the state a step starts from (after its density stage): point probes and
-// gauges (probe_points, one invocation per probe), force probes and fronts (probe_particles,
+// Probes sampled on the state a step starts from (after its density stage): the row's head
+// (the step and its time), point probes and gauges (probe_points, one invocation per probe;
+// dispatched for every sample), force probes and fronts (probe_particles,
 // one invocation per fluid particle, one partial per workgroup and slot), and the reduction of
 // the partials into a row of the sample buffer (probe_finish, one invocation). Under DFSPH the
 // last two run after the solves, on the pressure of the step's wall push (wall_push_pressure).
@@ -144,9 +145,30 @@ fn gauge_surface(x: f32, z: f32, bottom: f32, top: f32, step: f32) -> f32 {
     return bottom;
 }
 
+// Where row `r` of the sample buffer starts: the rows follow the values and the partials.
+fn row_start(r: u32) -> u32 {
+    let sizes = table_layout();
+    return 1u + sizes.z + r * (4u + sizes.x);
+}
+
+// The head of the row this sample fills: the step, the time (a compensated pair) and the last
+// step's dt, as the status words hold them when the sample starts. Written here, before the
+// step's work, since a DFSPH step chooses its dt (and advances the time words) between its
+// point probes and the rest of its sample.
+fn write_row_head() {
+    let row = row_start(probe_data_at(0u));
+    probe_data_set(row, atomicLoad(&status[STATUS_STEPS]));
+    probe_data_set(row + 1u, atomicLoad(&status[STATUS_TIME]));
+    probe_data_set(row + 2u, atomicLoad(&status[STATUS_TIME_COMPENSATION]));
+    probe_data_set(row + 3u, atomicLoad(&status[STATUS_DT]));
+}
+
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn probe_points(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let p = thread_index(gid, groups);
+    if (p == 0u) {
+        write_row_head();
+    }
     if (p >= table_counts().x) {
         return;
     }
@@ -383,14 +405,10 @@ fn probe_finish() {
             front++;
         }
     }
-    // The row: the step, the time (a compensated pair), the step's dt, then every value.
+    // The row after its head (write_row_head): every value.
     let written = probe_data_at(0u);
     let values = sizes.x;
-    let row = 1u + sizes.z + written * (4u + values);
-    probe_data_set(row, atomicLoad(&status[STATUS_STEPS]));
-    probe_data_set(row + 1u, atomicLoad(&status[STATUS_TIME]));
-    probe_data_set(row + 2u, atomicLoad(&status[STATUS_TIME_COMPENSATION]));
-    probe_data_set(row + 3u, atomicLoad(&status[STATUS_DT]));
+    let row = row_start(written);
     for (var v = 0u; v < values; v++) {
         probe_data_set(row + 4u + v, probe_data_at(1u + v));
     }

@@ -30,7 +30,8 @@ pub(super) struct DfsphSums<'a> {
 }
 
 pub(super) struct GpuProbes {
-    points: Option<Stage>,
+    /// The row's head and the point probes and gauges (built for every scene with probes).
+    points: Stage,
     particles: Option<Stage>,
     finish: Stage,
     /// Under DFSPH with force probes: `wall_push_pressure`, its output, its bind group per
@@ -127,8 +128,7 @@ impl GpuProbes {
                 }
             }
         }
-        let has_points = probes.probes.iter().any(|p| matches!(p.geometry, ProbeGeometry::Point { .. } | ProbeGeometry::Gauge { .. }));
-        let points = if has_points { Some(stage(ctx, "probes", "probe_points", &len, &k)?) } else { None };
+        let points = stage(ctx, "probes", "probe_points", &len, &k)?;
         let particles = if forces + fronts > 0 { Some(stage(ctx, "probes", "probe_particles", &len, &k)?) } else { None };
         let finish = stage(ctx, "probes", "probe_finish", &len, &k)?;
         // `pressures_read`: whether `pressures` binds the push's output (for the DFSPH force
@@ -152,7 +152,7 @@ impl GpuProbes {
         };
         let parity = |c: usize| {
             [
-                group(points.as_ref().unwrap_or(&finish), "probe_points", c, false),
+                group(&points, "probe_points", c, false),
                 group(particles.as_ref().unwrap_or(&finish), "probe_particles", c, true),
                 group(&finish, "probe_finish", c, false),
             ]
@@ -218,13 +218,13 @@ impl GpuProbes {
         true
     }
 
-    /// The point probes and gauges of a sample (its first part; [`GpuProbes::room`] first).
+    /// The first part of a sample ([`GpuProbes::room`] first): its row's head (the step and
+    /// the time the sample is taken at, before a DFSPH step's choice of dt advances them), the
+    /// point probes and gauges.
     pub(super) fn record_points(&self, pass: &mut wgpu::ComputePass<'static>, read: usize) {
-        if let Some(points) = &self.points {
-            pass.set_pipeline(&points.pipeline);
-            pass.set_bind_group(0, &self.groups[read][0], &[]);
-            pass.dispatch_workgroups(self.probe_count.div_ceil(points.threads_per_group), 1, 1);
-        }
+        pass.set_pipeline(&self.points.pipeline);
+        pass.set_bind_group(0, &self.groups[read][0], &[]);
+        pass.dispatch_workgroups(self.probe_count.div_ceil(self.points.threads_per_group), 1, 1);
     }
 
     /// The rest of a sample of `step`: the force and front probes (under DFSPH after the solves,
