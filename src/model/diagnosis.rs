@@ -4,11 +4,11 @@
 //! those figures, and only a condition that they break is named as the cause; when none is
 //! broken the message says the cause is unknown, with the figures.
 
-use super::numbers::short;
+use super::numbers::{short, short3};
 use super::initial::SolidRegion;
 use super::kernels::KernelCoefficients;
 use super::params::Params;
-use super::scene::Scene;
+use super::scene::{Boundary, Scene};
 use super::state::{BadStep, Health};
 
 /// The CFL number dt (c0 + |v|max) / h above which explicit weakly compressible SPH goes
@@ -92,22 +92,133 @@ impl TornFluid {
     }
 }
 
-/// What the state at a failure shows: fluid inside solids, and fluid torn under tension.
+/// The faces of the domain, in the order of [`EscapedFluid::through`]: -x, +x, -y, +y, -z, +z.
+const FACES: [&str; 6] = ["-x", "+x", "-y", "+y", "-z", "+z"];
+
+/// Fluid particles outside the domain, by the face of the domain each is farthest beyond.
+#[derive(Clone, Debug)]
+pub struct EscapedFluid {
+    min: [f64; 3],
+    max: [f64; 3],
+    /// Particles beyond each face, in the order of [`FACES`] (axis 2a: below min, 2a + 1: above max).
+    pub through: [u64; 6],
+}
+
+impl EscapedFluid {
+    pub fn new(scene: &Scene) -> Self {
+        EscapedFluid { min: scene.domain.min, max: scene.domain.max, through: [0; 6] }
+    }
+    /// Counts a fluid particle at `x` where it is outside the domain (a non-finite one is not
+    /// anywhere).
+    pub fn add(&mut self, x: [f64; 3]) {
+        let mut farthest: Option<(usize, f64)> = None;
+        for a in 0..3 {
+            for (face, beyond) in [(2 * a, self.min[a] - x[a]), (2 * a + 1, x[a] - self.max[a])] {
+                if beyond > 0.0 && farthest.is_none_or(|(_, d)| beyond > d) {
+                    farthest = Some((face, beyond));
+                }
+            }
+        }
+        if let (true, Some((face, _))) = (x.iter().all(|v| v.is_finite()), farthest) {
+            self.through[face] += 1;
+        }
+    }
+}
+
+/// What the state at a failure shows: fluid inside solids, fluid torn under tension, and fluid
+/// outside the domain.
 #[derive(Clone, Debug)]
 pub struct FailureScan {
     pub intrusions: SolidIntrusions,
     pub torn: TornFluid,
+    pub escaped: EscapedFluid,
 }
 
 impl FailureScan {
     pub fn new(scene: &Scene) -> Self {
-        FailureScan { intrusions: SolidIntrusions::new(scene), torn: TornFluid::new(&scene.params()) }
+        FailureScan { intrusions: SolidIntrusions::new(scene), torn: TornFluid::new(&scene.params()), escaped: EscapedFluid::new(scene) }
     }
     /// Adds a fluid particle at `x` with its density and pressure.
     pub fn add(&mut self, x: [f64; 3], density: f64, pressure: f64) {
         self.intrusions.add(x);
         self.torn.add(density, pressure);
+        self.escaped.add(x);
     }
+}
+
+/// What holds the fluid in on the side of `face` (an index into [`FACES`]): the container walls
+/// on that side and the planes facing back into the domain from it, by name.
+fn closed_by(scene: &Scene, face: usize) -> Vec<String> {
+    let (axis, sign) = (face / 2, if face % 2 == 0 { -1.0 } else { 1.0 });
+    let mut out = Vec::new();
+    for (i, b) in scene.boundary.iter().enumerate() {
+        match b {
+            Boundary::Container { open_top, .. } if !(face == 3 && *open_top) => {
+                out.push(format!("boundary[{i}] (the container's {} wall)", FACES[face]));
+            }
+            Boundary::Plane { point, normal, .. } => {
+                let length = normal.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if length > 0.0 && normal[axis] * sign / length < -0.99 {
+                    out.push(format!("boundary[{i}] (the plane through {})", short3(*point)));
+                }
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+/// The cause that fluid outside the domain shows: the face it left through, and either that
+/// nothing closes the domain on that side or that what closes it let the fluid through.
+fn escape_cause(scene: &Scene, escaped: &EscapedFluid, max_speed: f64) -> Option<String> {
+    // The face most left through (the first in FACES' order on a tie).
+    let face = (0..6).rev().max_by_key(|&f| escaped.through[f]).filter(|&f| escaped.through[f] > 0)?;
+    let (axis, above) = (face / 2, face % 2 == 1);
+    let count = escaped.through[face];
+    let others: u64 = escaped.through.iter().sum::<u64>() - count;
+    let bound = if above { escaped.max[axis] } else { escaped.min[axis] };
+    let coordinate = ["x", "y", "z"][axis];
+    let field = format!("domain.{}[{axis}]", if above { "max" } else { "min" });
+    let mut text = format!(
+        "{count} fluid particles are beyond the domain's {} face ({coordinate} {} {}){}",
+        FACES[face],
+        if above { ">" } else { "<" },
+        short(bound),
+        if others > 0 { format!(" ({others} more beyond its other faces)") } else { String::new() }
+    );
+    let closers = closed_by(scene, face);
+    if closers.is_empty() {
+        // A splash up against gravity rises |v|^2 / 2|g| at most above where it was thrown.
+        let g = scene.physics.gravity;
+        let outward = if above { 1.0 } else { -1.0 };
+        let g_along = g[axis] * outward;
+        let rise = if g_along < 0.0 && max_speed.is_finite() { format!(" (fluid thrown up at |v|max = {} rises |v|^2 / 2|g| = {} above where it was thrown)", short(max_speed), short(max_speed * max_speed / (-2.0 * g_along))) } else { String::new() };
+        let open_top = scene.boundary.iter().enumerate().find_map(|(i, b)| match b {
+            Boundary::Container { open_top: true, .. } if face == 3 => Some(format!(", and boundary[{i}], the container, is open at the top")),
+            _ => None,
+        });
+        text += &format!(
+            ", where nothing holds the fluid in (no wall or plane closes that side{}): fluid thrown that way leaves the domain; move {field} out{rise}, \
+             or close that side ({})",
+            open_top.unwrap_or_default(),
+            if face == 3 { "a container with open_top = false, or a plane" } else { "a container, or a plane" }
+        );
+    } else if closers.iter().all(|c| c.contains("container")) {
+        text += &format!(
+            ": they went through {}, whose wall particles did not hold fluid moving at up to |v|max = {}: back the wall with a plane on its inner face \
+             (as the built-in dam break does), or lower time.dt",
+            closers.join(" and "),
+            short(max_speed)
+        );
+    } else {
+        text += &format!(
+            ": they got past {}; a plane holds the fluid on the side its normal points to from inside the domain, so check that it lies within the domain \
+             ({field} = {})",
+            closers.join(" and "),
+            short(bound)
+        );
+    }
+    Some(text)
 }
 
 /// Why a run went bad: the first bad step and what went wrong there, then the cause that the
@@ -271,6 +382,9 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
         }
         for (name, count) in scan.map(|s| s.intrusions.found()).unwrap_or_default() {
             causes.push(format!("{count} fluid particles are inside {name}, past its first layer of wall particles: the fluid leaked into the solid or started in it"));
+        }
+        if let Some(escape) = scan.filter(|_| m.escaped > 0).and_then(|s| escape_cause(scene, &s.escaped, m.max_speed)) {
+            causes.push(escape);
         }
     }
     let figures = format!(

@@ -1,7 +1,8 @@
 //! Blow-ups caught and explained: the health of a run describes its first bad step, however long
 //! after it the host reads it; a run stops when the fluid leaves the weakly compressible regime
-//! (too dense, too fast); and the diagnosis names the cause the figures of the failing step show,
-//! or says that the cause is unknown. On the f64 CPU reference and on every GPU adapter found.
+//! (too dense, too fast); and the diagnosis names the cause the figures of the failing step and
+//! the state show (fluid inside a solid, torn, or out of the domain and by which face), or says
+//! that the cause is unknown. On the f64 CPU reference and on every GPU adapter found.
 
 use crate::common;
 use crate::common::TestScene;
@@ -190,13 +191,15 @@ fn fluid_leaking_through_a_wall_is_named_with_its_wall() {
         let f = failure(b.as_mut(), &scene, 1200, 10);
         assert!(f.contains("particles left the domain"), "{who}: {f}");
         assert!(f.contains("fluid particles are inside boundary[0] (the container's -y (floor) wall)"), "{who}: {f}");
+        assert!(f.contains("beyond the domain's -y face (y < -0.3): they went through boundary[0] (the container's -y wall)"), "{who}: {f}");
     }
 }
 
 #[test]
-fn a_cause_the_figures_do_not_show_is_unknown_and_the_speed_is_that_of_the_failing_step() {
+fn fluid_leaving_through_an_open_side_is_named_with_the_face_and_the_speed_of_the_failing_step() {
     // One particle rising at 1 m/s out through the top of a domain with no wall: every
-    // stability condition holds and nothing is too dense or fast. Only step 0 was saved: the
+    // stability condition holds and nothing is too dense or fast; what the state shows is a
+    // particle beyond the domain's +y face, which nothing closes. Only step 0 was saved: the
     // |v|max the message gives is the failing step's (1 m/s), not the last snapshot's.
     let scene = TestScene::new().domain([-0.1; 3], [0.3, 0.1, 0.3]).gravity([0.0; 3]).fluid([0.0; 3], [0.02; 3]).jitter(0.0).moving_at([0.0, 1.0, 0.0]).build();
     for mut b in backends(&scene, &scene.initial_state()) {
@@ -204,9 +207,55 @@ fn a_cause_the_figures_do_not_show_is_unknown_and_the_speed_is_that_of_the_faili
         let f = failure(b.as_mut(), &scene, 2000, 10);
         let bad = b.health().unwrap().bad_step.unwrap();
         assert!(bad.measured.escaped == 1 && (bad.measured.max_speed - 1.0).abs() < 1e-6, "{who}: {bad:?}");
-        assert!(f.contains("Cause unknown"), "{who}: {f}");
+        assert!(f.contains("Cause: 1 fluid particles are beyond the domain's +y face (y > 0.1), where nothing holds the fluid in"), "{who}: {f}");
+        assert!(f.contains("move domain.max[1] out, or close that side"), "{who}: {f}");
         assert!(f.contains("|v|max = 1,"), "{who}: {f}");
     }
+}
+
+/// The diagnosis of a step at which one particle left the domain (|v|max = 3 m/s, nothing
+/// else wrong), of `scene` with fluid particles found at `outside` (and one inside).
+fn escape_diagnosis(scene: &Scene, outside: &[[f64; 3]]) -> String {
+    use wgsph::model::diagnosis::{diagnose, FailureScan};
+    use wgsph::model::state::{BadStep, Health, StepMeasures};
+    let measured = StepMeasures { escaped: outside.len() as u64, max_density: 1000.0, max_speed: 3.0, dt: 0.0002, time: 0.1, ..Default::default() };
+    let health = Health { first_bad_step: Some(500), bad_step: Some(BadStep { step: 500, measured, too_dense: false, too_fast: false }), ..Default::default() };
+    let mut scan = FailureScan::new(scene);
+    scan.add([0.05; 3], 1000.0, 0.0);
+    for &x in outside {
+        scan.add(x, 1000.0, 0.0);
+    }
+    diagnose(scene, &health, Some(&scan))
+}
+
+#[test]
+fn fluid_out_of_the_domain_is_named_by_the_face_it_left_through_and_what_closes_it() {
+    // The domain is [-0.06, 0.30]^2 x [-0.06, 0.18]; the tank's inside [0, 0.24]^2 x [0, 0.12].
+    let open = tank().without_boundaries().container([0.0; 3], [0.24, 0.24, 0.12]).build();
+    // Thrown out of the open top: the face, the open container, and how high 3 m/s rises.
+    let f = escape_diagnosis(&open, &[[0.1, 0.35, 0.05], [0.1, 0.32, 0.05]]);
+    assert!(f.contains("2 fluid particles are beyond the domain's +y face (y > 0.3), where nothing holds the fluid in"), "{f}");
+    assert!(f.contains("boundary[0], the container, is open at the top"), "{f}");
+    assert!(f.contains("rises |v|^2 / 2|g| = 0.458716 above where it was thrown"), "{f}");
+    assert!(f.contains("move domain.max[1] out") && f.contains("open_top = false"), "{f}");
+    // Farthest beyond the +x face (and just beyond +y): through the container's +x wall.
+    let f = escape_diagnosis(&open, &[[0.4, 0.31, 0.05], [0.35, 0.1, 0.05], [0.1, -0.1, 0.05]]);
+    assert!(f.contains("2 fluid particles are beyond the domain's +x face (x > 0.3) (1 more beyond its other faces): they went through boundary[0] (the container's +x wall)"), "{f}");
+    assert!(f.contains("back the wall with a plane"), "{f}");
+    assert!(!f.contains("rises"), "{f}");
+    // Closed on top, the top face is a wall's.
+    let closed = tank().build();
+    let f = escape_diagnosis(&closed, &[[0.1, 0.35, 0.05]]);
+    assert!(f.contains("went through boundary[0] (the container's +y wall)"), "{f}");
+    // A plane facing the fluid from below the domain's floor (outside it), and a slanted one
+    // that closes no face.
+    let planes = tank().without_boundaries().plane([0.0, -0.2, 0.0], [0.0, 1.0, 0.0], 0.0).plane([0.0; 3], [1.0, 1.0, 0.0], 0.0).build();
+    let f = escape_diagnosis(&planes, &[[0.1, -0.1, 0.05]]);
+    assert!(f.contains("they got past boundary[0] (the plane through [0, -0.2, 0]); a plane holds the fluid"), "{f}");
+    assert!(f.contains("check that it lies within the domain (domain.min[1] = -0.06)"), "{f}");
+    let f = escape_diagnosis(&planes, &[[-0.1, 0.1, 0.05]]);
+    assert!(f.contains("beyond the domain's -x face (x < -0.06), where nothing holds the fluid in"), "{f}");
+    assert!(!f.contains("Cause unknown"), "{f}");
 }
 
 /// A block of 10 x 6 x 6 particles in no gravity and no tank, with a third too little mass per
