@@ -44,6 +44,11 @@ impl Comparison {
         self.fields.iter().all(|(name, e, tol)| self.judged(name, e) <= *tol)
     }
     pub fn table(&self) -> String {
+        self.table_as(true)
+    }
+    /// The table; where not `judged` (printed as information) an error over its tolerance
+    /// reads `over`, not `FAIL`.
+    pub fn table_as(&self, judged: bool) -> String {
         let mut s = format!("after {} step(s):\n  {:<13} {:>12} {:>12} {:>12}  result\n", self.steps, "field", "max error", "rms error", "tolerance");
         for (name, e, tol) in &self.fields {
             let rms = self.judged_by_rms.contains(name);
@@ -53,11 +58,24 @@ impl Comparison {
                 e.max,
                 e.rms,
                 tol,
-                if self.judged(name, e) <= *tol { "ok" } else { "FAIL" },
+                match (self.judged(name, e) <= *tol, judged) {
+                    (true, _) => "ok",
+                    (false, true) => "FAIL",
+                    (false, false) => "over",
+                },
                 if rms { " (rms)" } else { "" }
             );
         }
         s
+    }
+    /// Raises each field's tolerance to `factor` times the error `floor` (another path's
+    /// comparison with the same reference, over the same steps) is judged by for that field.
+    pub fn widen_to(&mut self, floor: &Comparison, factor: f64) {
+        for (name, _, tol) in &mut self.fields {
+            if let Some((_, e, _)) = floor.fields.iter().find(|f| f.0 == *name) {
+                *tol = tol.max(factor * floor.judged(name, e));
+            }
+        }
     }
     pub fn field(&self, name: &str) -> FieldError {
         self.fields.iter().find(|f| f.0 == name).map(|f| f.1).unwrap_or_else(|| panic!("no field {name}"))

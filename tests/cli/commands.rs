@@ -206,3 +206,30 @@ fn bad_picture_options_are_refused_with_what_is_allowed() {
     }
     assert!(!dir.path().join("f").exists());
 }
+
+#[test]
+fn compare_judges_a_dfsph_scene_by_its_iterations_and_again_with_them_held_fixed() {
+    // A solve that stops at its tolerance stops one iteration apart on the two paths now and
+    // then, and the flow amplifies that step's difference over 100 steps past the many-step
+    // tolerances (this column's position and pressure errors do): the free run is judged after
+    // one step and by its iteration counts, and its 100 steps again with the iterations held.
+    if common::contexts().is_empty() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "name = \"column\"\nseed = 3\n[domain]\nmin = [-0.07, -0.07, -0.07]\nmax = [0.67, 0.67, 0.17]\n\
+        [physics]\nsmoothing_length = 0.04\nparticle_spacing = 0.02\nkernel = \"mueller\"\nsolver = \"dfsph\"\nviscosity = 0.01\n\
+        [time]\ndt = 0.001\nend_time = 0.5\nadaptive = true\n\
+        [[fluid]]\nmin = [0.0, 0.0, 0.0]\nmax = [0.2, 0.3, 0.1]\njitter = 0.02\n\
+        [[boundary]]\ntype = \"container\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.6, 0.6, 0.1]\n";
+    std::fs::write(dir.path().join("column.toml"), scene).unwrap();
+    let out = wgsph(&["compare", "column.toml", "--steps", "100"], dir.path());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    for line in ["after 1 step(s):", "(not judged:", "iterations per step over 100 steps:", "the same 100 steps with every solve held at", "compare: passed"] {
+        assert!(text.contains(line), "no '{line}' in:\n{text}");
+    }
+    // The held run's table is judged against at least the f32 path's own errors.
+    assert!(text.contains("(tolerances at least 3 times the cpu f32 path's own errors against cpu f64)"), "{text}");
+    assert!(!text.contains("FAIL"), "{text}");
+}
