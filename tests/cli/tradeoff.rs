@@ -30,6 +30,32 @@ fn sample_times_fall_on_whole_even_numbers_of_base_steps_and_end_at_the_run_end(
 }
 
 #[test]
+fn a_study_leaves_out_the_knobs_its_scene_does_not_use() {
+    use wgsph::app::tradeoff::configs;
+    use wgsph::model::scene::{Boundary, PressureSolver, Scene};
+    let names = |scene: &Scene| configs(scene).into_iter().map(|c| c.name).collect::<Vec<_>>();
+    // The dam break has planes and runs weakly compressible: every knob changes it.
+    let dam_break = Scene::builtin("dam_break").unwrap();
+    let all = names(&dam_break);
+    assert!(all.iter().any(|n| n == "no planes") && all.iter().any(|n| n == "dfsph 0.01%"), "{all:?}");
+    // Without its planes, and with DFSPH at the default tolerance: no row that would run the
+    // baseline again, the other tolerances still there.
+    let mut dfsph = wgsph::app::tradeoff::with_dfsph(&dam_break, 1e-4);
+    dfsph.boundary.retain(|b| !matches!(b, Boundary::Plane { .. }));
+    assert_eq!(dfsph.physics.solver, PressureSolver::Dfsph);
+    let some = names(&dfsph);
+    for left_out in ["no planes", "dfsph 0.01%"] {
+        assert!(!some.iter().any(|n| n == left_out), "{left_out}: {some:?}");
+    }
+    for kept in ["baseline (gpu f32)", "cpu f64", "cpu f32", "dfsph 0.1%", "dfsph 1%", "no wall particles"] {
+        assert!(some.iter().any(|n| n == kept), "{kept}: {some:?}");
+    }
+    for c in configs(&dfsph).iter().filter(|c| !matches!(c.knob, "baseline" | "precision")) {
+        assert!(c.scene != dfsph || c.engine != wgsph::app::tradeoff::Engine::Gpu, "{} runs the baseline again", c.name);
+    }
+}
+
+#[test]
 fn a_small_study_writes_the_table_and_the_plot() {
     let dir = tempfile::tempdir().unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_wgsph"))
