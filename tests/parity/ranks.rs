@@ -655,6 +655,16 @@ fn dfsph_on_gpu_ranks_computes_bit_for_bit_what_one_gpu_computes() {
             assert_eq!((d.min, d.max, d.last), (dt.min, dt.max, dt.last), "{}: rank {rank} of {ranks} steps with one GPU's dt", scene.name);
         }
         assert!(all.iter().any(|r| r.3.stats.ghosts > 0), "{}: ranks hold ghosts", scene.name);
+        // The bytes over the bus count the solves' loops too: a DFSPH rank takes the full path
+        // every step (88 bytes per held particle up and down with its warm starts, and the
+        // cell starts), and its solves add a read of the binned positions (16 per particle)
+        // and the ghost syncs, several per step: more than 112 per held particle.
+        let cells = scene.params().grid.cell_count() as u64 + 1;
+        for (rank, (.., report)) in all.iter().enumerate().filter(|(_, r)| r.3.stats.ghosts > 0) {
+            let held = (report.own_particles + report.stats.ghosts) as u64;
+            let least = 40 * (112 * held + 4 * cells);
+            assert!(report.stats.bus_bytes > least, "{}: rank {rank} moved {} bytes over 40 steps, fewer than {least} for {held} held particles", scene.name, report.stats.bus_bytes);
+        }
         // With adaptive dt the time is summed on the host in f64 across ranks, a compensated
         // f32 sum on one GPU: the same to rounding.
         let many = &all[0].0;

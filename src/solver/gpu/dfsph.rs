@@ -33,6 +33,8 @@ pub struct RankSolves {
     /// samples the force probes on the host), and those velocities once read.
     pub wants_prediction_start: bool,
     pub prediction_start: Option<Vec<[f32; 4]>>,
+    /// Bytes the solves' loops moved between host and device (reads and writes) this step.
+    pub bus_bytes: u64,
 }
 
 /// DFSPH across ranks: the stage that gathers the velocities a rank sends to its neighbours

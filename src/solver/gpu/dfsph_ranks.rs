@@ -34,6 +34,14 @@ impl GpuSolver {
         }
     }
 
+    /// Counts `bytes` moved between host and device by the solves' loops (the rank's
+    /// `bus_bytes`).
+    fn count_bus_bytes(&self, bytes: u64) {
+        if let Some(r) = self.rank_solves.borrow_mut().as_mut() {
+            r.bus_bytes += bytes;
+        }
+    }
+
     /// The work recorded so far submitted and waited for, then `bytes` of `buffer` from `offset`
     /// read back.
     fn wait_and_read(&self, rec: &mut dyn Recorder, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> anyhow::Result<Vec<u8>> {
@@ -41,7 +49,9 @@ impl GpuSolver {
         if bytes == 0 {
             return Ok(Vec::new());
         }
-        Ok(read_ranges(&self.ctx, &[(buffer, offset, bytes)])?.remove(0))
+        let data = read_ranges(&self.ctx, &[(buffer, offset, bytes)])?.remove(0);
+        self.count_bus_bytes(bytes);
+        Ok(data)
     }
 
     /// After the binning: the ghost link, made in the order of the upload, put in the device's
@@ -59,15 +69,16 @@ impl GpuSolver {
         });
         let made = uploaded.and_then(|places| {
             let mut solves = self.rank_solves.borrow_mut();
-            let Some(link) = solves.as_mut().and_then(|r| r.link.as_mut()) else { return Ok(()) };
+            let Some(link) = solves.as_mut().and_then(|r| r.link.as_mut()) else { return Ok(0) };
             *link = link.reordered(&places);
             // The slots of the gather and the scatter, for every sync of the step.
             let [sent, received] = link.counts();
             let words: Vec<u32> = [sent, received].into_iter().chain(link.sent_slots()).chain(link.received_slots()).map(|v| v as u32).collect();
             let ghosts = self.ghost_velocities_stage()?;
             self.ctx.queue.write_buffer(&ghosts.slots, 0, bytemuck::cast_slice(&words));
-            Ok(())
+            Ok(4 * words.len() as u64)
         });
+        let made = made.map(|written| self.count_bus_bytes(written));
         if let Err(e) = made {
             self.solves_failed(e);
         }
@@ -129,6 +140,7 @@ impl GpuSolver {
         if let (true, true, Some(g)) = (ok, received > 0, self.ghost_velocities.get()) {
             let words: Vec<[f32; 4]> = values.iter().map(|v| [v.0[0], v.0[1], v.0[2], 0.0]).collect();
             self.ctx.queue.write_buffer(&g.values, 0, bytemuck::cast_slice(&words));
+            self.count_bus_bytes(16 * words.len() as u64);
             self.dispatch_threads(rec, &g.scatter, &g.groups[read][predicted as usize][1], received as u64);
         }
     }

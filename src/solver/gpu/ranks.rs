@@ -237,6 +237,7 @@ impl GpuRankStages {
         }
         let solves = solver.rank_solves.borrow_mut().take();
         if let (Some(d), Some(solves)) = (dfsph.as_mut(), solves) {
+            self.bus_bytes += solves.bus_bytes;
             *d.stats = solves.stats;
             if let (Some(out), Some(v)) = (d.prediction_start.as_deref_mut(), solves.prediction_start) {
                 *out = v.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
@@ -383,6 +384,7 @@ impl GpuSolver {
             failure: None,
             wants_prediction_start: held.prediction_start.is_some(),
             prediction_start: None,
+            bus_bytes: 0,
         });
     }
 
