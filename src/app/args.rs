@@ -133,6 +133,10 @@ pub struct RunArgs {
     /// in TOML (`--set time.dt=1e-4 --set physics.viscosity=0`); repeated; checked like the file.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub sets: Vec<Override>,
+    /// Remove a field of the scene (back to its default) or an entry of a list (`boundary.2`),
+    /// before the `--set`s: `--set physics.solver=dfsph --unset physics.speed_of_sound`; repeated.
+    #[arg(long = "unset", value_name = "KEY", value_parser = Override::unset)]
+    pub unsets: Vec<Override>,
     /// Number of steps to run (default: up to the scene's end time).
     #[arg(long, conflicts_with = "time")]
     pub steps: Option<u64>,
@@ -175,7 +179,7 @@ pub struct RunArgs {
     pub checkpoint_every: u64,
     /// Continue the run in DIR from its checkpoint, to the end it was heading to (or for
     /// --steps N / --time T more); scene and settings come from the checkpoint.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "sets", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format", "frames"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "sets", "unsets", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format", "frames"])]
     pub resume: Option<PathBuf>,
     /// Reconstruct the fluid surface (marching cubes over an SPH density field, splashsurf)
     /// every K steps into DIR/surface/step_NNNNNN.obj (0: never).

@@ -469,7 +469,8 @@ pub fn run_scene(args: &RunArgs) -> anyhow::Result<Scene> {
         Some(_) => SceneOrigin::BuiltIn(args.scene.clone()),
         None => SceneOrigin::File(PathBuf::from(&args.scene)),
     };
-    scene = scene.with_overrides(&args.sets, &origin)?;
+    let overrides: Vec<_> = args.unsets.iter().chain(&args.sets).cloned().collect();
+    scene = scene.with_overrides(&overrides, &origin)?;
     if let Some(n) = args.particles {
         scene = super::args::at_particles(&scene, n)?;
     }

@@ -1,18 +1,39 @@
 //! `--set KEY=VALUE`: a field of a scene changed from the command line, by its dotted path in
 //! the scene file (`time.dt`, `physics.viscosity`, `fluid.0.velocity`: a number indexes an array
 //! of blocks), with the value written as in TOML (`1e-4`, `[0, -9.81, 0]`, `true`, `"tait"`;
-//! a bare word is taken as a string, so `physics.kernel=cubic_spline` works). The changed scene
-//! is read and validated like a file, so a wrong key or value gets the file's error.
+//! a bare word is taken as a string, so `physics.kernel=cubic_spline` works); `--unset KEY`
+//! removes a field (back to its default, or gone where it has none) or an entry of a list
+//! (`boundary.2`). The overrides apply in order (the removals first), each read back so that a
+//! wrong key or type names it; the changed scene is then validated like a file, once, so that
+//! a change that takes several fields (`--set physics.solver=dfsph --unset
+//! physics.speed_of_sound`) passes through no half-made scene.
 
 use super::scene::{Scene, SceneError, SceneOrigin};
 
-/// One `--set KEY=VALUE`.
+/// One `--set KEY=VALUE`, or `--unset KEY` (no value).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Override {
     pub key: String,
-    pub value: toml::Value,
-    /// As given, for messages.
+    pub value: Option<toml::Value>,
+    /// As given, with its flag, for messages.
     pub text: String,
+}
+
+/// A dotted path of the scene file, checked for empty parts (`text`: the argument, for messages).
+fn checked_key<'a>(key: &'a str, text: &str) -> Result<&'a str, String> {
+    let key = key.trim();
+    if key.is_empty() || key.split('.').any(str::is_empty) {
+        return Err(format!("'{text}': the key must be a dotted path of the scene file, e.g. time.dt or physics.viscosity"));
+    }
+    Ok(key)
+}
+
+impl Override {
+    /// `--unset KEY`.
+    pub fn unset(text: &str) -> Result<Self, String> {
+        let key = checked_key(text, text)?;
+        Ok(Override { key: key.to_string(), value: None, text: format!("--unset {key}") })
+    }
 }
 
 impl std::str::FromStr for Override {
@@ -20,14 +41,11 @@ impl std::str::FromStr for Override {
 
     fn from_str(text: &str) -> Result<Self, String> {
         let (key, value) = text.split_once('=').ok_or_else(|| format!("'{text}' is not KEY=VALUE (e.g. time.dt=1e-4)"))?;
-        let key = key.trim();
-        if key.is_empty() || key.split('.').any(str::is_empty) {
-            return Err(format!("'{text}': the key must be a dotted path of the scene file, e.g. time.dt or physics.viscosity"));
-        }
+        let key = checked_key(key, text)?;
         let value = value.trim();
         let parsed = toml::from_str::<toml::Table>(&format!("v = {value}")).ok().and_then(|mut t| t.remove("v"));
         let value = parsed.unwrap_or_else(|| toml::Value::String(value.to_string()));
-        Ok(Override { key: key.to_string(), value, text: text.to_string() })
+        Ok(Override { key: key.to_string(), value: Some(value), text: format!("--set {text}") })
     }
 }
 
@@ -40,13 +58,32 @@ impl Scene {
         }
         let mut tree = toml::Value::try_from(self).expect("a scene serialises");
         for o in overrides {
-            let error = |message: String| SceneError { origin: format!("{origin} with --set {}", o.text), field: o.key.clone(), message };
-            set_path(&mut tree, &o.key, o.value.clone()).map_err(error)?;
-            // Read back after each, so that an error names the override that caused it.
-            let scene: Scene = tree.clone().try_into().map_err(|e: toml::de::Error| error(e.message().to_string()))?;
-            scene.validate(origin).map_err(|e| SceneError { origin: format!("{} with --set {}", e.origin, o.text), ..e })?;
+            let error = |message: String| SceneError { origin: format!("{origin} with {}", o.text), field: o.key.clone(), message };
+            match &o.value {
+                Some(value) => set_path(&mut tree, &o.key, value.clone()),
+                None => unset_path(&mut tree, &o.key),
+            }
+            .map_err(error)?;
+            // Read back after each, so that a wrong key or type names the override.
+            let _: Scene = tree.clone().try_into().map_err(|e: toml::de::Error| error(e.message().to_string()))?;
         }
-        Ok(tree.try_into().expect("checked above"))
+        let scene: Scene = tree.try_into().expect("read back above");
+        scene.validate(origin).map_err(|e| {
+            // Named by the overrides of the refused field (or those within it), else by all.
+            let related = |o: &&Override| e.field == o.key || e.field.starts_with(&format!("{}.", o.key)) || o.key.starts_with(&format!("{}.", e.field));
+            let named: Vec<&Override> = match overrides.iter().filter(related).collect::<Vec<_>>() {
+                some if !some.is_empty() => some,
+                _ => overrides.iter().collect(),
+            };
+            let flags = named.iter().map(|o| o.text.as_str()).collect::<Vec<_>>().join(" ");
+            // A field the scene must not have: say how to remove it from the command line.
+            let message = match e.message.ends_with("remove it") {
+                true => format!("{} (--unset {})", e.message, e.field),
+                false => e.message.clone(),
+            };
+            SceneError { origin: format!("{} with {flags}", e.origin), message, ..e }
+        })?;
+        Ok(scene)
     }
 }
 
@@ -80,4 +117,34 @@ fn set_path(tree: &mut toml::Value, key: &str, value: toml::Value) -> Result<(),
         };
     }
     Ok(())
+}
+
+/// Removes the value at a dotted path: a table's key, or an array's entry (the entries after it
+/// move up). An error where there is none.
+fn unset_path(tree: &mut toml::Value, key: &str) -> Result<(), String> {
+    let (parent, last) = match key.rsplit_once('.') {
+        Some((parent, last)) => (Some(parent), last),
+        None => (None, key),
+    };
+    let mut node = tree;
+    if let Some(parent) = parent {
+        for part in parent.split('.') {
+            node = match node {
+                toml::Value::Table(t) => t.get_mut(part),
+                toml::Value::Array(a) => part.parse::<usize>().ok().and_then(|i| a.get_mut(i)),
+                _ => None,
+            }
+            .ok_or_else(|| format!("the scene has no {parent} to remove {last} from"))?;
+        }
+    }
+    match node {
+        toml::Value::Table(t) => t.remove(last).map(|_| ()).ok_or_else(|| format!("is not set in the scene (a field at its default has nothing to remove)")),
+        toml::Value::Array(a) => {
+            let len = a.len();
+            let index = last.parse::<usize>().ok().filter(|&i| i < len).ok_or_else(|| format!("{} has {len} entries; '{last}' is not one (they are numbered from 0)", parent.unwrap_or("")))?;
+            a.remove(index);
+            Ok(())
+        }
+        _ => Err(format!("{} is a value, not a table: '{last}' cannot be removed from it", parent.unwrap_or(""))),
+    }
 }

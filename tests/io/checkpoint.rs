@@ -210,8 +210,11 @@ fn resume_from_the_command_line_continues_the_run() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("10 steps"));
     assert_eq!(files(&dir.path().join("a")), files(&dir.path().join("b")));
     // Settings come from the checkpoint: changing them is refused.
-    let o = wgsph(&["run", "--resume", "b", "--steps", "1", "--out", "c"], dir.path());
-    assert_eq!(o.status.code(), Some(2));
+    for changed in [&["--out", "c"][..], &["--set", "time.dt=1e-4"], &["--unset", "physics.viscosity"]] {
+        let o = wgsph(&[&["run", "--resume", "b", "--steps", "1"][..], changed].concat(), dir.path());
+        assert_eq!(o.status.code(), Some(2), "{changed:?}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"), "{}", String::from_utf8_lossy(&o.stderr));
+    }
 }
 
 #[test]
