@@ -207,6 +207,17 @@ fn bad_picture_options_are_refused_with_what_is_allowed() {
     assert!(!dir.path().join("f").exists());
 }
 
+/// `wgsph compare` of the scene file `toml` over `steps` steps: its standard output, after
+/// checking that it succeeded.
+fn compare_passing(toml: &str, steps: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("scene.toml"), toml).unwrap();
+    let out = wgsph(&["compare", "scene.toml", "--steps", steps], dir.path());
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    text
+}
+
 #[test]
 fn compare_judges_a_dfsph_scene_by_its_iterations_and_again_with_them_held_fixed() {
     // A solve that stops at its tolerance stops one iteration apart on the two paths now and
@@ -216,16 +227,12 @@ fn compare_judges_a_dfsph_scene_by_its_iterations_and_again_with_them_held_fixed
     if common::contexts().is_empty() {
         return;
     }
-    let dir = tempfile::tempdir().unwrap();
     let scene = "name = \"column\"\nseed = 3\n[domain]\nmin = [-0.07, -0.07, -0.07]\nmax = [0.67, 0.67, 0.17]\n\
         [physics]\nsmoothing_length = 0.04\nparticle_spacing = 0.02\nkernel = \"mueller\"\nsolver = \"dfsph\"\nviscosity = 0.01\n\
         [time]\ndt = 0.001\nend_time = 0.5\nadaptive = true\n\
         [[fluid]]\nmin = [0.0, 0.0, 0.0]\nmax = [0.2, 0.3, 0.1]\njitter = 0.02\n\
         [[boundary]]\ntype = \"container\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.6, 0.6, 0.1]\n";
-    std::fs::write(dir.path().join("column.toml"), scene).unwrap();
-    let out = wgsph(&["compare", "column.toml", "--steps", "100"], dir.path());
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    let text = compare_passing(scene, "100");
     for line in ["after 1 step(s):", "(not judged:", "iterations per step over 100 steps:", "the same 100 steps with every solve held at", "compare: passed"] {
         assert!(text.contains(line), "no '{line}' in:\n{text}");
     }
@@ -243,17 +250,13 @@ fn compare_gives_dfsph_solves_held_too_short_more_iterations() {
     if common::contexts().is_empty() {
         return;
     }
-    let dir = tempfile::tempdir().unwrap();
     let scene = "name = \"thrown\"\nseed = 9\n[domain]\nmin = [-0.1, -0.1, -0.1]\nmax = [0.7, 0.8, 0.2]\n\
         [physics]\nsmoothing_length = 0.06\nparticle_spacing = 0.02\nkernel = \"wendland\"\nsolver = \"dfsph\"\nviscosity = 0.01\n\
         boundary_friction = 0.0\nboundary_volume = \"akinci\"\n\
         [time]\ndt = 0.0005\nend_time = 0.5\n\
         [[fluid]]\nmin = [0.0, 0.0, 0.0]\nmax = [0.2, 0.3, 0.1]\njitter = 0.1\nvelocity = [0.5, 0.0, 0.0]\n\
         [[boundary]]\ntype = \"container\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.6, 0.6, 0.1]\n";
-    std::fs::write(dir.path().join("thrown.toml"), scene).unwrap();
-    let out = wgsph(&["compare", "thrown.toml", "--steps", "60"], dir.path());
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    let text = compare_passing(scene, "60");
     let held_short = "every solve held at 3 constant-density and 2 divergence iterations on every path:\n  went bad on the gpu path at step ";
     assert!(text.contains(held_short) && text.contains("the solves were held too short\n  (again with 5 and 3)"), "{text}");
     assert!(text.contains("every solve held at 5 constant-density and 3 divergence iterations") && text.ends_with("compare: passed\n"), "{text}");
