@@ -6,7 +6,7 @@
 //! over the steps far beyond rounding (docs/dfsph.md, "GPU against the CPU"). So the run as the
 //! scene sets it is judged after one step and by its iteration counts, and the many-step
 //! comparison of the state is made again with every solve held at a fixed number of
-//! iterations on both paths, where only the arithmetic differs.
+//! iterations on the GPU, the f64 and the f32 paths, where only the arithmetic differs.
 
 use super::args::CompareArgs;
 use crate::model::scene::Scene;
