@@ -633,8 +633,9 @@ fn probes_on_gpu_ranks_against_one_gpu(ctx: &GpuContext, scene: &Scene, steps: u
 /// DFSPH on GPU ranks: the host runs each solve's loop, the ghosts take their owners' velocities
 /// after every velocity change (read back, exchanged, written again), the shaders leave the
 /// ghosts out of the error sums and the adaptive step's maxima, which the ranks add or compare,
-/// and the warm starts travel with the particles; so N ranks run one GPU's iterations with its
-/// dt and compute its bits, through migration and moving bounds.
+/// and the warm starts travel with the particles, also through the resident steps' band and
+/// merge; so N ranks run one GPU's iterations with its dt and compute its bits, through
+/// migration and moving bounds.
 #[test]
 fn dfsph_on_gpu_ranks_computes_bit_for_bit_what_one_gpu_computes() {
     let Some(ctx) = common::contexts().into_iter().next() else { return };
@@ -655,15 +656,25 @@ fn dfsph_on_gpu_ranks_computes_bit_for_bit_what_one_gpu_computes() {
             assert_eq!((d.min, d.max, d.last), (dt.min, dt.max, dt.last), "{}: rank {rank} of {ranks} steps with one GPU's dt", scene.name);
         }
         assert!(all.iter().any(|r| r.3.stats.ghosts > 0), "{}: ranks hold ghosts", scene.name);
-        // The bytes over the bus count the solves' loops too: a DFSPH rank takes the full path
-        // every step (88 bytes per held particle up and down with its warm starts, and the
-        // cell starts), and its solves add a read of the binned positions (16 per particle)
-        // and the ghost syncs, several per step: more than 112 per held particle.
-        let cells = scene.params().grid.cell_count() as u64 + 1;
-        for (rank, (.., report)) in all.iter().enumerate().filter(|(_, r)| r.3.stats.ghosts > 0) {
-            let held = (report.own_particles + report.stats.ghosts) as u64;
-            let least = 40 * (112 * held + 4 * cells);
-            assert!(report.stats.bus_bytes > least, "{}: rank {rank} moved {} bytes over 40 steps, fewer than {least} for {held} held particles", scene.name, report.stats.bus_bytes);
+        // Resident steps: the band and the received particles carry the warm starts, and the
+        // device makes the solves' link from its binning. On the dam break, against the same 40
+        // steps with every step the first of its batch, which takes the full path (every held
+        // particle up and down with its warm starts and id, and the cell starts): fewer bytes on
+        // every rank.
+        for (rank, (.., report)) in all.iter().enumerate() {
+            assert!(report.stats.resident_steps > 0, "{}: rank {rank} of {ranks} ran no resident step", scene.name);
+        }
+        if scene.name == "dam_break" {
+            let full = gpu_on_ranks(&ctx, &scene, ranks, 10, &|b: &mut dyn Backend| {
+                for _ in 0..40 {
+                    b.step(1)?;
+                }
+                Ok(b.rank_report().expect("across ranks"))
+            });
+            for (rank, ((.., report), full)) in all.iter().zip(&full).enumerate() {
+                assert_eq!(full.stats.resident_steps, 0, "{}: rank {rank} of {ranks} without batches", scene.name);
+                assert!(report.stats.bus_bytes < full.stats.bus_bytes, "{}: rank {rank} moved {} bytes with resident steps, {} without", scene.name, report.stats.bus_bytes, full.stats.bus_bytes);
+            }
         }
         // With adaptive dt the time is summed on the host in f64 across ranks, a compensated
         // f32 sum on one GPU: the same to rounding.
@@ -708,14 +719,17 @@ fn the_ghost_velocities_stage_agrees_with_its_cpu_twin() {
 /// slots dropped (ghosts and particles outside the slab) and the band listed (with their places
 /// in the one-process order), the own particles' health, and the merge of the kept particles
 /// with received ones, which must put every particle where the twin puts it. On the dam break
-/// (summed density in the velocities' w) and a tank with continuity density (its own array),
-/// a slab that ends inside the fluid, every seventh slot marked a ghost.
+/// (summed density in the velocities' w), a tank with continuity density (its own array) and a
+/// DFSPH tank (positions holding places, whose ids and warm starts the band carries and the
+/// merge moves to the new slots), a slab that ends inside the fluid, every seventh slot marked a
+/// ghost.
 #[test]
 fn the_resident_exchange_stage_agrees_with_its_cpu_twin() {
-    use wgsph::solver::cpu::resident_exchange::{merge_kept, own_health, place_inserts, select_band, SlabFaces};
+    use wgsph::solver::cpu::resident_exchange::{at_place, merge_kept, own_health, place_inserts, place_w, select_band, SlabFaces};
     let bits = |v: &[[f32; 4]]| v.iter().map(|x| x.map(f32::to_bits)).collect::<Vec<_>>();
     for ctx in common::contexts() {
-        for scene in [dam_break(1000), TestScene::small_tank().continuity().build()] {
+        for scene in [dam_break(1000), TestScene::small_tank().continuity().build(), TestScene::small_tank().dfsph().build()] {
+            let dfsph = scene.params().dfsph.is_some();
             let mut gpu = common::gpu(ctx.clone(), &scene);
             gpu.step(5).expect("steps");
             let params = scene.params();
@@ -728,20 +742,24 @@ fn the_resident_exchange_stage_agrees_with_its_cpu_twin() {
             let n = gpu.fluid_count() as u32;
             let ghosts: Vec<u32> = (0..n).filter(|i| i % 7 == 3).collect();
             // Received particles in cells outside the slab (which hold only dropped slots), at
-            // places inside and past each cell's particles, sorted by place.
+            // places inside and past each cell's particles, sorted by place (with DFSPH, warm
+            // starts in the velocity's w and beside it).
             let mut received = Vec::new();
             for (k, x) in [faces.slab.start - 1, faces.slab.end].into_iter().enumerate() {
                 for y in [0, dims[1] / 4] {
                     for place in [0u64, 1, 40] {
                         let cell = (x + dims[0] * (y + dims[1])) as u64;
                         let id = 100_000 + received.len() as u32;
-                        received.push(([0.1 * k as f32, y as f32, place as f32, f32::from_bits(id | 0x8000_0000)], [1.0, 2.0, 3.0, 1000.0 + place as f32], cell << 32 | place));
+                        received.push(([0.1 * k as f32, y as f32, place as f32, f32::from_bits(id | 0x8000_0000)], [1.0, 2.0, 3.0, 1000.0 + place as f32], cell << 32 | place, -(id as f32)));
                     }
                 }
             }
             received.sort_by_key(|r| r.2);
-            let run = gpu.resident_exchange_alone(&faces, &ghosts, &received).expect("the stage runs");
+            // With DFSPH one GPU's positions hold ids 0..n, taken as places whose ids are these.
+            let place_ids: Vec<u32> = (0..n).map(|p| 50_000 + 3 * p).collect();
+            let run = gpu.resident_exchange_alone(&faces, &ghosts, &received, dfsph.then_some(&place_ids[..])).expect("the stage runs");
             let who = format!("{} on {}", scene.name, ctx.describe());
+            assert_eq!(run.places.is_some(), dfsph, "{who}: the places' arrays");
             // The band and the dropped slots, in slot order (the device lists them in any order).
             let (dropped, band) = select_band(&run.positions, &run.starts, &grid, &faces);
             let mut device_dropped = run.band.dropped.clone();
@@ -752,7 +770,15 @@ fn the_resident_exchange_stage_agrees_with_its_cpu_twin() {
             device_band.sort_unstable();
             assert_eq!(device_band, band, "{who}: the band's slots and places");
             for (k, &slot) in run.band.slots.iter().enumerate() {
-                assert_eq!(bits(&[run.band.positions[k], run.band.velocities[k]]), bits(&[run.positions[slot as usize], run.velocities[slot as usize]]), "{who}: band slot {slot}");
+                let (mut p, mut v) = (run.positions[slot as usize], run.velocities[slot as usize]);
+                if let Some([before, _]) = &run.places {
+                    // The id in the position's w, the warm starts in the velocity's w and beside it.
+                    let [pressure, divergence, id] = at_place(p[3], &[0, 1, 2].map(|a| before.iter().map(|e| e[a]).collect()));
+                    (p[3], v[3]) = (f32::from_bits(id), f32::from_bits(pressure));
+                    assert_eq!(run.band.warm_divergence[k].to_bits(), divergence, "{who}: band slot {slot}'s divergence warm start");
+                    assert!(id >= 50_000, "{who}: band slot {slot} carries an id of the places");
+                }
+                assert_eq!(bits(&[run.band.positions[k], run.band.velocities[k]]), bits(&[p, v]), "{who}: band slot {slot}");
             }
             // The health of the own particles.
             let domain = (params.domain_min.map(|x| x as f32), params.domain_max.map(|x| x as f32));
@@ -764,19 +790,34 @@ fn the_resident_exchange_stage_agrees_with_its_cpu_twin() {
             let kept = merge_kept(n as usize, &dropped, &places);
             let total = n as usize - dropped.len() + received.len();
             let (mut positions, mut velocities) = (vec![[f32::NAN; 4]; total], vec![[f32::NAN; 4]; total]);
+            let mut merged_places = vec![[u32::MAX; 3]; total];
             for (i, slot) in kept.iter().enumerate() {
                 if let Some(slot) = slot {
-                    positions[*slot as usize] = run.positions[i];
-                    velocities[*slot as usize] = run.velocities[i];
+                    let (s, mut p) = (*slot as usize, run.positions[i]);
+                    if let Some([before, _]) = &run.places {
+                        merged_places[s] = at_place(p[3], &[0, 1, 2].map(|a| before.iter().map(|e| e[a]).collect()));
+                        p[3] = place_w(*slot, p[3]);
+                    }
+                    positions[s] = p;
+                    velocities[s] = run.velocities[i];
                 }
             }
             for (j, &slot) in slots.iter().enumerate() {
-                positions[slot as usize] = received[j].0;
-                velocities[slot as usize] = received[j].1;
+                let (s, (mut p, mut v, _, divergence)) = (slot as usize, received[j]);
+                if dfsph {
+                    merged_places[s] = [v[3].to_bits(), divergence.to_bits(), p[3].to_bits() & !0x8000_0000];
+                    (p[3], v[3]) = (place_w(slot, p[3]), 0.0);
+                }
+                positions[s] = p;
+                velocities[s] = v;
             }
             assert!(positions.iter().all(|p| !p[0].is_nan()), "{who}: the twin fills every slot once");
             assert_eq!(bits(&run.merged_positions), bits(&positions), "{who}: merged positions");
             assert_eq!(bits(&run.merged_velocities), bits(&velocities), "{who}: merged velocities");
+            if let Some([_, after]) = &run.places {
+                assert_eq!(after, &merged_places, "{who}: each new place's warm starts and id");
+                assert!(merged_places.iter().any(|m| m[0] != 0), "{who}: the tank's warm starts are not all zero");
+            }
         }
     }
 }

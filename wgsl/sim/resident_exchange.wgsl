@@ -15,6 +15,13 @@
 //   step gives every cell the particles and order one process gives it, as the full upload does;
 // - `own_health` counts the rank's own particles' health after the step (ghosts left out).
 //
+// With DFSPH (DFSPH_PLACES) a position's w holds the particle's place in the upload, where its
+// id and its warm starts live (the solves' arrays are indexed by it, and the binning moves only
+// positions and velocities): the band carries the id in the position's w and the warm starts in
+// the velocity's w and the place vector's last lane, a received particle brings them in the same
+// lanes, and the merge writes every held particle's id and warm starts at its new slot, which
+// becomes its place for the next step.
+//
 // Twin of src/solver/cpu/resident_exchange.rs.
 
 //! include shared/common.wgsl
@@ -26,13 +33,26 @@
 // The words below (EXCHANGE_*), read and counted atomically.
 //! array exchange_words: u32, atomic, whole
 //! array dropped: u32, read_write
-// Per band particle three vectors: position, velocity, (slot, cell, place in the cell, 0) as bits.
+// Per band particle three vectors: position, velocity, (slot, cell, place in the cell, 0) as bits
+// (DFSPH_PLACES: the id in the position's w, the warm starts in the velocity's w and the last lane).
 //! array band: vec4<f32>, read_write
-// Per received particle three vectors: position, velocity, (cell, place in the cell, 0, 0) as bits.
+// Per received particle three vectors: position, velocity, (cell, place in the cell, 0, 0) as bits
+// (DFSPH_PLACES: the warm starts in the velocity's w and the third lane).
 //! array inserts: vec4<f32>, read
 //! array insert_places: u32, read_write
 //! array merged_positions: vec4<f32>, read_write
 //! array merged_velocities: vec4<f32>, read_write
+// DFSPH_PLACES: each place's id and warm starts (constant density, divergence), and the merged
+// ones, [warm pressure | warm divergence | id bits] with EXCHANGE_PLACES entries each.
+//! array place_ids: u32, read, optional
+//! array warm_pressure: f32, read, optional
+//! array warm_divergence: f32, read, optional
+//! array merged_places: f32, read_write, optional
+
+// DFSPH across ranks: positions hold places, not ids (above).
+override DFSPH_PLACES: bool = false;
+// The step keeps its densities in their own array (bound as `densities`).
+override DENSITY_ARRAY: bool = false;
 
 const EXCHANGE_AXIS: u32 = 0u;            // the axis the slabs cut
 const EXCHANGE_SLAB_START: u32 = 1u;      // the rank's cell layers along it, [start, end)
@@ -47,6 +67,7 @@ const EXCHANGE_NON_FINITE: u32 = 9u;      // own_health: own particles not finit
 const EXCHANGE_ESCAPED: u32 = 10u;        // finite, outside the domain
 const EXCHANGE_MAX_SPEED2: u32 = 11u;     // the largest |v|^2 (bits of a positive f32)
 const EXCHANGE_MAX_DENSITY: u32 = 12u;    // the largest finite positive density (bits)
+const EXCHANGE_PLACES: u32 = 13u;         // DFSPH_PLACES: entries of each part of merged_places
 
 fn word(k: u32) -> u32 {
     return atomicLoad(&exchange_words[k]);
@@ -127,9 +148,19 @@ fn select_band(
     if (in_band) {
         let k = band_base + band_place;
         let cell = cell_of_slot(i);
-        band_set(3u * k, p);
-        band_set(3u * k + 1u, velocities_at(i));
-        band_set(3u * k + 2u, bitcast<vec4<f32>>(vec4<u32>(i, cell, i - starts_at(cell), 0u)));
+        var position = p;
+        var velocity = velocities_at(i);
+        var warm_divergence_bits = 0u;
+        if (DFSPH_PLACES) {
+            // A band particle is never a ghost: its w is its place alone.
+            let place = particle_id(p.w);
+            position.w = bitcast<f32>(place_ids_at(place));
+            velocity.w = warm_pressure_at(place);
+            warm_divergence_bits = bitcast<u32>(warm_divergence_at(place));
+        }
+        band_set(3u * k, position);
+        band_set(3u * k + 1u, velocity);
+        band_set(3u * k + 2u, bitcast<vec4<f32>>(vec4<u32>(i, cell, i - starts_at(cell), warm_divergence_bits)));
     }
 }
 
@@ -148,6 +179,16 @@ fn dropped_below(slot: u32, count: u32) -> u32 {
     return low;
 }
 
+// DFSPH_PLACES: the id and warm starts of the particle now at `slot`, which becomes its place;
+// returns the w of its position (the slot, with the ghost bit of `w`).
+fn write_place(slot: u32, w: f32, id: u32, warm_pressure: f32, warm_divergence: f32) -> f32 {
+    let entries = word(EXCHANGE_PLACES);
+    merged_places_set(slot, warm_pressure);
+    merged_places_set(entries + slot, warm_divergence);
+    merged_places_set(2u * entries + slot, bitcast<f32>(id));
+    return bitcast<f32>(slot | (bitcast<u32>(w) & GHOST_BIT));
+}
+
 // Each received particle j goes before the first held slot whose place in the one-process order
 // is after its own: a slot of its cell at its place or, past the cell's end, the next cell's
 // first. Its new slot: the kept slots before that one, and the j received before it.
@@ -161,8 +202,15 @@ fn place_inserts(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     let before = min(starts_at(key.x) + key.y, starts_at(key.x + 1u));
     insert_places_set(j, before);
     let slot = before - dropped_below(before, word(EXCHANGE_DROPPED)) + j;
-    merged_positions_set(slot, inserts_at(3u * j));
-    merged_velocities_set(slot, inserts_at(3u * j + 1u));
+    var position = inserts_at(3u * j);
+    var velocity = inserts_at(3u * j + 1u);
+    if (DFSPH_PLACES) {
+        // The id in the position's w, the warm starts in the velocity's w and the key's z.
+        position.w = write_place(slot, position.w, particle_id(position.w), velocity.w, bitcast<f32>(key.z));
+        velocity.w = 0.0;
+    }
+    merged_positions_set(slot, position);
+    merged_velocities_set(slot, velocity);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -188,7 +236,12 @@ fn merge_kept(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
         }
     }
     let slot = i - below + low;
-    merged_positions_set(slot, positions_at(i));
+    var position = positions_at(i);
+    if (DFSPH_PLACES) {
+        let place = particle_id(position.w);
+        position.w = write_place(slot, position.w, place_ids_at(place), warm_pressure_at(place), warm_divergence_at(place));
+    }
+    merged_positions_set(slot, position);
     merged_velocities_set(slot, velocities_at(i));
 }
 
@@ -221,8 +274,9 @@ fn own_health(
             }
             speed2 = v.x * v.x + v.y * v.y + v.z * v.z;
         }
-        // The density of the step's fields: carried in their own array, or summed into the w.
-        let rho = select(v.w, densities_at(i), CONTINUITY);
+        // The density of the step's fields: in their own array where the step keeps one
+        // (continuity density, DFSPH), else summed into the velocity's w.
+        let rho = select(v.w, densities_at(i), DENSITY_ARRAY);
         if (is_finite_f32(rho) && rho > 0.0) {
             density = rho;
         }

@@ -189,6 +189,22 @@ pub struct GhostLink {
 }
 
 impl GhostLink {
+    /// A link without lists yet (a resident step's: the device makes them after its binning,
+    /// [`GhostLink::in_binned_order`]), with the check of its ids and what that took.
+    pub(super) fn unmade(comm: Arc<dyn Communicator>, failure: Option<String>, seconds: f64) -> GhostLink {
+        GhostLink { comm, send: Default::default(), receive: Default::default(), ghosts: Vec::new(), failure, seconds }
+    }
+
+    /// This link's messages with the lists of `positions` as a device binned them (each w
+    /// holding the ghost bit), on the slab `faces`: the particles the device holds in the
+    /// one-process order, which the neighbours' bins follow too.
+    pub fn in_binned_order(&self, positions: &[[f32; 4]], grid: &crate::model::params::Grid<f32>, faces: &SlabFaces) -> GhostLink {
+        const GHOST_BIT: u32 = 0x8000_0000;
+        let ghosts: Vec<bool> = positions.iter().map(|p| p[3].to_bits() & GHOST_BIT != 0).collect();
+        let (send, receive) = link_lists(positions.len(), |i| ghosts[i], |i| grid.cell_coords(V3([positions[i][0], positions[i][1], positions[i][2]]))[faces.axis], faces);
+        GhostLink { comm: self.comm.clone(), send, receive, ghosts, failure: self.failure.clone(), seconds: self.seconds }
+    }
+
     /// The ghosts' velocities (or any per-particle vector) replaced by their owners'.
     pub fn sync<R: Real>(&mut self, values: &mut [V3<R>]) {
         let sent = gather_ghost_velocities(values, &self.sent_slots());
@@ -293,6 +309,39 @@ impl GhostLink {
         });
         self.seconds += t0.elapsed().as_secs_f64();
         out
+    }
+}
+
+/// A link's lists over held particles `0..n`: the own particles within `halo` layers of a face
+/// with a neighbour go to it (a particle of a thin slab to both), and each ghost takes its
+/// values from the neighbour on its side; in the held order.
+fn link_lists(n: usize, ghost: impl Fn(usize) -> bool, layer: impl Fn(usize) -> u32, faces: &SlabFaces) -> ([Vec<usize>; 2], [Vec<usize>; 2]) {
+    let (mut send, mut receive): ([Vec<usize>; 2], [Vec<usize>; 2]) = Default::default();
+    for i in 0..n {
+        let l = layer(i);
+        if ghost(i) {
+            receive[(l >= faces.slab.end) as usize].push(i);
+        } else {
+            if faces.lower && l < faces.slab.start + faces.halo {
+                send[0].push(i);
+            }
+            if faces.upper && l + faces.halo >= faces.slab.end {
+                send[1].push(i);
+            }
+        }
+    }
+    (send, receive)
+}
+
+/// The check of a link's lists by the particles' ids, one message per neighbour: the ids a rank
+/// sends to each neighbour must be those of the neighbour's ghosts on that side, in order.
+/// Collective.
+pub(super) fn check_link_ids(comm: &dyn Communicator, sent: [Vec<f64>; 2], ghosts: [Vec<f64>; 2]) -> Result<(), String> {
+    let (lower, upper) = comm.exchange(&sent[0], &sent[1]).map_err(|e| format!("{e:#}"))?;
+    if lower == ghosts[0] && upper == ghosts[1] {
+        Ok(())
+    } else {
+        Err(format!("its ghosts in cell order are not its neighbours' particles in theirs ({} and {} received, {} and {} held)", lower.len(), upper.len(), ghosts[0].len(), ghosts[1].len()))
     }
 }
 
@@ -422,8 +471,9 @@ pub trait DeviceStages<R: Real>: Send {
     }
     /// Step `step` from the state the device kept, without its `dropped` slots (sorted) and with
     /// the `received` particles (sorted in the one-process order; `ghosts` says which are
-    /// ghosts); `None`, and nothing changed, where they do not fit the device's arrays.
-    fn run_resident_step(&mut self, _step: u64, _dropped: &[u32], _received: &Held<R>, _ghosts: &[bool]) -> anyhow::Result<Option<ResidentStep>> {
+    /// ghosts; with DFSPH carrying their warm starts, and `solves` what the host keeps of the
+    /// solves); `None`, and nothing changed, where they do not fit the device's arrays.
+    fn run_resident_step(&mut self, _step: u64, _dropped: &[u32], _received: &Held<R>, _ghosts: &[bool], _solves: Option<ResidentSolves<'_>>) -> anyhow::Result<Option<ResidentStep>> {
         Ok(None)
     }
     /// The state the device kept, read back into `held` as a step writes it back.
@@ -443,6 +493,16 @@ pub struct ResidentBand<R: Real> {
     pub dropped: Vec<u32>,
     pub slots: Vec<u32>,
     pub particles: Held<R>,
+}
+
+/// DFSPH on a resident step: what the host keeps of the solves (as [`DfsphHeld`]), and the
+/// step's link, checked by the host and made by the device from its binning on the slab
+/// `faces`.
+pub struct ResidentSolves<'a> {
+    pub stats: &'a mut crate::model::state::IterationStats,
+    pub link: &'a mut GhostLink,
+    pub faces: SlabFaces,
+    pub particles: usize,
 }
 
 /// What a resident step gives back: its dt and the own particles' health.
@@ -690,44 +750,29 @@ impl<R: Real> CpuSolver<R> {
     /// DFSPH across ranks: this step's [`GhostLink`] (which slots to send to each neighbour and
     /// which to receive), checked once by the particles' ids; on the CPU path after the binning,
     /// with device stages in the order of the upload (the device puts it in its own cell order).
+    /// Where a resident step that fell back to this path has checked the step's link already,
+    /// its lists are made again without a second check, so that every rank exchanges as many
+    /// messages.
     pub(super) fn link_ghosts(&mut self) {
         let Some(part) = self.ranks.as_deref() else { return };
-        let (rank, size) = (part.comm.rank(), part.comm.size());
-        let mine = part.slabs.layers_of(rank);
-        let n = self.positions.len();
+        let faces = part.faces();
         let ghosts = self.ghost_flags();
-        let layer = |i: usize| self.grid.cell_coords(self.positions[i])[part.axis];
-        let (mut send, mut receive): ([Vec<usize>; 2], [Vec<usize>; 2]) = Default::default();
-        for i in 0..n {
-            let l = layer(i);
-            if ghosts[i] {
-                receive[(l >= mine.end) as usize].push(i);
-            } else {
-                if rank > 0 && l < mine.start + part.slabs.halo {
-                    send[0].push(i);
-                }
-                if rank + 1 < size && l + part.slabs.halo >= mine.end {
-                    send[1].push(i);
-                }
+        let layer = |i: usize| self.grid.cell_coords(self.positions[i])[faces.axis];
+        let (send, receive) = link_lists(self.positions.len(), |i| ghosts[i], layer, &faces);
+        let (failure, seconds) = part.link.as_ref().map_or((None, 0.0), |l| (l.failure.clone(), l.seconds));
+        let checked = part.link.is_some();
+        let mut link = GhostLink { comm: part.comm.clone(), send, receive, ghosts, failure, seconds };
+        if !checked {
+            let t0 = Instant::now();
+            let ids = |slots: &[usize]| slots.iter().map(|&i| self.ids[i] as f64).collect::<Vec<f64>>();
+            let sent = [ids(&link.send[0]), ids(&link.send[1])];
+            let held = [ids(&link.receive[0]), ids(&link.receive[1])];
+            if let Err(e) = check_link_ids(&*link.comm, sent, held) {
+                link.failure.get_or_insert(e);
             }
+            link.seconds += t0.elapsed().as_secs_f64();
         }
-        let mut link = GhostLink { comm: part.comm.clone(), send, receive, ghosts, failure: None, seconds: 0.0 };
-        let t0 = Instant::now();
-        let ids = |slots: &[usize]| slots.iter().map(|&i| self.ids[i] as f64).collect::<Vec<f64>>();
-        let checked = link.comm.exchange(&ids(&link.send[0]), &ids(&link.send[1])).map_err(|e| format!("{e:#}")).and_then(|(lower, upper)| {
-            let expected = [ids(&link.receive[0]), ids(&link.receive[1])];
-            if lower == expected[0] && upper == expected[1] {
-                Ok(())
-            } else {
-                Err(format!("rank {rank} of {size}: its ghosts in cell order are not its neighbours' particles in theirs ({} and {} received, {} and {} held)", lower.len(), upper.len(), expected[0].len(), expected[1].len()))
-            }
-        });
-        link.seconds += t0.elapsed().as_secs_f64();
-        let part = self.ranks.as_deref_mut().expect("across ranks");
-        if let Err(e) = checked {
-            part.failure.get_or_insert(e);
-        }
-        part.link = Some(link);
+        self.ranks.as_deref_mut().expect("across ranks").link = Some(link);
     }
 
     /// Every probe's values read from `input` by the ranks together ([`probes_across_ranks`]),

@@ -98,7 +98,8 @@ pub fn merge_kept(held: usize, dropped: &[u32], places: &[u32]) -> Vec<Option<u3
 }
 
 /// `own_health`: the health of the particles that are not ghosts, the density read from
-/// `densities` where the step keeps them (continuity density), else from the velocities' w.
+/// `densities` where the step keeps them (continuity density, DFSPH), else from the velocities'
+/// w.
 pub fn own_health(positions: &[[f32; 4]], velocities: &[[f32; 4]], densities: Option<&[f32]>, domain: ([f32; 3], [f32; 3])) -> OwnHealth {
     let mut h = OwnHealth::default();
     for (i, (p, v)) in positions.iter().zip(velocities).enumerate() {
@@ -119,4 +120,22 @@ pub fn own_health(positions: &[[f32; 4]], velocities: &[[f32; 4]], densities: Op
         }
     }
     h
+}
+
+/// With DFSPH across ranks a position's w holds the particle's place in the upload, at which its
+/// id and warm starts live (`DFSPH_PLACES` in the shader): each place's (warm pressure, warm
+/// divergence, id).
+pub type Places = [Vec<u32>; 3];
+
+/// `select_band`, `merge_kept` with DFSPH: the (warm pressure, warm divergence, id) bits of the
+/// particle whose position's w is `w` (its place, with the ghost bit).
+pub fn at_place(w: f32, places: &Places) -> [u32; 3] {
+    let place = (w.to_bits() & !GHOST_BIT) as usize;
+    places.each_ref().map(|a| a[place])
+}
+
+/// `place_inserts`, `merge_kept` with DFSPH: the w of a merged position, its new `slot` (its
+/// place from now on) with the ghost bit of its old `w`.
+pub fn place_w(slot: u32, w: f32) -> f32 {
+    f32::from_bits(slot | (w.to_bits() & GHOST_BIT))
 }

@@ -8,12 +8,14 @@
 //! stable binning then sees what the full path gives it, and computes the same bits.
 //!
 //! A step takes the full path where the host needs the particles: the first step of each batch
-//! (`CpuSolver::step`), a step that moves the slab bounds or samples probes, DFSPH, or a band
-//! or merge that outgrows the device's room. The host's arrays are read back from the device
-//! before the full path and at the end of every batch, so nothing outside the batch sees them
-//! stale.
+//! (`CpuSolver::step`), a step that moves the slab bounds or samples probes, or a band or merge
+//! that outgrows the device's room. With DFSPH the warm starts travel with the band and the
+//! received particles, the host checks the step's ghosts by their ids as the full path does,
+//! and the device makes the solves' ghost link from its own binning. The host's arrays are
+//! read back from the device before the full path and at the end of every batch, so nothing
+//! outside the batch sees them stale.
 
-use super::exchange::{lock, Carried, Held, ResidentBand, ResidentStep};
+use super::exchange::{check_link_ids, lock, Carried, GhostLink, Held, ResidentBand, ResidentSolves, ResidentStep};
 use super::resident_exchange::SlabFaces;
 use super::CpuSolver;
 use crate::model::real::{Real, V3};
@@ -37,7 +39,7 @@ impl<R: Real> CpuSolver<R> {
     /// done and the full path's arrays made on the host).
     pub(super) fn step_resident(&mut self) -> bool {
         let Some(device) = self.device.clone() else { return false };
-        if self.device_held == DeviceHeld::Nothing || self.dfsph.is_some() {
+        if self.device_held == DeviceHeld::Nothing {
             return false;
         }
         let Some(part) = self.ranks.as_deref() else { return false };
@@ -48,6 +50,7 @@ impl<R: Real> CpuSolver<R> {
         }
         let (rank, size) = (part.comm.rank(), part.comm.size());
         let faces = part.faces();
+        let particles = part.total_fluid;
         let t0 = Instant::now();
         let band = match lock(&device).resident_band(&faces) {
             Ok(Some(band)) => band,
@@ -71,7 +74,23 @@ impl<R: Real> CpuSolver<R> {
             }
         };
         self.lists.clear();
-        let ran = lock(&device).run_resident_step(self.step, &band.dropped, &received, &ghosts);
+        let ran = {
+            let solves = match (self.dfsph.as_mut(), self.ranks.as_deref_mut()) {
+                (Some(d), Some(part)) => Some(ResidentSolves { stats: &mut d.stats, link: part.link.as_mut().expect("made by the exchange"), faces: faces.clone(), particles }),
+                _ => None,
+            };
+            lock(&device).run_resident_step(self.step, &band.dropped, &received, &ghosts, solves)
+        };
+        if self.dfsph.is_some() {
+            if let Ok(Some(done)) = &ran {
+                let d = self.dfsph.as_mut().expect("DFSPH");
+                (d.last_dt, d.dt) = (done.dt, done.dt);
+            }
+            // Where the merge did not fit, the full path below takes the link, checked already.
+            if !matches!(ran, Ok(None)) {
+                self.unlink_ghosts();
+            }
+        }
         match ran {
             Ok(Some(done)) => {
                 if let Some(part) = self.ranks.as_deref_mut() {
@@ -99,9 +118,11 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// The exchange of the full path (migration, then ghosts) on the band: the particles the
-    /// neighbours sent, sorted in the one-process order, and which of them are ghosts.
+    /// neighbours sent, sorted in the one-process order, and which of them are ghosts. With
+    /// DFSPH the step's link too, checked by the ids as the full path checks it (its lists are
+    /// the device's to make).
     fn exchange_band(&mut self, faces: &SlabFaces, band: &ResidentBand<R>) -> anyhow::Result<(Held<R>, Vec<bool>)> {
-        let carried = Carried { density: self.params.continuity_density, warm: false };
+        let carried = Carried { density: self.params.continuity_density, warm: self.dfsph.is_some() };
         let grid = self.grid;
         let part = self.ranks.as_deref_mut().expect("across ranks");
         let comm = part.comm.clone();
@@ -124,7 +145,23 @@ impl<R: Real> CpuSolver<R> {
         let mut received = held.picked(&arrived);
         let migrants = received.len();
         received.decode(&from_lower, carried)?;
+        let from_lower_end = received.len();
         received.decode(&from_upper, carried)?;
+        if carried.warm {
+            // The full path's check of the link (link_ghosts), one message per neighbour, so that
+            // every rank exchanges as many messages whichever path it takes: the ids of the
+            // particles this rank sent as ghosts, against those of the ghosts it received.
+            let t0 = Instant::now();
+            let ids = |slots: &mut dyn Iterator<Item = usize>, from: &Held<R>| slots.map(|i| from.id[i] as f64).collect::<Vec<f64>>();
+            let layer = |i: usize| layer_of(held.x[i]);
+            let sent = [
+                ids(&mut order.iter().copied().filter(|&i| faces.lower && layer(i) < faces.slab.start + faces.halo), &held),
+                ids(&mut order.iter().copied().filter(|&i| faces.upper && layer(i) + faces.halo >= faces.slab.end), &held),
+            ];
+            let ghosts = [ids(&mut (migrants..from_lower_end), &received), ids(&mut (from_lower_end..received.len()), &received)];
+            let failure = check_link_ids(&*comm, sent, ghosts).err();
+            part.link = Some(GhostLink::unmade(comm.clone(), failure, t0.elapsed().as_secs_f64()));
+        }
         let mut sorted: Vec<usize> = (0..received.len()).collect();
         sorted.sort_unstable_by_key(|&i| received.order[i]);
         let ghosts = sorted.iter().map(|&i| i >= migrants).collect();
@@ -157,6 +194,11 @@ impl<R: Real> CpuSolver<R> {
                     all.id.push(self.ids[i]);
                     if !self.carried_densities.is_empty() {
                         all.rho.push(self.carried_densities[i]);
+                    }
+                    if let Some(d) = &self.dfsph {
+                        // The warm starts were given back by place in the upload.
+                        let k = self.warm_keys[i] as usize;
+                        all.warm.push([d.warm_pressure[k], d.warm_divergence[k]]);
                     }
                     all.order.push((cell as u64) << 32 | (slot - self.starts[cell]) as u64);
                 }

@@ -23,6 +23,9 @@ pub struct RankSolves {
     /// The ghosts in the solves: in the upload's order until the binning, in the device's
     /// after it. `None` for the fields alone.
     pub link: Option<GhostLink>,
+    /// A resident step's (src/solver/cpu/resident_steps.rs): the link's lists are made from the
+    /// binned positions on these faces of the rank's slab, not reordered from the host's.
+    pub link_faces: Option<crate::solver::cpu::resident_exchange::SlabFaces>,
     /// The solves' iterations so far (each solve adds its own).
     pub stats: IterationStats,
     /// The fluid particles of the whole simulation.

@@ -55,22 +55,29 @@ impl GpuSolver {
     }
 
     /// After the binning: the ghost link, made in the order of the upload, put in the device's
-    /// cell order (each position's w holds its particle's place in the upload).
+    /// cell order (each position's w holds its particle's place in the upload); on a resident
+    /// step, made from the binned positions (their layers and ghost bits), which are in the
+    /// one-process order.
     pub(super) fn link_in_device_order(&self, rec: &mut dyn Recorder) {
         if !self.solves_across_ranks() {
             return;
         }
         let n = self.fluid_count as usize;
         let positions = self.store.state(self.current).positions;
-        let uploaded = self.wait_and_read(rec, &positions, 0, n as u64 * 16).and_then(|data| {
-            let places: Vec<usize> = ids_of(&bytemuck::pod_collect_to_vec(&data)).iter().map(|&w| (w & !GHOST_BIT) as usize).collect();
-            anyhow::ensure!(places.iter().all(|&u| u < n), "the binned positions do not hold places in the upload of {n} particles");
-            Ok(places)
+        let binned = self.wait_and_read(rec, &positions, 0, n as u64 * 16).and_then(|data| {
+            let binned: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data);
+            anyhow::ensure!(ids_of(&binned).iter().all(|&w| ((w & !GHOST_BIT) as usize) < n), "the binned positions do not hold places in the upload of {n} particles");
+            Ok(binned)
         });
-        let made = uploaded.and_then(|places| {
+        let made = binned.and_then(|binned| {
             let mut solves = self.rank_solves.borrow_mut();
-            let Some(link) = solves.as_mut().and_then(|r| r.link.as_mut()) else { return Ok(0) };
-            *link = link.reordered(&places);
+            let Some(r) = solves.as_mut() else { return Ok(0) };
+            let faces = r.link_faces.clone();
+            let Some(link) = r.link.as_mut() else { return Ok(0) };
+            *link = match faces {
+                Some(faces) => link.in_binned_order(&binned, &self.params.grid.cast::<f32>(), &faces),
+                None => link.reordered(&ids_of(&binned).iter().map(|&w| (w & !GHOST_BIT) as usize).collect::<Vec<usize>>()),
+            };
             // The slots of the gather and the scatter, for every sync of the step.
             let [sent, received] = link.counts();
             let words: Vec<u32> = [sent, received].into_iter().chain(link.sent_slots()).chain(link.received_slots()).map(|v| v as u32).collect();

@@ -5,7 +5,7 @@
 //! the stages bound to `fluid_count`, so a changing count costs no new pipelines unless it
 //! outgrows the capacity.
 
-use super::buffers::{ids_of, vec4s, WallCellIndex, GHOST_BIT, WALL_CELL_BLOCK};
+use super::buffers::{ids_of, storage, vec4s, WallCellIndex, GHOST_BIT, WALL_CELL_BLOCK};
 use super::device::GpuContext;
 use super::readback::read_buffers;
 use super::{GpuOptions, GpuSolver};
@@ -14,9 +14,9 @@ use crate::model::params::Params;
 use crate::model::kernels::sort_by_cell;
 use crate::model::real::V3;
 use crate::solver::communicator::Communicator;
-use crate::solver::cpu::exchange::{DeviceStages, DfsphHeld, Held, HeldArrays, ResidentBand, ResidentStep};
+use crate::solver::cpu::exchange::{DeviceStages, DfsphHeld, Held, HeldArrays, ResidentBand, ResidentSolves, ResidentStep};
 use crate::solver::cpu::resident_exchange::SlabFaces;
-use super::resident::{received_w, ResidentExchange};
+use super::resident::{received_w, PlaceArrays, ResidentExchange};
 use super::dfsph::RankSolves;
 use super::params::status;
 use std::sync::Arc;
@@ -53,13 +53,17 @@ pub struct GpuRankStages {
     /// Band and received particles the resident exchange makes room for: an eighth of the
     /// held particles at first, more once a step needed more.
     list_room: u64,
+    /// DFSPH: each place's particle id (a position's w holds its place in the upload, where the
+    /// warm starts live too), for the solver's capacity; uploaded with the particles, written
+    /// again by each resident step's merge.
+    place_ids: Option<wgpu::Buffer>,
 }
 
 impl GpuRankStages {
     /// The stages on `ctx` for the scene's `params`, for a rank of `comm` (the walls come
     /// with [`DeviceStages::set_walls`]). `why`: how the adapter was chosen.
     pub fn new(ctx: GpuContext, params: &Params, options: GpuOptions, why: String, comm: Arc<dyn Communicator>) -> Self {
-        GpuRankStages { ctx, params: params.clone(), options, walls: InitialState::default(), solver: None, capacity: 0, why, comm, resident: None, keeps_step: false, bus_bytes: 0, list_room: 0 }
+        GpuRankStages { ctx, params: params.clone(), options, walls: InitialState::default(), solver: None, capacity: 0, why, comm, resident: None, keeps_step: false, bus_bytes: 0, list_room: 0, place_ids: None }
     }
 
     /// A solver with buffers for `capacity` particles (placeholders at the domain's lower
@@ -118,13 +122,17 @@ impl DeviceStages<f32> for GpuRankStages {
     }
 
     fn resident_band(&mut self, faces: &SlabFaces) -> anyhow::Result<Option<ResidentBand<f32>>> {
-        if !self.keeps_step || self.params.dfsph.is_some() {
+        if !self.keeps_step {
             return Ok(None);
         }
         let solver = self.solver.as_ref().expect("kept by a step");
         if self.resident.is_none() {
             let room = self.list_room.max(solver.fluid_count as u64 / 8);
-            self.resident = Some(ResidentExchange::new(solver, room)?);
+            let places = match (&self.place_ids, &solver.dfsph) {
+                (Some(ids), Some(d)) => Some(PlaceArrays { ids, warm_pressure: &d.buffers.warm_pressure, warm_divergence: &d.buffers.warm_divergence }),
+                _ => None,
+            };
+            self.resident = Some(ResidentExchange::new(solver, room, places)?);
         }
         let resident = self.resident.as_ref().expect("made above");
         let band = resident.band(solver, faces);
@@ -154,25 +162,33 @@ impl DeviceStages<f32> for GpuRankStages {
             if continuity {
                 particles.rho.push(v[3]);
             }
+            if let Some(&divergence) = band.warm_divergence.get(k) {
+                // DFSPH: the constant-density warm start in the velocity's w.
+                particles.warm.push([v[3], divergence]);
+            }
             particles.order.push(band.keys[k]);
         }
         Ok(Some(ResidentBand { dropped, slots: by_slot.iter().map(|&k| band.slots[k]).collect(), particles }))
     }
 
-    fn run_resident_step(&mut self, step: u64, dropped: &[u32], received: &Held<f32>, ghosts: &[bool]) -> anyhow::Result<Option<ResidentStep>> {
+    fn run_resident_step(&mut self, step: u64, dropped: &[u32], received: &Held<f32>, ghosts: &[bool], solves: Option<ResidentSolves<'_>>) -> anyhow::Result<Option<ResidentStep>> {
         let (Some(solver), Some(resident)) = (self.solver.as_mut(), self.resident.as_ref()) else { return Ok(None) };
         if !self.keeps_step {
             return Ok(None);
         }
+        // With DFSPH the velocity's w carries the constant-density warm start (DFSPH sums its
+        // density: the w holds no carried density) and the divergence one goes beside it.
         let positions: Vec<[f32; 4]> = (0..received.len()).map(|k| {
             let x = received.x[k].0;
             [x[0], x[1], x[2], received_w(received.id[k], ghosts[k])]
         }).collect();
         let velocities: Vec<[f32; 4]> = (0..received.len()).map(|k| {
             let v = received.v[k].0;
-            [v[0], v[1], v[2], received.rho.get(k).copied().unwrap_or(0.0)]
+            let w = received.warm.get(k).map_or(received.rho.get(k).copied().unwrap_or(0.0), |warm| warm[0]);
+            [v[0], v[1], v[2], w]
         }).collect();
-        if !resident.merge(solver, dropped, &positions, &velocities, &received.order) {
+        let warm_divergence: Vec<f32> = received.warm.iter().map(|w| w[1]).collect();
+        if !resident.merge(solver, dropped, &positions, &velocities, &received.order, &warm_divergence) {
             if received.len() as u64 > resident.list_capacity() {
                 self.grow_lists(received.len() as u64);
             }
@@ -184,7 +200,31 @@ impl DeviceStages<f32> for GpuRankStages {
         self.keeps_step = false;
         solver.steps = step;
         solver.accelerations_valid = false;
+        let link_back = solves.as_ref().map(|s| s.link.clone());
+        if let Some(s) = &solves {
+            // The solves across ranks, their link made from the step's binning on the slab's faces.
+            *solver.rank_solves.borrow_mut() = Some(RankSolves {
+                link: link_back,
+                link_faces: Some(s.faces.clone()),
+                stats: *s.stats,
+                particles: s.particles,
+                failure: None,
+                wants_prediction_start: false,
+                prediction_start: None,
+                bus_bytes: 0,
+            });
+        }
         solver.advance(1);
+        if let (Some(s), Some(done)) = (solves, solver.rank_solves.borrow_mut().take()) {
+            self.bus_bytes += done.bus_bytes;
+            *s.stats = done.stats;
+            if let Some(link) = done.link {
+                *s.link = link;
+            }
+            if let Some(e) = done.failure {
+                anyhow::bail!("DFSPH's solves across ranks: {e}");
+            }
+        }
         if let Some(e) = solver.rank_error.borrow_mut().take() {
             anyhow::bail!("the adaptive step's maxima across ranks: {e}");
         }
@@ -193,9 +233,12 @@ impl DeviceStages<f32> for GpuRankStages {
         Ok(Some(ResidentStep { dt: self.step_dt(&words), health }))
     }
 
-    fn read_held(&mut self, held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
-        anyhow::ensure!(self.keeps_step && self.params.dfsph.is_none(), "the device keeps no step's particles");
-        self.read_back(held, None).map(|_| ())
+    fn read_held(&mut self, mut held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
+        anyhow::ensure!(self.keeps_step, "the device keeps no step's particles");
+        // The host's ids are no longer in the order of the upload: with DFSPH they come from the
+        // device's places.
+        let dfsph = held.dfsph.take();
+        self.read_back(held, dfsph, true).map(|_| ())
     }
 
     fn bus_bytes(&self) -> u64 {
@@ -213,7 +256,9 @@ impl GpuRankStages {
         self.keeps_step = false;
         if self.solver.is_none() || n > self.capacity {
             let capacity = ((n.max(1) as f64) * CAPACITY_MARGIN).ceil() as usize;
-            self.solver = Some(self.make_solver(capacity)?);
+            let solver = self.make_solver(capacity)?;
+            self.place_ids = solver.dfsph.is_some().then(|| storage(&self.ctx.device, "place ids", solver.store.capacity() * 4));
+            self.solver = Some(solver);
             self.resident = None;
             self.capacity = capacity;
         }
@@ -229,6 +274,11 @@ impl GpuRankStages {
         if let Some(d) = &dfsph {
             solver.load_dfsph_held(d);
             self.bus_bytes += 8 * n as u64;
+        }
+        if let (Some(ids), true) = (&self.place_ids, advance) {
+            // Each place's id, for the resident steps that may follow this one.
+            self.ctx.queue.write_buffer(ids, 0, bytemuck::cast_slice(held.ids.as_slice()));
+            self.bus_bytes += 4 * n as u64;
         }
         if advance {
             solver.advance(1);
@@ -252,15 +302,16 @@ impl GpuRankStages {
         if let Some(e) = solver.rank_error.borrow_mut().take() {
             anyhow::bail!("the adaptive step's maxima across ranks: {e}");
         }
-        let dt = self.read_back(held, dfsph)?;
+        let dt = self.read_back(held, dfsph, false)?;
         self.keeps_step = advance;
         Ok(dt)
     }
 
     /// Reads the device's state back into `held` in cell order (positions, velocities, ids, the
     /// carried densities, the densities and pressures, the cell starts; with DFSPH the warm
-    /// starts); returns the last step's dt.
-    fn read_back(&mut self, held: HeldArrays<'_, f32>, dfsph: Option<DfsphHeld<'_, f32>>) -> anyhow::Result<f64> {
+    /// starts); returns the last step's dt. With DFSPH each slot's id is found by its place:
+    /// in `held`'s ids where they are the upload's, else (`places_on_device`) in the device's.
+    fn read_back(&mut self, held: HeldArrays<'_, f32>, dfsph: Option<DfsphHeld<'_, f32>>, places_on_device: bool) -> anyhow::Result<f64> {
         let solver = self.solver.as_ref().expect("made by a step");
         let n = solver.fluid_count as usize;
         let cells = self.params.grid.cell_count() as u64;
@@ -278,12 +329,18 @@ impl GpuRankStages {
         // The w of a position is the particle's id (DFSPH: its place in the upload), with the
         // ghost bit.
         let slots = ids_of(&pos).into_iter().map(|w| w & !GHOST_BIT);
-        *held.ids = match dfsph {
-            Some(_) => {
+        *held.ids = match (&dfsph, &self.place_ids) {
+            (Some(_), Some(ids)) if places_on_device => {
+                // Uploaded with the step's particles, or written by a resident step's merge.
+                let by_place: Vec<u32> = bytemuck::pod_collect_to_vec(&read_buffers(&self.ctx, &[(ids, bytes * 4)])?[0]);
+                self.bus_bytes += 4 * bytes;
+                slots.map(|place| by_place[place as usize]).collect()
+            }
+            (Some(_), _) => {
                 let uploaded = std::mem::take(held.ids);
                 slots.map(|slot| uploaded[slot as usize]).collect()
             }
-            None => slots.collect(),
+            (None, _) => slots.collect(),
         };
         *held.positions = pos.iter().map(|p| V3([p[0], p[1], p[2]])).collect();
         *held.velocities = vel.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
@@ -379,6 +436,7 @@ impl GpuSolver {
         }
         *self.rank_solves.borrow_mut() = Some(RankSolves {
             link: held.link.as_deref().cloned(),
+            link_faces: None,
             stats: *held.stats,
             particles: held.particles,
             failure: None,

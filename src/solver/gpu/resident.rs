@@ -28,19 +28,31 @@ pub mod words {
     pub const ESCAPED: usize = 10;
     pub const MAX_SPEED2: usize = 11;
     pub const MAX_DENSITY: usize = 12;
+    pub const PLACES: usize = 13;
     /// Words in the buffer.
     pub const COUNT: usize = 16;
 }
 
 /// The band a step's exchange reads back: the dropped slots (unsorted), and for each band
 /// particle its slot, position and velocity (the device's vectors, w included) and its place in
-/// the one-process order (cell and place in the cell of the last binning).
+/// the one-process order (cell and place in the cell of the last binning). With DFSPH the
+/// position's w holds the id, the velocity's w the constant-density warm start, and
+/// `warm_divergence` the divergence solve's.
 pub struct DeviceBand {
     pub dropped: Vec<u32>,
     pub slots: Vec<u32>,
     pub positions: Vec<[f32; 4]>,
     pub velocities: Vec<[f32; 4]>,
     pub keys: Vec<u64>,
+    pub warm_divergence: Vec<f32>,
+}
+
+/// DFSPH across ranks: the arrays indexed by each particle's place in the upload (the w of its
+/// position), which the merge writes again at the particles' new slots.
+pub struct PlaceArrays<'a> {
+    pub ids: &'a wgpu::Buffer,
+    pub warm_pressure: &'a wgpu::Buffer,
+    pub warm_divergence: &'a wgpu::Buffer,
 }
 
 /// The stages and arrays of the resident exchange, made for a solver's capacity, with room for
@@ -59,6 +71,8 @@ pub struct ResidentExchange {
     inserts: wgpu::Buffer,
     merged_positions: wgpu::Buffer,
     merged_velocities: wgpu::Buffer,
+    /// DFSPH: the merged ids and warm starts, and where they go.
+    places: Option<(wgpu::Buffer, [wgpu::Buffer; 3])>,
     /// Held particles the arrays hold (the solver's capacity).
     capacity: u64,
     /// Band and received particles each.
@@ -70,24 +84,31 @@ pub struct ResidentExchange {
 }
 
 impl ResidentExchange {
-    pub fn new(solver: &GpuSolver, list_capacity: u64) -> anyhow::Result<Self> {
+    /// The stages for `solver`'s capacity, with room for `list_capacity` band and received
+    /// particles; with DFSPH the arrays its positions' places index (`places`).
+    pub fn new(solver: &GpuSolver, list_capacity: u64, place_arrays: Option<PlaceArrays<'_>>) -> anyhow::Result<Self> {
         let ctx = &solver.ctx;
         let capacity = solver.store.capacity();
         let list_capacity = list_capacity.clamp(64, capacity.max(64));
         let cells = solver.params.grid.cell_count() as u64 + 1;
         let with_densities = solver.densities.is_some();
+        let with_places = place_arrays.is_some();
         let lens = move |name: &str| match name {
             "starts" => cells,
             "exchange_words" => words::COUNT as u64,
             "band" | "inserts" => 3 * list_capacity,
             "insert_places" => list_capacity,
             "densities" if !with_densities => 0,
+            "place_ids" | "warm_pressure" | "warm_divergence" if !with_places => 0,
+            "merged_places" => if with_places { 3 * capacity } else { 0 },
             _ => capacity,
         };
         // Ghosts are marked in the w of their positions (always so across ranks, where this
         // runs; one GPU's stage tests mark some themselves).
         let mut constants: Vec<(&'static str, f64)> = solver.constants_sized(WORKGROUP_SIZE).into_iter().filter(|c| c.0 != "GHOSTS").collect();
         constants.push(("GHOSTS", 1.0));
+        constants.push(("DFSPH_PLACES", with_places as u32 as f64));
+        constants.push(("DENSITY_ARRAY", with_densities as u32 as f64));
         let stage = |entry: &str| stage_with_aliases(ctx, "resident_exchange", entry, &lens, &constants, &[]);
         let [select_band, place_inserts, merge_kept, own_health] = ["select_band", "place_inserts", "merge_kept", "own_health"].map(stage);
         let (select_band, place_inserts, merge_kept, own_health) = (select_band?, place_inserts?, merge_kept?, own_health?);
@@ -99,6 +120,7 @@ impl ResidentExchange {
         let places = storage(device, "received particles' places", list_capacity * 4);
         let merged_positions = storage(device, "merged positions", capacity * 16);
         let merged_velocities = storage(device, "merged velocities", capacity * 16);
+        let place_arrays = place_arrays.map(|p| (storage(device, "merged places", 3 * capacity * 4), [p.warm_pressure.clone(), p.warm_divergence.clone(), p.ids.clone()]));
         let groups = (0..solver.store.phases())
             .map(|c| {
                 let state = solver.store.state(c);
@@ -114,12 +136,21 @@ impl ResidentExchange {
                     "insert_places" => places.clone(),
                     "merged_positions" => merged_positions.clone(),
                     "merged_velocities" => merged_velocities.clone(),
+                    "merged_places" | "warm_pressure" | "warm_divergence" | "place_ids" => {
+                        let (merged, [pressure, divergence, ids]) = place_arrays.as_ref().expect("bound only with DFSPH");
+                        match name {
+                            "merged_places" => merged.clone(),
+                            "warm_pressure" => pressure.clone(),
+                            "warm_divergence" => divergence.clone(),
+                            _ => ids.clone(),
+                        }
+                    }
                     other => panic!("no buffer holds the array '{other}'"),
                 };
                 [&select_band, &place_inserts, &merge_kept, &own_health].map(|s| s.bind_group(device, "resident exchange", &solver.uniform, &buffers))
             })
             .collect();
-        Ok(ResidentExchange { select_band, place_inserts, merge_kept, own_health, groups, words, dropped, band, inserts, merged_positions, merged_velocities, capacity, list_capacity, last_sizes: Default::default(), bytes_read: Default::default() })
+        Ok(ResidentExchange { select_band, place_inserts, merge_kept, own_health, groups, words, dropped, band, inserts, merged_positions, merged_velocities, places: place_arrays, capacity, list_capacity, last_sizes: Default::default(), bytes_read: Default::default() })
     }
 
     /// Band and received particles the arrays have room for.
@@ -178,22 +209,27 @@ impl ResidentExchange {
         data[2].truncate(band as usize * 48);
         let dropped: Vec<u32> = bytemuck::pod_collect_to_vec(&data[1]);
         let vectors: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[2]);
-        let mut out = DeviceBand { dropped, slots: Vec::new(), positions: Vec::new(), velocities: Vec::new(), keys: Vec::new() };
+        let mut out = DeviceBand { dropped, slots: Vec::new(), positions: Vec::new(), velocities: Vec::new(), keys: Vec::new(), warm_divergence: Vec::new() };
         for entry in vectors.chunks_exact(3) {
             let key = entry[2].map(f32::to_bits);
             out.slots.push(key[0]);
             out.positions.push(entry[0]);
             out.velocities.push(entry[1]);
             out.keys.push((key[1] as u64) << 32 | key[2] as u64);
+            if self.places.is_some() {
+                out.warm_divergence.push(entry[2][3]);
+            }
         }
         Ok(Ok(out))
     }
 
     /// The held particles written again without the `dropped` slots (sorted) and with the
     /// received particles (positions and velocities, w included, sorted by their places in the
-    /// one-process order `keys`), in that order; the solver then holds them. False, and nothing
-    /// changed, where they do not fit the arrays.
-    pub fn merge(&self, solver: &mut GpuSolver, dropped: &[u32], positions: &[[f32; 4]], velocities: &[[f32; 4]], keys: &[u64]) -> bool {
+    /// one-process order `keys`; with DFSPH the id in the position's w, the constant-density
+    /// warm start in the velocity's w and the divergence one in `warm_divergence`), in that
+    /// order; the solver then holds them. False, and nothing changed, where they do not fit the
+    /// arrays.
+    pub fn merge(&self, solver: &mut GpuSolver, dropped: &[u32], positions: &[[f32; 4]], velocities: &[[f32; 4]], keys: &[u64], warm_divergence: &[f32]) -> bool {
         let held = solver.fluid_count as u64;
         let merged = held - dropped.len() as u64 + positions.len() as u64;
         if merged > self.capacity || positions.len() as u64 > self.list_capacity || merged == 0 {
@@ -204,6 +240,7 @@ impl ResidentExchange {
         control[words::DROPPED] = dropped.len() as u32;
         control[words::INSERTS] = positions.len() as u32;
         control[words::HELD] = held as u32;
+        control[words::PLACES] = self.capacity as u32;
         ctx.queue.write_buffer(&self.words, 0, bytemuck::cast_slice(&control));
         if !dropped.is_empty() {
             ctx.queue.write_buffer(&self.dropped, 0, bytemuck::cast_slice(dropped));
@@ -211,7 +248,8 @@ impl ResidentExchange {
         if !positions.is_empty() {
             let mut vectors = Vec::with_capacity(3 * positions.len());
             for k in 0..positions.len() {
-                let key = [(keys[k] >> 32) as u32, keys[k] as u32, 0, 0].map(f32::from_bits);
+                let divergence = warm_divergence.get(k).map_or(0, |w| w.to_bits());
+                let key = [(keys[k] >> 32) as u32, keys[k] as u32, divergence, 0].map(f32::from_bits);
                 vectors.extend([positions[k], velocities[k], key]);
             }
             ctx.queue.write_buffer(&self.inserts, 0, bytemuck::cast_slice(&vectors));
@@ -223,6 +261,12 @@ impl ResidentExchange {
         let state = solver.store.state(solver.current);
         rec.copy(&self.merged_positions, &state.positions, merged * 16);
         rec.copy(&self.merged_velocities, &state.velocities, merged * 16);
+        if let Some((from, to)) = &self.places {
+            // Each part of the merged places to its array: the new slots are the next places.
+            for (k, array) in to.iter().enumerate() {
+                rec.copy_range(from, k as u64 * self.capacity * 4, array, 0, merged * 4);
+            }
+        }
         ctx.queue.submit([rec.finish()]);
         solver.set_held_count(merged as u32);
         true
@@ -279,15 +323,22 @@ pub struct ResidentExchangeRun {
     /// `own_health` of the state before (with its densities where the step keeps them).
     pub health: OwnHealth,
     pub densities: Option<Vec<f32>>,
+    /// DFSPH: each place's id and warm starts (constant density, divergence) before, and after
+    /// the merge by new slot.
+    pub places: Option<[Vec<[u32; 3]>; 2]>,
 }
+
+/// A received particle for [`GpuSolver::resident_exchange_alone`]: position and velocity (w
+/// included), place in the one-process order, and with DFSPH its divergence warm start.
+pub type Received = ([f32; 4], [f32; 4], u64, f32);
 
 impl GpuSolver {
     /// The resident exchange's stage alone on the current state (for the stage tests): the
     /// slots `ghosts` marked as ghosts, the band of `faces` listed, the own particles' health
     /// counted, then the held particles merged without the dropped slots and with `received`
-    /// (position, velocity and place in the one-process order each, sorted by place). The
-    /// solver holds the merged particles afterwards.
-    pub fn resident_exchange_alone(&mut self, faces: &SlabFaces, ghosts: &[u32], received: &[([f32; 4], [f32; 4], u64)]) -> anyhow::Result<ResidentExchangeRun> {
+    /// (sorted by place). The solver holds the merged particles afterwards. With DFSPH the
+    /// positions' w (one GPU's ids) serve as places, whose ids are `place_ids`.
+    pub fn resident_exchange_alone(&mut self, faces: &SlabFaces, ghosts: &[u32], received: &[Received], place_ids: Option<&[u32]>) -> anyhow::Result<ResidentExchangeRun> {
         let n = self.fluid_count as u64;
         let state = self.store.state(self.current);
         let cells = self.params.grid.cell_count() as u64 + 1;
@@ -304,21 +355,39 @@ impl GpuSolver {
             Some(d) => Some(bytemuck::pod_collect_to_vec(&read_ranges(&self.ctx, &[(d, 0, n * 4)])?.remove(0))),
             None => None,
         };
-        let stage = ResidentExchange::new(self, n.max(received.len() as u64))?;
+        let capacity = self.store.capacity();
+        let ids_buffer = place_ids.map(|ids| {
+            let buffer = storage(&self.ctx.device, "place ids", capacity * 4);
+            self.ctx.queue.write_buffer(&buffer, 0, bytemuck::cast_slice(ids));
+            buffer
+        });
+        // The places' ids and warm starts, as (warm pressure, warm divergence, id) bits.
+        let read_places = |solver: &GpuSolver, count: u64| -> anyhow::Result<Option<Vec<[u32; 3]>>> {
+            let (Some(ids), Some(d)) = (&ids_buffer, &solver.dfsph) else { return Ok(None) };
+            let b = &d.buffers;
+            let data = read_ranges(&solver.ctx, &[(&b.warm_pressure, 0, count * 4), (&b.warm_divergence, 0, count * 4), (ids, 0, count * 4)])?;
+            let words: Vec<Vec<u32>> = data.iter().map(|d| bytemuck::pod_collect_to_vec(d)).collect();
+            Ok(Some((0..count as usize).map(|k| [words[0][k], words[1][k], words[2][k]]).collect()))
+        };
+        let before = read_places(self, n)?;
+        let places = match (&ids_buffer, &self.dfsph) {
+            (Some(ids), Some(d)) => Some(PlaceArrays { ids, warm_pressure: &d.buffers.warm_pressure, warm_divergence: &d.buffers.warm_divergence }),
+            _ => None,
+        };
+        let stage = ResidentExchange::new(self, n.max(received.len() as u64), places)?;
         let (health, _) = stage.own_health(self, 1)?;
         let band = stage.band(self, faces)?.map_err(|size| anyhow::anyhow!("the band of {size} particles outgrows its array"))?;
         let mut dropped = band.dropped.clone();
         dropped.sort_unstable();
-        let (p, v, keys): (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<u64>) = received.iter().fold((Vec::new(), Vec::new(), Vec::new()), |mut acc, r| {
-            acc.0.push(r.0);
-            acc.1.push(r.1);
-            acc.2.push(r.2);
-            acc
-        });
-        anyhow::ensure!(stage.merge(self, &dropped, &p, &v, &keys), "the merge does not fit the arrays");
+        let p: Vec<[f32; 4]> = received.iter().map(|r| r.0).collect();
+        let v: Vec<[f32; 4]> = received.iter().map(|r| r.1).collect();
+        let keys: Vec<u64> = received.iter().map(|r| r.2).collect();
+        let warm: Vec<f32> = received.iter().map(|r| r.3).collect();
+        anyhow::ensure!(stage.merge(self, &dropped, &p, &v, &keys, &warm), "the merge does not fit the arrays");
         let m = self.fluid_count as u64;
         let state = self.store.state(self.current);
         let data = read_ranges(&self.ctx, &[(&state.positions, 0, m * 16), (&state.velocities, 0, m * 16)])?;
+        let after = read_places(self, m)?;
         Ok(ResidentExchangeRun {
             positions,
             velocities,
@@ -328,6 +397,7 @@ impl GpuSolver {
             merged_velocities: bytemuck::pod_collect_to_vec(&data[1]),
             health,
             densities,
+            places: before.zip(after).map(|(b, a)| [b, a]),
         })
     }
 }

@@ -102,6 +102,11 @@ impl PlainRecorder {
     pub fn clear_range(&mut self, buffer: &wgpu::Buffer, offset: u64, bytes: u64) {
         self.clear(buffer, offset, Some(bytes));
     }
+    /// Copies `bytes` bytes of `from` at `from_offset` to `to` at `to_offset`.
+    pub fn copy_range(&mut self, from: &wgpu::Buffer, from_offset: u64, to: &wgpu::Buffer, to_offset: u64, bytes: u64) {
+        self.pass = None;
+        self.encoder.copy_buffer_to_buffer(from, from_offset, to, to_offset, bytes);
+    }
 }
 
 impl Recorder for PlainRecorder {
