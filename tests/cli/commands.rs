@@ -239,6 +239,10 @@ fn compare_judges_a_dfsph_scene_by_its_iterations_and_again_with_them_held_fixed
     // The held run's table is judged against at least the f32 path's own errors.
     assert!(text.contains("(tolerances at least 3 times the cpu f32 path's own errors against cpu f64)"), "{text}");
     assert!(!text.contains("FAIL"), "{text}");
+    assert!(text.contains("  divergence  ") && text.contains("and 2 divergence iterations on every path"), "{text}");
+    // Without the divergence solve, neither its iterations nor its held count are reported.
+    let text = compare_passing(&scene.replace("viscosity = 0.01\n", "viscosity = 0.01\n[physics.dfsph]\ndivergence_solve = false\n"), "100");
+    assert!(text.contains("with every solve held at 3 constant-density iterations on every path:") && !text.contains("divergence"), "{text}");
 }
 
 #[test]
@@ -258,7 +262,7 @@ fn compare_gives_dfsph_solves_held_too_short_more_iterations() {
         [[boundary]]\ntype = \"container\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.6, 0.6, 0.1]\n";
     let text = compare_passing(scene, "60");
     let held_short = "every solve held at 3 constant-density and 2 divergence iterations on every path:\n  went bad on the gpu path at step ";
-    assert!(text.contains(held_short) && text.contains("the solves were held too short\n  (again with 5 and 3)"), "{text}");
+    assert!(text.contains(held_short) && text.contains("the solves were held too short\n  (again with 5 constant-density and 3 divergence iterations)"), "{text}");
     assert!(text.contains("every solve held at 5 constant-density and 3 divergence iterations") && text.ends_with("compare: passed\n"), "{text}");
 }
 
