@@ -714,6 +714,49 @@ fn the_ghost_velocities_stage_agrees_with_its_cpu_twin() {
     }
 }
 
+/// The ghost link stage (wgsl/sim/ghost_link.wgsl), with which DFSPH's solves on GPU ranks make
+/// their link from the device's binning, against its CPU twin: the link's cells' bounds in the
+/// cell starts; and the lists joined from them are the slots whose particles lie in each list's
+/// layers (what the host's rule gives from the positions). On a dam break, slabs across x and
+/// z with a face inside the fluid, one with both neighbours and one thinner than its ghost
+/// layers.
+#[test]
+fn the_ghost_link_stage_agrees_with_its_cpu_twin() {
+    use wgsph::solver::cpu::ghost_link::{link_cell_bounds, link_cells, link_slots};
+    use wgsph::solver::cpu::resident_exchange::SlabFaces;
+    for ctx in common::contexts() {
+        let scene = dam_break(1000);
+        let mut gpu = common::gpu(ctx.clone(), &scene);
+        gpu.step(3).expect("steps");
+        let grid = scene.params().grid.cast::<f32>();
+        let end = grid.cell_coords(wgsph::model::real::V3(scene.fluid[0].max.map(|x| x as f32)));
+        let mid = grid.cell_coords(wgsph::model::real::V3(scene.fluid[0].min.map(|x| x as f32)));
+        for faces in [
+            SlabFaces { axis: 0, slab: mid[0] + 2..end[0], halo: 2, lower: true, upper: true },
+            SlabFaces { axis: 2, slab: mid[2] + 1..mid[2] + 2, halo: 2, lower: true, upper: true },
+            SlabFaces { axis: 0, slab: 0..end[0] - 1, halo: 1, lower: false, upper: true },
+        ] {
+            let who = format!("{faces:?} on {}", ctx.describe());
+            let (positions, starts, bounds) = gpu.ghost_link_alone(&faces).expect("the stage runs");
+            let lists = link_cells(grid.dims, &faces);
+            assert_eq!(bounds, link_cell_bounds(&starts, &lists.concat()), "{who}: the cells' bounds");
+            // The rule on the positions: own particles (in the slab) within halo layers of a face
+            // with a neighbour, and the particles in the halo layers beyond each such face.
+            let layer = |p: &[f32; 4]| grid.cell_coords(wgsph::model::real::V3([p[0], p[1], p[2]]))[faces.axis];
+            let (s, e, h) = (faces.slab.start, faces.slab.end, faces.halo);
+            let rules: [&dyn Fn(u32) -> bool; 4] = [
+                &|l| faces.lower && l >= s && l < e && l < s + h,
+                &|l| faces.upper && l >= s && l < e && l + h >= e,
+                &|l| faces.lower && l + h >= s && l < s,
+                &|l| faces.upper && l >= e && l < e + h,
+            ];
+            let expected = rules.map(|rule| (0..positions.len()).filter(|&i| rule(layer(&positions[i]))).collect::<Vec<usize>>());
+            assert_eq!(link_slots(&lists, &bounds), expected, "{who}: the lists");
+            assert!(expected[1].len() + expected[3].len() > 0, "{who}: the face lies in the fluid");
+        }
+    }
+}
+
 /// The resident exchange's stage (wgsl/sim/resident_exchange.wgsl), with which a GPU rank keeps
 /// its particles on the device between steps, against its CPU twin on the same state: the
 /// slots dropped (ghosts and particles outside the slab) and the band listed (with their places

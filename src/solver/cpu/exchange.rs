@@ -186,23 +186,37 @@ pub struct GhostLink {
     pub failure: Option<String>,
     /// Seconds spent in the messages (the exchange's share of the step).
     pub seconds: f64,
+    /// Where the lists are still to be made (a resident step's link), the sizes the host
+    /// knows they have.
+    sizes: Option<[usize; 4]>,
 }
 
 impl GhostLink {
-    /// A link without lists yet (a resident step's: the device makes them after its binning,
-    /// [`GhostLink::in_binned_order`]), with the check of its ids and what that took.
-    pub(super) fn unmade(comm: Arc<dyn Communicator>, failure: Option<String>, seconds: f64) -> GhostLink {
-        GhostLink { comm, send: Default::default(), receive: Default::default(), ghosts: Vec::new(), failure, seconds }
+    /// A link whose lists a device makes after its binning ([`GhostLink::with_lists`]), with
+    /// the sizes the host knows they have (sent to the lower and the upper neighbour, received
+    /// from each: what a resident step's exchange sent and received), the check of its ids and
+    /// what that took.
+    pub(super) fn unmade(comm: Arc<dyn Communicator>, sizes: [usize; 4], failure: Option<String>, seconds: f64) -> GhostLink {
+        GhostLink { comm, send: Default::default(), receive: Default::default(), ghosts: Vec::new(), failure, seconds, sizes: Some(sizes) }
     }
 
-    /// This link's messages with the lists of `positions` as a device binned them (each w
-    /// holding the ghost bit), on the slab `faces`: the particles the device holds in the
-    /// one-process order, which the neighbours' bins follow too.
-    pub fn in_binned_order(&self, positions: &[[f32; 4]], grid: &crate::model::params::Grid<f32>, faces: &SlabFaces) -> GhostLink {
-        const GHOST_BIT: u32 = 0x8000_0000;
-        let ghosts: Vec<bool> = positions.iter().map(|p| p[3].to_bits() & GHOST_BIT != 0).collect();
-        let (send, receive) = link_lists(positions.len(), |i| ghosts[i], |i| grid.cell_coords(V3([positions[i][0], positions[i][1], positions[i][2]]))[faces.axis], faces);
-        GhostLink { comm: self.comm.clone(), send, receive, ghosts, failure: self.failure.clone(), seconds: self.seconds }
+    /// How many particles the lists hold: sent to the lower and to the upper neighbour, then
+    /// received from each.
+    pub fn list_sizes(&self) -> [usize; 4] {
+        self.sizes.unwrap_or([self.send[0].len(), self.send[1].len(), self.receive[0].len(), self.receive[1].len()])
+    }
+
+    /// This link's messages with `lists` a device made from its binning (in
+    /// [`list_sizes`](GhostLink::list_sizes)' order, src/solver/cpu/ghost_link.rs); an error
+    /// where they hold other counts than the host's (the device binned some particle of the
+    /// face layers in another layer than the host's exchange put it).
+    pub fn with_lists(&self, lists: [Vec<usize>; 4]) -> Result<GhostLink, String> {
+        let sizes = lists.each_ref().map(|l| l.len());
+        if sizes != self.list_sizes() {
+            return Err(format!("the device's binning lists {sizes:?} particles in the face layers (sent down, sent up, from below, from above) where the exchange has {:?}", self.list_sizes()));
+        }
+        let [down, up, below, above] = lists;
+        Ok(GhostLink { comm: self.comm.clone(), send: [down, up], receive: [below, above], ghosts: Vec::new(), failure: self.failure.clone(), seconds: self.seconds, sizes: None })
     }
 
     /// The ghosts' velocities (or any per-particle vector) replaced by their owners'.
@@ -270,33 +284,6 @@ impl GhostLink {
                 self.failure.get_or_insert(format!("{e:#}"));
                 u64::MAX
             }
-        }
-    }
-
-    /// The link of the same particles after a device has binned them: `uploaded[k]` is the slot
-    /// (in this link's order) of the particle the device holds at slot k. The device's binning
-    /// is stable and both sides of a face hold their shared particles in the same order (the
-    /// one-process order), so the lists stay in step with the neighbours'.
-    pub fn reordered(&self, uploaded: &[usize]) -> GhostLink {
-        const SEND: [u8; 2] = [1, 2];
-        const RECEIVE: [u8; 2] = [4, 8];
-        let mut role = vec![0u8; self.ghosts.len()];
-        for side in 0..2 {
-            for &i in &self.send[side] {
-                role[i] |= SEND[side];
-            }
-            for &i in &self.receive[side] {
-                role[i] |= RECEIVE[side];
-            }
-        }
-        let slots = |bit: u8| (0..uploaded.len()).filter(|&k| role[uploaded[k]] & bit != 0).collect::<Vec<usize>>();
-        GhostLink {
-            comm: self.comm.clone(),
-            send: SEND.map(slots),
-            receive: RECEIVE.map(slots),
-            ghosts: uploaded.iter().map(|&u| self.ghosts[u]).collect(),
-            failure: self.failure.clone(),
-            seconds: self.seconds,
         }
     }
 
@@ -591,6 +578,8 @@ pub struct DfsphHeld<'a, R: Real> {
     pub link: Option<&'a mut GhostLink>,
     /// The fluid particles of the whole simulation (the solves' average error is over them).
     pub particles: usize,
+    /// The rank's slab, whose face layers the link lists.
+    pub faces: Option<SlabFaces>,
     /// Given by a step that samples the probes, for the velocities the prediction started from
     /// (after the divergence solve), in the device's order (the force probes' viscous part).
     pub prediction_start: Option<&'a mut Vec<V3<R>>>,
@@ -614,6 +603,7 @@ impl<R: Real> CpuSolver<R> {
     /// from where the step samples probes).
     pub(super) fn held_arrays<'a>(&'a mut self, ghosts: &'a [bool], with_link: bool, prediction_start: bool) -> HeldArrays<'a, R> {
         let particles = self.ranks.as_ref().map_or(self.positions.len(), |part| part.total_fluid);
+        let faces = self.ranks.as_deref().map(|part| part.faces());
         let link = match with_link {
             true => self.ranks.as_deref_mut().and_then(|part| part.link.as_mut()),
             false => None,
@@ -628,6 +618,7 @@ impl<R: Real> CpuSolver<R> {
                 last_dt: d.last_dt,
                 link,
                 particles,
+                faces,
                 prediction_start: if prediction_start { Some(&mut self.scratch_v3) } else { None },
             }),
             positions: &mut self.positions,
@@ -761,7 +752,7 @@ impl<R: Real> CpuSolver<R> {
         let (send, receive) = link_lists(self.positions.len(), |i| ghosts[i], layer, &faces);
         let (failure, seconds) = part.link.as_ref().map_or((None, 0.0), |l| (l.failure.clone(), l.seconds));
         let checked = part.link.is_some();
-        let mut link = GhostLink { comm: part.comm.clone(), send, receive, ghosts, failure, seconds };
+        let mut link = GhostLink { comm: part.comm.clone(), send, receive, ghosts, failure, seconds, sizes: None };
         if !checked {
             let t0 = Instant::now();
             let ids = |slots: &[usize]| slots.iter().map(|&i| self.ids[i] as f64).collect::<Vec<f64>>();

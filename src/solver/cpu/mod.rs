@@ -17,6 +17,7 @@ pub mod dfsph_pressure;
 pub mod dfsph_shared;
 pub mod exchange;
 pub mod fields;
+pub mod ghost_link;
 pub mod ghost_velocities;
 pub mod forces;
 pub mod forces_integrate;

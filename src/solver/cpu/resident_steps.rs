@@ -159,8 +159,9 @@ impl<R: Real> CpuSolver<R> {
                 ids(&mut order.iter().copied().filter(|&i| faces.upper && layer(i) + faces.halo >= faces.slab.end), &held),
             ];
             let ghosts = [ids(&mut (migrants..from_lower_end), &received), ids(&mut (from_lower_end..received.len()), &received)];
+            let sizes = [sent[0].len(), sent[1].len(), ghosts[0].len(), ghosts[1].len()];
             let failure = check_link_ids(&*comm, sent, ghosts).err();
-            part.link = Some(GhostLink::unmade(comm.clone(), failure, t0.elapsed().as_secs_f64()));
+            part.link = Some(GhostLink::unmade(comm.clone(), sizes, failure, t0.elapsed().as_secs_f64()));
         }
         let mut sorted: Vec<usize> = (0..received.len()).collect();
         sorted.sort_unstable_by_key(|&i| received.order[i]);

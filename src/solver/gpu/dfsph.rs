@@ -23,9 +23,9 @@ pub struct RankSolves {
     /// The ghosts in the solves: in the upload's order until the binning, in the device's
     /// after it. `None` for the fields alone.
     pub link: Option<GhostLink>,
-    /// A resident step's (src/solver/cpu/resident_steps.rs): the link's lists are made from the
-    /// binned positions on these faces of the rank's slab, not reordered from the host's.
-    pub link_faces: Option<crate::solver::cpu::resident_exchange::SlabFaces>,
+    /// The rank's slab, whose face layers' cells the link lists after the device's binning
+    /// (src/solver/cpu/ghost_link.rs).
+    pub faces: Option<crate::solver::cpu::resident_exchange::SlabFaces>,
     /// The solves' iterations so far (each solve adds its own).
     pub stats: IterationStats,
     /// The fluid particles of the whole simulation.
@@ -83,6 +83,44 @@ impl GhostVelocities {
 
     pub fn bytes(&self) -> u64 {
         self.slots.size() + self.values.size()
+    }
+}
+
+/// DFSPH across ranks: the stage that reads where the ghost link's cells lie in the cell starts
+/// (wgsl/sim/ghost_link.wgsl), with room for `capacity` cells: the most the link lists for the
+/// grid (every cell of four times the ghost layers), made on the first solve across ranks.
+pub struct GhostLinkCells {
+    pub stage: Stage,
+    /// The count of cells, then the cells.
+    pub cells: wgpu::Buffer,
+    /// Each cell's first slot and end.
+    pub bounds: wgpu::Buffer,
+    pub group: wgpu::BindGroup,
+    pub capacity: u64,
+}
+
+impl GhostLinkCells {
+    /// With room for `capacity` cells, reading the cell starts `starts` of `cells` cells.
+    pub fn new(ctx: &GpuContext, capacity: u64, cells: u64, constants: &[(&'static str, f64)], starts: &wgpu::Buffer, uniform: &wgpu::Buffer) -> Result<Self, GpuError> {
+        let lens = move |name: &str| match name {
+            "starts" => cells + 1,
+            "link_cells" => capacity + 1,
+            _ => 2 * capacity,
+        };
+        let stage = stage_with_aliases(ctx, "ghost_link", "link_cell_bounds", &lens, constants, &[])?;
+        let list = storage(&ctx.device, "ghost link cells", (capacity + 1) * 4);
+        let bounds = storage(&ctx.device, "ghost link cell bounds", 2 * capacity * 4);
+        let group = stage.bind_group(&ctx.device, "ghost link", uniform, &|name: &str| match name {
+            "starts" => starts.clone(),
+            "link_cells" => list.clone(),
+            "link_bounds" => bounds.clone(),
+            other => panic!("no buffer holds the array '{other}'"),
+        });
+        Ok(GhostLinkCells { stage, cells: list, bounds, group, capacity })
+    }
+
+    pub fn bytes(&self) -> u64 {
+        self.cells.size() + self.bounds.size()
     }
 }
 

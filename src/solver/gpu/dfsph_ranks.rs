@@ -11,8 +11,7 @@
 //!
 //! The recorder of the profile cannot wait, so a profile never takes this path.
 
-use super::buffers::{ids_of, GHOST_BIT};
-use super::dfsph::{GhostVelocities, SolvePasses};
+use super::dfsph::{GhostLinkCells, GhostVelocities, SolvePasses};
 use super::params::status;
 use super::readback::read_ranges;
 use super::schedule::Recorder;
@@ -20,6 +19,8 @@ use super::solver::GpuSolver;
 use crate::model::real::V3;
 use crate::solver::cpu::dfsph_convergence::{begin_solve, check_convergence, SolveLimits};
 use crate::solver::cpu::dfsph_shared::error_threshold;
+use crate::solver::cpu::ghost_link::{link_cells, link_slots};
+use crate::solver::cpu::resident_exchange::SlabFaces;
 
 impl GpuSolver {
     /// Whether the DFSPH step under way runs its solves across ranks.
@@ -54,30 +55,40 @@ impl GpuSolver {
         Ok(data)
     }
 
-    /// After the binning: the ghost link, made in the order of the upload, put in the device's
-    /// cell order (each position's w holds its particle's place in the upload); on a resident
-    /// step, made from the binned positions (their layers and ghost bits), which are in the
-    /// one-process order.
+    /// After the binning: the ghost link's lists in the device's cell order, made from the
+    /// binning itself without reading the particles back. The link lists the particles of the
+    /// cell layers next to the slab's faces (the own ones within the ghost layers, the ghosts
+    /// beyond), which are whole cells of the binning: the host lists those cells
+    /// (`link_cells`), the device reads where each lies in the cell starts
+    /// (`wgsl/sim/ghost_link.wgsl`), and the host joins the runs and checks their counts
+    /// against the exchange's. Both sides of a face bin their shared particles from the same
+    /// order with the same stable sort, so their lists stay in step.
     pub(super) fn link_in_device_order(&self, rec: &mut dyn Recorder) {
         if !self.solves_across_ranks() {
             return;
         }
-        let n = self.fluid_count as usize;
-        let positions = self.store.state(self.current).positions;
-        let binned = self.wait_and_read(rec, &positions, 0, n as u64 * 16).and_then(|data| {
-            let binned: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data);
-            anyhow::ensure!(ids_of(&binned).iter().all(|&w| ((w & !GHOST_BIT) as usize) < n), "the binned positions do not hold places in the upload of {n} particles");
-            Ok(binned)
+        let Some(faces) = self.rank_solves.borrow().as_ref().and_then(|r| r.faces.clone()) else {
+            self.solves_failed(anyhow::anyhow!("the solves across ranks were given no slab"));
+            return;
+        };
+        let lists = link_cells(self.params.grid.dims, &faces);
+        let cells: Vec<u32> = lists.concat();
+        let bounds = self.ghost_link_cells_stage(&faces).and_then(|stage| {
+            anyhow::ensure!(cells.len() as u64 <= stage.capacity, "the ghost link lists {} cells, its arrays hold {}", cells.len(), stage.capacity);
+            if cells.is_empty() {
+                return Ok(Vec::new());
+            }
+            let words: Vec<u32> = std::iter::once(cells.len() as u32).chain(cells.iter().copied()).collect();
+            self.ctx.queue.write_buffer(&stage.cells, 0, bytemuck::cast_slice(&words));
+            self.count_bus_bytes(4 * words.len() as u64);
+            self.dispatch_threads(rec, &stage.stage, &stage.group, cells.len() as u64);
+            let data = self.wait_and_read(rec, &stage.bounds, 0, 8 * cells.len() as u64)?;
+            Ok(bytemuck::pod_collect_to_vec::<u8, [u32; 2]>(&data))
         });
-        let made = binned.and_then(|binned| {
+        let made = bounds.and_then(|bounds| {
             let mut solves = self.rank_solves.borrow_mut();
-            let Some(r) = solves.as_mut() else { return Ok(0) };
-            let faces = r.link_faces.clone();
-            let Some(link) = r.link.as_mut() else { return Ok(0) };
-            *link = match faces {
-                Some(faces) => link.in_binned_order(&binned, &self.params.grid.cast::<f32>(), &faces),
-                None => link.reordered(&ids_of(&binned).iter().map(|&w| (w & !GHOST_BIT) as usize).collect::<Vec<usize>>()),
-            };
+            let Some(link) = solves.as_mut().and_then(|r| r.link.as_mut()) else { return Ok(0) };
+            *link = link.with_lists(link_slots(&lists, &bounds)).map_err(|e| anyhow::anyhow!(e))?;
             // The slots of the gather and the scatter, for every sync of the step.
             let [sent, received] = link.counts();
             let words: Vec<u32> = [sent, received].into_iter().chain(link.sent_slots()).chain(link.received_slots()).map(|v| v as u32).collect();
@@ -89,6 +100,20 @@ impl GpuSolver {
         if let Err(e) = made {
             self.solves_failed(e);
         }
+    }
+
+    /// The stage that reads the link's cells' bounds, made on first use with room for every
+    /// cell of four times `faces`' ghost layers across any axis of the grid (the most the link
+    /// can list).
+    fn ghost_link_cells_stage(&self, faces: &SlabFaces) -> anyhow::Result<&GhostLinkCells> {
+        if let Some(made) = self.ghost_link_cells.get() {
+            return Ok(made);
+        }
+        let cells = self.params.grid.cell_count() as u64;
+        let per_layer = cells / self.params.grid.dims.iter().copied().min().unwrap_or(1).max(1) as u64;
+        let capacity = (4 * faces.halo as u64 * per_layer).max(1);
+        let made = GhostLinkCells::new(&self.ctx, capacity, cells, &self.constants_sized(super::shaders::WORKGROUP_SIZE), &self.starts, &self.uniform)?;
+        Ok(self.ghost_link_cells.get_or_init(|| made))
     }
 
     /// The gather and scatter of the ghosts' velocities, made on first use for the solver's
@@ -241,5 +266,30 @@ impl GpuSolver {
         self.ctx.queue.submit([rec.finish()]);
         let after = read(&velocities, n * 16)?;
         Ok((before[..n as usize].to_vec(), gathered[..sent.len()].to_vec(), after[..n as usize].to_vec()))
+    }
+}
+
+impl GpuSolver {
+    /// The ghost link stage alone on the current state's binning (for the stage tests): the
+    /// cells of `faces`' link listed, and where each lies in the cell starts. Returns the
+    /// positions in slot order (w included), the cell starts and the cells' bounds, in the order
+    /// of `link_cells`' lists joined.
+    #[allow(clippy::type_complexity)]
+    pub fn ghost_link_alone(&self, faces: &SlabFaces) -> anyhow::Result<(Vec<[f32; 4]>, Vec<u32>, Vec<[u32; 2]>)> {
+        let n = self.fluid_count as u64;
+        let cells = self.params.grid.cell_count() as u64 + 1;
+        let state = self.store.state(self.current);
+        let data = read_ranges(&self.ctx, &[(&state.positions, 0, n * 16), (&self.starts, 0, cells * 4)])?;
+        let listed: Vec<u32> = link_cells(self.params.grid.dims, faces).concat();
+        let stage = self.ghost_link_cells_stage(faces)?;
+        anyhow::ensure!(listed.len() as u64 <= stage.capacity, "the ghost link lists {} cells, its arrays hold {}", listed.len(), stage.capacity);
+        let words: Vec<u32> = std::iter::once(listed.len() as u32).chain(listed.iter().copied()).collect();
+        self.ctx.queue.write_buffer(&stage.cells, 0, bytemuck::cast_slice(&words));
+        let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "ghost link");
+        self.dispatch_threads(&mut rec, &stage.stage, &stage.group, listed.len() as u64);
+        self.ctx.queue.submit([rec.finish()]);
+        let bounds = read_ranges(&self.ctx, &[(&stage.bounds, 0, (8 * listed.len() as u64).max(8))])?.remove(0);
+        let bounds: Vec<[u32; 2]> = bytemuck::pod_collect_to_vec(&bounds);
+        Ok((bytemuck::pod_collect_to_vec(&data[0]), bytemuck::pod_collect_to_vec(&data[1]), bounds[..listed.len()].to_vec()))
     }
 }

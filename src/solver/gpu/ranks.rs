@@ -205,7 +205,7 @@ impl DeviceStages<f32> for GpuRankStages {
             // The solves across ranks, their link made from the step's binning on the slab's faces.
             *solver.rank_solves.borrow_mut() = Some(RankSolves {
                 link: link_back,
-                link_faces: Some(s.faces.clone()),
+                faces: Some(s.faces.clone()),
                 stats: *s.stats,
                 particles: s.particles,
                 failure: None,
@@ -436,7 +436,7 @@ impl GpuSolver {
         }
         *self.rank_solves.borrow_mut() = Some(RankSolves {
             link: held.link.as_deref().cloned(),
-            link_faces: None,
+            faces: held.faces.clone(),
             stats: *held.stats,
             particles: held.particles,
             failure: None,

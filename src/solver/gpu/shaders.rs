@@ -53,6 +53,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/fields.wgsl", include_str!("../../../wgsl/sim/fields.wgsl")),
     ("sim/neighbour_skin.wgsl", include_str!("../../../wgsl/sim/neighbour_skin.wgsl")),
     ("sim/ghost_velocities.wgsl", include_str!("../../../wgsl/sim/ghost_velocities.wgsl")),
+    ("sim/ghost_link.wgsl", include_str!("../../../wgsl/sim/ghost_link.wgsl")),
     ("sim/resident_exchange.wgsl", include_str!("../../../wgsl/sim/resident_exchange.wgsl")),
 ];
 

@@ -252,6 +252,8 @@ pub struct GpuSolver {
     pub(super) rank_solves: std::cell::RefCell<Option<RankSolves>>,
     /// DFSPH across ranks: the gather and scatter of the ghosts' velocities, made on first use.
     pub(super) ghost_velocities: std::cell::OnceCell<GhostVelocities>,
+    /// DFSPH across ranks: where the ghost link's cells lie in the binning, made on first use.
+    pub(super) ghost_link_cells: std::cell::OnceCell<super::dfsph::GhostLinkCells>,
     /// Bytes of every buffer the solver allocated.
     memory: u64,
     /// The buffers the solver planned and allocated (the probes' besides, in `memory`).
@@ -720,6 +722,7 @@ impl GpuSolver {
             rank_error: std::cell::RefCell::new(None),
             rank_solves: std::cell::RefCell::new(None),
             ghost_velocities: std::cell::OnceCell::new(),
+            ghost_link_cells: std::cell::OnceCell::new(),
             arrays,
             constants: k,
             output_fields: std::cell::OnceCell::new(),
@@ -1066,6 +1069,7 @@ impl GpuSolver {
             + s.probes.as_ref().map_or(0, |p| p.bytes())
             + s.output_fields.get().map_or(0, |o| o.densities.size() + o.pressures.size())
             + s.ghost_velocities.get().map_or(0, |g| g.bytes())
+            + s.ghost_link_cells.get().map_or(0, |g| g.bytes())
     }
 
     /// The snapshot rows of the current state (after a refresh) in pieces of `chunk` slots: the
