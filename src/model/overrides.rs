@@ -65,7 +65,14 @@ impl Scene {
             }
             .map_err(error)?;
             // Read back after each, so that a wrong key or type names the override.
-            let _: Scene = tree.clone().try_into().map_err(|e: toml::de::Error| error(e.message().to_string()))?;
+            let _: Scene = tree.clone().try_into().map_err(|e: toml::de::Error| {
+                let message = e.message().to_string();
+                // A field every scene has, removed: serde's "missing field" says what, not why.
+                match (&o.value, message.starts_with("missing field")) {
+                    (None, true) => error(format!("is required in every scene and has no default, so it cannot be removed (--set {}=VALUE changes it)", o.key)),
+                    _ => error(message),
+                }
+            })?;
         }
         let scene: Scene = tree.try_into().expect("read back above");
         scene.validate(origin).map_err(|e| {
@@ -101,12 +108,18 @@ fn set_path(tree: &mut toml::Value, key: &str, value: toml::Value) -> Result<(),
                     t.insert(part.to_string(), value);
                     return Ok(());
                 }
+                // A list the scene does not have: its entries cannot be set one by one.
+                let next = parts[i + 1];
+                if !t.contains_key(*part) && next.parse::<usize>().is_ok() {
+                    let here = parts[..=i].join(".");
+                    return Err(format!("the scene has no {here} list, so it has no entry {next} to set: add its entries in a scene file ([[{part}]] tables)"));
+                }
                 t.entry(part.to_string()).or_insert_with(|| toml::Value::Table(Default::default()))
             }
             toml::Value::Array(a) => {
                 let len = a.len();
                 let index: usize = part.parse().map_err(|_| format!("{walked} is a list of {len}: index it with a number from 0 to {}", len.saturating_sub(1)))?;
-                let slot = a.get_mut(index).ok_or_else(|| format!("{walked} has {len} entries; {index} is not one (they are numbered from 0)"))?;
+                let slot = a.get_mut(index).ok_or_else(|| format!("{walked} has {}; {index} is not one (they are numbered from 0)", entries(len)))?;
                 if last {
                     *slot = value;
                     return Ok(());
@@ -134,17 +147,22 @@ fn unset_path(tree: &mut toml::Value, key: &str) -> Result<(), String> {
                 toml::Value::Array(a) => part.parse::<usize>().ok().and_then(|i| a.get_mut(i)),
                 _ => None,
             }
-            .ok_or_else(|| format!("the scene has no {parent} to remove {last} from"))?;
+            .ok_or_else(|| format!("the scene has no {parent}, so it has no {last} to remove"))?;
         }
     }
     match node {
         toml::Value::Table(t) => t.remove(last).map(|_| ()).ok_or_else(|| "is not set in the scene (a field at its default has nothing to remove)".to_string()),
         toml::Value::Array(a) => {
             let len = a.len();
-            let index = last.parse::<usize>().ok().filter(|&i| i < len).ok_or_else(|| format!("{} has {len} entries; '{last}' is not one (they are numbered from 0)", parent.unwrap_or("")))?;
+            let index = last.parse::<usize>().ok().filter(|&i| i < len).ok_or_else(|| format!("{} has {}; '{last}' is not one (they are numbered from 0)", parent.unwrap_or(""), entries(len)))?;
             a.remove(index);
             Ok(())
         }
         _ => Err(format!("{} is a value, not a table: '{last}' cannot be removed from it", parent.unwrap_or(""))),
     }
+}
+
+/// "1 entry", "3 entries".
+fn entries(n: usize) -> String {
+    format!("{n} {}", if n == 1 { "entry" } else { "entries" })
 }

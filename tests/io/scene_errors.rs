@@ -187,7 +187,8 @@ fn set_changes_a_scene_field_checked_like_the_file_and_recorded() {
         ("time.dtt=1", "unknown field `dtt`"),
         ("physics.viscosity=fast", "invalid type"),
         ("physics.equation_of_state=cubic", "tait"),
-        ("fluid.3.jitter=0", "fluid has 1 entries"),
+        ("fluid.3.jitter=0", "fluid has 1 entry; 3 is not one"),
+        ("probe.0.name=p", "the scene has no probe list, so it has no entry 0 to set"),
         ("time.dt.x=1", "is a value"),
         ("nonsense", "KEY=VALUE"),
     ] {
@@ -225,10 +226,11 @@ fn unset_removes_a_field_so_that_a_scene_can_change_its_solver_from_the_command_
     for (unset, says) in [
         ("physics.speed_of_sond", "physics.speed_of_sond: is not set in the scene"),
         ("boundary.9", "boundary has 7 entries; '9' is not one"),
-        ("time.dt", "with --unset time.dt: time.dt: missing field `dt`"),
+        ("time.dt", "with --unset time.dt: time.dt: is required in every scene and has no default, so it cannot be removed (--set time.dt=VALUE changes it)"),
+        ("physics", "with --unset physics: physics: is required in every scene"),
         ("physics.gravity.x", "physics.gravity has 3 entries; 'x' is not one"),
         ("time.dt.x", "time.dt is a value, not a table"),
-        ("nowhere.x", "the scene has no nowhere to remove x from"),
+        ("nowhere.x", "the scene has no nowhere, so it has no x to remove"),
         ("a..b", "must be a dotted path"),
     ] {
         let o = wgsph_in(dir.path(), &["run", "dam_break", "--steps", "1", "--out", "bad", "--unset", unset]);
