@@ -49,6 +49,8 @@ pub struct ViewArgs {
     /// A built-in scene name or a path to a scene TOML file.
     #[arg(default_value = "dam_break")]
     pub scene: String,
+    #[command(flatten)]
+    pub overrides: SceneOverrides,
     /// Refine or coarsen the scene to about N fluid particles.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub particles: Option<u64>,
@@ -124,11 +126,10 @@ impl std::str::FromStr for SnapshotInterval {
     }
 }
 
-#[derive(Args, Debug, Clone)]
-pub struct RunArgs {
-    /// A built-in scene name (see `wgsph scenes`) or a path to a scene TOML file.
-    #[arg(default_value = "dam_break")]
-    pub scene: String,
+/// `--set` and `--unset`: a scene changed from the command line, for every command that takes
+/// a scene.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SceneOverrides {
     /// Change a field of the scene: its dotted path in the scene file and a value written as
     /// in TOML (`--set time.dt=1e-4 --set physics.viscosity=0`); repeated; checked like the file.
     #[arg(long = "set", value_name = "KEY=VALUE")]
@@ -137,6 +138,29 @@ pub struct RunArgs {
     /// before the `--set`s: `--set physics.solver=dfsph --unset physics.speed_of_sound`; repeated.
     #[arg(long = "unset", value_name = "KEY", value_parser = Override::unset)]
     pub unsets: Vec<Override>,
+}
+
+impl SceneOverrides {
+    /// The scene `name` (a built-in scene or a file) with these changes: the removals first,
+    /// then the `--set`s, in order; checked once all have applied.
+    pub fn scene(&self, name: &str) -> anyhow::Result<Scene> {
+        let scene = Scene::load(name)?;
+        let origin = match Scene::builtin(name) {
+            Some(_) => crate::model::scene::SceneOrigin::BuiltIn(name.to_string()),
+            None => crate::model::scene::SceneOrigin::File(PathBuf::from(name)),
+        };
+        let all: Vec<Override> = self.unsets.iter().chain(&self.sets).cloned().collect();
+        Ok(scene.with_overrides(&all, &origin)?)
+    }
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct RunArgs {
+    /// A built-in scene name (see `wgsph scenes`) or a path to a scene TOML file.
+    #[arg(default_value = "dam_break")]
+    pub scene: String,
+    #[command(flatten)]
+    pub overrides: SceneOverrides,
     /// Number of steps to run (default: up to the scene's end time).
     #[arg(long, conflicts_with = "time")]
     pub steps: Option<u64>,
@@ -250,6 +274,8 @@ pub struct CompareArgs {
     /// A built-in scene name or a path to a scene TOML file.
     #[arg(default_value = "seed")]
     pub scene: String,
+    #[command(flatten)]
+    pub overrides: SceneOverrides,
     /// Steps of the second comparison (the first is after one step).
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
     pub steps: u64,
@@ -360,6 +386,8 @@ pub struct ProfileArgs {
     /// A built-in scene name or a path to a scene TOML file.
     #[arg(default_value = "dam_break")]
     pub scene: String,
+    #[command(flatten)]
+    pub overrides: SceneOverrides,
     /// Refine or coarsen the scene to about N fluid particles.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub particles: Option<u64>,
@@ -383,6 +411,8 @@ pub struct TradeoffArgs {
     /// A built-in scene name or a path to a scene TOML file.
     #[arg(default_value = "dam_break")]
     pub scene: String,
+    #[command(flatten)]
+    pub overrides: SceneOverrides,
     /// Output directory for tradeoff.md and tradeoff.png.
     #[arg(long, default_value = "tradeoff")]
     pub out: PathBuf,
@@ -481,8 +511,8 @@ pub struct BenchArgs {
 /// The scene a command runs: `SCENE` loaded, at `--particles N` where given, with a warning
 /// line on stderr for each fluid block that its particle lattice does not fill exactly (unless
 /// `quiet`).
-pub fn load_scene(name: &str, particles: Option<u64>, quiet: bool) -> anyhow::Result<Scene> {
-    let mut scene = Scene::load(name)?;
+pub fn load_scene(name: &str, overrides: &SceneOverrides, particles: Option<u64>, quiet: bool) -> anyhow::Result<Scene> {
+    let mut scene = overrides.scene(name)?;
     if let Some(n) = particles {
         scene = at_particles(&scene, n)?;
     }

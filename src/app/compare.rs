@@ -24,7 +24,7 @@ pub const ITERATION_TOLERANCE: f64 = 0.05;
 pub const F32_FLOOR: f64 = 3.0;
 
 pub fn cmd_compare(args: &CompareArgs) -> anyhow::Result<i32> {
-    let scene = super::args::load_scene(&args.scene, None, false)?;
+    let scene = super::args::load_scene(&args.scene, &args.overrides, None, false)?;
     let steps = args.steps.max(1);
     let dfsph = scene.physics.solver == crate::model::scene::PressureSolver::Dfsph;
     let (mut ok, iterations) = compare_runs(&scene, steps, !dfsph)?;

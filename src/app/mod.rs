@@ -119,7 +119,7 @@ fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
     if args.picture.style == crate::viz::render::Style::Mesh {
         return Err(InputError("--style mesh is for `wgsph run --frames` (the surface is reconstructed on the host, too slowly for a window); `wgsph view` takes --style particles or surface".into()).into());
     }
-    let scene = args::load_scene(&args.scene, args.particles, false)?;
+    let scene = args::load_scene(&args.scene, &args.overrides, args.particles, false)?;
     let dt = scene.time.dt;
     let steps_per_frame = args.steps_per_frame.unwrap_or_else(|| ((1.0 / 60.0 / dt).ceil() as u64).clamp(1, 64));
     crate::viz::view::view(

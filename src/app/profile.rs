@@ -367,7 +367,7 @@ impl Profile {
 }
 
 pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
-    let scene = super::args::load_scene(&args.scene, args.particles, false)?;
+    let scene = super::args::load_scene(&args.scene, &args.overrides, args.particles, false)?;
     let options = GpuOptions { single_cells: args.single_cells, ..args.tuning.options() };
     let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
     print!("{}", profile.table());

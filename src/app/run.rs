@@ -12,7 +12,7 @@ use crate::io::snapshot::SnapshotWriter;
 use crate::io::summary::{write_summary, DfsphSummary, RanksSummary, RunStatus, Summary, SUMMARY_FILE};
 use crate::io::surface::{write_snapshot_surface, MeshFormat, SurfaceParameters};
 use crate::model::params::Params;
-use crate::model::scene::{Scene, SceneOrigin};
+use crate::model::scene::Scene;
 use crate::model::state::Snapshot;
 use crate::model::diagnosis::regime_warnings;
 use crate::solver::backend::diagnose_failure;
@@ -464,13 +464,7 @@ pub fn summary_line(s: &Summary, out: &Path) -> String {
 
 /// The scene of `wgsph run`: the file or built-in scene, with `--set` and `--particles`.
 pub fn run_scene(args: &RunArgs) -> anyhow::Result<Scene> {
-    let mut scene = Scene::load(&args.scene)?;
-    let origin = match Scene::builtin(&args.scene) {
-        Some(_) => SceneOrigin::BuiltIn(args.scene.clone()),
-        None => SceneOrigin::File(PathBuf::from(&args.scene)),
-    };
-    let overrides: Vec<_> = args.unsets.iter().chain(&args.sets).cloned().collect();
-    scene = scene.with_overrides(&overrides, &origin)?;
+    let mut scene = args.overrides.scene(&args.scene)?;
     if let Some(n) = args.particles {
         scene = super::args::at_particles(&scene, n)?;
     }

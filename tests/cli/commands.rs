@@ -281,3 +281,31 @@ fn compare_of_a_run_that_goes_bad_says_where_and_why() {
     assert!(err.contains("rising went bad within 400 steps, on the gpu path at step ") && err.contains("on the cpu f64 path at step "), "{err}");
     assert!(err.contains("beyond the domain's +y face") && err.contains("compare fewer steps (--steps)"), "{err}");
 }
+
+/// Every command that takes a scene takes `--set` and `--unset` too, checked as `run` checks
+/// them: a bad override is refused by name before anything runs, and a good one reaches the
+/// scene the command works on (here `compare` of the still tank switched to DFSPH from the
+/// command line, which reports DFSPH's iterations).
+#[test]
+fn every_command_that_takes_a_scene_takes_its_overrides() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut commands = vec![vec!["compare", "hydrostatic"], vec!["profile", "hydrostatic"], vec!["tradeoff", "hydrostatic", "--out", "t"]];
+    if cfg!(feature = "view") {
+        commands.push(vec!["view", "hydrostatic"]);
+    }
+    for command in commands {
+        for (flags, says) in [(["--set", "time.dt=-1"], "with --set time.dt=-1: time.dt: is -1"), (["--unset", "time.dt"], "with --unset time.dt: time.dt: is required")] {
+            let o = wgsph(&[&command[..], &flags[..]].concat(), dir.path());
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{command:?} {flags:?}: {err}");
+            assert!(err.contains(says) && !err.contains("panicked"), "{command:?} {flags:?}: {err}");
+        }
+    }
+    assert!(!dir.path().join("t").exists(), "a refused study wrote nothing");
+    if common::contexts().is_empty() {
+        return;
+    }
+    let o = wgsph(&["compare", "hydrostatic", "--steps", "5", "--set", "physics.solver=dfsph", "--unset", "physics.speed_of_sound"], dir.path());
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && text.contains("iterations per step over 5 steps:") && text.ends_with("compare: passed\n"), "{text}\n{}", String::from_utf8_lossy(&o.stderr));
+}
