@@ -66,7 +66,7 @@ impl Scene {
             .map_err(error)?;
             // Read back after each, so that a wrong key or type names the override.
             let _: Scene = tree.clone().try_into().map_err(|e: toml::de::Error| {
-                let message = e.message().to_string();
+                let message = super::scene::readable_parse_error(e.message());
                 // A field every scene has, removed: serde's "missing field" says what, not why.
                 match (&o.value, message.starts_with("missing field")) {
                     (None, true) => error(format!("is required in every scene and has no default, so it cannot be removed (--set {}=VALUE changes it)", o.key)),

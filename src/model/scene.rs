@@ -626,7 +626,7 @@ impl Scene {
                     format!("line {line}")
                 })
                 .unwrap_or_else(|| "toml".into());
-            err(origin, field, e.message().to_string())
+            err(origin, field, readable_parse_error(e.message()))
         })?;
         scene.validate(origin)?;
         Ok(scene)
@@ -941,5 +941,18 @@ impl ProbeSpec {
             every_steps: None,
             every_seconds: None,
         }
+    }
+}
+
+/// A reader's message in the scene file's words: the reader names the type it expected
+/// (`expected struct DfsphSettings`), which a scene's author never sees; a table is what the
+/// file gives there.
+pub(crate) fn readable_parse_error(message: &str) -> String {
+    match message.split_once("expected struct ") {
+        Some((before, after)) => {
+            let rest = after.trim_start_matches(|c: char| c.is_alphanumeric() || c == '_');
+            format!("{before}expected a table of fields ([section] or {{ key = value, ... }}){rest}")
+        }
+        None => message.to_string(),
     }
 }

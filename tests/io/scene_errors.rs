@@ -58,6 +58,9 @@ fn a_wrong_type_or_unknown_field_is_named() {
     assert!(e.contains("smoothing_lenght"), "{e}");
     let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nequation_of_state = \"cubic\""));
     assert!(e.contains("linear") && e.contains("tait"), "{e}");
+    // A value where a table belongs: said in the file's words, not by the reader's type.
+    let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\ndfsph = 5"));
+    assert!(e.contains("line") && e.contains("invalid type: integer `5`, expected a table of fields") && !e.contains("struct"), "{e}");
 }
 
 #[test]
@@ -186,6 +189,7 @@ fn set_changes_a_scene_field_checked_like_the_file_and_recorded() {
     for (set, says) in [
         ("time.dtt=1", "unknown field `dtt`"),
         ("physics.viscosity=fast", "invalid type"),
+        ("physics.dfsph=5", "physics.dfsph: invalid type: integer `5`, expected a table of fields"),
         ("physics.equation_of_state=cubic", "tait"),
         ("fluid.3.jitter=0", "fluid has 1 entry; 3 is not one"),
         ("probe.0.name=p", "the scene has no probe list, so it has no entry 0 to set"),
