@@ -5,9 +5,10 @@
 //! device (`dfsph_convergence.wgsl`); across ranks the host runs the loop instead: the
 //! velocities the rank sends are gathered on the device and read back, exchanged through the
 //! rank's [`GhostLink`](crate::solver::cpu::exchange::GhostLink), and those received written
-//! and scattered onto the ghosts (`ghost_velocities.wgsl`); the error sum of the own particles (the shaders leave the ghosts
-//! out) is read back, added over the ranks and checked with the CPU's twin of the GPU's check.
-//! Every rank then runs the iterations one GPU runs, on the same numbers.
+//! and scattered onto the ghosts (`ghost_velocities.wgsl`), the link's lists made from the
+//! device's binning (`ghost_link.wgsl`); the error sum of the own particles (the shaders leave
+//! the ghosts out) is read back, added over the ranks and checked with the CPU's twin of the
+//! GPU's check. Every rank then runs the iterations one GPU runs, on the same numbers.
 //!
 //! The recorder of the profile cannot wait, so a profile never takes this path.
 
