@@ -97,6 +97,9 @@ pub struct GhostLinkCells {
     pub bounds: wgpu::Buffer,
     pub group: wgpu::BindGroup,
     pub capacity: u64,
+    /// The slab whose link's cells `cells` holds, and those cells by list: written again only
+    /// when the slab's bounds move.
+    pub listed: std::cell::RefCell<Option<(crate::solver::cpu::resident_exchange::SlabFaces, [Vec<u32>; 4])>>,
 }
 
 impl GhostLinkCells {
@@ -116,7 +119,7 @@ impl GhostLinkCells {
             "link_bounds" => bounds.clone(),
             other => panic!("no buffer holds the array '{other}'"),
         });
-        Ok(GhostLinkCells { stage, cells: list, bounds, group, capacity })
+        Ok(GhostLinkCells { stage, cells: list, bounds, group, capacity, listed: Default::default() })
     }
 
     pub fn bytes(&self) -> u64 {

@@ -72,21 +72,29 @@ impl GpuSolver {
             self.solves_failed(anyhow::anyhow!("the solves across ranks were given no slab"));
             return;
         };
-        let lists = link_cells(self.params.grid.dims, &faces);
-        let cells: Vec<u32> = lists.concat();
-        let bounds = self.ghost_link_cells_stage(&faces).and_then(|stage| {
-            anyhow::ensure!(cells.len() as u64 <= stage.capacity, "the ghost link lists {} cells, its arrays hold {}", cells.len(), stage.capacity);
-            if cells.is_empty() {
-                return Ok(Vec::new());
+        let listed = self.ghost_link_cells_stage(&faces).and_then(|stage| {
+            let mut listed = stage.listed.borrow_mut();
+            if listed.as_ref().is_none_or(|(written, _)| *written != faces) {
+                // The slab is new or its bounds moved: its cells, written once for the steps
+                // until they move again.
+                let lists = link_cells(self.params.grid.dims, &faces);
+                let cells = lists.iter().map(|l| l.len()).sum::<usize>();
+                anyhow::ensure!(cells as u64 <= stage.capacity, "the ghost link lists {cells} cells, its arrays hold {}", stage.capacity);
+                let words: Vec<u32> = std::iter::once(cells as u32).chain(lists.iter().flatten().copied()).collect();
+                self.ctx.queue.write_buffer(&stage.cells, 0, bytemuck::cast_slice(&words));
+                self.count_bus_bytes(4 * words.len() as u64);
+                *listed = Some((faces.clone(), lists));
             }
-            let words: Vec<u32> = std::iter::once(cells.len() as u32).chain(cells.iter().copied()).collect();
-            self.ctx.queue.write_buffer(&stage.cells, 0, bytemuck::cast_slice(&words));
-            self.count_bus_bytes(4 * words.len() as u64);
-            self.dispatch_threads(rec, &stage.stage, &stage.group, cells.len() as u64);
-            let data = self.wait_and_read(rec, &stage.bounds, 0, 8 * cells.len() as u64)?;
-            Ok(bytemuck::pod_collect_to_vec::<u8, [u32; 2]>(&data))
+            let lists = listed.as_ref().expect("written above").1.clone();
+            let cells = lists.iter().map(|l| l.len()).sum::<usize>() as u64;
+            if cells == 0 {
+                return Ok((lists, Vec::new()));
+            }
+            self.dispatch_threads(rec, &stage.stage, &stage.group, cells);
+            let data = self.wait_and_read(rec, &stage.bounds, 0, 8 * cells)?;
+            Ok((lists, bytemuck::pod_collect_to_vec::<u8, [u32; 2]>(&data)))
         });
-        let made = bounds.and_then(|bounds| {
+        let made = listed.and_then(|(lists, bounds)| {
             let mut solves = self.rank_solves.borrow_mut();
             let Some(link) = solves.as_mut().and_then(|r| r.link.as_mut()) else { return Ok(0) };
             *link = link.with_lists(link_slots(&lists, &bounds)).map_err(|e| anyhow::anyhow!(e))?;
@@ -286,6 +294,7 @@ impl GpuSolver {
         anyhow::ensure!(listed.len() as u64 <= stage.capacity, "the ghost link lists {} cells, its arrays hold {}", listed.len(), stage.capacity);
         let words: Vec<u32> = std::iter::once(listed.len() as u32).chain(listed.iter().copied()).collect();
         self.ctx.queue.write_buffer(&stage.cells, 0, bytemuck::cast_slice(&words));
+        *stage.listed.borrow_mut() = None;
         let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "ghost link");
         self.dispatch_threads(&mut rec, &stage.stage, &stage.group, listed.len() as u64);
         self.ctx.queue.submit([rec.finish()]);
