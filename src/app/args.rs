@@ -52,10 +52,10 @@ pub struct ViewArgs {
     #[command(flatten)]
     pub overrides: SceneOverrides,
     /// Refine or coarsen the scene to about N fluid particles.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_parser = at_least_one)]
     pub particles: Option<u64>,
     /// Simulation steps per drawn frame (default: 1/60 s of simulated time, at most 64).
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_parser = at_least_one)]
     pub steps_per_frame: Option<u64>,
     #[command(flatten)]
     pub picture: PictureArgs,
@@ -63,7 +63,7 @@ pub struct ViewArgs {
     #[arg(long, value_name = "FILE", requires = "quit_after")]
     pub screenshot: Option<PathBuf>,
     /// Close the window after N frames.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_name = "N", value_parser = at_least_one)]
     pub quit_after: Option<u64>,
 }
 
@@ -182,10 +182,10 @@ pub struct RunArgs {
     #[arg(long, value_name = "K|Ts")]
     pub snapshot_every: Option<SnapshotInterval>,
     /// Refine or coarsen the scene to about N fluid particles (spacings, h and dt scale together).
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_parser = at_least_one)]
     pub particles: Option<u64>,
     /// Check for NaN and escaped particles every K steps.
-    #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, default_value_t = 50, value_parser = at_least_one)]
     pub check_every: u64,
     /// Snapshot formats, repeated or comma-separated: csv, vtk (ParaView, with a .vtk.series
     /// index), ply (Blender, splashsurf).
@@ -216,7 +216,7 @@ pub struct RunArgs {
     #[arg(long, value_name = "DIR")]
     pub frames: Option<PathBuf>,
     /// A picture every K steps (default: about 100 per run).
-    #[arg(long, value_name = "K", requires = "frames", value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_name = "K", requires = "frames", value_parser = at_least_one)]
     pub frame_every: Option<u64>,
     #[command(flatten)]
     pub picture: PictureArgs,
@@ -277,7 +277,7 @@ pub struct CompareArgs {
     #[command(flatten)]
     pub overrides: SceneOverrides,
     /// Steps of the second comparison (the first is after one step).
-    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, default_value_t = 100, value_parser = at_least_one)]
     pub steps: u64,
 }
 
@@ -338,7 +338,7 @@ pub struct GpuTuning {
     #[arg(long, value_name = "SIZES")]
     pub workgroup_size: Option<WorkgroupSizes>,
     /// Steps recorded into one command buffer (default 32).
-    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_name = "K", value_parser = at_least_one)]
     pub steps_per_submit: Option<u64>,
     /// How a DFSPH solve's loop ends on the GPU (the GPU makes iterations recorded past the
     /// end empty): `adaptive` (default: a first block as long as the last step's solve, then
@@ -389,10 +389,10 @@ pub struct ProfileArgs {
     #[command(flatten)]
     pub overrides: SceneOverrides,
     /// Refine or coarsen the scene to about N fluid particles.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_parser = at_least_one)]
     pub particles: Option<u64>,
     /// Steps to time (after 2 warm-up steps).
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, default_value_t = 20, value_parser = at_least_one)]
     pub steps: u64,
     #[command(flatten)]
     pub tuning: GpuTuning,
@@ -417,7 +417,7 @@ pub struct TradeoffArgs {
     #[arg(long, default_value = "tradeoff")]
     pub out: PathBuf,
     /// Fluid particles of the base resolution (the scene is refined or coarsened to it).
-    #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, default_value_t = 2000, value_parser = at_least_one)]
     pub particles: u64,
     /// Simulated time of every run (default 0.3 s: the dam-break surge before it reaches the
     /// far wall, after which the splash makes single trajectories chaotic).
@@ -477,7 +477,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u32).range(2..=400))]
     pub n: u32,
     /// Steps to time (after one warm-up step).
-    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, default_value_t = 200, value_parser = at_least_one)]
     pub steps: u64,
     /// The paths to time, comma-separated.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::Gpu, BenchPath::DfsphCpuF32, BenchPath::DfsphGpu])]
@@ -536,5 +536,15 @@ pub fn warn_lattice(scene: &Scene, quiet: bool) {
         for line in scene.lattice_changes().into_iter().chain(scene.rest_density_warning()) {
             eprintln!("warning: {line}");
         }
+    }
+}
+
+/// A count of at least 1 (steps, particles, intervals): clap's own range check names the type's
+/// largest value as the bound, which says nothing to a user.
+fn at_least_one(text: &str) -> Result<u64, String> {
+    match text.trim().parse::<u64>() {
+        Ok(n) if n >= 1 => Ok(n),
+        Ok(_) => Err("0 is not allowed: give a whole number of at least 1".into()),
+        Err(_) => Err(format!("'{text}' is not a whole number of at least 1")),
     }
 }

@@ -124,6 +124,12 @@ fn the_command_line_exits_with_2_on_bad_input_before_any_work() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("built-in"));
     let out = wgsph(&["run", "--steps", "-3"], dir.path());
     assert_eq!(out.status.code(), Some(2));
+    // A count of zero or not a count: said without the type's largest value as a bound.
+    for (command, flag, value, says) in [("compare", "--steps", "0", "0 is not allowed: give a whole number of at least 1"), ("run", "--particles", "1.5", "'1.5' is not a whole number of at least 1")] {
+        let out = wgsph(&[command, flag, value], dir.path());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.code() == Some(2) && err.contains(says) && !err.contains("18446744073709551615"), "{command} {flag} {value}: {err}");
+    }
     let out = wgsph(&["run", "--backend", "tpu"], dir.path());
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cpu"));
