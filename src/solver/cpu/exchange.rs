@@ -61,8 +61,8 @@ impl RankPart {
 
     /// Ghosts: the own particles of `held` (taken in the order `which`) in the layers next to
     /// each face go to the neighbour on that side; returns the words the lower and the upper
-    /// neighbour sent. Collective.
-    pub(super) fn exchange_ghosts<R: Real>(&self, held: &Held<R>, which: impl IntoIterator<Item = usize>, grid: &crate::model::params::Grid<R>, carried: Carried) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+    /// neighbour sent, and which of `held` went down and up, in that order. Collective.
+    pub(super) fn exchange_ghosts<R: Real>(&self, held: &Held<R>, which: impl IntoIterator<Item = usize>, grid: &crate::model::params::Grid<R>, carried: Carried) -> anyhow::Result<(Vec<f64>, Vec<f64>, [Vec<usize>; 2])> {
         let faces = self.faces();
         let (mut down, mut up) = (Vec::new(), Vec::new());
         for i in which {
@@ -74,7 +74,8 @@ impl RankPart {
                 up.push(i);
             }
         }
-        self.comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))
+        let (from_lower, from_upper) = self.comm.exchange(&held.encode(&down, carried), &held.encode(&up, carried))?;
+        Ok((from_lower, from_upper, [down, up]))
     }
 
     /// Migration: towards the owner's side, one neighbour per round, until no rank holds a
@@ -985,7 +986,7 @@ impl<R: Real> CpuSolver<R> {
         }
         let (held, _) = part.migrate(held, &grid, carried)?;
         let held = held.sorted();
-        let (from_lower, from_upper) = part.exchange_ghosts(&held, 0..held.len(), &grid, carried)?;
+        let (from_lower, from_upper, _) = part.exchange_ghosts(&held, 0..held.len(), &grid, carried)?;
         let own_count = held.len();
         let mut all = held;
         all.decode(&from_lower, carried)?;

@@ -139,7 +139,7 @@ impl<R: Real> CpuSolver<R> {
         // Ghosts, as the full path's, in the one-process order.
         let mut order: Vec<usize> = (0..held.len()).collect();
         order.sort_unstable_by_key(|&i| held.order[i]);
-        let (from_lower, from_upper) = part.exchange_ghosts(&held, order.iter().copied(), &grid, carried)?;
+        let (from_lower, from_upper, sent) = part.exchange_ghosts(&held, order.iter().copied(), &grid, carried)?;
         // What the device does not hold: the migrants that arrived, and the ghosts.
         let arrived: Vec<usize> = order.iter().copied().filter(|&i| arrived[i]).collect();
         let mut received = held.picked(&arrived);
@@ -153,11 +153,7 @@ impl<R: Real> CpuSolver<R> {
             // particles this rank sent as ghosts, against those of the ghosts it received.
             let t0 = Instant::now();
             let ids = |slots: &mut dyn Iterator<Item = usize>, from: &Held<R>| slots.map(|i| from.id[i] as f64).collect::<Vec<f64>>();
-            let layer = |i: usize| layer_of(held.x[i]);
-            let sent = [
-                ids(&mut order.iter().copied().filter(|&i| faces.lower && layer(i) < faces.slab.start + faces.halo), &held),
-                ids(&mut order.iter().copied().filter(|&i| faces.upper && layer(i) + faces.halo >= faces.slab.end), &held),
-            ];
+            let sent = sent.map(|side| ids(&mut side.into_iter(), &held));
             let ghosts = [ids(&mut (migrants..from_lower_end), &received), ids(&mut (from_lower_end..received.len()), &received)];
             let sizes = [sent[0].len(), sent[1].len(), ghosts[0].len(), ghosts[1].len()];
             let failure = check_link_ids(&*comm, sent, ghosts).err();

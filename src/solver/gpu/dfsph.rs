@@ -40,6 +40,30 @@ pub struct RankSolves {
     pub bus_bytes: u64,
 }
 
+impl RankSolves {
+    /// The solves of a step about to run: with `link` and the slab `faces` it lists, the
+    /// iterations so far, the particles of the whole simulation, and whether the velocities the
+    /// prediction starts from are to be read back.
+    pub fn new(link: Option<GhostLink>, faces: Option<crate::solver::cpu::resident_exchange::SlabFaces>, stats: IterationStats, particles: usize, wants_prediction_start: bool) -> Self {
+        RankSolves { link, faces, stats, particles, failure: None, wants_prediction_start, prediction_start: None, bus_bytes: 0 }
+    }
+
+    /// After the step: its iterations into `stats`, its link (in the device's order) into
+    /// `link`, its bytes added to `bus_bytes`; the velocities the prediction started from where
+    /// they were read back, or the first failure of the solves.
+    pub fn hand_back(self, stats: &mut IterationStats, link: Option<&mut GhostLink>, bus_bytes: &mut u64) -> anyhow::Result<Option<Vec<[f32; 4]>>> {
+        *bus_bytes += self.bus_bytes;
+        *stats = self.stats;
+        if let (Some(link), Some(moved)) = (link, self.link) {
+            *link = moved;
+        }
+        if let Some(e) = self.failure {
+            anyhow::bail!("DFSPH's solves across ranks: {e}");
+        }
+        Ok(self.prediction_start)
+    }
+}
+
 /// DFSPH across ranks: the stage that gathers the velocities a rank sends to its neighbours
 /// and scatters those it receives onto its ghosts (wgsl/sim/ghost_velocities.wgsl), with its
 /// slots and values, made on the first solve across ranks for the solver's capacity.

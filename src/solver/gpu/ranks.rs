@@ -200,30 +200,13 @@ impl DeviceStages<f32> for GpuRankStages {
         self.keeps_step = false;
         solver.steps = step;
         solver.accelerations_valid = false;
-        let link_back = solves.as_ref().map(|s| s.link.clone());
         if let Some(s) = &solves {
             // The solves across ranks, their link made from the step's binning on the slab's faces.
-            *solver.rank_solves.borrow_mut() = Some(RankSolves {
-                link: link_back,
-                faces: Some(s.faces.clone()),
-                stats: *s.stats,
-                particles: s.particles,
-                failure: None,
-                wants_prediction_start: false,
-                prediction_start: None,
-                bus_bytes: 0,
-            });
+            *solver.rank_solves.borrow_mut() = Some(RankSolves::new(Some(s.link.clone()), Some(s.faces.clone()), *s.stats, s.particles, false));
         }
         solver.advance(1);
         if let (Some(s), Some(done)) = (solves, solver.rank_solves.borrow_mut().take()) {
-            self.bus_bytes += done.bus_bytes;
-            *s.stats = done.stats;
-            if let Some(link) = done.link {
-                *s.link = link;
-            }
-            if let Some(e) = done.failure {
-                anyhow::bail!("DFSPH's solves across ranks: {e}");
-            }
+            done.hand_back(s.stats, Some(s.link), &mut self.bus_bytes)?;
         }
         if let Some(e) = solver.rank_error.borrow_mut().take() {
             anyhow::bail!("the adaptive step's maxima across ranks: {e}");
@@ -287,16 +270,9 @@ impl GpuRankStages {
         }
         let solves = solver.rank_solves.borrow_mut().take();
         if let (Some(d), Some(solves)) = (dfsph.as_mut(), solves) {
-            self.bus_bytes += solves.bus_bytes;
-            *d.stats = solves.stats;
-            if let (Some(out), Some(v)) = (d.prediction_start.as_deref_mut(), solves.prediction_start) {
+            let prediction_start = solves.hand_back(d.stats, d.link.as_deref_mut(), &mut self.bus_bytes)?;
+            if let (Some(out), Some(v)) = (d.prediction_start.as_deref_mut(), prediction_start) {
                 *out = v.iter().map(|v| V3([v[0], v[1], v[2]])).collect();
-            }
-            if let (Some(link), Some(moved)) = (d.link.as_deref_mut(), solves.link) {
-                *link = moved;
-            }
-            if let Some(e) = solves.failure {
-                anyhow::bail!("DFSPH's solves across ranks: {e}");
             }
         }
         if let Some(e) = solver.rank_error.borrow_mut().take() {
@@ -434,16 +410,7 @@ impl GpuSolver {
         if self.params.adaptive.is_some() {
             queue.write_buffer(&self.status, status::DT as u64 * 4, bytemuck::bytes_of(&(held.last_dt as f32)));
         }
-        *self.rank_solves.borrow_mut() = Some(RankSolves {
-            link: held.link.as_deref().cloned(),
-            faces: held.faces.clone(),
-            stats: *held.stats,
-            particles: held.particles,
-            failure: None,
-            wants_prediction_start: held.prediction_start.is_some(),
-            prediction_start: None,
-            bus_bytes: 0,
-        });
+        *self.rank_solves.borrow_mut() = Some(RankSolves::new(held.link.as_deref().cloned(), held.faces.clone(), *held.stats, held.particles, held.prediction_start.is_some()));
     }
 
     /// Puts `positions`, `velocities` (and with continuity density `carried` densities) in the
