@@ -128,6 +128,12 @@ pub struct RankSummary {
     pub resident_steps: u64,
     #[serde(default)]
     pub bus_bytes: u64,
+    /// On a GPU: seconds in the device's calls (uploads, steps, read-backs and the waits for
+    /// them), the solves' exchanges inside them left out, and their share of the wall time.
+    #[serde(default)]
+    pub device_seconds: f64,
+    #[serde(default)]
+    pub device_share: f64,
 }
 
 impl RanksSummary {
@@ -158,6 +164,8 @@ impl RanksSummary {
                     adapter: r.adapter.clone(),
                     resident_steps: r.stats.resident_steps,
                     bus_bytes: r.stats.bus_bytes,
+                    device_seconds: r.stats.device_seconds,
+                    device_share: if wall_seconds > 0.0 { r.stats.device_seconds / wall_seconds } else { 0.0 },
                 })
                 .collect(),
         }

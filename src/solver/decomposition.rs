@@ -144,6 +144,9 @@ pub struct RankStats {
     pub resident_steps: u64,
     /// On a device: bytes of particles that crossed between the host and the device, both ways.
     pub bus_bytes: u64,
+    /// On a device: seconds in its calls (uploads, steps, read-backs and the waits for them),
+    /// less the solves' exchanges across ranks inside them (counted in `exchange_seconds`).
+    pub device_seconds: f64,
 }
 
 /// One rank's part of a simulation across ranks, as the backend reports it.

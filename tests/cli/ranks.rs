@@ -107,6 +107,8 @@ fn the_dam_break_on_one_two_and_four_ranks_writes_the_same_snapshots() {
         assert_eq!(four.per_rank.iter().map(|r| r.particles).sum::<usize>(), s[2].fluid_particles);
         assert!(four.per_rank.iter().map(|r| r.migrated).sum::<u64>() > 0, "the collapsing column crosses slab faces: {four:?}");
         assert!(four.per_rank.iter().all(|r| (0.0..=1.0).contains(&r.exchange_share)));
+        // The CPU path has no device to wait for.
+        assert!(four.per_rank.iter().all(|r| r.device_seconds == 0.0 && r.device_share == 0.0), "{four:?}");
         // Each rank holds the walls near its slab; the summary counts the scene's.
         assert_eq!(s[2].wall_particles, s[0].wall_particles);
         assert!(four.per_rank.iter().all(|r| r.walls > 0 && r.walls < s[2].wall_particles), "{four:?}");
@@ -128,6 +130,9 @@ fn the_dam_break_on_two_gpu_ranks_agrees_with_one_gpu() {
     assert_eq!(two.status, RunStatus::Completed);
     let ranks = two.ranks.expect("a ranks block");
     assert!(ranks.per_rank.len() == 2 && ranks.per_rank.iter().all(|r| r.adapter.contains("hardware adapter") || r.adapter.contains("no hardware adapter")), "each rank says which adapter and why: {ranks:?}");
+    // The time in the device's calls (the steps run there) is counted apart from the exchange's,
+    // and the two fit in the run.
+    assert!(ranks.per_rank.iter().all(|r| r.device_seconds > 0.0 && r.device_share + r.exchange_share <= 1.0), "{ranks:?}");
     let rows = |dir: &str| -> Vec<Vec<f64>> {
         let text = String::from_utf8(last_snapshot(&tmp.path().join(dir))).unwrap();
         text.lines().skip(1).map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect()).collect()

@@ -195,10 +195,10 @@ pub struct GhostLink {
 impl GhostLink {
     /// A link whose lists a device makes after its binning ([`GhostLink::with_lists`]), with
     /// the sizes the host knows they have (sent to the lower and the upper neighbour, received
-    /// from each: what a resident step's exchange sent and received), the check of its ids and
-    /// what that took.
-    pub(super) fn unmade(comm: Arc<dyn Communicator>, sizes: [usize; 4], failure: Option<String>, seconds: f64) -> GhostLink {
-        GhostLink { comm, send: Default::default(), receive: Default::default(), ghosts: Vec::new(), failure, seconds, sizes: Some(sizes) }
+    /// from each: what a resident step's exchange sent and received) and the check of its ids
+    /// (timed with the exchange that made it).
+    pub(super) fn unmade(comm: Arc<dyn Communicator>, sizes: [usize; 4], failure: Option<String>) -> GhostLink {
+        GhostLink { comm, send: Default::default(), receive: Default::default(), ghosts: Vec::new(), failure, seconds: 0.0, sizes: Some(sizes) }
     }
 
     /// How many particles the lists hold: sent to the lower and to the upper neighbour, then
@@ -638,7 +638,9 @@ impl<R: Real> CpuSolver<R> {
         self.lists.clear();
         let step = self.step;
         let ghosts = self.ghost_flags();
+        let started = self.device_call_start();
         let ran = lock(&device).run_fields(step, self.held_arrays(&ghosts, false, false));
+        self.count_device_call(started);
         if let Err(e) = ran {
             if let Some(part) = &mut self.ranks {
                 part.failure.get_or_insert(format!("rank {} of {}: the device's density stage failed: {e:#}", part.comm.rank(), part.comm.size()));
@@ -679,7 +681,9 @@ impl<R: Real> CpuSolver<R> {
         if dfsph {
             self.link_ghosts();
         }
+        let started = self.device_call_start();
         let ran = lock(&device).run_step(step, self.held_arrays(&ghosts, dfsph, first_positions.is_some()));
+        self.count_device_call(started);
         self.unlink_ghosts();
         let dt = match ran {
             Ok(dt) => dt,
@@ -780,6 +784,25 @@ impl<R: Real> CpuSolver<R> {
         if let (Some(e), Some(part)) = (failure, self.ranks.as_mut()) {
             part.failure.get_or_insert(e);
         }
+    }
+
+    /// When a call to the device starts: the instant, and the seconds the DFSPH link has spent
+    /// across ranks so far (the solves inside the call exchange through it).
+    pub(super) fn device_call_start(&self) -> (Instant, f64) {
+        (Instant::now(), self.link_seconds())
+    }
+
+    /// Counts a device call begun at `started` in the rank's device time, less what the solves
+    /// spent in the exchange meanwhile (that goes to the exchange time when the link is undone).
+    pub(super) fn count_device_call(&mut self, started: (Instant, f64)) {
+        let exchanged = self.link_seconds() - started.1;
+        if let Some(part) = self.ranks.as_deref_mut() {
+            part.stats.device_seconds += (started.0.elapsed().as_secs_f64() - exchanged).max(0.0);
+        }
+    }
+
+    fn link_seconds(&self) -> f64 {
+        self.ranks.as_deref().and_then(|p| p.link.as_ref()).map_or(0.0, |link| link.seconds)
     }
 
     /// After a DFSPH step across ranks: what its link measured and met goes to the rank's.
@@ -1160,7 +1183,7 @@ impl<R: Real> CpuSolver<R> {
         let Some(mine) = self.rank_report() else { return Ok(None) };
         let comm = self.ranks.as_ref().expect("across ranks").comm.clone();
         let s = &mine.stats;
-        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64, mine.walls as f64, s.resident_steps as f64, s.bus_bytes as f64])?;
+        let all = comm.all_gather(&[mine.own_particles as f64, s.exchange_seconds, s.migrated as f64, s.ghosts as f64, mine.node_rank as f64, mine.node_ranks as f64, mine.threads as f64, mine.walls as f64, s.resident_steps as f64, s.bus_bytes as f64, s.device_seconds])?;
         // The adapters' names travel as bytes, padded to the longest.
         let longest = all_max(comm.as_ref(), &[mine.adapter.len() as f64])?[0] as usize;
         let mut name: Vec<f64> = mine.adapter.bytes().map(f64::from).collect();
@@ -1177,7 +1200,7 @@ impl<R: Real> CpuSolver<R> {
                     node_ranks: r[5] as usize,
                     threads: r[6] as usize,
                     adapter: names[rank].clone(),
-                    stats: RankStats { exchange_seconds: r[1], migrated: r[2] as u64, ghosts: r[3] as usize, resident_steps: r[8] as u64, bus_bytes: r[9] as u64, ..s.clone() },
+                    stats: RankStats { exchange_seconds: r[1], migrated: r[2] as u64, ghosts: r[3] as usize, resident_steps: r[8] as u64, bus_bytes: r[9] as u64, device_seconds: r[10], ..s.clone() },
                     ..mine.clone()
                 })
                 .collect(),

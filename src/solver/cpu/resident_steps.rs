@@ -51,8 +51,10 @@ impl<R: Real> CpuSolver<R> {
         let (rank, size) = (part.comm.rank(), part.comm.size());
         let faces = part.faces();
         let particles = part.total_fluid;
-        let t0 = Instant::now();
-        let band = match lock(&device).resident_band(&faces) {
+        let started = self.device_call_start();
+        let band = lock(&device).resident_band(&faces);
+        self.count_device_call(started);
+        let band = match band {
             Ok(Some(band)) => band,
             Ok(None) => return false,
             Err(e) => {
@@ -61,6 +63,7 @@ impl<R: Real> CpuSolver<R> {
                 return false;
             }
         };
+        let t0 = Instant::now();
         let exchanged = self.exchange_band(&faces, &band);
         if let Some(part) = self.ranks.as_deref_mut() {
             part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
@@ -74,6 +77,7 @@ impl<R: Real> CpuSolver<R> {
             }
         };
         self.lists.clear();
+        let started = self.device_call_start();
         let ran = {
             let solves = match (self.dfsph.as_mut(), self.ranks.as_deref_mut()) {
                 (Some(d), Some(part)) => Some(ResidentSolves { stats: &mut d.stats, link: part.link.as_mut().expect("made by the exchange"), faces: faces.clone(), particles }),
@@ -81,6 +85,7 @@ impl<R: Real> CpuSolver<R> {
             };
             lock(&device).run_resident_step(self.step, &band.dropped, &received, &ghosts, solves)
         };
+        self.count_device_call(started);
         if self.dfsph.is_some() {
             if let Ok(Some(done)) = &ran {
                 let d = self.dfsph.as_mut().expect("DFSPH");
@@ -151,13 +156,12 @@ impl<R: Real> CpuSolver<R> {
             // The full path's check of the link (link_ghosts), one message per neighbour, so that
             // every rank exchanges as many messages whichever path it takes: the ids of the
             // particles this rank sent as ghosts, against those of the ghosts it received.
-            let t0 = Instant::now();
             let ids = |slots: &mut dyn Iterator<Item = usize>, from: &Held<R>| slots.map(|i| from.id[i] as f64).collect::<Vec<f64>>();
             let sent = sent.map(|side| ids(&mut side.into_iter(), &held));
             let ghosts = [ids(&mut (migrants..from_lower_end), &received), ids(&mut (from_lower_end..received.len()), &received)];
             let sizes = [sent[0].len(), sent[1].len(), ghosts[0].len(), ghosts[1].len()];
             let failure = check_link_ids(&*comm, sent, ghosts).err();
-            part.link = Some(GhostLink::unmade(comm.clone(), sizes, failure, t0.elapsed().as_secs_f64()));
+            part.link = Some(GhostLink::unmade(comm.clone(), sizes, failure));
         }
         let mut sorted: Vec<usize> = (0..received.len()).collect();
         sorted.sort_unstable_by_key(|&i| received.order[i]);
@@ -180,7 +184,10 @@ impl<R: Real> CpuSolver<R> {
     /// particles, in the one-process order, for the full path's upload.
     fn merge_on_host(&mut self, band: &ResidentBand<R>, received: Held<R>, ghosts: &[bool]) -> anyhow::Result<()> {
         let device = self.device.clone().expect("with device stages");
-        lock(&device).read_held(self.held_arrays(&[], false, false))?;
+        let started = self.device_call_start();
+        let read = lock(&device).read_held(self.held_arrays(&[], false, false));
+        self.count_device_call(started);
+        read?;
         let mut all = Held::default();
         for cell in 0..self.starts.len() - 1 {
             for slot in self.starts[cell]..self.starts[cell + 1] {
@@ -218,7 +225,9 @@ impl<R: Real> CpuSolver<R> {
             return;
         }
         let Some(device) = self.device.clone() else { return };
+        let started = self.device_call_start();
         let read = lock(&device).read_held(self.held_arrays(&[], false, false));
+        self.count_device_call(started);
         self.size_held_arrays();
         self.device_held = DeviceHeld::Same;
         if let Err(e) = read {

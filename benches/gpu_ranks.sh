@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# GPU ranks on one hardware GPU, in one command: the dam break on one process against two
+# ranks of wgsph-mpi sharing the GPU, with resident steps (the default 50-step batches) and
+# with the full path every step (--check-every 1), weakly compressible and DFSPH; and whether
+# two ranks end on one GPU's last snapshot, byte for byte.
+#
+# Usage, from the project root, with the release binaries at $WGSPH and $WGSPH_MPI (default
+# .gpu/wgsph and .gpu/wgsph-mpi) and Open MPI's launcher at $MPIRUN (default mpirun):
+#
+#   benches/gpu_ranks.sh [OUTDIR] [SIZES]
+#
+# SIZES (default "1000000 4000000") are the weakly compressible dam breaks' particle counts;
+# DFSPH runs at the first. Each run goes twice, at two step counts: the difference of their
+# wall times over the difference of the steps is the time per step without the setup. OUTDIR
+# (default gpu-ranks) receives log.txt and each run's summary.json as NAME.json; the figures
+# go to BENCHMARKS.md with the adapter, driver, particle count, date and commit. Debian 12's Open
+# MPI taken to a newer system may crash in mpirun's PMIx; PMIX_MCA_preg=native avoided it there.
+set -u
+out=${1:-gpu-ranks}
+sizes=${2:-"1000000 4000000"}
+W=${WGSPH:-.gpu/wgsph}
+M=${WGSPH_MPI:-.gpu/wgsph-mpi}
+R=${MPIRUN:-mpirun}
+mkdir -p "$out"
+exec > >(tee "$out/log.txt") 2>&1
+export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-/tmp}
+work=$(mktemp -d)
+same=${SAME:-100000}
+dfsph=(--set physics.solver=dfsph --unset physics.speed_of_sound)
+
+# NAME LIMIT HOW ARGS...: one run of the dam break; HOW is one (one process), resident (two
+# ranks, default batches) or full (two ranks, the full path every step).
+run() {
+  local name=$1 limit=$2 how=$3; shift 3
+  local launch=("$W")
+  case $how in
+    resident) launch=("$R" --allow-run-as-root --oversubscribe --bind-to none -np 2 "$M") ;;
+    full) launch=("$R" --allow-run-as-root --oversubscribe --bind-to none -np 2 "$M"); set -- "$@" --check-every 1 ;;
+  esac
+  rm -rf "$work/run"
+  echo "=== $name ($(date -u +%T))"
+  timeout "$limit" "${launch[@]}" run dam_break --backend gpu --quiet --out "$work/run" "$@" 2>&1 \
+    | grep -v '^warning: fluid\[' | tail -3
+  echo "=== exit ${PIPESTATUS[0]}"
+  [ -f "$work/run/summary.json" ] && cp "$work/run/summary.json" "$out/$name.json"
+  grep -h -E '"(wall_seconds|fluid_particles|resident_steps|bus_bytes|exchange_share)"' "$work/run/summary.json" 2>/dev/null | tr -d ' \n'; echo
+}
+
+command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv
+date -u
+
+# Byte for byte: two ranks with resident steps against one GPU, both methods, $SAME particles
+# (default 100 k).
+for method in wcsph dfsph; do
+  extra=(); [ $method = dfsph ] && extra=("${dfsph[@]}")
+  for how in one resident; do
+    run "same_${method}_$how" 120 $how --particles "$same" --steps 200 --snapshot-every 200 "${extra[@]}"
+    cp "$work/run/snapshots/step_000200.csv" "$work/${method}_$how.csv" 2>/dev/null
+  done
+  if cmp -s "$work/${method}_one.csv" "$work/${method}_resident.csv"; then
+    echo "SAME: $method, 2 ranks with resident steps end on one GPU's snapshot byte for byte"
+  else
+    echo "DIFFERENT: $method, 2 ranks with resident steps against one GPU"
+  fi
+done
+
+# Time per step: the weakly compressible dam break by size, then DFSPH at the first size.
+first=${sizes%% *}
+for n in $sizes; do
+  for how in one resident full; do
+    for steps in 100 300; do
+      run "wcsph_${n}_${how}_$steps" 150 $how --particles "$n" --steps $steps --snapshot-every 0
+    done
+  done
+done
+for how in one resident full; do
+  for steps in 50 150; do
+    run "dfsph_${first}_${how}_$steps" 150 $how --particles "$first" --steps $steps --snapshot-every 0 "${dfsph[@]}"
+  done
+done
+rm -rf "$work"
