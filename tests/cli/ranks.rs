@@ -131,8 +131,10 @@ fn the_dam_break_on_two_gpu_ranks_agrees_with_one_gpu() {
     let ranks = two.ranks.expect("a ranks block");
     assert!(ranks.per_rank.len() == 2 && ranks.per_rank.iter().all(|r| r.adapter.contains("hardware adapter") || r.adapter.contains("no hardware adapter")), "each rank says which adapter and why: {ranks:?}");
     // The time in the device's calls (the steps run there) is counted apart from the exchange's,
-    // and the two fit in the run.
-    assert!(ranks.per_rank.iter().all(|r| r.device_seconds > 0.0 && r.device_share + r.exchange_share <= 1.0), "{ranks:?}");
+    // and on rank 0, whose run the shares are of, the two fit in it (another rank may wait for
+    // rank 0 to start, and counts that wait in its exchange).
+    let first = &ranks.per_rank[0];
+    assert!(ranks.per_rank.iter().all(|r| r.device_seconds > 0.0) && first.device_share + first.exchange_share <= 1.0, "{ranks:?}");
     let rows = |dir: &str| -> Vec<Vec<f64>> {
         let text = String::from_utf8(last_snapshot(&tmp.path().join(dir))).unwrap();
         text.lines().skip(1).map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect()).collect()
