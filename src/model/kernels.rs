@@ -210,14 +210,15 @@ impl<R: Real> Grid<R> {
     /// the domain still has a valid cell (it is counted as escaped elsewhere); the same formula
     /// as the GPU's `cell_coords`.
     pub fn cell_coords(&self, p: V3<R>) -> [u32; 3] {
-        let mut c = [0u32; 3];
-        for a in 0..3 {
-            let f = ((p.0[a] - self.origin.0[a]) * self.inv_cell).floor();
-            let max = R::of((self.dims[a] - 1) as f64);
-            let f = if f.is_nan() { R::zero() } else { f.max(R::zero()).min(max) };
-            c[a] = f.to64() as u32;
-        }
-        c
+        [0, 1, 2].map(|axis| self.layer(p, axis))
+    }
+    /// The cell coordinate of a point along one `axis` (its cell layer), as `cell_coords` gives
+    /// it: the exchange across ranks asks only this, for every particle near a slab's faces.
+    pub fn layer(&self, p: V3<R>, axis: usize) -> u32 {
+        let f = ((p.0[axis] - self.origin.0[axis]) * self.inv_cell).floor();
+        let max = R::of((self.dims[axis] - 1) as f64);
+        let f = if f.is_nan() { R::zero() } else { f.max(R::zero()).min(max) };
+        f.to64() as u32
     }
     /// The cell key of cell coordinates, x fastest.
     pub fn key(&self, c: [u32; 3]) -> u32 {

@@ -809,19 +809,20 @@ fn the_resident_exchange_stage_agrees_with_its_cpu_twin() {
             device_dropped.sort_unstable();
             assert_eq!(device_dropped, dropped, "{who}: dropped slots");
             assert!(dropped.len() > ghosts.len() && !band.is_empty(), "{who}: the slab leaves particles outside it and near its faces");
-            let mut device_band: Vec<(u32, u64)> = run.band.slots.iter().copied().zip(run.band.keys.iter().copied()).collect();
+            let mut device_band: Vec<(u32, u64)> = (0..run.band.entries.len()).map(|k| (run.band.slot(k), run.band.key(k))).collect();
             device_band.sort_unstable();
             assert_eq!(device_band, band, "{who}: the band's slots and places");
-            for (k, &slot) in run.band.slots.iter().enumerate() {
+            for (k, &[position, velocity, key]) in run.band.entries.iter().enumerate() {
+                let slot = run.band.slot(k);
                 let (mut p, mut v) = (run.positions[slot as usize], run.velocities[slot as usize]);
                 if let Some([before, _]) = &run.places {
                     // The id in the position's w, the warm starts in the velocity's w and beside it.
                     let [pressure, divergence, id] = at_place(p[3], &[0, 1, 2].map(|a| before.iter().map(|e| e[a]).collect()));
                     (p[3], v[3]) = (f32::from_bits(id), f32::from_bits(pressure));
-                    assert_eq!(run.band.warm_divergence[k].to_bits(), divergence, "{who}: band slot {slot}'s divergence warm start");
+                    assert_eq!(key[3].to_bits(), divergence, "{who}: band slot {slot}'s divergence warm start");
                     assert!(id >= 50_000, "{who}: band slot {slot} carries an id of the places");
                 }
-                assert_eq!(bits(&[run.band.positions[k], run.band.velocities[k]]), bits(&[p, v]), "{who}: band slot {slot}");
+                assert_eq!(bits(&[position, velocity]), bits(&[p, v]), "{who}: band slot {slot}");
             }
             // The health of the own particles.
             let domain = (params.domain_min.map(|x| x as f32), params.domain_max.map(|x| x as f32));

@@ -66,7 +66,7 @@ impl RankPart {
         let faces = self.faces();
         let (mut down, mut up) = (Vec::new(), Vec::new());
         for i in which {
-            let l = grid.cell_coords(held.x[i])[faces.axis];
+            let l = grid.layer(held.x[i], faces.axis);
             if faces.lower && l < faces.slab.start + faces.halo {
                 down.push(i);
             }
@@ -89,7 +89,7 @@ impl RankPart {
         for round in 0.. {
             let (mut stay, mut down, mut up) = (Vec::new(), Vec::new(), Vec::new());
             for i in 0..held.len() {
-                match self.slabs.owner(grid.cell_coords(held.x[i])[self.axis]).cmp(&rank) {
+                match self.slabs.owner(grid.layer(held.x[i], self.axis)).cmp(&rank) {
                     std::cmp::Ordering::Equal => stay.push(i),
                     std::cmp::Ordering::Less => down.push(i),
                     std::cmp::Ordering::Greater => up.push(i),
@@ -130,7 +130,7 @@ impl WallSource {
     /// dropped, so every kept wall has all its wall neighbours.
     pub(super) fn near<R: Real>(&self, grid: &crate::model::params::Grid<R>, axis: usize, slab: Range<u32>, halo: u32) -> InitialState {
         let reach = halo + 1;
-        let layer = |p: [f64; 3]| grid.cell_coords(V3::from64(p))[axis];
+        let layer = |p: [f64; 3]| grid.layer(V3::from64(p), axis);
         let within = |reach: u32| move |p: [f64; 3]| {
             let l = layer(p);
             l + reach >= slab.start && l < slab.end + reach
@@ -372,6 +372,19 @@ impl<R: Real> Held<R> {
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }
+    /// Room for `n` more particles in each array the particles carry.
+    pub fn reserve(&mut self, n: usize, carried: Carried) {
+        self.x.reserve(n);
+        self.v.reserve(n);
+        self.id.reserve(n);
+        self.order.reserve(n);
+        if carried.density {
+            self.rho.reserve(n);
+        }
+        if carried.warm {
+            self.warm.reserve(n);
+        }
+    }
     pub(super) fn push_from(&mut self, o: &Held<R>, i: usize) {
         self.x.push(o.x[i]);
         self.v.push(o.v[i]);
@@ -404,6 +417,7 @@ impl<R: Real> Held<R> {
     pub(super) fn decode(&mut self, words_in: &[f64], carried: Carried) -> anyhow::Result<()> {
         let w = words(carried);
         anyhow::ensure!(words_in.len() % w == 0, "a neighbour sent {} words, not a whole number of particles of {w} words", words_in.len());
+        self.reserve(words_in.len() / w, carried);
         for p in words_in.chunks_exact(w) {
             self.x.push(V3::from64([p[0], p[1], p[2]]));
             self.v.push(V3::from64([p[3], p[4], p[5]]));
@@ -427,6 +441,7 @@ impl<R: Real> Held<R> {
     /// The particles `which`, in that order.
     pub(super) fn picked(&self, which: &[usize]) -> Held<R> {
         let mut out = Held::default();
+        out.reserve(which.len(), Carried { density: !self.rho.is_empty(), warm: !self.warm.is_empty() });
         for &i in which {
             out.push_from(self, i);
         }
@@ -753,7 +768,7 @@ impl<R: Real> CpuSolver<R> {
         let Some(part) = self.ranks.as_deref() else { return };
         let faces = part.faces();
         let ghosts = self.ghost_flags();
-        let layer = |i: usize| self.grid.cell_coords(self.positions[i])[faces.axis];
+        let layer = |i: usize| self.grid.layer(self.positions[i], faces.axis);
         let (send, receive) = link_lists(self.positions.len(), |i| ghosts[i], layer, &faces);
         let (failure, seconds) = part.link.as_ref().map_or((None, 0.0), |l| (l.failure.clone(), l.seconds));
         let checked = part.link.is_some();
@@ -821,7 +836,7 @@ impl<R: Real> CpuSolver<R> {
     fn ghost_flags(&self) -> Vec<bool> {
         let Some(part) = &self.ranks else { return Vec::new() };
         let mine = part.slabs.layers_of(part.comm.rank());
-        self.positions.iter().map(|&x| !mine.contains(&self.grid.cell_coords(x)[part.axis])).collect()
+        self.positions.iter().map(|&x| !mine.contains(&self.grid.layer(x, part.axis))).collect()
     }
 
     /// The solver of one rank's part of a simulation across the ranks of `comm`: the fluid
@@ -838,7 +853,7 @@ impl<R: Real> CpuSolver<R> {
     fn new_part_with(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64, device: Option<Box<dyn DeviceStages<R>>>) -> anyhow::Result<Self> {
         let grid = params.grid.cast::<R>();
         let axis = slab_axis(grid.dims);
-        let layer_of = |p: [f64; 3]| grid.cell_coords(V3::from64(p))[axis];
+        let layer_of = |p: [f64; 3]| grid.layer(V3::from64(p), axis);
         let mut counts = vec![0u64; grid.dims[axis] as usize];
         initial.visit_fluid(|p| counts[layer_of(p.position) as usize] += 1);
         let total = counts.iter().sum::<u64>() as usize;
@@ -987,7 +1002,7 @@ impl<R: Real> CpuSolver<R> {
         let step = self.step;
         let part = self.ranks.as_mut().expect("only across ranks");
         let axis = part.axis;
-        let layer_of = |grid: &crate::model::params::Grid<R>, p: V3<R>| grid.cell_coords(p)[axis];
+        let layer_of = |grid: &crate::model::params::Grid<R>, p: V3<R>| grid.layer(p, axis);
         let comm = part.comm.clone();
         let mut slab_moved = false;
         if balance && part.balance_every > 0 && step > 0 && step % part.balance_every == 0 {
@@ -1340,7 +1355,7 @@ impl<R: Real> CpuSolver<R> {
         let part = self.ranks.as_ref().expect("only across ranks");
         let grid = self.grid;
         let axis = part.axis;
-        let layer_of = |p: [f64; 3]| grid.cell_coords(V3::<R>::from64(p))[axis];
+        let layer_of = |p: [f64; 3]| grid.layer(V3::<R>::from64(p), axis);
         let mut counts = vec![0u64; grid.dims[axis] as usize];
         let mut total = 0usize;
         source.visit_positions(&mut |p| {
@@ -1451,7 +1466,7 @@ impl<R: Real> CpuSolver<R> {
 /// saw fluid in their band. Returns the values and the error of a failed collective.
 pub(super) fn probes_across_ranks<R: Real>(input: &ProbeInput<R>, part: &RankPart, own: &[Range<usize>], list: &[Probe], offsets: &[usize]) -> (Vec<f64>, Option<String>) {
     let rank = part.comm.rank();
-    let evaluates = |x: V3<R>| part.slabs.owner(input.grid.cell_coords(x)[part.axis]) == rank;
+    let evaluates = |x: V3<R>| part.slabs.owner(input.grid.layer(x, part.axis)) == rank;
     let count = offsets.last().zip(list.last()).map_or(0, |(&at, p)| at + p.geometry.columns().len());
     let mut local = vec![R::zero(); count];
     // Forces and fronts over the own particles.

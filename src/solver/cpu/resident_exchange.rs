@@ -55,7 +55,7 @@ pub fn select_band(positions: &[[f32; 4]], starts: &[u32], grid: &Grid<f32>, fac
             dropped.push(i);
             continue;
         }
-        let layer = grid.cell_coords(V3([p[0], p[1], p[2]]))[faces.axis];
+        let layer = grid.layer(V3([p[0], p[1], p[2]]), faces.axis);
         let leaving = !faces.slab.contains(&layer);
         let near_face = (faces.lower && layer < faces.slab.start + faces.halo) || (faces.upper && layer + faces.halo >= faces.slab.end);
         if leaving {

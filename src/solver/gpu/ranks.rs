@@ -14,7 +14,7 @@ use crate::model::params::Params;
 use crate::model::kernels::sort_by_cell;
 use crate::model::real::V3;
 use crate::solver::communicator::Communicator;
-use crate::solver::cpu::exchange::{DeviceStages, DfsphHeld, Held, HeldArrays, ResidentBand, ResidentSolves, ResidentStep};
+use crate::solver::cpu::exchange::{Carried, DeviceStages, DfsphHeld, Held, HeldArrays, ResidentBand, ResidentSolves, ResidentStep};
 use crate::solver::cpu::resident_exchange::SlabFaces;
 use super::resident::{received_w, PlaceArrays, ResidentExchange};
 use super::dfsph::RankSolves;
@@ -148,27 +148,29 @@ impl DeviceStages<f32> for GpuRankStages {
         };
         // In slot order, which is the one-process order (the state is in the cell order of its
         // binning).
-        let mut by_slot: Vec<usize> = (0..band.slots.len()).collect();
-        by_slot.sort_unstable_by_key(|&k| band.slots[k]);
-        let mut dropped = band.dropped;
-        dropped.sort_unstable();
-        let continuity = self.params.continuity_density;
+        let mut by_slot: Vec<(u32, usize)> = (0..band.entries.len()).map(|k| (band.slot(k), k)).collect();
+        by_slot.sort_unstable();
+        let (continuity, dfsph) = (self.params.continuity_density, resident.carries_places());
         let mut particles = Held::default();
-        for &k in &by_slot {
-            let (p, v) = (band.positions[k], band.velocities[k]);
+        particles.reserve(by_slot.len(), Carried { density: continuity, warm: dfsph });
+        for &(_, k) in &by_slot {
+            let [p, v, key] = band.entries[k];
             particles.x.push(V3([p[0], p[1], p[2]]));
             particles.v.push(V3([v[0], v[1], v[2]]));
             particles.id.push(p[3].to_bits() & !GHOST_BIT);
             if continuity {
                 particles.rho.push(v[3]);
             }
-            if let Some(&divergence) = band.warm_divergence.get(k) {
-                // DFSPH: the constant-density warm start in the velocity's w.
-                particles.warm.push([v[3], divergence]);
+            if dfsph {
+                // The constant-density warm start in the velocity's w, the divergence one beside
+                // the key.
+                particles.warm.push([v[3], key[3]]);
             }
-            particles.order.push(band.keys[k]);
+            particles.order.push(band.key(k));
         }
-        Ok(Some(ResidentBand { dropped, slots: by_slot.iter().map(|&k| band.slots[k]).collect(), particles }))
+        let mut dropped = band.dropped;
+        dropped.sort_unstable();
+        Ok(Some(ResidentBand { dropped, slots: by_slot.iter().map(|&(slot, _)| slot).collect(), particles }))
     }
 
     fn run_resident_step(&mut self, step: u64, dropped: &[u32], received: &Held<f32>, ghosts: &[bool], solves: Option<ResidentSolves<'_>>) -> anyhow::Result<Option<ResidentStep>> {

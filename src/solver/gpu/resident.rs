@@ -33,18 +33,26 @@ pub mod words {
     pub const COUNT: usize = 16;
 }
 
-/// The band a step's exchange reads back: the dropped slots (unsorted), and for each band
-/// particle its slot, position and velocity (the device's vectors, w included) and its place in
-/// the one-process order (cell and place in the cell of the last binning). With DFSPH the
-/// position's w holds the id, the velocity's w the constant-density warm start, and
-/// `warm_divergence` the divergence solve's.
+/// The band a step's exchange reads back: the dropped slots (unsorted), and the band's
+/// entries as the device wrote them (unsorted), three vectors each: the position and the
+/// velocity (w included), then the slot, the place in the one-process order (cell, and place
+/// in the cell of the last binning) and, with DFSPH, the divergence solve's warm start (the
+/// position's w holds the id, the velocity's w the constant-density warm start).
 pub struct DeviceBand {
     pub dropped: Vec<u32>,
-    pub slots: Vec<u32>,
-    pub positions: Vec<[f32; 4]>,
-    pub velocities: Vec<[f32; 4]>,
-    pub keys: Vec<u64>,
-    pub warm_divergence: Vec<f32>,
+    pub entries: Vec<[[f32; 4]; 3]>,
+}
+
+impl DeviceBand {
+    /// The slot of entry `k`.
+    pub fn slot(&self, k: usize) -> u32 {
+        self.entries[k][2][0].to_bits()
+    }
+    /// The place of entry `k` in the one-process order.
+    pub fn key(&self, k: usize) -> u64 {
+        let key = self.entries[k][2].map(f32::to_bits);
+        (key[1] as u64) << 32 | key[2] as u64
+    }
 }
 
 /// DFSPH across ranks: the arrays indexed by each particle's place in the upload (the w of its
@@ -165,6 +173,11 @@ impl ResidentExchange {
 
     /// Lists the dropped slots and reads back the band of the state the last step left
     /// (`faces`: the rank's slab), or `Err` with the band's size where it outgrows its array.
+    /// Whether the band carries DFSPH's places and warm starts.
+    pub fn carries_places(&self) -> bool {
+        self.places.is_some()
+    }
+
     pub fn band(&self, solver: &GpuSolver, faces: &SlabFaces) -> anyhow::Result<Result<DeviceBand, u64>> {
         let ctx = &solver.ctx;
         let mut control = [0u32; words::COUNT];
@@ -208,18 +221,8 @@ impl ResidentExchange {
         data[1].truncate(dropped as usize * 4);
         data[2].truncate(band as usize * 48);
         let dropped: Vec<u32> = bytemuck::pod_collect_to_vec(&data[1]);
-        let vectors: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&data[2]);
-        let mut out = DeviceBand { dropped, slots: Vec::new(), positions: Vec::new(), velocities: Vec::new(), keys: Vec::new(), warm_divergence: Vec::new() };
-        for entry in vectors.chunks_exact(3) {
-            let key = entry[2].map(f32::to_bits);
-            out.slots.push(key[0]);
-            out.positions.push(entry[0]);
-            out.velocities.push(entry[1]);
-            out.keys.push((key[1] as u64) << 32 | key[2] as u64);
-            if self.places.is_some() {
-                out.warm_divergence.push(entry[2][3]);
-            }
-        }
+        let entries: Vec<[[f32; 4]; 3]> = bytemuck::pod_collect_to_vec(&data[2]);
+        let out = DeviceBand { dropped, entries };
         Ok(Ok(out))
     }
 
