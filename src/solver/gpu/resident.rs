@@ -171,13 +171,13 @@ impl ResidentExchange {
         self.bytes_read.get()
     }
 
-    /// Lists the dropped slots and reads back the band of the state the last step left
-    /// (`faces`: the rank's slab), or `Err` with the band's size where it outgrows its array.
     /// Whether the band carries DFSPH's places and warm starts.
     pub fn carries_places(&self) -> bool {
         self.places.is_some()
     }
 
+    /// Lists the dropped slots and reads back the band of the state the last step left
+    /// (`faces`: the rank's slab), or `Err` with the band's size where it outgrows its array.
     pub fn band(&self, solver: &GpuSolver, faces: &SlabFaces) -> anyhow::Result<Result<DeviceBand, u64>> {
         let ctx = &solver.ctx;
         let mut control = [0u32; words::COUNT];
@@ -222,8 +222,7 @@ impl ResidentExchange {
         data[2].truncate(band as usize * 48);
         let dropped: Vec<u32> = bytemuck::pod_collect_to_vec(&data[1]);
         let entries: Vec<[[f32; 4]; 3]> = bytemuck::pod_collect_to_vec(&data[2]);
-        let out = DeviceBand { dropped, entries };
-        Ok(Ok(out))
+        Ok(Ok(DeviceBand { dropped, entries }))
     }
 
     /// The held particles written again without the `dropped` slots (sorted) and with the
