@@ -10,8 +10,9 @@
 #   benches/gpu_ranks.sh [OUTDIR] [SIZES]
 #
 # SIZES (default "1000000 4000000") are the weakly compressible dam breaks' particle counts;
-# DFSPH runs at the first. Each run goes twice, at two step counts: the difference of their
-# wall times over the difference of the steps is the time per step without the setup. OUTDIR
+# DFSPH runs at the first. One process is profiled; each run across ranks goes twice, at two
+# step counts: the difference of their wall times (or of their exchange and device seconds)
+# over the difference of the steps is the time per step without the setup. OUTDIR
 # (default gpu-ranks) receives log.txt and each run's summary.json as NAME.json; the figures
 # go to BENCHMARKS.md with the adapter, driver, particle count, date and commit. Debian 12's Open
 # MPI taken to a newer system may crash in mpirun's PMIx; PMIX_MCA_preg=native avoided it there.
@@ -64,16 +65,26 @@ for method in wcsph dfsph; do
   fi
 done
 
-# Time per step: the weakly compressible dam break by size, then DFSPH at the first size.
+# Time per step: the weakly compressible dam break by size, then DFSPH at the first size. One
+# process is profiled (its setup varies by more than its steps take); the ranks run twice, and
+# their summaries' exchange_seconds and device_seconds split a rank's time. The full path runs
+# at the first size only (at 4 M it takes minutes).
 first=${sizes%% *}
+profile() {
+  echo "=== $1 ($(date -u +%T))"
+  timeout 150 "$W" profile dam_break --steps 40 "${@:2}" 2>&1 | grep -E 'host wall-clock|^total|iterations per step'
+}
 for n in $sizes; do
-  for how in one resident full; do
+  profile "wcsph_${n}_one" --particles "$n"
+  hows="resident"; [ "$n" = "$first" ] && hows="resident full"
+  for how in $hows; do
     for steps in 100 300; do
       run "wcsph_${n}_${how}_$steps" 150 $how --particles "$n" --steps $steps --snapshot-every 0
     done
   done
 done
-for how in one resident full; do
+profile "dfsph_${first}_one" --particles "$first" "${dfsph[@]}"
+for how in resident full; do
   for steps in 50 150; do
     run "dfsph_${first}_${how}_$steps" 150 $how --particles "$first" --steps $steps --snapshot-every 0 "${dfsph[@]}"
   done
