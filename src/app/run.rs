@@ -462,13 +462,10 @@ pub fn summary_line(s: &Summary, out: &Path) -> String {
     )
 }
 
-/// The scene of `wgsph run`: the file or built-in scene, with `--set` and `--particles`.
+/// The scene of `wgsph run`: the file or built-in scene, with `--set` and `--particles` (its
+/// lattice warnings are the run's to print).
 pub fn run_scene(args: &RunArgs) -> anyhow::Result<Scene> {
-    let mut scene = args.overrides.scene(&args.scene)?;
-    if let Some(n) = args.particles {
-        scene = super::args::at_particles(&scene, n)?;
-    }
-    Ok(scene)
+    super::args::load_scene(&args.scene, &args.overrides, args.particles, true)
 }
 
 /// What is odd about a built-in scene, said in one line when it runs.

@@ -494,17 +494,16 @@ pub fn cmd_tradeoff(args: &TradeoffArgs) -> anyhow::Result<i32> {
     if !(args.time.is_finite() && args.time > 0.0) {
         return Err(InputError(format!("--time is {}; must be a finite number > 0", args.time)).into());
     }
-    let scene = Scene::load(&args.scene)?;
     let base = super::args::load_scene(&args.scene, &args.overrides, Some(args.particles), false)?;
     std::fs::create_dir_all(&args.out)?;
     let started = Instant::now();
-    println!("tradeoff {}: {} fluid particles, {} s simulated, {} samples", scene.name, base.fluid_particle_count(), args.time, args.samples);
+    println!("tradeoff {}: {} fluid particles, {} s simulated, {} samples", base.name, base.fluid_particle_count(), args.time, args.samples);
     let rows = study(&base, args.time, args.samples, |line| println!("  {line}"))?;
-    let title = format!("{}: error against cost ({} fluid particles, {} s)", scene.name, base.fluid_particle_count(), args.time);
+    let title = format!("{}: error against cost ({} fluid particles, {} s)", base.name, base.fluid_particle_count(), args.time);
     let md = format!(
         "# Speed against accuracy: {}\n\n{} fluid particles at the base resolution, {} s simulated, compared at {} times with the reference \
          (CPU f64, dt / 4). Study run in {:.0} s. The errors and costs are defined in `src/app/tradeoff.rs` and docs/performance.md.\n\n{}",
-        scene.name,
+        base.name,
         base.fluid_particle_count(),
         args.time,
         args.samples,

@@ -652,13 +652,10 @@ impl<R: Real> CpuSolver<R> {
 
     /// The device's binning and density of the held particles (a snapshot's fields).
     fn fields_on_device(&mut self) {
-        let device = self.device.clone().expect("only with device stages");
         self.lists.clear();
         let step = self.step;
         let ghosts = self.ghost_flags();
-        let started = self.device_call_start();
-        let ran = lock(&device).run_fields(step, self.held_arrays(&ghosts, false, false));
-        self.count_device_call(started);
+        let ran = self.on_device(|s, device| device.run_fields(step, s.held_arrays(&ghosts, false, false)));
         if let Err(e) = ran {
             if let Some(part) = &mut self.ranks {
                 part.failure.get_or_insert(format!("rank {} of {}: the device's density stage failed: {e:#}", part.comm.rank(), part.comm.size()));
@@ -670,7 +667,6 @@ impl<R: Real> CpuSolver<R> {
     /// own particles the device gave back, and reduced over the ranks as on the host. True
     /// where the device ran it (and keeps what it gave back).
     pub(super) fn step_on_device(&mut self) -> bool {
-        let device = self.device.clone().expect("only with device stages");
         // Probes are sampled on the host from the state the step starts from: the device bins it
         // and evaluates its density stage (as for a snapshot), and the CPU path's probe stage
         // reads the result with its own particles counted (probes_across_ranks). A device that
@@ -699,9 +695,7 @@ impl<R: Real> CpuSolver<R> {
         if dfsph {
             self.link_ghosts();
         }
-        let started = self.device_call_start();
-        let ran = lock(&device).run_step(step, self.held_arrays(&ghosts, dfsph, first_positions.is_some()));
-        self.count_device_call(started);
+        let ran = self.on_device(|s, device| device.run_step(step, s.held_arrays(&ghosts, dfsph, first_positions.is_some())));
         self.unlink_ghosts();
         let dt = match ran {
             Ok(dt) => dt,
@@ -804,19 +798,18 @@ impl<R: Real> CpuSolver<R> {
         }
     }
 
-    /// When a call to the device starts: the instant, and the seconds the DFSPH link has spent
-    /// across ranks so far (the solves inside the call exchange through it).
-    pub(super) fn device_call_start(&self) -> (Instant, f64) {
-        (Instant::now(), self.link_seconds())
-    }
-
-    /// Counts a device call begun at `started` in the rank's device time, less what the solves
-    /// spent in the exchange meanwhile (that goes to the exchange time when the link is undone).
-    pub(super) fn count_device_call(&mut self, started: (Instant, f64)) {
-        let exchanged = self.link_seconds() - started.1;
+    /// A call to the rank's device (`call` with this solver and the locked device), counted in
+    /// the rank's device time less what the DFSPH solves inside it spent exchanging across ranks
+    /// (that goes to the exchange time when the link is undone).
+    pub(super) fn on_device<T>(&mut self, call: impl FnOnce(&mut Self, &mut dyn DeviceStages<R>) -> T) -> T {
+        let device = self.device.clone().expect("only with device stages");
+        let (started, linked) = (Instant::now(), self.link_seconds());
+        let out = call(self, &mut **lock(&device));
+        let exchanged = self.link_seconds() - linked;
         if let Some(part) = self.ranks.as_deref_mut() {
-            part.stats.device_seconds += (started.0.elapsed().as_secs_f64() - exchanged).max(0.0);
+            part.stats.device_seconds += (started.elapsed().as_secs_f64() - exchanged).max(0.0);
         }
+        out
     }
 
     fn link_seconds(&self) -> f64 {

@@ -15,7 +15,7 @@
 //! read back from the device before the full path and at the end of every batch, so nothing
 //! outside the batch sees them stale.
 
-use super::exchange::{check_link_ids, lock, Carried, GhostLink, Held, ResidentBand, ResidentSolves, ResidentStep};
+use super::exchange::{check_link_ids, Carried, GhostLink, Held, ResidentBand, ResidentSolves, ResidentStep};
 use super::resident_exchange::SlabFaces;
 use super::CpuSolver;
 use crate::model::real::{Real, V3};
@@ -38,8 +38,7 @@ impl<R: Real> CpuSolver<R> {
     /// the full path (nothing done, or, where the merge did not fit the device, the exchange
     /// done and the full path's arrays made on the host).
     pub(super) fn step_resident(&mut self) -> bool {
-        let Some(device) = self.device.clone() else { return false };
-        if self.device_held == DeviceHeld::Nothing {
+        if self.device.is_none() || self.device_held == DeviceHeld::Nothing {
             return false;
         }
         let Some(part) = self.ranks.as_deref() else { return false };
@@ -51,10 +50,7 @@ impl<R: Real> CpuSolver<R> {
         let (rank, size) = (part.comm.rank(), part.comm.size());
         let faces = part.faces();
         let particles = part.total_fluid;
-        let started = self.device_call_start();
-        let band = lock(&device).resident_band(&faces);
-        self.count_device_call(started);
-        let band = match band {
+        let band = match self.on_device(|_, device| device.resident_band(&faces)) {
             Ok(Some(band)) => band,
             Ok(None) => return false,
             Err(e) => {
@@ -77,15 +73,13 @@ impl<R: Real> CpuSolver<R> {
             }
         };
         self.lists.clear();
-        let started = self.device_call_start();
-        let ran = {
-            let solves = match (self.dfsph.as_mut(), self.ranks.as_deref_mut()) {
+        let ran = self.on_device(|s, device| {
+            let solves = match (s.dfsph.as_mut(), s.ranks.as_deref_mut()) {
                 (Some(d), Some(part)) => Some(ResidentSolves { stats: &mut d.stats, link: part.link.as_mut().expect("made by the exchange"), faces: faces.clone(), particles }),
                 _ => None,
             };
-            lock(&device).run_resident_step(self.step, &band.dropped, &received, &ghosts, solves)
-        };
-        self.count_device_call(started);
+            device.run_resident_step(s.step, &band.dropped, &received, &ghosts, solves)
+        });
         if self.dfsph.is_some() {
             if let Ok(Some(done)) = &ran {
                 let d = self.dfsph.as_mut().expect("DFSPH");
@@ -188,11 +182,7 @@ impl<R: Real> CpuSolver<R> {
     /// state the device kept (read back) less the `band`'s dropped slots, and the `received`
     /// particles, in the one-process order, for the full path's upload.
     fn merge_on_host(&mut self, band: &ResidentBand<R>, received: Held<R>, ghosts: &[bool]) -> anyhow::Result<()> {
-        let device = self.device.clone().expect("with device stages");
-        let started = self.device_call_start();
-        let read = lock(&device).read_held(self.held_arrays(&[], false, false));
-        self.count_device_call(started);
-        read?;
+        self.on_device(|s, device| device.read_held(s.held_arrays(&[], false, false)))?;
         let mut all = Held::default();
         for cell in 0..self.starts.len() - 1 {
             for slot in self.starts[cell]..self.starts[cell + 1] {
@@ -229,10 +219,10 @@ impl<R: Real> CpuSolver<R> {
         if self.device_held != DeviceHeld::Ahead {
             return;
         }
-        let Some(device) = self.device.clone() else { return };
-        let started = self.device_call_start();
-        let read = lock(&device).read_held(self.held_arrays(&[], false, false));
-        self.count_device_call(started);
+        if self.device.is_none() {
+            return;
+        }
+        let read = self.on_device(|s, device| device.read_held(s.held_arrays(&[], false, false)));
         self.size_held_arrays();
         self.device_held = DeviceHeld::Same;
         if let Err(e) = read {

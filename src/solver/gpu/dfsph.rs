@@ -149,6 +149,16 @@ impl GhostLinkCells {
     pub fn bytes(&self) -> u64 {
         self.cells.size() + self.bounds.size()
     }
+
+    /// Writes the cells of a link's `lists` (joined, after their count) for the stage to read;
+    /// returns the bytes written.
+    pub fn write_cells(&self, queue: &wgpu::Queue, lists: &[Vec<u32>]) -> anyhow::Result<u64> {
+        let cells = lists.iter().map(Vec::len).sum::<usize>();
+        anyhow::ensure!(cells as u64 <= self.capacity, "the ghost link lists {cells} cells, its arrays hold {}", self.capacity);
+        let words: Vec<u32> = std::iter::once(cells as u32).chain(lists.iter().flatten().copied()).collect();
+        queue.write_buffer(&self.cells, 0, bytemuck::cast_slice(&words));
+        Ok(4 * words.len() as u64)
+    }
 }
 
 /// The pipelines of DFSPH's stages.

@@ -78,11 +78,7 @@ impl GpuSolver {
                 // The slab is new or its bounds moved: its cells, written once for the steps
                 // until they move again.
                 let lists = link_cells(self.params.grid.dims, &faces);
-                let cells = lists.iter().map(|l| l.len()).sum::<usize>();
-                anyhow::ensure!(cells as u64 <= stage.capacity, "the ghost link lists {cells} cells, its arrays hold {}", stage.capacity);
-                let words: Vec<u32> = std::iter::once(cells as u32).chain(lists.iter().flatten().copied()).collect();
-                self.ctx.queue.write_buffer(&stage.cells, 0, bytemuck::cast_slice(&words));
-                self.count_bus_bytes(4 * words.len() as u64);
+                self.count_bus_bytes(stage.write_cells(&self.ctx.queue, &lists)?);
                 *listed = Some((faces.clone(), lists));
             }
             let lists = listed.as_ref().expect("written above").1.clone();
@@ -289,17 +285,16 @@ impl GpuSolver {
         let cells = self.params.grid.cell_count() as u64 + 1;
         let state = self.store.state(self.current);
         let data = read_ranges(&self.ctx, &[(&state.positions, 0, n * 16), (&self.starts, 0, cells * 4)])?;
-        let listed: Vec<u32> = link_cells(self.params.grid.dims, faces).concat();
+        let lists = link_cells(self.params.grid.dims, faces);
+        let listed = lists.iter().map(Vec::len).sum::<usize>();
         let stage = self.ghost_link_cells_stage(faces)?;
-        anyhow::ensure!(listed.len() as u64 <= stage.capacity, "the ghost link lists {} cells, its arrays hold {}", listed.len(), stage.capacity);
-        let words: Vec<u32> = std::iter::once(listed.len() as u32).chain(listed.iter().copied()).collect();
-        self.ctx.queue.write_buffer(&stage.cells, 0, bytemuck::cast_slice(&words));
+        stage.write_cells(&self.ctx.queue, &lists)?;
         *stage.listed.borrow_mut() = None;
         let mut rec = super::schedule::PlainRecorder::new(&self.ctx.device, "ghost link");
-        self.dispatch_threads(&mut rec, &stage.stage, &stage.group, listed.len() as u64);
+        self.dispatch_threads(&mut rec, &stage.stage, &stage.group, listed as u64);
         self.ctx.queue.submit([rec.finish()]);
-        let bounds = read_ranges(&self.ctx, &[(&stage.bounds, 0, (8 * listed.len() as u64).max(8))])?.remove(0);
+        let bounds = read_ranges(&self.ctx, &[(&stage.bounds, 0, (8 * listed as u64).max(8))])?.remove(0);
         let bounds: Vec<[u32; 2]> = bytemuck::pod_collect_to_vec(&bounds);
-        Ok((bytemuck::pod_collect_to_vec(&data[0]), bytemuck::pod_collect_to_vec(&data[1]), bounds[..listed.len()].to_vec()))
+        Ok((bytemuck::pod_collect_to_vec(&data[0]), bytemuck::pod_collect_to_vec(&data[1]), bounds[..listed].to_vec()))
     }
 }
