@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # GPU ranks on one hardware GPU, in one command: the dam break on one process against two
-# ranks of wgsph-mpi sharing the GPU, with resident steps (the default 50-step batches) and
-# with the full path every step (--check-every 1), weakly compressible and DFSPH; and whether
+# ranks of wgsph-mpi sharing the GPU, with resident steps (the default) and
+# with the full path every step (--full-exchange), weakly compressible and DFSPH; and whether
 # two ranks end on one GPU's last snapshot, byte for byte.
 #
 # Usage, from the project root, with the release binaries at $WGSPH and $WGSPH_MPI (default
@@ -30,13 +30,13 @@ same=${SAME:-100000}
 dfsph=(--set physics.solver=dfsph --unset physics.speed_of_sound)
 
 # NAME LIMIT HOW ARGS...: one run of the dam break; HOW is one (one process), resident (two
-# ranks, default batches) or full (two ranks, the full path every step).
+# ranks, resident steps) or full (two ranks, the full path every step: --full-exchange).
 run() {
   local name=$1 limit=$2 how=$3; shift 3
   local launch=("$W")
   case $how in
     resident) launch=("$R" --allow-run-as-root --oversubscribe --bind-to none -np 2 "$M") ;;
-    full) launch=("$R" --allow-run-as-root --oversubscribe --bind-to none -np 2 "$M"); set -- "$@" --check-every 1 ;;
+    full) launch=("$R" --allow-run-as-root --oversubscribe --bind-to none -np 2 "$M"); set -- "$@" --full-exchange ;;
   esac
   rm -rf "$work/run"
   echo "=== $name ($(date -u +%T))"

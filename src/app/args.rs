@@ -174,6 +174,12 @@ pub struct RunArgs {
     pub precision: Option<PrecisionArg>,
     #[command(flatten)]
     pub gpu: GpuTuning,
+    /// Across GPU ranks (`mpirun -np N wgsph-mpi run ...`), read every held particle back after
+    /// each step and upload them all before the next, instead of keeping them on the device
+    /// with only the band next to each slab's faces crossing the bus: the path the resident
+    /// steps are compared against (the same values, slower).
+    #[arg(long)]
+    pub full_exchange: bool,
     /// Output directory (default: a new one per run, out/SCENE-001, out/SCENE-002, ...).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -203,7 +209,7 @@ pub struct RunArgs {
     pub checkpoint_every: u64,
     /// Continue the run in DIR from its checkpoint, to the end it was heading to (or for
     /// --steps N / --time T more); scene and settings come from the checkpoint.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "sets", "unsets", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format", "frames"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "sets", "unsets", "particles", "backend", "precision", "out", "snapshot_every", "check_every", "formats", "overwrite", "checkpoint_every", "surface_mesh_every", "surface_mesh_format", "frames", "full_exchange"])]
     pub resume: Option<PathBuf>,
     /// Reconstruct the fluid surface (marching cubes over an SPH density field, splashsurf)
     /// every K steps into DIR/surface/step_NNNNNN.obj (0: never).
@@ -286,7 +292,7 @@ impl RunArgs {
     /// The backend these flags ask for.
     pub fn backend_choice(&self) -> BackendChoice {
         let precision = self.precision.map_or(Precision::F64, PrecisionArg::precision);
-        BackendChoice { device: self.backend.device(), precision, gpu_options: self.gpu.options(), context: None, ranks: None }
+        BackendChoice { device: self.backend.device(), precision, gpu_options: GpuOptions { full_exchange: self.full_exchange, ..self.gpu.options() }, context: None, ranks: None }
     }
 }
 
@@ -376,6 +382,7 @@ impl GpuTuning {
             neighbour_lists: if self.no_neighbour_lists { Some(false) } else { None },
             neighbour_list_capacity: None,
             neighbour_skin: self.neighbour_skin,
+            full_exchange: false,
         }
     }
 }

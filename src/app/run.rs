@@ -499,6 +499,11 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     }
     let writes_files = super::ranks::writes_files(ranks);
     let quiet = args.quiet || !writes_files;
+    let across = ranks.map_or(1, |r| r.comm.size());
+    if args.full_exchange && (across < 2 || args.backend == BackendArg::Cpu) {
+        let why = if across < 2 { "one process has nothing to exchange (run it under mpirun with wgsph-mpi and -np 2 or more)".to_string() } else { format!("--backend cpu exchanges every particle at every step already ({across} ranks)") };
+        return Err(InputError(format!("--full-exchange chooses how GPU ranks exchange their particles, and {why}: leave it out")).into());
+    }
     if let Some(r) = ranks.filter(|r| r.comm.size() > 1) {
         if args.frames.is_some() || args.surface_mesh_every > 0 {
             return Err(InputError(format!(

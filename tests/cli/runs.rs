@@ -253,7 +253,7 @@ fn auto_takes_a_hardware_gpu_else_the_cpu_path_and_says_why() {
 /// The GPU step's tuning flags change nothing on the CPU path: asked for with `--backend cpu`
 /// they are refused by name with exit code 2 before anything is written; where the automatic
 /// choice falls on the CPU path, a note says they were not used; `--precision f64` with
-/// `--backend gpu` is refused the same way. `profile --single-cells` (each particle's own walk)
+/// `--backend gpu` is refused the same way, and `--full-exchange` on one process. `profile --single-cells` (each particle's own walk)
 /// cannot go with `--subgroup-tiles`.
 #[test]
 fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
@@ -279,6 +279,11 @@ fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
     let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "gpu", "--precision", "f64", "--out", "refused"], dir.path());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--precision f64 sets the CPU path's float type"), "{}", text(&o.stderr));
+    assert!(!dir.path().join("refused").exists());
+    // How GPU ranks exchange their particles means nothing to one process.
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--full-exchange", "--out", "refused"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--full-exchange") && text(&o.stderr).contains("one process has nothing to exchange"), "{}", text(&o.stderr));
     assert!(!dir.path().join("refused").exists());
     // A neighbour skin outside its range, or with a grid rebuilt every 2nd step (the skin
     // chooses when): refused by name before anything is written.

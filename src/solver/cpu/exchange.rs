@@ -925,7 +925,7 @@ impl<R: Real> CpuSolver<R> {
             transport: p.comm.describe(),
             axis: p.axis,
             bounds: p.slabs.bounds.clone(),
-            own_particles: self.own_slots().iter().map(|r| r.len()).sum(),
+            own_particles: self.own_count(),
             walls: self.walls().0.len(),
             node_rank: p.comm.node_rank().0,
             node_ranks: p.comm.node_rank().1,
@@ -1158,6 +1158,7 @@ impl<R: Real> CpuSolver<R> {
     /// A snapshot's fields on every rank: the exchange with fresh ghosts, the binning and the
     /// density (and the pressure of the last solve, for DFSPH).
     fn snapshot_fields_across_ranks(&mut self) -> anyhow::Result<()> {
+        self.take_back_held();
         self.exchange(false);
         if self.rank_failure().is_none() && self.device.is_some() {
             self.fields_on_device();
@@ -1173,6 +1174,7 @@ impl<R: Real> CpuSolver<R> {
 
     /// [`CpuSolver::step_fields`] across ranks, gathered on rank 0 (empty on the others).
     pub(super) fn step_fields_across_ranks(&mut self) -> anyhow::Result<StepFields> {
+        self.take_back_held();
         let rows = self.gather_own(6, |s, i| {
             let a = s.accelerations[i].to64();
             vec![s.ids[i] as f64, s.densities[i].to64(), s.pressures[i].to64(), a[0], a[1], a[2]]
@@ -1280,6 +1282,7 @@ impl<R: Real> CpuSolver<R> {
     /// sends its own particles' values there to rank 0, which hands the piece to `visit`; the
     /// other ranks visit nothing. No rank holds more than its own particles and one piece.
     pub(super) fn visit_state_array_across_ranks(&mut self, array: StateArray, chunk: u64, visit: &mut dyn FnMut(StatePiece) -> anyhow::Result<()>) -> anyhow::Result<()> {
+        self.take_back_held();
         let total = crate::solver::backend::Backend::state_array_len(self, array) as u64;
         let mut places = self.places_in_one_process_order()?;
         if array == StateArray::WarmStart {
@@ -1348,6 +1351,8 @@ impl<R: Real> CpuSolver<R> {
     /// and this rank takes the particles of its slab, in the state's order, and the walls
     /// near it.
     pub(super) fn restore_state_across_ranks(&mut self, source: &mut dyn StateSource) -> anyhow::Result<()> {
+        // The device's particles are replaced with the rest: the next step uploads them.
+        self.forget_device_state();
         let part = self.ranks.as_ref().expect("only across ranks");
         let grid = self.grid;
         let axis = part.axis;

@@ -750,18 +750,15 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// Runs up to `n` steps, stopping early after a step that went wrong. Across ranks on a
-    /// device, the steps after the first may leave the particles on the device; they are read
-    /// back at the end, so the host's arrays are whole between calls.
+    /// device, the steps may leave the particles on the device, from one call to the next:
+    /// what reads the host's arrays takes them back first (`take_back_held`).
     pub fn step(&mut self, n: u64) {
-        self.device_held = resident_steps::DeviceHeld::Nothing;
         for _ in 0..n {
             self.step_once();
             if !self.health.is_ok() || self.rank_failure().is_some() {
                 break;
             }
         }
-        self.sync_held();
-        self.device_held = resident_steps::DeviceHeld::Nothing;
     }
 
     /// A snapshot's fields for the current positions: the binning, then the density (and the

@@ -7,13 +7,14 @@
 //! what the neighbours sent into the particles it kept, in the one-process order: the step's
 //! stable binning then sees what the full path gives it, and computes the same bits.
 //!
-//! A step takes the full path where the host needs the particles: the first step of each batch
-//! (`CpuSolver::step`), a step that moves the slab bounds or samples probes, or a band or merge
-//! that outgrows the device's room. With DFSPH the warm starts travel with the band and the
-//! received particles, the host checks the step's ghosts by their ids as the full path does,
-//! and the device makes the solves' ghost link from its own binning. The host's arrays are
-//! read back from the device before the full path and at the end of every batch, so nothing
-//! outside the batch sees them stale.
+//! A step takes the full path where the host needs the particles: the first step, the first
+//! after the host read them for an output (a snapshot, a checkpoint), a step that moves the
+//! slab bounds or samples probes, or a band or merge that outgrows the device's room. With
+//! DFSPH the warm starts travel with the band and the received particles, the host checks the
+//! step's ghosts by their ids as the full path does, and the device makes the solves' ghost
+//! link from its own binning. The particles stay on the device from one batch of steps to the
+//! next (a health check needs only the counts the steps gather); whatever reads the host's
+//! arrays takes them back first (`CpuSolver::take_back_held`), so nothing sees them stale.
 
 use super::exchange::{check_link_ids, Carried, GhostLink, Held, ResidentBand, ResidentSolves, ResidentStep};
 use super::resident_exchange::SlabFaces;
@@ -29,8 +30,9 @@ pub enum DeviceHeld {
     Nothing,
     /// The state the last step left, which the host's arrays hold too.
     Same,
-    /// The state the last step left, which the host's arrays lag behind.
-    Ahead,
+    /// The state the last step left, which the host's arrays lag behind: `own` of its particles
+    /// are this rank's (the rest are ghosts), which the host's stale cell starts cannot count.
+    Ahead { own: usize },
 }
 
 impl<R: Real> CpuSolver<R> {
@@ -59,12 +61,13 @@ impl<R: Real> CpuSolver<R> {
                 return false;
             }
         };
+        let own = self.own_count();
         let t0 = Instant::now();
         let exchanged = self.exchange_band(&faces, &band);
         if let Some(part) = self.ranks.as_deref_mut() {
             part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
         }
-        let (received, ghosts) = match exchanged {
+        let (received, ghosts, (left, arrived)) = match exchanged {
             Ok(done) => done,
             Err(e) => {
                 // A failed collective stops every rank after this step.
@@ -96,7 +99,7 @@ impl<R: Real> CpuSolver<R> {
                     part.stats.ghosts = ghosts.iter().filter(|&&g| g).count();
                     part.stats.resident_steps += 1;
                 }
-                self.device_held = DeviceHeld::Ahead;
+                self.device_held = DeviceHeld::Ahead { own: own + arrived - left };
                 self.record_resident_step(&done);
             }
             Ok(None) => {
@@ -119,8 +122,8 @@ impl<R: Real> CpuSolver<R> {
     /// The exchange of the full path (migration, then ghosts) on the band: the particles the
     /// neighbours sent, sorted in the one-process order, and which of them are ghosts. With
     /// DFSPH the step's link too, checked by the ids as the full path checks it (its lists are
-    /// the device's to make).
-    fn exchange_band(&mut self, faces: &SlabFaces, band: &ResidentBand<R>) -> anyhow::Result<(Held<R>, Vec<bool>)> {
+    /// the device's to make). Last, how many own particles left the slab and how many arrived.
+    fn exchange_band(&mut self, faces: &SlabFaces, band: &ResidentBand<R>) -> anyhow::Result<(Held<R>, Vec<bool>, (usize, usize))> {
         let carried = Carried { density: self.params.continuity_density, warm: self.dfsph.is_some() };
         let grid = self.grid;
         let part = self.ranks.as_deref_mut().expect("across ranks");
@@ -131,8 +134,10 @@ impl<R: Real> CpuSolver<R> {
         // and the device must agree on them, or a particle would be lost or held twice. Both
         // lists are sorted by slot, so one walk through the dropped slots answers for the band.
         let mut dropped = band.dropped.iter().copied().peekable();
+        let mut left = 0;
         for (k, &slot) in band.slots.iter().enumerate() {
             let leaves = part.slabs.owner(layer_of(band.particles.x[k])) != rank;
+            left += leaves as usize;
             while dropped.next_if(|&d| d < slot).is_some() {}
             anyhow::ensure!(leaves == (dropped.peek() == Some(&slot)), "rank {rank}: the device and the host disagree on whether the particle in slot {slot} leaves the slab");
         }
@@ -165,7 +170,7 @@ impl<R: Real> CpuSolver<R> {
         let mut sorted: Vec<usize> = (0..received.len()).collect();
         sorted.sort_by_key(|&i| received.order[i]);
         let ghosts = sorted.iter().map(|&i| i >= migrants).collect();
-        Ok((received.picked(&sorted), ghosts))
+        Ok((received.picked(&sorted), ghosts, (left, migrants)))
     }
 
     /// The bookkeeping of a resident step: the own particles' health the device counted, over
@@ -216,7 +221,7 @@ impl<R: Real> CpuSolver<R> {
 
     /// The host's arrays read back from the device where they lag behind it.
     pub(super) fn sync_held(&mut self) {
-        if self.device_held != DeviceHeld::Ahead {
+        if !matches!(self.device_held, DeviceHeld::Ahead { .. }) {
             return;
         }
         if self.device.is_none() {
@@ -230,6 +235,28 @@ impl<R: Real> CpuSolver<R> {
                 let e = format!("rank {} of {}: reading the particles back failed: {e:#}", part.comm.rank(), part.comm.size());
                 self.note_failure(Some(e));
             }
+        }
+    }
+
+    /// The host takes the particles back to read or change them (a snapshot, a checkpoint, a
+    /// restore): read back where the device is ahead, and the next step uploads them again
+    /// (the host's exchange for an output moves ghosts and migrants the device does not see).
+    pub(super) fn take_back_held(&mut self) {
+        self.sync_held();
+        self.device_held = DeviceHeld::Nothing;
+    }
+
+    /// The host's arrays replaced (a restore): the next step uploads them, whatever the device
+    /// holds.
+    pub(super) fn forget_device_state(&mut self) {
+        self.device_held = DeviceHeld::Nothing;
+    }
+
+    /// This rank's own particles (the held less the ghosts), wherever they are.
+    pub(super) fn own_count(&self) -> usize {
+        match self.device_held {
+            DeviceHeld::Ahead { own } => own,
+            _ => self.own_slots().iter().map(|r| r.len()).sum(),
         }
     }
 }

@@ -122,7 +122,7 @@ impl DeviceStages<f32> for GpuRankStages {
     }
 
     fn resident_band(&mut self, faces: &SlabFaces) -> anyhow::Result<Option<ResidentBand<f32>>> {
-        if !self.keeps_step {
+        if !self.keeps_step || self.options.full_exchange {
             return Ok(None);
         }
         let solver = self.solver.as_ref().expect("kept by a step");

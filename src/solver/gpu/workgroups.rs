@@ -210,6 +210,12 @@ pub struct GpuOptions {
     /// is then submitted alone, whatever `steps_per_submit` says: the host reads whether the
     /// next one rebuilds.
     pub neighbour_skin: Option<f64>,
+    /// Across ranks, every step on the full path: every held particle read back after the step
+    /// and uploaded again before the next, as the first step and a balance step take it.
+    /// `false` (the default): the particles stay on the device from one step to the next, and
+    /// only the band next to the slab's faces crosses the bus (src/solver/cpu/resident_steps.rs;
+    /// the same values). For comparing the two; one device has nothing to exchange.
+    pub full_exchange: bool,
 }
 
 #[cfg(test)]
