@@ -337,9 +337,10 @@ fn an_error_on_one_rank_stops_every_rank_naming_it() {
 /// Probes across MPI ranks: the first rank alone writes the series, and those of a point, a gauge
 /// and a front are byte for byte those of one rank (each point and gauge level is evaluated by
 /// the rank whose slab holds it; the tank's slabs cut the vertical, so the gauge crosses them).
-/// The tank with a point probe, a gauge and a front every 10 steps, run for 100 steps on 1 and
-/// 2 ranks of `backend`: each probe's CSV file of both runs.
-fn probe_series_on_one_and_two_ranks(m: &(PathBuf, PathBuf), backend: &str) -> Vec<[String; 3]> {
+/// The tank with a point probe, a gauge (where `gauge`) and a front every 10 steps, run for 100
+/// steps on 1 and 2 ranks of `backend`: each probe's CSV file of both runs (the gauge's empty
+/// without it).
+fn probe_series_on_one_and_two_ranks(m: &(PathBuf, PathBuf), backend: &str, gauge: bool) -> Vec<[String; 3]> {
     let tmp = tempfile::tempdir().unwrap();
     let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/hydrostatic.toml")).unwrap();
     let probes = r#"
@@ -350,24 +351,26 @@ position = [0.2, 0.05, 0.05]
 every_steps = 10
 
 [[probe]]
-name = "level"
-type = "gauge"
-position = [0.2, 0.0, 0.05]
-every_steps = 10
-
-[[probe]]
 name = "front"
 type = "front"
 every_steps = 10
 "#;
-    std::fs::write(tmp.path().join("tank.toml"), base + probes).unwrap();
+    let level = r#"
+[[probe]]
+name = "level"
+type = "gauge"
+position = [0.2, 0.0, 0.05]
+every_steps = 10
+"#;
+    std::fs::write(tmp.path().join("tank.toml"), base + probes + if gauge { level } else { "" }).unwrap();
     let mut series = Vec::new();
     for ranks in [1, 2] {
         let out = format!("r{ranks}");
         run_ok(mpirun(m, ranks, &["run", "tank.toml", "--backend", backend, "--quiet", "--particles", "800", "--steps", "100", "--out", &out], tmp.path()));
-        let read = |name: &str| std::fs::read_to_string(tmp.path().join(&out).join("probes").join(format!("{name}.csv"))).unwrap();
+        let read = |name: &str| std::fs::read_to_string(tmp.path().join(&out).join("probes").join(format!("{name}.csv"))).unwrap_or_default();
         let files = ["sensor", "level", "front"].map(read);
         assert_eq!(files[0].lines().count(), 11, "a header and the steps 0, 10, ..., 90: {}", files[0]);
+        assert_eq!(files[1].is_empty(), !gauge);
         assert!(tmp.path().join(&out).join("probes").join("sensor.png").exists(), "the plot");
         series.push(files);
     }
@@ -380,16 +383,20 @@ every_steps = 10
 #[test]
 fn probes_on_two_ranks_write_the_series_of_one_rank() {
     let Some(m) = mpi() else { return };
-    let series = probe_series_on_one_and_two_ranks(&m, "cpu");
+    let series = probe_series_on_one_and_two_ranks(&m, "cpu", true);
     assert!(series[0] == series[1], "one rank:\n{:?}\ntwo ranks:\n{:?}", series[0], series[1]);
 }
 
-/// Probes on GPU ranks (sampled on the host from each device's density stage): the series of
-/// one GPU to the rounding of the probe stage's f32 sums.
+/// Probes on GPU ranks. Without the gauge each rank's device samples them within its steps and
+/// the ranks add their rows: the series are one GPU's byte for byte. With a gauge whose line
+/// crosses the slabs (the tank's cut the vertical) the host samples them from each device's
+/// density stage: one GPU's series to the rounding of the probe stage's f32 sums.
 #[test]
 fn probes_on_two_gpu_ranks_write_the_series_of_one_gpu() {
     let Some(m) = mpi() else { return };
-    let series = probe_series_on_one_and_two_ranks(&m, "gpu");
+    let series = probe_series_on_one_and_two_ranks(&m, "gpu", false);
+    assert!(series[0] == series[1], "one GPU:\n{:?}\ntwo GPU ranks:\n{:?}", series[0], series[1]);
+    let series = probe_series_on_one_and_two_ranks(&m, "gpu", true);
     let numbers = |text: &str| -> Vec<Vec<f64>> { text.lines().skip(1).map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect()).collect() };
     for (one, two) in series[0].iter().zip(&series[1]) {
         assert_eq!(one.lines().next(), two.lines().next(), "the same columns");

@@ -572,11 +572,14 @@ fn total_walls(scene: &Scene) -> usize {
     scene.initial_walls().wall_positions.len()
 }
 
-/// Probes on GPU ranks: each rank samples on the host what its device's binning and density
-/// stage give for the state a step starts from (src/solver/cpu/exchange.rs, `step_on_device`),
-/// so the samples are the one-GPU run's up to the arithmetic of the probe stage itself (the
-/// WGSL stage on one GPU, the CPU twin in f32 across ranks); sampling leaves the step's bits
-/// alone.
+/// Probes on GPU ranks. Weakly compressible: each rank's device samples them within its step
+/// (wgsl/sim/probes.wgsl on its held particles, the ghosts left out of forces and fronts) and
+/// the host adds the ranks' rows (src/solver/cpu/exchange.rs, `sample_probes_from_device`), so
+/// the points, gauges and fronts are one GPU's bits, the forces one GPU's sums added in another
+/// grouping, and the steps that sample stay resident. DFSPH: each rank samples on the host what
+/// its device's binning and factors give (`step_on_device`), one GPU's samples up to the
+/// arithmetic of the probe stage itself (the WGSL stage on one GPU, the CPU twin in f32 across
+/// ranks). Sampling leaves the steps' bits alone.
 #[test]
 fn probes_on_gpu_ranks_read_what_one_gpu_reads() {
     let Some(ctx) = common::contexts().into_iter().next() else { return };
@@ -586,17 +589,21 @@ fn probes_on_gpu_ranks_read_what_one_gpu_reads() {
     // wall push of the solves' stiffness sums, which the device gives back), in a tank whose
     // slabs cut the vertical and whose floor carries the water.
     let mut tank = with_probes(Scene::builtin("hydrostatic").expect("built in").with_fluid_particles(2000), every, [[0.2, 0.2, 0.05], [0.1, 0.05, 0.05]], [[0.1, 0.0, 0.05], [0.3, 0.0, 0.05]]);
+    // Weakly compressible in that tank: its gauges' lines cross the slabs, so the host samples.
+    let mut weakly_compressible_tank = tank.clone();
+    weakly_compressible_tank.name = "hydrostatic, slabs across the gauges".into();
     tank.name = "hydrostatic, DFSPH".into();
     tank.physics.solver = wgsph::model::scene::PressureSolver::Dfsph;
     tank.physics.stiffness = None;
     tank.physics.speed_of_sound = None;
     tank.time.dt = 0.001;
-    for scene in [dam, tank] {
-        probes_on_gpu_ranks_against_one_gpu(&ctx, &scene, steps);
+    for (scene, on_device) in [(dam, true), (tank, false), (weakly_compressible_tank, false)] {
+        probes_on_gpu_ranks_against_one_gpu(&ctx, &scene, steps, on_device);
     }
 }
 
-fn probes_on_gpu_ranks_against_one_gpu(ctx: &GpuContext, scene: &Scene, steps: u64) {
+/// `on_device`: whether the ranks' devices sample the probes (else the host does).
+fn probes_on_gpu_ranks_against_one_gpu(ctx: &GpuContext, scene: &Scene, steps: u64, on_device: bool) {
     let columns = probe_columns(scene);
     let device = GpuContext::from_adapter(ctx.adapter.clone()).expect("device");
     let mut sim = open(scene, &BackendChoice::gpu_on(device)).expect("opens");
@@ -606,16 +613,23 @@ fn probes_on_gpu_ranks_against_one_gpu(ctx: &GpuContext, scene: &Scene, steps: u
     assert_eq!(one.len(), 6, "the states of steps 0, 20, ..., 100");
     let all = gpu_on_ranks(ctx, scene, 2, 0, &|b: &mut dyn Backend| {
         b.step(steps)?;
-        Ok((b.take_probe_samples()?, b.snapshot()?))
+        Ok((b.take_probe_samples()?, b.snapshot()?, b.rank_report().expect("across ranks")))
     });
-    let (_, state) = &all[0];
+    if on_device {
+        // The first step, and the second that makes the device's room for the band (and at
+        // most one merge that outgrows its room), take the full path.
+        for (rank, (.., report)) in all.iter().enumerate() {
+            assert!(report.stats.resident_steps + 3 >= steps, "{}: rank {rank} ran {} resident steps of {steps}, the probes sampled on the device", scene.name, report.stats.resident_steps);
+        }
+    }
+    let (_, state, _) = &all[0];
     assert_eq!(largest_difference(&one_state, state), (0.0, 0.0), "{}: sampling probes leaves the steps' bits alone", scene.name);
     let last = &one.last().expect("samples").values;
     if scene.name.starts_with("hydrostatic") {
         assert!(last.iter().zip(&columns).any(|(v, c)| *c == "force" && v.abs() > 1.0), "{}: the tank carries the fluid: {last:?}", scene.name);
     }
     let mut largest: f64 = 0.0;
-    for (rank, (samples, _)) in all.iter().enumerate() {
+    for (rank, (samples, ..)) in all.iter().enumerate() {
         assert_eq!(samples.len(), one.len(), "{}: rank {rank}", scene.name);
         for (a, b) in one.iter().zip(samples) {
             assert_eq!((a.step, a.time), (b.step, b.time));
@@ -627,6 +641,9 @@ fn probes_on_gpu_ranks_against_one_gpu(ctx: &GpuContext, scene: &Scene, steps: u
                 // density near zero is compared at the scale of rho0 and rho0 g times 0.1 m).
                 let scale = match *c { "pressure_Pa" | "density_kg_m3" => 1000.0, "force" => force, _ => 1.0 };
                 largest = largest.max((x - y).abs() / x.abs().max(scale));
+                if on_device && *c != "force" {
+                    assert!(x.to_bits() == y.to_bits(), "{}: rank {rank}, step {}, {c}: one GPU {x}, GPU ranks {y}, bit for bit", scene.name, a.step);
+                }
                 assert!((x - y).abs() <= 1e-5 * x.abs().max(scale), "{}: rank {rank}, step {}, {c}: one GPU {x}, GPU ranks {y}", scene.name, a.step);
             }
         }

@@ -322,7 +322,8 @@ fn probe_particles(
         slot_sums[s] = select(0.0, LOWEST, is_max_slot(s, forces));
     }
     let i = gid.x + gid.y * groups.x * PROBE_WORKGROUP;
-    if (i < params.fluid_count) {
+    // Across ranks each rank counts its own particles: a ghost's part is its owner's.
+    if (i < params.fluid_count && !is_ghost(positions_at(i).w)) {
         if (WALLS && forces > 0u) {
             add_wall_forces(i, forces);
         }

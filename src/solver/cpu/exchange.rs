@@ -486,6 +486,12 @@ pub trait DeviceStages<R: Real>: Send {
     fn read_held(&mut self, _held: HeldArrays<'_, R>) -> anyhow::Result<()> {
         anyhow::bail!("this device keeps no particles between steps")
     }
+    /// The probes' rows the device sampled since the last call (a scene with probes, weakly
+    /// compressible: src/solver/cpu/exchange.rs `probes_on_device`), each its step and every
+    /// column over the held particles, the ghosts left out of the forces and fronts.
+    fn take_probe_rows(&mut self) -> anyhow::Result<Vec<(u64, Vec<f64>)>> {
+        Ok(Vec::new())
+    }
     /// Bytes of particles that crossed between the host and the device so far, both ways.
     fn bus_bytes(&self) -> u64 {
         0
@@ -676,7 +682,9 @@ impl<R: Real> CpuSolver<R> {
         // the force and front probes after the solves, on the step's first positions.
         let dfsph = self.dfsph.is_some();
         let mut dfsph_points = None;
-        if self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some()) {
+        let sampling = self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
+        let on_device = self.probes_on_device();
+        if sampling && !on_device {
             self.fields_on_device();
             self.compute_wall_pressure();
             match dfsph {
@@ -713,6 +721,13 @@ impl<R: Real> CpuSolver<R> {
         }
         if let (Some(values), Some(mut positions)) = (dfsph_points, first_positions) {
             self.sample_dfsph_forces_on_device(values, dt, &mut positions);
+        }
+        if sampling && on_device {
+            self.sample_probes_from_device();
+        } else if sampling {
+            // The host sampled them: the device's own rows are not used (read, so that its row
+            // buffer never fills).
+            let _ = self.on_device(|_, device| device.take_probe_rows());
         }
         let n = self.positions.len();
         self.accelerations.resize(n, V3::zero());
@@ -781,6 +796,45 @@ impl<R: Real> CpuSolver<R> {
             link.seconds += t0.elapsed().as_secs_f64();
         }
         self.ranks.as_deref_mut().expect("across ranks").link = Some(link);
+    }
+
+    /// Whether each rank's device samples the probes (the weakly compressible step across
+    /// ranks on devices): wgsl/sim/probes.wgsl runs on the held particles within the step, as
+    /// on one device, and the host adds the ranks' rows ([`device_probes_across_ranks`]), so
+    /// a step that samples probes needs no particle on the host and may stay resident. DFSPH
+    /// samples at two points of its step, on the host; so does a scene with a gauge whose
+    /// vertical line crosses the slabs (cut along y), level by level.
+    pub(super) fn probes_on_device(&self) -> bool {
+        let Some(part) = self.ranks.as_deref() else { return false };
+        let gauge = || self.params.probes.probes.iter().any(|p| matches!(p.geometry, ProbeGeometry::Gauge { .. }));
+        self.device.is_some() && self.dfsph.is_none() && !self.params.probes.is_empty() && !(part.axis == 1 && gauge())
+    }
+
+    /// After a device step that sampled the probes ([`Self::probes_on_device`]): the device's
+    /// row of this step, added over the ranks. A rank whose device gave no row still takes
+    /// part in the collectives (with NaN values), so no rank waits, and stops with its error.
+    pub(super) fn sample_probes_from_device(&mut self) {
+        let (step, count) = (self.step, self.params.probes.value_count());
+        let rows = self.on_device(|_, device| device.take_probe_rows());
+        let (device, mut failure) = match rows.map(|rows| rows.into_iter().find(|r| r.0 == step)) {
+            Ok(Some((_, values))) if values.len() == count => (values, None),
+            Ok(_) => (vec![f64::NAN; count], Some(format!("the device sampled no probe row of step {step}"))),
+            Err(e) => (vec![f64::NAN; count], Some(format!("reading the device's probe rows failed: {e:#}"))),
+        };
+        let part = self.ranks.as_deref().expect("across ranks");
+        if let Some(e) = failure.as_mut() {
+            *e = format!("rank {} of {}: {e}", part.comm.rank(), part.comm.size());
+        }
+        let grid = self.grid;
+        let evaluates = |x: [f64; 3]| part.slabs.owner(grid.layer(V3::<R>::from64(x), part.axis)) == part.comm.rank();
+        let p = &self.params.probes;
+        let t0 = Instant::now();
+        let (values, reduced) = device_probes_across_ranks(part, &p.probes, &p.offsets(), device, evaluates);
+        if let Some(part) = self.ranks.as_deref_mut() {
+            part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+        }
+        self.note_failure(failure.or(reduced));
+        self.push_probe_sample(values);
     }
 
     /// Every probe's values read from `input` by the ranks together ([`probes_across_ranks`]),
@@ -1486,46 +1540,78 @@ pub(super) fn probes_across_ranks<R: Real>(input: &ProbeInput<R>, part: &RankPar
         .map(|(p, &at)| (p.clone(), at))
         .unzip();
     probes::probe_points(input, &mine, &mine_at, &mut local);
-    // Summed: every column, then each gauge's level fractions; the fronts' farthest apart.
+    // Every column, then each gauge's level fractions (this slab's levels).
     let mut sums: Vec<f64> = local.iter().map(|v| v.to64()).collect();
-    let mut farthest = Vec::new();
-    for (probe, &at) in list.iter().zip(offsets) {
-        match probe.geometry {
-            ProbeGeometry::Gauge { x, z, bottom, top, step } => {
-                let f = probes::gauge_fractions(input, R::of(x), R::of(z), R::of(bottom), R::of(top), R::of(step), evaluates);
-                sums.extend(f.iter().map(|v| v.to64()));
-            }
-            ProbeGeometry::Front { .. } => {
-                farthest.push(if sums[at + 1] > 0.0 { sums[at] } else { f64::NEG_INFINITY });
-                sums[at] = 0.0;
-            }
-            _ => {}
+    for probe in list {
+        if let ProbeGeometry::Gauge { x, z, bottom, top, step } = probe.geometry {
+            let f = probes::gauge_fractions(input, R::of(x), R::of(z), R::of(bottom), R::of(top), R::of(step), evaluates);
+            sums.extend(f.iter().map(|v| v.to64()));
         }
     }
-    let reduced = all_sum(&*part.comm, &sums).and_then(|s| Ok((s, all_max(&*part.comm, &farthest)?)));
-    let (sums, farthest) = match reduced {
-        Ok(r) => r,
-        Err(e) => return (vec![f64::NAN; count], Some(format!("{e:#}"))),
+    let (mut values, fractions) = match add_probes_over_ranks(part, list, offsets, sums) {
+        Ok(added) => added,
+        Err(e) => return (vec![f64::NAN; count], Some(e)),
     };
-    let mut values = sums[..count].to_vec();
-    let (mut level, mut front) = (count, 0);
+    let mut level = 0;
     for (probe, &at) in list.iter().zip(offsets) {
-        match probe.geometry {
-            ProbeGeometry::Gauge { bottom, top, step, .. } => {
-                let (bottom, top, step) = (R::of(bottom), R::of(top), R::of(step));
-                let levels = probes::gauge_levels(bottom, top, step).len();
-                let fractions = &sums[level..level + levels];
-                let surface = probes::surface_from_fractions(bottom, top, step, |k, _| R::of(fractions[k]));
-                values[at] = surface.to64();
-                values[at + 1] = (surface - bottom).to64();
-                level += levels;
-            }
-            ProbeGeometry::Front { .. } => {
-                values[at] = if values[at + 1] > 0.0 { farthest[front] } else { 0.0 };
-                front += 1;
-            }
-            _ => {}
+        if let ProbeGeometry::Gauge { bottom, top, step, .. } = probe.geometry {
+            let (bottom, top, step) = (R::of(bottom), R::of(top), R::of(step));
+            let levels = probes::gauge_levels(bottom, top, step).len();
+            let fractions = &fractions[level..level + levels];
+            let surface = probes::surface_from_fractions(bottom, top, step, |k, _| R::of(fractions[k]));
+            values[at] = surface.to64();
+            values[at + 1] = (surface - bottom).to64();
+            level += levels;
         }
     }
     (values, None)
+}
+
+/// The probes' sample across ranks from each rank's device (wgsl/sim/probes.wgsl on the held
+/// particles, the ghosts left out of the forces and fronts): `device` holds every column as
+/// the device computed it; a point's and a gauge's values are kept by the rank that
+/// `evaluates` them (whose neighbourhood of them is whole, so they are the one-process run's
+/// bits) and zeroed elsewhere, then the ranks add them up as [`probes_across_ranks`] does.
+pub(super) fn device_probes_across_ranks(part: &RankPart, list: &[Probe], offsets: &[usize], mut device: Vec<f64>, evaluates: impl Fn([f64; 3]) -> bool) -> (Vec<f64>, Option<String>) {
+    let count = device.len();
+    for (probe, &at) in list.iter().zip(offsets) {
+        let point = match probe.geometry {
+            ProbeGeometry::Point { position } => position,
+            // The gauge's line lies in one cell layer of the slab axis (probes_on_device).
+            ProbeGeometry::Gauge { x, z, bottom, .. } => [x, bottom, z],
+            _ => continue,
+        };
+        if !evaluates(point) {
+            device[at..at + probe.geometry.columns().len()].fill(0.0);
+        }
+    }
+    match add_probes_over_ranks(part, list, offsets, device) {
+        Ok((values, _)) => (values, None),
+        Err(e) => (vec![f64::NAN; count], Some(e)),
+    }
+}
+
+/// The ranks' probe sums added up (collective): `sums` holds every column of this rank
+/// (a front's farthest and count from its own particles), then any further sums to add; each
+/// front's farthest is taken over the ranks that saw fluid in its band. Returns the columns and
+/// the further sums.
+fn add_probes_over_ranks(part: &RankPart, list: &[Probe], offsets: &[usize], mut sums: Vec<f64>) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let count = offsets.last().zip(list.last()).map_or(0, |(&at, p)| at + p.geometry.columns().len());
+    let mut farthest = Vec::new();
+    for (probe, &at) in list.iter().zip(offsets) {
+        if let ProbeGeometry::Front { .. } = probe.geometry {
+            farthest.push(if sums[at + 1] > 0.0 { sums[at] } else { f64::NEG_INFINITY });
+            sums[at] = 0.0;
+        }
+    }
+    let (mut sums, farthest) = all_sum(&*part.comm, &sums).and_then(|s| Ok((s, all_max(&*part.comm, &farthest)?))).map_err(|e| format!("{e:#}"))?;
+    let further = sums.split_off(count);
+    let mut front = 0;
+    for (probe, &at) in list.iter().zip(offsets) {
+        if let ProbeGeometry::Front { .. } = probe.geometry {
+            sums[at] = if sums[at + 1] > 0.0 { farthest[front] } else { 0.0 };
+            front += 1;
+        }
+    }
+    Ok((sums, further))
 }

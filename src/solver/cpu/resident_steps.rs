@@ -45,8 +45,10 @@ impl<R: Real> CpuSolver<R> {
         }
         let Some(part) = self.ranks.as_deref() else { return false };
         let balance = part.balance_every > 0 && self.step > 0 && self.step % part.balance_every == 0;
-        let probes = !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
-        if part.first_order.is_some() || balance || probes {
+        // Probes sampled on the host need its particles; the device's own samples do not.
+        let sampling = !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
+        let probes_on_device = self.probes_on_device();
+        if part.first_order.is_some() || balance || (sampling && !probes_on_device) {
             return false;
         }
         let (rank, size) = (part.comm.rank(), part.comm.size());
@@ -100,6 +102,9 @@ impl<R: Real> CpuSolver<R> {
                     part.stats.resident_steps += 1;
                 }
                 self.device_held = DeviceHeld::Ahead { own: own + arrived - left };
+                if sampling {
+                    self.sample_probes_from_device();
+                }
                 self.record_resident_step(&done);
             }
             Ok(None) => {

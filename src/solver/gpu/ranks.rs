@@ -218,6 +218,14 @@ impl DeviceStages<f32> for GpuRankStages {
         Ok(Some(ResidentStep { dt: self.step_dt(&words), health }))
     }
 
+    fn take_probe_rows(&mut self) -> anyhow::Result<Vec<(u64, Vec<f64>)>> {
+        let Some(solver) = self.solver.as_mut() else { return Ok(Vec::new()) };
+        let samples = crate::solver::backend::Backend::take_probe_samples(solver)?;
+        // Each row: its head (step, time and its compensation, dt) and its values, in words.
+        self.bus_bytes += samples.iter().map(|s| 4 * (4 + s.values.len() as u64)).sum::<u64>();
+        Ok(samples.into_iter().map(|s| (s.step, s.values)).collect())
+    }
+
     fn read_held(&mut self, mut held: HeldArrays<'_, f32>) -> anyhow::Result<()> {
         anyhow::ensure!(self.keeps_step, "the device keeps no step's particles");
         // The host's ids are no longer in the order of the upload: with DFSPH they come from the
