@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # GPU ranks on one hardware GPU, in one command: the dam break on one process against two
 # ranks of wgsph-mpi sharing the GPU, with resident steps (the default) and
-# with the full path every step (--full-exchange), weakly compressible and DFSPH; and whether
-# two ranks end on one GPU's last snapshot, byte for byte.
+# with the full path every step (--full-exchange), weakly compressible and DFSPH, and with
+# probes sampled every step; and whether two ranks end on one GPU's last snapshot, byte for byte.
 #
 # Usage, from the project root, with the release binaries at $WGSPH and $WGSPH_MPI (default
 # .gpu/wgsph and .gpu/wgsph-mpi) and Open MPI's launcher at $MPIRUN (default mpirun):
@@ -40,7 +40,7 @@ run() {
   esac
   rm -rf "$work/run"
   echo "=== $name ($(date -u +%T))"
-  timeout "$limit" "${launch[@]}" run dam_break --backend gpu --quiet --out "$work/run" "$@" 2>&1 \
+  timeout "$limit" "${launch[@]}" run "${SCENE:-dam_break}" --backend gpu --quiet --out "$work/run" "$@" 2>&1 \
     | grep -v '^warning: fluid\[' | tail -3
   echo "=== exit ${PIPESTATUS[0]}"
   [ -f "$work/run/summary.json" ] && cp "$work/run/summary.json" "$out/$name.json"
@@ -82,6 +82,18 @@ for n in $sizes; do
       run "wcsph_${n}_${how}_$steps" 150 $how --particles "$n" --steps $steps --snapshot-every 0
     done
   done
+done
+# Probes every step (a point on the far wall, a gauge, the tank's force, the front), sampled by
+# each rank's device: the steps stay resident.
+probes="$work/dam_probes.toml"
+cp scenes/dam_break.toml "$probes"
+for p in 'name = "wall_sensor"\ntype = "point"\nposition = [1.59, 0.05, 0.05]' 'name = "gauge_1"\ntype = "gauge"\nposition = [0.3, 0.0, 0.05]' 'name = "tank"\ntype = "force"\nboundary = 0' 'name = "front"\ntype = "front"'; do
+  printf '\n[[probe]]\n%b\nevery_steps = 1\n' "$p" >> "$probes"
+done
+echo "=== probes_${first}_one ($(date -u +%T))"
+timeout 150 "$W" profile "$probes" --steps 40 --particles "$first" 2>&1 | grep -E 'host wall-clock|^total|probes'
+for steps in 100 300; do
+  SCENE=$probes run "probes_${first}_resident_$steps" 150 resident --particles "$first" --steps $steps --snapshot-every 0
 done
 profile "dfsph_${first}_one" --particles "$first" "${dfsph[@]}"
 for how in resident full; do

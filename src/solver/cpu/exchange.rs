@@ -486,9 +486,9 @@ pub trait DeviceStages<R: Real>: Send {
     fn read_held(&mut self, _held: HeldArrays<'_, R>) -> anyhow::Result<()> {
         anyhow::bail!("this device keeps no particles between steps")
     }
-    /// The probes' rows the device sampled since the last call (a scene with probes, weakly
-    /// compressible: src/solver/cpu/exchange.rs `probes_on_device`), each its step and every
-    /// column over the held particles, the ghosts left out of the forces and fronts.
+    /// The probes' rows the device sampled since the last call (a scene with probes:
+    /// `CpuSolver::probes_on_device`), each its step and every column over the held particles,
+    /// the ghosts left out of the forces and fronts.
     fn take_probe_rows(&mut self) -> anyhow::Result<Vec<(u64, Vec<f64>)>> {
         Ok(Vec::new())
     }
@@ -798,16 +798,16 @@ impl<R: Real> CpuSolver<R> {
         self.ranks.as_deref_mut().expect("across ranks").link = Some(link);
     }
 
-    /// Whether each rank's device samples the probes (the weakly compressible step across
-    /// ranks on devices): wgsl/sim/probes.wgsl runs on the held particles within the step, as
-    /// on one device, and the host adds the ranks' rows ([`device_probes_across_ranks`]), so
-    /// a step that samples probes needs no particle on the host and may stay resident. DFSPH
-    /// samples at two points of its step, on the host; so does a scene with a gauge whose
-    /// vertical line crosses the slabs (cut along y), level by level.
+    /// Whether each rank's device samples the probes (across ranks on devices): wgsl/sim/
+    /// probes.wgsl runs on the held particles within the step, as on one device (with DFSPH the
+    /// points after the factors, the rest after the solves), and the host adds the ranks' rows
+    /// ([`device_probes_across_ranks`]), so a step that samples probes needs no particle on
+    /// the host and may stay resident. A scene with a gauge whose vertical line crosses the
+    /// slabs (cut along y) is sampled on the host instead, level by level.
     pub(super) fn probes_on_device(&self) -> bool {
         let Some(part) = self.ranks.as_deref() else { return false };
         let gauge = || self.params.probes.probes.iter().any(|p| matches!(p.geometry, ProbeGeometry::Gauge { .. }));
-        self.device.is_some() && self.dfsph.is_none() && !self.params.probes.is_empty() && !(part.axis == 1 && gauge())
+        self.device.is_some() && !self.params.probes.is_empty() && !(part.axis == 1 && gauge())
     }
 
     /// After a device step that sampled the probes ([`Self::probes_on_device`]): the device's

@@ -50,8 +50,10 @@ pub struct GpuRankStages {
     keeps_step: bool,
     /// Bytes of particles that crossed between the host and the device (both ways), so far.
     bus_bytes: u64,
-    /// Band and received particles the resident exchange makes room for: an eighth of the
-    /// held particles at first, more once a step needed more.
+    /// Band and received particles the resident exchange makes room for: at first an eighth of
+    /// the held particles or a quarter more than the ghosts of the last full step (the band
+    /// the neighbours take and the particles they send are each about that many), whichever
+    /// is more; more once a step needed more.
     list_room: u64,
     /// DFSPH: each place's particle id (a position's w holds its place in the upload, where the
     /// warm starts live too), for the solver's capacity; uploaded with the particles, written
@@ -264,6 +266,8 @@ impl GpuRankStages {
         let ids = if dfsph.is_some() { None } else { Some(held.ids.as_slice()) };
         solver.load_held(&positions, &velocities, held.carried_densities, held.ghosts, ids, step);
         self.bus_bytes += 32 * n as u64;
+        let ghosts = held.ghosts.iter().filter(|&&g| g).count() as u64;
+        self.list_room = self.list_room.max(ghosts + ghosts / 4);
         if let Some(d) = &dfsph {
             solver.load_dfsph_held(d);
             self.bus_bytes += 8 * n as u64;
