@@ -13,7 +13,9 @@
 //   particle moves up by the received particles that come before it and down by the dropped
 //   slots before it (two binary searches in short sorted lists), so the stable binning of the
 //   step gives every cell the particles and order one process gives it, as the full upload does;
-// - `own_health` counts the rank's own particles' health after the step (ghosts left out).
+// - `own_health` counts the rank's own particles' health after the step (ghosts left out);
+// - `count_layers` counts the rank's own particles in each cell layer of the slab axis, from
+//   which the ranks move their slab bounds towards equal counts (src/solver/decomposition.rs).
 //
 // With DFSPH (DFSPH_PLACES) a position's w holds the particle's place in the upload, where its
 // id and its warm starts live (the solves' arrays are indexed by it, and the binning moves only
@@ -48,6 +50,8 @@
 //! array warm_pressure: f32, read, optional
 //! array warm_divergence: f32, read, optional
 //! array merged_places: f32, read_write, optional
+// count_layers: per cell layer of the slab axis, the own particles in it.
+//! array layer_counts: u32, atomic, whole
 
 // DFSPH across ranks: positions hold places, not ids (above).
 override DFSPH_PLACES: bool = false;
@@ -287,5 +291,19 @@ fn own_health(
     if (lid == 0u) {
         atomicMax(&exchange_words[EXCHANGE_MAX_SPEED2], reduce_result(0u));
         atomicMax(&exchange_words[EXCHANGE_MAX_DENSITY], reduce_result(1u));
+    }
+}
+
+// The rank's own particles (ghosts left out) per cell layer of the slab axis, as the host's
+// balance counts them (`Grid::layer` of each own position), so that a step that moves the slab
+// bounds needs no particle on the host. Zeroed by the host before.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn count_layers(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    if (i < params.fluid_count) {
+        let p = positions_at(i);
+        if (!is_ghost(p.w)) {
+            atomicAdd(&layer_counts[cell_coords(p.xyz)[word(EXCHANGE_AXIS)]], 1u);
+        }
     }
 }

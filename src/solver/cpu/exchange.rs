@@ -50,9 +50,35 @@ pub struct RankPart {
     pub(super) walls: WallSource,
     /// Wall particles of the whole simulation.
     pub(super) total_walls: usize,
+    /// The step whose bounds were balanced already (by a resident step, from the device's
+    /// counts, before it fell back to the full path, whose exchange then leaves them).
+    pub(super) balanced_step: Option<u64>,
 }
 
 impl RankPart {
+    /// Whether step `step` may move the slab bounds (every `balance_every` steps, once).
+    pub(super) fn balance_due(&self, step: u64) -> bool {
+        self.balance_every > 0 && step > 0 && step % self.balance_every == 0 && self.balanced_step != Some(step)
+    }
+
+    /// The slab bounds moved towards equal counts (collective), from this rank's own particles
+    /// per cell layer of the slab axis (`layers`); true where they moved. Counts the step's
+    /// imbalance and the moves in the rank's stats.
+    pub(super) fn balance(&mut self, layers: &[f64]) -> anyhow::Result<bool> {
+        let counts: Vec<u64> = all_sum(&*self.comm, layers)?.iter().map(|&c| c as u64).collect();
+        let per_rank = |s: &Slabs| -> Vec<u64> { (0..s.ranks()).map(|r| s.layers_of(r).map(|l| counts[l as usize]).sum()).collect() };
+        let before = imbalance(&per_rank(&self.slabs));
+        let moved = self.slabs.rebalanced(&counts);
+        self.stats.last_imbalance = before;
+        self.stats.max_imbalance = self.stats.max_imbalance.max(before);
+        if moved == self.slabs {
+            return Ok(false);
+        }
+        self.slabs = moved;
+        self.stats.rebalances += 1;
+        Ok(true)
+    }
+
     /// Where this rank's slab lies, and which neighbours it has.
     pub(super) fn faces(&self) -> SlabFaces {
         let (rank, size) = (self.comm.rank(), self.comm.size());
@@ -486,6 +512,16 @@ pub trait DeviceStages<R: Real>: Send {
     fn read_held(&mut self, _held: HeldArrays<'_, R>) -> anyhow::Result<()> {
         anyhow::bail!("this device keeps no particles between steps")
     }
+    /// The own particles (ghosts left out) per cell layer along `axis` of the state the device
+    /// kept (`None` where it keeps none), for a step that may move the slab bounds.
+    fn own_layer_counts(&mut self, _axis: usize) -> anyhow::Result<Option<Vec<u32>>> {
+        Ok(None)
+    }
+    /// The walls near the slab replaced by `walls` where they fit the device's buffers, the
+    /// state it kept left as it is; false, and nothing changed, where they do not.
+    fn replace_walls(&mut self, _walls: &InitialState) -> bool {
+        false
+    }
     /// The probes' rows the device sampled since the last call (a scene with probes:
     /// `CpuSolver::probes_on_device`), each its step and every column over the held particles,
     /// the ghosts left out of the forces and fronts.
@@ -618,7 +654,7 @@ impl<R: Real> CpuSolver<R> {
     }
 
     /// The wall particles near this rank's slab, from the scene (or the whole state given).
-    fn walls_near_slab(&self) -> InitialState {
+    pub(super) fn walls_near_slab(&self) -> InitialState {
         let part = self.ranks.as_deref().expect("across ranks");
         part.walls.near(&self.grid, part.axis, part.slabs.layers_of(part.comm.rank()), part.slabs.halo)
     }
@@ -946,6 +982,7 @@ impl<R: Real> CpuSolver<R> {
             link: None,
             total_walls: walls.total(),
             walls,
+            balanced_step: None,
         }));
         Ok(solver)
     }
@@ -1053,24 +1090,13 @@ impl<R: Real> CpuSolver<R> {
         let part = self.ranks.as_mut().expect("only across ranks");
         let axis = part.axis;
         let layer_of = |grid: &crate::model::params::Grid<R>, p: V3<R>| grid.layer(p, axis);
-        let comm = part.comm.clone();
         let mut slab_moved = false;
-        if balance && part.balance_every > 0 && step > 0 && step % part.balance_every == 0 {
+        if balance && part.balance_due(step) {
             let mut layers = vec![0.0; grid.dims[axis] as usize];
             for &p in &held.x {
                 layers[layer_of(&grid, p) as usize] += 1.0;
             }
-            let counts: Vec<u64> = all_sum(&*comm, &layers)?.iter().map(|&c| c as u64).collect();
-            let per_rank = |s: &Slabs| -> Vec<u64> { (0..s.ranks()).map(|r| s.layers_of(r).map(|l| counts[l as usize]).sum()).collect() };
-            let before = imbalance(&per_rank(&part.slabs));
-            let moved = part.slabs.rebalanced(&counts);
-            part.stats.last_imbalance = before;
-            part.stats.max_imbalance = part.stats.max_imbalance.max(before);
-            if moved != part.slabs {
-                part.slabs = moved;
-                part.stats.rebalances += 1;
-                slab_moved = true;
-            }
+            slab_moved = part.balance(&layers)?;
         }
         let (held, _) = part.migrate(held, &grid, carried)?;
         let held = held.sorted();

@@ -165,6 +165,14 @@ impl<R: Real> CpuSolver<R> {
     /// never move; across ranks again whenever the slab's bounds move, and handed to the
     /// device stages too.
     pub(crate) fn install_walls(&mut self, initial: &InitialState) {
+        self.install_walls_on_host(initial);
+        if let Some(device) = &self.device {
+            exchange::lock(device).set_walls(initial);
+        }
+    }
+
+    /// The host's wall arrays of [`Self::install_walls`] (a device's walls left as they are).
+    fn install_walls_on_host(&mut self, initial: &InitialState) {
         let params = &self.params;
         let walls: Vec<V3<R>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
         let (wall_order, wall_starts) = sort_by_cell(&self.grid, &walls);
@@ -177,9 +185,6 @@ impl<R: Real> CpuSolver<R> {
         self.wall_points = self.wall_positions.iter().zip(&self.wall_masses).map(|(x, &m)| [x.0[0], x.0[1], x.0[2], m]).collect();
         self.wall_fields = if params.boundary_pressure == BoundaryPressure::Adami { vec![[R::zero(), R::of(params.rest_density)]; walls.len()] } else { Vec::new() };
         self.wall_order = wall_order;
-        if let Some(device) = &self.device {
-            exchange::lock(device).set_walls(initial);
-        }
     }
 
     pub fn params(&self) -> &Params {

@@ -69,6 +69,15 @@ pub fn select_band(positions: &[[f32; 4]], starts: &[u32], grid: &Grid<f32>, fac
     (dropped, band)
 }
 
+/// `count_layers`: the own particles (ghosts left out) per cell layer of the slab `axis`.
+pub fn count_layers(positions: &[[f32; 4]], grid: &Grid<f32>, axis: usize) -> Vec<u32> {
+    let mut counts = vec![0u32; grid.dims[axis] as usize];
+    for p in positions.iter().filter(|p| !is_ghost(p)) {
+        counts[grid.layer(V3([p[0], p[1], p[2]]), axis) as usize] += 1;
+    }
+    counts
+}
+
 /// `place_inserts`: the held slot before which each received particle goes (its place in the
 /// one-process order `keys[j]` against the cells of the last binning), and its new slot, given
 /// the `dropped` slots (sorted).

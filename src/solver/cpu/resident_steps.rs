@@ -8,8 +8,10 @@
 //! stable binning then sees what the full path gives it, and computes the same bits.
 //!
 //! A step takes the full path where the host needs the particles: the first step, the first
-//! after the host read them for an output (a snapshot, a checkpoint), a step that moves the
-//! slab bounds or samples probes, or a band or merge that outgrows the device's room. With
+//! after the host read them for an output (a snapshot, a checkpoint), a step whose probes the
+//! host samples, a step whose moved bounds bring walls the device has no room for, or a band
+//! or merge that outgrows the device's room. A step that may move the bounds counts the own
+//! particles per layer on the device (`balance_on_device`). With
 //! DFSPH the warm starts travel with the band and the received particles, the host checks the
 //! step's ghosts by their ids as the full path does, and the device makes the solves' ghost
 //! link from its own binning. The particles stay on the device from one batch of steps to the
@@ -35,6 +37,16 @@ pub enum DeviceHeld {
     Ahead { own: usize },
 }
 
+/// How a resident step's move of the slab bounds went.
+enum Balanced {
+    /// Balanced; the step goes on from the device.
+    Resident,
+    /// The step takes the full path (which balances where this did not).
+    FullPath,
+    /// A collective failed: the step stops.
+    Failed,
+}
+
 impl<R: Real> CpuSolver<R> {
     /// Runs this step from the state the device kept, where it can; false where the step takes
     /// the full path (nothing done, or, where the merge did not fit the device, the exchange
@@ -44,13 +56,22 @@ impl<R: Real> CpuSolver<R> {
             return false;
         }
         let Some(part) = self.ranks.as_deref() else { return false };
-        let balance = part.balance_every > 0 && self.step > 0 && self.step % part.balance_every == 0;
+        let balance = part.balance_due(self.step);
         // Probes sampled on the host need its particles; the device's own samples do not.
         let sampling = !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
         let probes_on_device = self.probes_on_device();
-        if part.first_order.is_some() || balance || (sampling && !probes_on_device) {
+        if part.first_order.is_some() || (sampling && !probes_on_device) {
             return false;
         }
+        // This rank's own particles before the exchange, counted by the slab they were held for.
+        let own = self.own_count();
+        // The bounds' move first, as the full path's exchange makes it.
+        match balance.then(|| self.balance_on_device()) {
+            Some(Balanced::FullPath) => return false,
+            Some(Balanced::Failed) => return true,
+            Some(Balanced::Resident) | None => {}
+        }
+        let Some(part) = self.ranks.as_deref() else { return false };
         let (rank, size) = (part.comm.rank(), part.comm.size());
         let faces = part.faces();
         let particles = part.total_fluid;
@@ -63,7 +84,6 @@ impl<R: Real> CpuSolver<R> {
                 return false;
             }
         };
-        let own = self.own_count();
         let t0 = Instant::now();
         let exchanged = self.exchange_band(&faces, &band);
         if let Some(part) = self.ranks.as_deref_mut() {
@@ -122,6 +142,53 @@ impl<R: Real> CpuSolver<R> {
             }
         }
         true
+    }
+
+    /// A step that may move the slab bounds, balanced from the own particles the device counted
+    /// per cell layer (none read back), with the full path's collective and rule
+    /// ([`super::exchange::RankPart::balance`]). Where the bounds move, the walls near the new
+    /// slab replace the old on the device, in its buffers where they fit; where they do not, the
+    /// particles are read back first and the step takes the full path (which balances no more).
+    fn balance_on_device(&mut self) -> Balanced {
+        let part = self.ranks.as_deref().expect("across ranks");
+        let (rank, size, axis) = (part.comm.rank(), part.comm.size(), part.axis);
+        let counts = match self.on_device(|_, device| device.own_layer_counts(axis)) {
+            Ok(Some(counts)) => counts,
+            // The full path counts them on the host.
+            Ok(None) => return Balanced::FullPath,
+            Err(e) => {
+                self.note_failure(Some(format!("rank {rank} of {size}: counting the particles per layer failed: {e:#}")));
+                return Balanced::FullPath;
+            }
+        };
+        let t0 = Instant::now();
+        let step = self.step;
+        let part = self.ranks.as_deref_mut().expect("across ranks");
+        let layers: Vec<f64> = counts.iter().map(|&c| c as f64).collect();
+        let moved = part.balance(&layers);
+        part.balanced_step = Some(step);
+        part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
+        match moved {
+            Ok(false) => Balanced::Resident,
+            Ok(true) => {
+                let walls = self.walls_near_slab();
+                if self.on_device(|_, device| device.replace_walls(&walls)) {
+                    self.install_walls_on_host(&walls);
+                    Balanced::Resident
+                } else {
+                    // The device makes its buffers again for these walls: its particles first.
+                    self.sync_held();
+                    self.device_held = DeviceHeld::Nothing;
+                    self.install_walls(&walls);
+                    Balanced::FullPath
+                }
+            }
+            Err(e) => {
+                // A failed collective stops every rank after this step.
+                self.note_failure(Some(format!("{e:#}")));
+                Balanced::Failed
+            }
+        }
     }
 
     /// The exchange of the full path (migration, then ghosts) on the band: the particles the

@@ -101,12 +101,7 @@ impl DeviceStages<f32> for GpuRankStages {
     }
 
     fn set_walls(&mut self, walls: &InitialState) {
-        self.walls = InitialState {
-            wall_positions: walls.wall_positions.clone(),
-            wall_masses: walls.wall_masses.clone(),
-            wall_boundaries: walls.wall_boundaries.clone(),
-            ..InitialState::default()
-        };
+        self.keep_walls(walls);
         // Loaded where they fit; otherwise made again, with these walls, at the next step.
         if !self.solver.as_mut().is_some_and(|solver| solver.load_walls(walls)) {
             self.solver = None;
@@ -124,19 +119,10 @@ impl DeviceStages<f32> for GpuRankStages {
     }
 
     fn resident_band(&mut self, faces: &SlabFaces) -> anyhow::Result<Option<ResidentBand<f32>>> {
-        if !self.keeps_step || self.options.full_exchange {
+        if !self.make_resident()? {
             return Ok(None);
         }
-        let solver = self.solver.as_ref().expect("kept by a step");
-        if self.resident.is_none() {
-            let room = self.list_room.max(solver.fluid_count as u64 / 8);
-            let places = match (&self.place_ids, &solver.dfsph) {
-                (Some(ids), Some(d)) => Some(PlaceArrays { ids, warm_pressure: &d.buffers.warm_pressure, warm_divergence: &d.buffers.warm_divergence }),
-                _ => None,
-            };
-            self.resident = Some(ResidentExchange::new(solver, room, places)?);
-        }
-        let resident = self.resident.as_ref().expect("made above");
+        let (Some(solver), Some(resident)) = (self.solver.as_ref(), self.resident.as_ref()) else { return Ok(None) };
         let band = resident.band(solver, faces);
         // The control words written, and what the reads took.
         self.bus_bytes += WORDS_BYTES + resident.band_bytes_read();
@@ -218,6 +204,25 @@ impl DeviceStages<f32> for GpuRankStages {
         let (health, words) = resident.own_health(solver, status::DT as u64 + 1)?;
         self.keeps_step = true;
         Ok(Some(ResidentStep { dt: self.step_dt(&words), health }))
+    }
+
+    fn own_layer_counts(&mut self, axis: usize) -> anyhow::Result<Option<Vec<u32>>> {
+        if !self.make_resident()? {
+            return Ok(None);
+        }
+        let (Some(solver), Some(resident)) = (self.solver.as_ref(), self.resident.as_ref()) else { return Ok(None) };
+        let counts = resident.layer_counts(solver, axis)?;
+        // The control words written, and the counts read.
+        self.bus_bytes += WORDS_BYTES + 4 * counts.len() as u64;
+        Ok(Some(counts))
+    }
+
+    fn replace_walls(&mut self, walls: &InitialState) -> bool {
+        if !self.solver.as_mut().is_some_and(|solver| solver.load_walls(walls)) {
+            return false;
+        }
+        self.keep_walls(walls);
+        true
     }
 
     fn take_probe_rows(&mut self) -> anyhow::Result<Vec<(u64, Vec<f64>)>> {
@@ -356,6 +361,34 @@ impl GpuRankStages {
     }
 
     /// Room for `needed` band or received particles and a quarter more, from the next step on.
+    /// The walls a solver made again is made with.
+    fn keep_walls(&mut self, walls: &InitialState) {
+        self.walls = InitialState {
+            wall_positions: walls.wall_positions.clone(),
+            wall_masses: walls.wall_masses.clone(),
+            wall_boundaries: walls.wall_boundaries.clone(),
+            ..InitialState::default()
+        };
+    }
+
+    /// The resident exchange's stages, made where the device keeps the last step's particles
+    /// and the rank takes resident steps; false where it does not.
+    fn make_resident(&mut self) -> anyhow::Result<bool> {
+        if !self.keeps_step || self.options.full_exchange {
+            return Ok(false);
+        }
+        let solver = self.solver.as_ref().expect("kept by a step");
+        if self.resident.is_none() {
+            let room = self.list_room.max(solver.fluid_count as u64 / 8);
+            let places = match (&self.place_ids, &solver.dfsph) {
+                (Some(ids), Some(d)) => Some(PlaceArrays { ids, warm_pressure: &d.buffers.warm_pressure, warm_divergence: &d.buffers.warm_divergence }),
+                _ => None,
+            };
+            self.resident = Some(ResidentExchange::new(solver, room, places)?);
+        }
+        Ok(true)
+    }
+
     fn grow_lists(&mut self, needed: u64) {
         self.list_room = self.list_room.max(needed + needed / 4);
         self.resident = None;

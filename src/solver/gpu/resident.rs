@@ -71,9 +71,12 @@ pub struct ResidentExchange {
     place_inserts: Stage,
     merge_kept: Stage,
     own_health: Stage,
-    /// Per phase of the state: the bind groups of the four entry points, in that order.
-    groups: Vec<[wgpu::BindGroup; 4]>,
+    count_layers: Stage,
+    /// Per phase of the state: the bind groups of the five entry points, in that order.
+    groups: Vec<[wgpu::BindGroup; 5]>,
     words: wgpu::Buffer,
+    /// `count_layers`' counts, room for the layers along any axis.
+    layer_counts: wgpu::Buffer,
     dropped: wgpu::Buffer,
     band: wgpu::Buffer,
     inserts: wgpu::Buffer,
@@ -99,11 +102,14 @@ impl ResidentExchange {
         let capacity = solver.store.capacity();
         let list_capacity = list_capacity.clamp(64, capacity.max(64));
         let cells = solver.params.grid.cell_count() as u64 + 1;
+        // Room for the layers along any axis.
+        let layers = solver.params.grid.dims.into_iter().max().unwrap_or(1) as u64;
         let with_densities = solver.densities.is_some();
         let with_places = place_arrays.is_some();
         let lens = move |name: &str| match name {
             "starts" => cells,
             "exchange_words" => words::COUNT as u64,
+            "layer_counts" => layers,
             "band" | "inserts" => 3 * list_capacity,
             "insert_places" => list_capacity,
             "densities" if !with_densities => 0,
@@ -118,10 +124,11 @@ impl ResidentExchange {
         constants.push(("DFSPH_PLACES", with_places as u32 as f64));
         constants.push(("DENSITY_ARRAY", with_densities as u32 as f64));
         let stage = |entry: &str| stage_with_aliases(ctx, "resident_exchange", entry, &lens, &constants, &[]);
-        let [select_band, place_inserts, merge_kept, own_health] = ["select_band", "place_inserts", "merge_kept", "own_health"].map(stage);
-        let (select_band, place_inserts, merge_kept, own_health) = (select_band?, place_inserts?, merge_kept?, own_health?);
+        let [select_band, place_inserts, merge_kept, own_health, count_layers] = ["select_band", "place_inserts", "merge_kept", "own_health", "count_layers"].map(stage);
+        let (select_band, place_inserts, merge_kept, own_health, count_layers) = (select_band?, place_inserts?, merge_kept?, own_health?, count_layers?);
         let device = &ctx.device;
         let words = storage(device, "exchange words", words::COUNT as u64 * 4);
+        let layer_counts = storage(device, "layer counts", layers * 4);
         let dropped = storage(device, "dropped slots", capacity * 4);
         let band = storage(device, "band", 3 * list_capacity * 16);
         let inserts = storage(device, "received particles", 3 * list_capacity * 16);
@@ -138,6 +145,7 @@ impl ResidentExchange {
                     "densities" => solver.densities.clone().expect("bound only where the step keeps densities"),
                     "starts" => solver.starts.clone(),
                     "exchange_words" => words.clone(),
+                    "layer_counts" => layer_counts.clone(),
                     "dropped" => dropped.clone(),
                     "band" => band.clone(),
                     "inserts" => inserts.clone(),
@@ -155,10 +163,10 @@ impl ResidentExchange {
                     }
                     other => panic!("no buffer holds the array '{other}'"),
                 };
-                [&select_band, &place_inserts, &merge_kept, &own_health].map(|s| s.bind_group(device, "resident exchange", &solver.uniform, &buffers))
+                [&select_band, &place_inserts, &merge_kept, &own_health, &count_layers].map(|s| s.bind_group(device, "resident exchange", &solver.uniform, &buffers))
             })
             .collect();
-        Ok(ResidentExchange { select_band, place_inserts, merge_kept, own_health, groups, words, dropped, band, inserts, merged_positions, merged_velocities, places: place_arrays, capacity, list_capacity, last_sizes: Default::default(), bytes_read: Default::default() })
+        Ok(ResidentExchange { select_band, place_inserts, merge_kept, own_health, count_layers, groups, words, layer_counts, dropped, band, inserts, merged_positions, merged_velocities, places: place_arrays, capacity, list_capacity, last_sizes: Default::default(), bytes_read: Default::default() })
     }
 
     /// Band and received particles the arrays have room for.
@@ -292,6 +300,22 @@ impl ResidentExchange {
         };
         Ok((health, bytemuck::pod_collect_to_vec(&data[1])))
     }
+
+    /// The own particles (ghosts left out) per cell layer along `axis` of the state the last
+    /// step left, for moving the slab bounds without reading the particles back.
+    pub fn layer_counts(&self, solver: &GpuSolver, axis: usize) -> anyhow::Result<Vec<u32>> {
+        let ctx = &solver.ctx;
+        let layers = solver.params.grid.dims[axis] as u64;
+        let mut control = [0u32; words::COUNT];
+        control[words::AXIS] = axis as u32;
+        ctx.queue.write_buffer(&self.words, 0, bytemuck::cast_slice(&control));
+        ctx.queue.write_buffer(&self.layer_counts, 0, bytemuck::cast_slice(&vec![0u32; layers as usize]));
+        let mut rec = PlainRecorder::new(&ctx.device, "layer counts");
+        solver.dispatch_particles(&mut rec, &self.count_layers, &self.groups[solver.current][4]);
+        ctx.queue.submit([rec.finish()]);
+        let data = read_ranges(ctx, &[(&self.layer_counts, 0, layers * 4)])?;
+        Ok(bytemuck::pod_collect_to_vec(&data[0]))
+    }
 }
 
 impl GpuSolver {
@@ -325,6 +349,8 @@ pub struct ResidentExchangeRun {
     /// `own_health` of the state before (with its densities where the step keeps them).
     pub health: OwnHealth,
     pub densities: Option<Vec<f32>>,
+    /// `count_layers` of the state before along the slab axis.
+    pub layer_counts: Vec<u32>,
     /// DFSPH: each place's id and warm starts (constant density, divergence) before, and after
     /// the merge by new slot.
     pub places: Option<[Vec<[u32; 3]>; 2]>,
@@ -337,7 +363,7 @@ pub type Received = ([f32; 4], [f32; 4], u64, f32);
 impl GpuSolver {
     /// The resident exchange's stage alone on the current state (for the stage tests): the
     /// slots `ghosts` marked as ghosts, the band of `faces` listed, the own particles' health
-    /// counted, then the held particles merged without the dropped slots and with `received`
+    /// and its layers counted, then the held particles merged without the dropped slots and with `received`
     /// (sorted by place). The solver holds the merged particles afterwards. With DFSPH the
     /// positions' w (one GPU's ids) serve as places, whose ids are `place_ids`.
     pub fn resident_exchange_alone(&mut self, faces: &SlabFaces, ghosts: &[u32], received: &[Received], place_ids: Option<&[u32]>) -> anyhow::Result<ResidentExchangeRun> {
@@ -378,6 +404,7 @@ impl GpuSolver {
         };
         let stage = ResidentExchange::new(self, n.max(received.len() as u64), places)?;
         let (health, _) = stage.own_health(self, 1)?;
+        let layer_counts = stage.layer_counts(self, faces.axis)?;
         let band = stage.band(self, faces)?.map_err(|size| anyhow::anyhow!("the band of {size} particles outgrows its array"))?;
         let mut dropped = band.dropped.clone();
         dropped.sort_unstable();
@@ -399,6 +426,7 @@ impl GpuSolver {
             merged_velocities: bytemuck::pod_collect_to_vec(&data[1]),
             health,
             densities,
+            layer_counts,
             places: before.zip(after).map(|(b, a)| [b, a]),
         })
     }
