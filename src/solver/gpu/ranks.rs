@@ -360,7 +360,6 @@ impl GpuRankStages {
         Ok(self.step_dt(&words))
     }
 
-    /// Room for `needed` band or received particles and a quarter more, from the next step on.
     /// The walls a solver made again is made with.
     fn keep_walls(&mut self, walls: &InitialState) {
         self.walls = InitialState {
@@ -389,6 +388,7 @@ impl GpuRankStages {
         Ok(true)
     }
 
+    /// Room for `needed` band or received particles and a quarter more, from the next step on.
     fn grow_lists(&mut self, needed: u64) {
         self.list_room = self.list_room.max(needed + needed / 4);
         self.resident = None;
