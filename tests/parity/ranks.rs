@@ -790,8 +790,9 @@ fn the_ghost_link_stage_agrees_with_its_cpu_twin() {
 /// The resident exchange's stage (wgsl/sim/resident_exchange.wgsl), with which a GPU rank keeps
 /// its particles on the device between steps, against its CPU twin on the same state: the
 /// slots dropped (ghosts and particles outside the slab) and the band listed (with their places
-/// in the one-process order), the own particles' health and their counts per cell layer, and the merge of the kept particles
-/// with received ones, which must put every particle where the twin puts it. On the dam break
+/// in the one-process order), the own particles' health and their counts per cell layer, and
+/// the merge of the kept particles with received ones, which must put every particle where the
+/// twin puts it. On the dam break
 /// (summed density in the velocities' w), a tank with continuity density (its own array) and a
 /// DFSPH tank (positions holding places, whose ids and warm starts the band carries and the
 /// merge moves to the new slots), a slab that ends inside the fluid, every seventh slot marked a

@@ -718,7 +718,7 @@ impl<R: Real> CpuSolver<R> {
         // the force and front probes after the solves, on the step's first positions.
         let dfsph = self.dfsph.is_some();
         let mut dfsph_points = None;
-        let sampling = self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
+        let sampling = self.probes_due();
         let on_device = self.probes_on_device();
         if sampling && !on_device {
             self.fields_on_device();

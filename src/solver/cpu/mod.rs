@@ -565,7 +565,7 @@ impl<R: Real> CpuSolver<R> {
             // factors' density and output pressure (wgsl: after the factors dispatch); the force
             // and front probes the step's first positions after the solves, whose wall push the
             // forces are (`sample_dfsph_forces`).
-            let due = !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
+            let due = self.probes_due();
             // Across ranks, the ghosts' part in the solves (docs/scale-out.md).
             self.link_ghosts();
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
@@ -587,7 +587,7 @@ impl<R: Real> CpuSolver<R> {
         }
         self.compute_density();
         self.compute_wall_pressure();
-        if !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some()) {
+        if self.probes_due() {
             self.sample_probes();
         }
         self.compute_forces();
@@ -720,6 +720,11 @@ impl<R: Real> CpuSolver<R> {
             }
         };
         self.push_probe_sample(values);
+    }
+
+    /// Whether a probe samples the step under way (a scene with probes only).
+    pub(super) fn probes_due(&self) -> bool {
+        !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some())
     }
 
     /// Keeps a sample of the probes taken in the step under way.

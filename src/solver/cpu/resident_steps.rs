@@ -11,10 +11,10 @@
 //! after the host read them for an output (a snapshot, a checkpoint), a step whose probes the
 //! host samples, a step whose moved bounds bring walls the device has no room for, or a band
 //! or merge that outgrows the device's room. A step that may move the bounds counts the own
-//! particles per layer on the device (`balance_on_device`). With
-//! DFSPH the warm starts travel with the band and the received particles, the host checks the
-//! step's ghosts by their ids as the full path does, and the device makes the solves' ghost
-//! link from its own binning. The particles stay on the device from one batch of steps to the
+//! particles per layer on the device (`balance_on_device`). With DFSPH the warm starts travel
+//! with the band and the received particles, the host checks the step's ghosts by their ids as
+//! the full path does, and the device makes the solves' ghost link from its own binning. The
+//! particles stay on the device from one batch of steps to the
 //! next (a health check needs only the counts the steps gather); whatever reads the host's
 //! arrays takes them back first (`CpuSolver::take_back_held`), so nothing sees them stale.
 
@@ -58,7 +58,7 @@ impl<R: Real> CpuSolver<R> {
         let Some(part) = self.ranks.as_deref() else { return false };
         let balance = part.balance_due(self.step);
         // Probes sampled on the host need its particles; the device's own samples do not.
-        let sampling = !self.params.probes.is_empty() && self.params.probes.samples_step(self.step, self.params.dt, self.params.adaptive.is_some());
+        let sampling = self.probes_due();
         let probes_on_device = self.probes_on_device();
         if part.first_order.is_some() || (sampling && !probes_on_device) {
             return false;
@@ -177,8 +177,7 @@ impl<R: Real> CpuSolver<R> {
                     Balanced::Resident
                 } else {
                     // The device makes its buffers again for these walls: its particles first.
-                    self.sync_held();
-                    self.device_held = DeviceHeld::Nothing;
+                    self.take_back_held();
                     self.install_walls(&walls);
                     Balanced::FullPath
                 }

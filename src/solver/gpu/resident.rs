@@ -363,8 +363,8 @@ pub type Received = ([f32; 4], [f32; 4], u64, f32);
 impl GpuSolver {
     /// The resident exchange's stage alone on the current state (for the stage tests): the
     /// slots `ghosts` marked as ghosts, the band of `faces` listed, the own particles' health
-    /// and its layers counted, then the held particles merged without the dropped slots and with `received`
-    /// (sorted by place). The solver holds the merged particles afterwards. With DFSPH the
+    /// and their layers counted, then the held particles merged without the dropped slots and
+    /// with `received` (sorted by place). The solver holds the merged particles afterwards. With DFSPH the
     /// positions' w (one GPU's ids) serve as places, whose ids are `place_ids`.
     pub fn resident_exchange_alone(&mut self, faces: &SlabFaces, ghosts: &[u32], received: &[Received], place_ids: Option<&[u32]>) -> anyhow::Result<ResidentExchangeRun> {
         let n = self.fluid_count as u64;
