@@ -52,8 +52,14 @@ impl RankCommunicator for MpiCommunicator {
     fn size(&self) -> usize {
         self.world.size() as usize
     }
-    fn exchange(&self, to_lower: &[f64], to_upper: &[f64]) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+    fn exchange(&self, to_lower: &[u8], to_upper: &[u8]) -> anyhow::Result<(Vec<u8>, Vec<u8>)> {
         let (rank, size) = (self.world.rank(), self.world.size());
+        // MPI counts in a C int. The neighbour waits for this message: stop every rank.
+        for message in [to_lower, to_upper] {
+            if Count::try_from(message.len()).is_err() {
+                self.abort(&format!("a message to a neighbour of {} bytes is beyond MPI's count of {} bytes (more ranks make each slab's messages smaller)", message.len(), Count::MAX));
+            }
+        }
         let mut from_lower = Vec::new();
         let mut from_upper = Vec::new();
         mpi::request::scope(|scope| {
@@ -61,10 +67,10 @@ impl RankCommunicator for MpiCommunicator {
             let down = (rank > 0).then(|| self.world.process_at_rank(rank - 1).immediate_send_with_tag(scope, to_lower, TOWARDS_LOWER));
             let up = (rank + 1 < size).then(|| self.world.process_at_rank(rank + 1).immediate_send_with_tag(scope, to_upper, TOWARDS_UPPER));
             if rank > 0 {
-                from_lower = self.world.process_at_rank(rank - 1).receive_vec_with_tag::<f64>(TOWARDS_UPPER).0;
+                from_lower = self.world.process_at_rank(rank - 1).receive_vec_with_tag::<u8>(TOWARDS_UPPER).0;
             }
             if rank + 1 < size {
-                from_upper = self.world.process_at_rank(rank + 1).receive_vec_with_tag::<f64>(TOWARDS_LOWER).0;
+                from_upper = self.world.process_at_rank(rank + 1).receive_vec_with_tag::<u8>(TOWARDS_LOWER).0;
             }
             if let Some(r) = down {
                 r.wait();

@@ -6,7 +6,7 @@ use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
 /// A float the CPU solver can run in. `f64` is the reference; `f32` mirrors the GPU's arithmetic.
 pub trait Real:
-    num_traits::Float + num_traits::FromPrimitive + Send + Sync + Default + std::fmt::Debug + std::iter::Sum + LaneFloat + 'static
+    num_traits::Float + num_traits::FromPrimitive + Send + Sync + Default + std::fmt::Debug + std::iter::Sum + LaneFloat + bytemuck::Pod + 'static
 {
     /// Converts a scene constant (always f64) into this type.
     fn of(value: f64) -> Self {

@@ -8,14 +8,16 @@ use std::sync::{Arc, Mutex};
 
 /// The ranks of one simulation, as one of them sees them. Every call is collective: each rank
 /// makes the same calls in the same order (the step order guarantees it), so a call never
-/// needs a tag. Messages are `f64` words: ids and counts below 2^53 travel exactly.
+/// needs a tag. The neighbours' messages are bytes (particles as their bits, in the float type
+/// of the run); the collectives' values are `f64`, in which ids and counts below 2^53 travel
+/// exactly.
 pub trait Communicator: Send + Sync {
     /// This rank, `0..size()`.
     fn rank(&self) -> usize;
     fn size(&self) -> usize;
     /// Sends `to_lower` to rank - 1 and `to_upper` to rank + 1 (nothing past either end of the
     /// rank order) and returns what those ranks sent here: (from the lower, from the upper).
-    fn exchange(&self, to_lower: &[f64], to_upper: &[f64]) -> anyhow::Result<(Vec<f64>, Vec<f64>)>;
+    fn exchange(&self, to_lower: &[u8], to_upper: &[u8]) -> anyhow::Result<(Vec<u8>, Vec<u8>)>;
     /// Every rank's `values`, in rank order: the same result on every rank.
     fn all_gather(&self, values: &[f64]) -> anyhow::Result<Vec<Vec<f64>>>;
     /// Every rank's `values`, in rank order, on rank 0 (`None` on the others).
@@ -97,8 +99,8 @@ impl LocalGroup {
     pub fn new(size: usize) -> Vec<LocalCommunicator> {
         let size = size.max(1);
         // senders[from][to], receivers[to][from]
-        let mut senders: Vec<Vec<Sender<Vec<f64>>>> = (0..size).map(|_| Vec::new()).collect();
-        let mut receivers: Vec<Vec<Option<Receiver<Vec<f64>>>>> = (0..size).map(|_| (0..size).map(|_| None).collect()).collect();
+        let mut senders: Vec<Vec<Sender<Vec<u8>>>> = (0..size).map(|_| Vec::new()).collect();
+        let mut receivers: Vec<Vec<Option<Receiver<Vec<u8>>>>> = (0..size).map(|_| (0..size).map(|_| None).collect()).collect();
         for (from, row) in senders.iter_mut().enumerate() {
             for inbox in receivers.iter_mut() {
                 let (s, r) = channel();
@@ -124,17 +126,24 @@ impl LocalGroup {
 pub struct LocalCommunicator {
     rank: usize,
     size: usize,
-    to: Vec<Sender<Vec<f64>>>,
-    from: Vec<Mutex<Receiver<Vec<f64>>>>,
+    /// Every message as bytes (the collectives' values as their bits).
+    to: Vec<Sender<Vec<u8>>>,
+    from: Vec<Mutex<Receiver<Vec<u8>>>>,
 }
 
 impl LocalCommunicator {
-    fn send(&self, to: usize, values: &[f64]) -> anyhow::Result<()> {
-        self.to[to].send(values.to_vec()).map_err(|_| anyhow::anyhow!("rank {to} has stopped (rank {} could not send to it)", self.rank))
+    fn send_bytes(&self, to: usize, bytes: &[u8]) -> anyhow::Result<()> {
+        self.to[to].send(bytes.to_vec()).map_err(|_| anyhow::anyhow!("rank {to} has stopped (rank {} could not send to it)", self.rank))
     }
-    fn receive(&self, from: usize) -> anyhow::Result<Vec<f64>> {
+    fn receive_bytes(&self, from: usize) -> anyhow::Result<Vec<u8>> {
         let inbox = self.from[from].lock().map_err(|_| anyhow::anyhow!("rank {}'s inbox from rank {from} is poisoned", self.rank))?;
         inbox.recv().map_err(|_| anyhow::anyhow!("rank {from} has stopped (rank {} waited for it)", self.rank))
+    }
+    fn send(&self, to: usize, values: &[f64]) -> anyhow::Result<()> {
+        self.send_bytes(to, bytemuck::cast_slice(values))
+    }
+    fn receive(&self, from: usize) -> anyhow::Result<Vec<f64>> {
+        self.receive_bytes(from).map(|bytes| bytemuck::pod_collect_to_vec(&bytes))
     }
 }
 
@@ -145,16 +154,16 @@ impl Communicator for LocalCommunicator {
     fn size(&self) -> usize {
         self.size
     }
-    fn exchange(&self, to_lower: &[f64], to_upper: &[f64]) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+    fn exchange(&self, to_lower: &[u8], to_upper: &[u8]) -> anyhow::Result<(Vec<u8>, Vec<u8>)> {
         // Channels buffer, so sending first never blocks.
         if self.rank > 0 {
-            self.send(self.rank - 1, to_lower)?;
+            self.send_bytes(self.rank - 1, to_lower)?;
         }
         if self.rank + 1 < self.size {
-            self.send(self.rank + 1, to_upper)?;
+            self.send_bytes(self.rank + 1, to_upper)?;
         }
-        let lower = if self.rank > 0 { self.receive(self.rank - 1)? } else { Vec::new() };
-        let upper = if self.rank + 1 < self.size { self.receive(self.rank + 1)? } else { Vec::new() };
+        let lower = if self.rank > 0 { self.receive_bytes(self.rank - 1)? } else { Vec::new() };
+        let upper = if self.rank + 1 < self.size { self.receive_bytes(self.rank + 1)? } else { Vec::new() };
         Ok((lower, upper))
     }
     fn all_gather(&self, values: &[f64]) -> anyhow::Result<Vec<Vec<f64>>> {

@@ -14,7 +14,7 @@ use super::ghost_velocities::{gather_ghost_velocities, scatter_ghost_velocities}
 use super::resident_exchange::{OwnHealth, SlabFaces};
 use super::CpuSolver;
 use crate::model::initial::{FluidParticle, InitialState};
-use crate::model::real::{Real, V3};
+use crate::model::real::{as_arrays, Real, V3};
 use crate::model::state::{BackendState, Snapshot, StepFields};
 use crate::solver::backend::{StateArray, StatePiece, StateSource};
 use super::probes::{self, ProbeInput};
@@ -86,9 +86,9 @@ impl RankPart {
     }
 
     /// Ghosts: the own particles of `held` (taken in the order `which`) in the layers next to
-    /// each face go to the neighbour on that side; returns the words the lower and the upper
+    /// each face go to the neighbour on that side; returns the bytes the lower and the upper
     /// neighbour sent, and which of `held` went down and up, in that order. Collective.
-    pub(super) fn exchange_ghosts<R: Real>(&self, held: &Held<R>, which: impl IntoIterator<Item = usize>, grid: &crate::model::params::Grid<R>, carried: Carried) -> anyhow::Result<(Vec<f64>, Vec<f64>, [Vec<usize>; 2])> {
+    pub(super) fn exchange_ghosts<R: Real>(&self, held: &Held<R>, which: impl IntoIterator<Item = usize>, grid: &crate::model::params::Grid<R>, carried: Carried) -> anyhow::Result<(Vec<u8>, Vec<u8>, [Vec<usize>; 2])> {
         let faces = self.faces();
         let (mut down, mut up) = (Vec::new(), Vec::new());
         for i in which {
@@ -273,18 +273,19 @@ impl GhostLink {
     /// the failure stops the run).
     pub fn exchange_gathered<R: Real>(&mut self, sent: &[V3<R>]) -> Vec<V3<R>> {
         let t0 = Instant::now();
-        let encode = |values: &[V3<R>]| values.iter().flat_map(|v| v.to64()).collect::<Vec<f64>>();
+        // The values as their bits: what arrives is what was sent.
         let (down, up) = sent.split_at(self.send[0].len().min(sent.len()));
         let mut received = vec![V3::zero(); self.receive[0].len() + self.receive[1].len()];
-        match self.comm.exchange(&encode(down), &encode(up)) {
+        match self.comm.exchange(bytemuck::cast_slice(as_arrays(down)), bytemuck::cast_slice(as_arrays(up))) {
             Ok((lower, upper)) => {
                 let mut at = 0;
-                for (slots, words) in self.receive.iter().zip([lower, upper]) {
-                    if words.len() != 3 * slots.len() {
-                        self.failure.get_or_insert(format!("a neighbour sent {} values for {} ghosts in a DFSPH solve", words.len() / 3, slots.len()));
+                let each = std::mem::size_of::<[R; 3]>();
+                for (slots, bytes) in self.receive.iter().zip([lower, upper]) {
+                    if bytes.len() != each * slots.len() {
+                        self.failure.get_or_insert(format!("a neighbour sent {} bytes for {} ghosts in a DFSPH solve, not {each} each", bytes.len(), slots.len()));
                     } else {
-                        for (k, w) in words.chunks_exact(3).enumerate() {
-                            received[at + k] = V3::from64([w[0], w[1], w[2]]);
+                        for (k, v) in bytes.chunks_exact(each).enumerate() {
+                            received[at + k] = V3(bytemuck::pod_read_unaligned(v));
                         }
                     }
                     at += slots.len();
@@ -350,12 +351,12 @@ fn link_lists(n: usize, ghost: impl Fn(usize) -> bool, layer: impl Fn(usize) -> 
 /// The check of a link's lists by the particles' ids, one message per neighbour: the ids a rank
 /// sends to each neighbour must be those of the neighbour's ghosts on that side, in order.
 /// Collective.
-pub(super) fn check_link_ids(comm: &dyn Communicator, sent: [Vec<f64>; 2], ghosts: [Vec<f64>; 2]) -> Result<(), String> {
-    let (lower, upper) = comm.exchange(&sent[0], &sent[1]).map_err(|e| format!("{e:#}"))?;
-    if lower == ghosts[0] && upper == ghosts[1] {
+pub(super) fn check_link_ids(comm: &dyn Communicator, sent: [Vec<u32>; 2], ghosts: [Vec<u32>; 2]) -> Result<(), String> {
+    let (lower, upper) = comm.exchange(bytemuck::cast_slice(&sent[0]), bytemuck::cast_slice(&sent[1])).map_err(|e| format!("{e:#}"))?;
+    if lower == bytemuck::cast_slice::<u32, u8>(&ghosts[0]) && upper == bytemuck::cast_slice::<u32, u8>(&ghosts[1]) {
         Ok(())
     } else {
-        Err(format!("its ghosts in cell order are not its neighbours' particles in theirs ({} and {} received, {} and {} held)", lower.len(), upper.len(), ghosts[0].len(), ghosts[1].len()))
+        Err(format!("its ghosts in cell order are not its neighbours' particles in theirs ({} and {} received, {} and {} held)", lower.len() / 4, upper.len() / 4, ghosts[0].len(), ghosts[1].len()))
     }
 }
 
@@ -369,11 +370,29 @@ pub struct Carried {
     pub warm: bool,
 }
 
-/// Words per particle in a message: position, velocity, id, place in the one-process order (two
-/// words of 32 bits), with continuity density the carried density, with DFSPH the two
-/// warm-start stiffnesses.
-fn words(carried: Carried) -> usize {
-    9 + carried.density as usize + 2 * carried.warm as usize
+/// Bytes per particle in a message, in the run's float type `R`: position and velocity (six
+/// values), id (4 bytes), place in the one-process order (8 bytes), with continuity density the
+/// carried density, with DFSPH the two warm-start stiffnesses (a value each). The values travel
+/// as their bits (what arrives is what was sent; an f32 run's messages are half what f64 words
+/// made them), in the byte order of the machines, which every rank of a run shares.
+fn particle_bytes<R: Real>(carried: Carried) -> usize {
+    (6 + carried.density as usize + 2 * carried.warm as usize) * std::mem::size_of::<R>() + 12
+}
+
+/// Appends the bits of `field(i)` for each of `which` to a message.
+fn put_field<T: bytemuck::Pod>(out: &mut Vec<u8>, which: &[usize], field: impl Fn(usize) -> T) {
+    let start = out.len();
+    out.resize(start + which.len() * std::mem::size_of::<T>(), 0);
+    for (bytes, &i) in out[start..].chunks_exact_mut(std::mem::size_of::<T>()).zip(which) {
+        bytes.copy_from_slice(bytemuck::bytes_of(&field(i)));
+    }
+}
+
+/// The `n` values of one field of a message, from byte `*at` on (moved past them).
+fn take_field<'a, T: bytemuck::Pod>(bytes: &'a [u8], n: usize, at: &mut usize) -> impl Iterator<Item = T> + 'a {
+    let part = &bytes[*at..*at + n * std::mem::size_of::<T>()];
+    *at += part.len();
+    part.chunks_exact(std::mem::size_of::<T>()).map(bytemuck::pod_read_unaligned)
 }
 
 /// Particles on their way through the exchange, as a structure of arrays: position, velocity,
@@ -423,38 +442,37 @@ impl<R: Real> Held<R> {
         }
         self.order.push(o.order[i]);
     }
-    pub(super) fn encode(&self, which: &[usize], carried: Carried) -> Vec<f64> {
-        let mut out = Vec::with_capacity(which.len() * words(carried));
-        for &i in which {
-            out.extend_from_slice(&self.x[i].to64());
-            out.extend_from_slice(&self.v[i].to64());
-            out.push(self.id[i] as f64);
-            out.push((self.order[i] >> 32) as f64);
-            out.push((self.order[i] & 0xffff_ffff) as f64);
-            if carried.density {
-                out.push(self.rho[i].to64());
-            }
-            if carried.warm {
-                out.extend(self.warm[i].map(|k| k.to64()));
-            }
+    /// The particles `which`, as a message ([`particle_bytes`] each), field by field: the
+    /// positions of all, then their velocities, and so on.
+    pub(super) fn encode(&self, which: &[usize], carried: Carried) -> Vec<u8> {
+        let mut out = Vec::with_capacity(which.len() * particle_bytes::<R>(carried));
+        put_field(&mut out, which, |i| self.x[i].0);
+        put_field(&mut out, which, |i| self.v[i].0);
+        put_field(&mut out, which, |i| self.id[i]);
+        put_field(&mut out, which, |i| self.order[i]);
+        if carried.density {
+            put_field(&mut out, which, |i| self.rho[i]);
+        }
+        if carried.warm {
+            put_field(&mut out, which, |i| self.warm[i]);
         }
         out
     }
-    pub(super) fn decode(&mut self, words_in: &[f64], carried: Carried) -> anyhow::Result<()> {
-        let w = words(carried);
-        anyhow::ensure!(words_in.len() % w == 0, "a neighbour sent {} words, not a whole number of particles of {w} words", words_in.len());
-        self.reserve(words_in.len() / w, carried);
-        for p in words_in.chunks_exact(w) {
-            self.x.push(V3::from64([p[0], p[1], p[2]]));
-            self.v.push(V3::from64([p[3], p[4], p[5]]));
-            self.id.push(p[6] as u32);
-            self.order.push(((p[7] as u64) << 32) | p[8] as u64);
-            if carried.density {
-                self.rho.push(R::of(p[9]));
-            }
-            if carried.warm {
-                self.warm.push([R::of(p[w - 2]), R::of(p[w - 1])]);
-            }
+    /// The particles of a message [`Held::encode`] made, appended.
+    pub(super) fn decode(&mut self, bytes: &[u8], carried: Carried) -> anyhow::Result<()> {
+        let each = particle_bytes::<R>(carried);
+        anyhow::ensure!(bytes.len() % each == 0, "a neighbour sent {} bytes, not a whole number of particles of {each} bytes", bytes.len());
+        let (n, at) = (bytes.len() / each, &mut 0);
+        self.reserve(n, carried);
+        self.x.extend(take_field(bytes, n, at).map(V3));
+        self.v.extend(take_field(bytes, n, at).map(V3));
+        self.id.extend(take_field::<u32>(bytes, n, at));
+        self.order.extend(take_field::<u64>(bytes, n, at));
+        if carried.density {
+            self.rho.extend(take_field::<R>(bytes, n, at));
+        }
+        if carried.warm {
+            self.warm.extend(take_field::<[R; 2]>(bytes, n, at));
         }
         Ok(())
     }
@@ -467,14 +485,16 @@ impl<R: Real> Held<R> {
         idx.sort_by_key(|&i| self.order[i]);
         self.picked(&idx)
     }
-    /// The particles `which`, in that order.
+    /// The particles `which`, in that order (array by array: a gather each, where a particle
+    /// at a time pushed to six arrays and asked which it carries).
     pub(super) fn picked(&self, which: &[usize]) -> Held<R> {
-        let mut out = Held::default();
-        out.reserve(which.len(), Carried { density: !self.rho.is_empty(), warm: !self.warm.is_empty() });
-        for &i in which {
-            out.push_from(self, i);
+        fn gather<T: Copy>(from: &[T], which: &[usize]) -> Vec<T> {
+            if from.is_empty() {
+                return Vec::new();
+            }
+            which.iter().map(|&i| from[i]).collect()
         }
-        out
+        Held { x: gather(&self.x, which), v: gather(&self.v, which), id: gather(&self.id, which), rho: gather(&self.rho, which), warm: gather(&self.warm, which), order: gather(&self.order, which) }
     }
 }
 
@@ -823,7 +843,7 @@ impl<R: Real> CpuSolver<R> {
         let mut link = GhostLink { comm: part.comm.clone(), send, receive, ghosts, failure, seconds, sizes: None };
         if !checked {
             let t0 = Instant::now();
-            let ids = |slots: &[usize]| slots.iter().map(|&i| self.ids[i] as f64).collect::<Vec<f64>>();
+            let ids = |slots: &[usize]| slots.iter().map(|&i| self.ids[i]).collect::<Vec<u32>>();
             let sent = [ids(&link.send[0]), ids(&link.send[1])];
             let held = [ids(&link.receive[0]), ids(&link.receive[1])];
             if let Err(e) = check_link_ids(&*link.comm, sent, held) {

@@ -75,7 +75,7 @@ impl<R: Real> CpuSolver<R> {
         let (rank, size) = (part.comm.rank(), part.comm.size());
         let faces = part.faces();
         let particles = part.total_fluid;
-        let band = match self.on_device(|_, device| device.resident_band(&faces)) {
+        let mut band = match self.on_device(|_, device| device.resident_band(&faces)) {
             Ok(Some(band)) => band,
             Ok(None) => return false,
             Err(e) => {
@@ -85,7 +85,7 @@ impl<R: Real> CpuSolver<R> {
             }
         };
         let t0 = Instant::now();
-        let exchanged = self.exchange_band(&faces, &band);
+        let exchanged = self.exchange_band(&faces, &mut band);
         if let Some(part) = self.ranks.as_deref_mut() {
             part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
         }
@@ -190,11 +190,12 @@ impl<R: Real> CpuSolver<R> {
         }
     }
 
-    /// The exchange of the full path (migration, then ghosts) on the band: the particles the
-    /// neighbours sent, sorted in the one-process order, and which of them are ghosts. With
-    /// DFSPH the step's link too, checked by the ids as the full path checks it (its lists are
-    /// the device's to make). Last, how many own particles left the slab and how many arrived.
-    fn exchange_band(&mut self, faces: &SlabFaces, band: &ResidentBand<R>) -> anyhow::Result<(Held<R>, Vec<bool>, (usize, usize))> {
+    /// The exchange of the full path (migration, then ghosts) on the band, whose particles it
+    /// takes: the particles the neighbours sent, sorted in the one-process order, and which of
+    /// them are ghosts. With DFSPH the step's link too, checked by the ids as the full path
+    /// checks it (its lists are the device's to make). Last, how many own particles left the
+    /// slab and how many arrived.
+    fn exchange_band(&mut self, faces: &SlabFaces, band: &mut ResidentBand<R>) -> anyhow::Result<(Held<R>, Vec<bool>, (usize, usize))> {
         let carried = Carried { density: self.params.continuity_density, warm: self.dfsph.is_some() };
         let grid = self.grid;
         let part = self.ranks.as_deref_mut().expect("across ranks");
@@ -213,7 +214,7 @@ impl<R: Real> CpuSolver<R> {
             anyhow::ensure!(leaves == (dropped.peek() == Some(&slot)), "rank {rank}: the device and the host disagree on whether the particle in slot {slot} leaves the slab");
         }
         // Migration, as the full path's.
-        let (held, arrived) = part.migrate(band.particles.clone(), &grid, carried)?;
+        let (held, arrived) = part.migrate(std::mem::take(&mut band.particles), &grid, carried)?;
         // Ghosts, as the full path's, in the one-process order.
         let mut order: Vec<usize> = (0..held.len()).collect();
         order.sort_unstable_by_key(|&i| held.order[i]);
@@ -229,7 +230,7 @@ impl<R: Real> CpuSolver<R> {
             // The full path's check of the link (link_ghosts), one message per neighbour, so that
             // every rank exchanges as many messages whichever path it takes: the ids of the
             // particles this rank sent as ghosts, against those of the ghosts it received.
-            let ids = |slots: &mut dyn Iterator<Item = usize>, from: &Held<R>| slots.map(|i| from.id[i] as f64).collect::<Vec<f64>>();
+            let ids = |slots: &mut dyn Iterator<Item = usize>, from: &Held<R>| slots.map(|i| from.id[i]).collect::<Vec<u32>>();
             let sent = sent.map(|side| ids(&mut side.into_iter(), &held));
             let ghosts = [ids(&mut (migrants..from_lower_end), &received), ids(&mut (from_lower_end..received.len()), &received)];
             let sizes = [sent[0].len(), sent[1].len(), ghosts[0].len(), ghosts[1].len()];
