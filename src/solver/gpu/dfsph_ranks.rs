@@ -47,11 +47,13 @@ impl GpuSolver {
     /// The work recorded so far submitted and waited for, then `bytes` of `buffer` from `offset`
     /// read back.
     fn wait_and_read(&self, rec: &mut dyn Recorder, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> anyhow::Result<Vec<u8>> {
-        anyhow::ensure!(rec.submit_and_wait(&self.ctx), "DFSPH across ranks cannot run in timed passes");
+        let cannot = || anyhow::anyhow!("DFSPH across ranks cannot run in timed passes");
         if bytes == 0 {
+            anyhow::ensure!(rec.submit_and_wait(&self.ctx), cannot());
             return Ok(Vec::new());
         }
-        let data = read_ranges(&self.ctx, &[(buffer, offset, bytes)])?.remove(0);
+        // One submission and one wait for the work and the read.
+        let data = rec.submit_and_read(&self.ctx, &[(buffer, offset, bytes)]).ok_or_else(cannot)??.remove(0);
         self.count_bus_bytes(bytes);
         Ok(data)
     }

@@ -32,13 +32,21 @@ pub fn read_buffers(ctx: &GpuContext, buffers: &[(&wgpu::Buffer, u64)]) -> anyho
 /// Copies byte ranges `(buffer, offset, bytes)` to mappable staging buffers and reads them back
 /// (waits for the GPU). Copies are made in whole 4-byte words, as wgpu requires.
 pub fn read_ranges(ctx: &GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> anyhow::Result<Vec<Vec<u8>>> {
-    let device = &ctx.device;
-    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
-    let staging: Vec<wgpu::Buffer> = ranges
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+    let staged = stage_ranges(ctx, &mut encoder, ranges);
+    ctx.queue.submit([encoder.finish()]);
+    read_staged(ctx, &staged, ranges)
+}
+
+/// Records into `encoder` copies of byte ranges `(buffer, offset, bytes)` to new mappable
+/// staging buffers, for [`read_staged`] once `encoder` is submitted: work recorded before the
+/// copies and the read of its results then share one submission and one wait.
+pub fn stage_ranges(ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, ranges: &[(&wgpu::Buffer, u64, u64)]) -> Vec<wgpu::Buffer> {
+    ranges
         .iter()
         .map(|&(src, offset, bytes)| {
             let size = bytes.max(4).next_multiple_of(4);
-            let dst = device.create_buffer(&wgpu::BufferDescriptor {
+            let dst = ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("staging"),
                 size,
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -47,8 +55,13 @@ pub fn read_ranges(ctx: &GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> an
             encoder.copy_buffer_to_buffer(src, offset, &dst, 0, size);
             dst
         })
-        .collect();
-    ctx.queue.submit([encoder.finish()]);
+        .collect()
+}
+
+/// Waits for the GPU and reads back the staging buffers [`stage_ranges`] recorded the copies
+/// of `ranges` into (their submission made).
+pub fn read_staged(ctx: &GpuContext, staging: &[wgpu::Buffer], ranges: &[(&wgpu::Buffer, u64, u64)]) -> anyhow::Result<Vec<Vec<u8>>> {
+    let device = &ctx.device;
     let (tx, rx) = std::sync::mpsc::channel();
     for (i, s) in staging.iter().enumerate() {
         let tx = tx.clone();
@@ -67,7 +80,7 @@ pub fn read_ranges(ctx: &GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> an
         .zip(ranges)
         .map(|(s, &(_, _, bytes))| s.slice(..).get_mapped_range().expect("mapped above")[..bytes as usize].to_vec())
         .collect();
-    for s in &staging {
+    for s in staging {
         s.unmap();
     }
     Ok(out)

@@ -5,7 +5,7 @@
 
 use super::shaders::{dispatch_size, Stage};
 use super::solver::GpuSolver;
-use super::readback::{read_buffers, read_ranges};
+use super::readback::{read_buffers, read_ranges, read_staged, stage_ranges};
 use super::buffers::storage;
 use super::dfsph::{SharedBuffers, SolvePasses};
 use super::workgroups::{SolverLoop, ADAPTIVE_BLOCK};
@@ -82,6 +82,12 @@ pub trait Recorder {
     /// Submits what is recorded and waits for it, so that the host can read a result back
     /// before recording more (the DFSPH loop with readbacks). `false` where the recorder cannot.
     fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool;
+    /// Submits what is recorded, waits for it and reads byte ranges `(buffer, offset, bytes)`
+    /// back (the DFSPH loop's words across ranks, a solve's end); `None` where the recorder
+    /// cannot wait. Here as `submit_and_wait` and a read after it: two submissions and waits.
+    fn submit_and_read(&mut self, ctx: &super::device::GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> Option<anyhow::Result<Vec<Vec<u8>>>> {
+        self.submit_and_wait(ctx).then(|| read_ranges(ctx, ranges))
+    }
 }
 
 /// Records into as few compute passes as the clears allow.
@@ -130,6 +136,17 @@ impl Recorder for PlainRecorder {
         ctx.queue.submit([done.finish()]);
         let _ = ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None });
         true
+    }
+    fn submit_and_read(&mut self, ctx: &super::device::GpuContext, ranges: &[(&wgpu::Buffer, u64, u64)]) -> Option<anyhow::Result<Vec<Vec<u8>>>> {
+        // The copies behind the recorded work, in its submission: one wait for both (on a GPU
+        // a submission and a wait cost tens of microseconds, paid here at every check of a
+        // DFSPH solve).
+        self.pass = None;
+        let staged = stage_ranges(ctx, &mut self.encoder, ranges);
+        let next = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
+        let done = std::mem::replace(&mut self.encoder, next);
+        ctx.queue.submit([done.finish()]);
+        Some(read_staged(ctx, &staged, ranges))
     }
 }
 
@@ -340,8 +357,7 @@ impl GpuSolver {
         let words = status::MAX_SPEED as u64 * 4;
         debug_assert_eq!(status::MAX_ACCELERATION, status::MAX_SPEED + 1);
         let reduced = (|| -> anyhow::Result<[f32; 2]> {
-            anyhow::ensure!(rec.submit_and_wait(&self.ctx), "the adaptive step across ranks cannot run in timed passes");
-            let data = read_ranges(&self.ctx, &[(&self.status, words, 8)])?;
+            let data = rec.submit_and_read(&self.ctx, &[(&self.status, words, 8)]).ok_or_else(|| anyhow::anyhow!("the adaptive step across ranks cannot run in timed passes"))??;
             let mine: [f32; 2] = std::array::from_fn(|k| f32::from_le_bytes(data[0][4 * k..4 * k + 4].try_into().expect("4 bytes")));
             // f32 to f64 and back is exact, and so is the largest of them.
             let all = crate::solver::communicator::all_max(&**comm, &[mine[0] as f64, mine[1] as f64])?;
@@ -518,8 +534,9 @@ impl GpuSolver {
             block = later;
             // A block boundary: ask the GPU whether the solve goes on (a recorder that cannot
             // wait, the profile's across ranks, records every iteration up to the limit).
-            if recorded < limit && rec.submit_and_wait(&self.ctx) {
-                if let Some(done) = self.solve_ended() {
+            if recorded < limit {
+                let Some(read) = rec.submit_and_read(&self.ctx, &[(&self.status, status::DFSPH_ITERATION as u64 * 4, 8)]) else { continue };
+                if let Some(done) = self.solve_ended(read) {
                     let mut last = self.last_iterations.get();
                     last[solve] = done.saturating_sub(warm);
                     self.last_iterations.set(last);
@@ -530,11 +547,11 @@ impl GpuSolver {
     }
 
     /// The iterations of the DFSPH solve under way once it has ended (the warm start counts
-    /// as one), `None` while it goes on (two status words read back).
-    fn solve_ended(&self) -> Option<u32> {
-        let words = status::DFSPH_ITERATION as u64 * 4;
+    /// as one), `None` while it goes on: from `read`, the two status words from
+    /// `DFSPH_ITERATION` read back.
+    fn solve_ended(&self, read: anyhow::Result<Vec<Vec<u8>>>) -> Option<u32> {
         debug_assert_eq!(status::DFSPH_SOLVING, status::DFSPH_ITERATION + 1);
-        match read_ranges(&self.ctx, &[(&self.status, words, 8)]) {
+        match read {
             Ok(data) => {
                 let word = |k: usize| u32::from_le_bytes(data[0][4 * k..4 * k + 4].try_into().expect("4 bytes"));
                 (word(1) == 0).then(|| word(0))
