@@ -543,11 +543,14 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     if !quiet {
         println!("backend: {}", sim.backend_reason());
     }
-    if sim.kind() == "gpu" && args.precision == Some(PrecisionArg::F64) {
+    // What the automatic choice leaves unused, said once (by the first rank across ranks).
+    if sim.kind() == "gpu" && args.precision == Some(PrecisionArg::F64) && writes_files {
         eprintln!("note: --precision f64 not used: the automatic choice is the GPU, which computes in f32 (--backend cpu runs the CPU path in f64)");
     }
-    if sim.kind() == "cpu" && !gpu_flags.is_empty() {
-        eprintln!("note: {} not used: the automatic choice is the CPU path (--backend gpu runs the GPU step)", gpu_flags.join(", "));
+    // CPU ranks exchange every particle at every step: --full-exchange steers GPU ranks only.
+    let unused: Vec<&str> = gpu_flags.iter().copied().chain(args.full_exchange.then_some("--full-exchange")).collect();
+    if sim.kind() == "cpu" && !unused.is_empty() && writes_files {
+        eprintln!("note: {} not used: the automatic choice is the CPU path (--backend gpu runs the GPU step)", unused.join(", "));
     }
     // From here on the directories are changed; a failure before the first step undoes it.
     let start = match outputs {

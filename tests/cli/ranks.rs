@@ -134,6 +134,11 @@ fn the_dam_break_on_two_gpu_ranks_agrees_with_one_gpu() {
     full.push("--full-exchange");
     run_ok(mpirun(&m, 2, &full, tmp.path()));
     assert!(last_snapshot(&tmp.path().join("full")) == last_snapshot(&tmp.path().join("two")), "--full-exchange writes the resident steps' last snapshot");
+    // Where the automatic choice falls on the CPU path (no hardware adapter), whose ranks
+    // exchange every particle at every step, the flag is said to be unused, once.
+    let o = run_ok(mpirun(&m, 2, &["run", "hydrostatic", "--particles", "300", "--steps", "2", "--quiet", "--full-exchange", "--out", "auto"], tmp.path()));
+    let notes = String::from_utf8_lossy(&o.stderr).matches("note: --full-exchange not used: the automatic choice is the CPU path").count();
+    assert_eq!(notes, (summary(&tmp.path().join("auto")).backend == "cpu") as usize, "{}", String::from_utf8_lossy(&o.stderr));
     let resident = |s: &Summary| s.ranks.as_ref().expect("a ranks block").per_rank.iter().map(|r| r.resident_steps).collect::<Vec<u64>>();
     let (one, two) = (summary(&tmp.path().join("one")), summary(&tmp.path().join("two")));
     assert_eq!(resident(&summary(&tmp.path().join("full"))), [0, 0]);
