@@ -374,7 +374,8 @@ pub struct Carried {
 /// values), id (4 bytes), place in the one-process order (8 bytes), with continuity density the
 /// carried density, with DFSPH the two warm-start stiffnesses (a value each). The values travel
 /// as their bits (what arrives is what was sent; an f32 run's messages are half what f64 words
-/// made them), in the byte order of the machines, which every rank of a run shares.
+/// made them), in the sending machine's byte order: the ranks of a run must share one (x86-64
+/// and 64-bit ARM are both little-endian).
 fn particle_bytes<R: Real>(carried: Carried) -> usize {
     (6 + carried.density as usize + 2 * carried.warm as usize) * std::mem::size_of::<R>() + 12
 }
