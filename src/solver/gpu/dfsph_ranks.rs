@@ -47,15 +47,11 @@ impl GpuSolver {
     /// The work recorded so far submitted and waited for, then `bytes` of `buffer` from `offset`
     /// read back.
     fn wait_and_read(&self, rec: &mut dyn Recorder, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> anyhow::Result<Vec<u8>> {
-        let cannot = || anyhow::anyhow!("DFSPH across ranks cannot run in timed passes");
-        if bytes == 0 {
-            anyhow::ensure!(rec.submit_and_wait(&self.ctx), cannot());
-            return Ok(Vec::new());
-        }
-        // One submission and one wait for the work and the read.
-        let data = rec.submit_and_read(&self.ctx, &[(buffer, offset, bytes)]).ok_or_else(cannot)??.remove(0);
+        // One submission and one wait for the work and the read (nothing read where `bytes` is 0).
+        let ranges: &[(&wgpu::Buffer, u64, u64)] = if bytes == 0 { &[] } else { &[(buffer, offset, bytes)] };
+        let mut data = rec.submit_and_read(&self.ctx, ranges).ok_or_else(|| anyhow::anyhow!("DFSPH across ranks cannot run in timed passes"))??;
         self.count_bus_bytes(bytes);
-        Ok(data)
+        Ok(data.pop().unwrap_or_default())
     }
 
     /// After the binning: the ghost link's lists in the device's cell order, made from the

@@ -108,6 +108,13 @@ impl PlainRecorder {
     pub fn clear_range(&mut self, buffer: &wgpu::Buffer, offset: u64, bytes: u64) {
         self.clear(buffer, offset, Some(bytes));
     }
+    /// Submits what is recorded and goes on recording into a new encoder.
+    fn submit(&mut self, ctx: &super::device::GpuContext) {
+        self.pass = None;
+        let next = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
+        let done = std::mem::replace(&mut self.encoder, next);
+        ctx.queue.submit([done.finish()]);
+    }
     /// Copies `bytes` bytes of `from` at `from_offset` to `to` at `to_offset`.
     pub fn copy_range(&mut self, from: &wgpu::Buffer, from_offset: u64, to: &wgpu::Buffer, to_offset: u64, bytes: u64) {
         self.pass = None;
@@ -130,10 +137,7 @@ impl Recorder for PlainRecorder {
         self.encoder.copy_buffer_to_buffer(from, 0, to, 0, bytes);
     }
     fn submit_and_wait(&mut self, ctx: &super::device::GpuContext) -> bool {
-        self.pass = None;
-        let next = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
-        let done = std::mem::replace(&mut self.encoder, next);
-        ctx.queue.submit([done.finish()]);
+        self.submit(ctx);
         let _ = ctx.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None });
         true
     }
@@ -143,9 +147,7 @@ impl Recorder for PlainRecorder {
         // DFSPH solve).
         self.pass = None;
         let staged = stage_ranges(ctx, &mut self.encoder, ranges);
-        let next = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
-        let done = std::mem::replace(&mut self.encoder, next);
-        ctx.queue.submit([done.finish()]);
+        self.submit(ctx);
         Some(read_staged(ctx, &staged, ranges))
     }
 }
