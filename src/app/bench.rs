@@ -13,7 +13,8 @@
 
 use super::args::{BenchArgs, BenchPath};
 use super::errors::InputError;
-use crate::io::atomic::write_atomic;
+use anyhow::Context;
+use std::io::Write;
 use crate::model::scene::{Boundary, BoundaryVolume, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, Time, WallParticles};
 use crate::solver::gpu::device::compute_adapters;
 use crate::solver::gpu::{GpuContext, GpuOptions};
@@ -235,6 +236,7 @@ fn check_flags_have_paths(args: &BenchArgs) -> Result<(), InputError> {
 
 pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
     check_flags_have_paths(args)?;
+    let file = args.out.as_deref().map(|p| super::errors::output_file("--out", p)).transpose()?;
     if let Some(t) = args.threads {
         // The CPU paths' pool; set once, before any parallel work.
         rayon::ThreadPoolBuilder::new().num_threads(t as usize).build_global().map_err(|e| anyhow::anyhow!("--threads {t}: {e}"))?;
@@ -282,9 +284,11 @@ pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
         let (p, d) = SPLISHSPLASH_DFSPH_ITERATIONS;
         println!("x SPH of the dfsph paths: over SPlisHSPlasH 2.16 DFSPH ({p} + {d} iterations per step; docs/dfsph.md)");
     }
-    if let Some(path) = &args.out {
+    if let Some(mut file) = file {
+        let path = file.path().to_path_buf();
         let json = serde_json::to_string_pretty(&rows)?;
-        write_atomic(path, |w| writeln!(w, "{json}"))?;
+        writeln!(file, "{json}").with_context(|| format!("cannot write {}", path.display()))?;
+        file.commit()?;
         println!("wrote {}", path.display());
     }
     Ok(0)

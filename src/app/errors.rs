@@ -3,6 +3,7 @@
 //! there is none, a scene beyond the adapter's limits), 130 / 143 a run stopped by SIGINT /
 //! SIGTERM (see `run::report_run`).
 
+use crate::io::atomic::AtomicFile;
 use crate::io::rundir::RunDirError;
 use crate::model::scene::SceneError;
 use crate::solver::gpu::memory::GpuMemoryError;
@@ -24,4 +25,15 @@ pub fn exit_code(e: &anyhow::Error) -> i32 {
     } else {
         1
     }
+}
+
+/// The file a command's `--out FILE.json` names, opened before the command's work so that an
+/// unusable path is bad input (exit 2) and not a failure after minutes of measuring. Nothing
+/// replaces the path until the returned file is committed.
+pub fn output_file(flag: &str, path: &std::path::Path) -> Result<AtomicFile, InputError> {
+    let cannot = |why: String| InputError(format!("{flag} {}: {why}; allowed: the path of a file in a directory this user can write", path.display()));
+    if path.is_dir() {
+        return Err(cannot("is a directory".into()));
+    }
+    AtomicFile::create(path).map_err(|e| cannot(format!("{:#}", e).replace(&format!("cannot write {}: ", path.display()), "cannot be written: ")))
 }

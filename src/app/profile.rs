@@ -5,7 +5,8 @@
 //! has `TIMESTAMP_QUERY`; elsewhere only whole steps are timed on the host (submit and wait).
 
 use super::args::ProfileArgs;
-use crate::io::atomic::write_atomic;
+use anyhow::Context;
+use std::io::Write;
 use crate::model::kernels::{sort_by_cell, KernelCoefficients};
 use crate::model::params::Params;
 use crate::model::real::V3;
@@ -368,14 +369,15 @@ impl Profile {
 
 pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
     let scene = super::args::load_scene(&args.scene, &args.overrides, args.particles, false)?;
+    let file = args.out.as_deref().map(|p| super::errors::output_file("--out", p)).transpose()?;
     let options = GpuOptions { single_cells: args.single_cells, ..args.tuning.options() };
     let profile = profile(GpuContext::new()?, &scene, args.steps, options)?;
     print!("{}", profile.table());
-    if let Some(path) = &args.out {
-        write_atomic(path, |w| {
-            serde_json::to_writer_pretty(&mut *w, &profile).map_err(std::io::Error::other)?;
-            writeln!(w)
-        })?;
+    if let Some(mut file) = file {
+        let path = file.path().to_path_buf();
+        serde_json::to_writer_pretty(&mut file, &profile)?;
+        writeln!(file).with_context(|| format!("cannot write {}", path.display()))?;
+        file.commit()?;
         println!("wrote {}", path.display());
     }
     Ok(0)

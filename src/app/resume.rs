@@ -5,7 +5,7 @@ use super::errors::InputError;
 use super::run::{exit_code_of, report_run, run, steps_for_time, ResumedRun, RunOptions};
 use super::signals;
 use crate::io::checkpoint::{read, read_where, Checkpoint, CheckpointFile, CHECKPOINT_FILE};
-use crate::io::rundir::remove_partial_files;
+use crate::io::rundir::{remove_partial_files, SCENE_COPY};
 use crate::io::summary::Summary;
 use crate::model::scene::{Scene, SceneOrigin};
 use crate::solver::{open, Backend, BackendChoice, Precision, Ranks};
@@ -33,6 +33,11 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
     }
     .map_err(|e| InputError(format!("--resume: {e}")))?;
     let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::File(path.clone()))?;
+    if writes_files {
+        if let Some(why) = scene_copy_differs(dir, &scene) {
+            eprintln!("warning: {why}; the resumed run continues the checkpoint's scene, as it was when the run started");
+        }
+    }
     let params = scene.params();
     let step = c.state.step;
     let end = match (args.steps, args.time) {
@@ -78,6 +83,21 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
         return Ok(exit_code_of(&summary));
     }
     report_run(&summary, dir, args.quiet)
+}
+
+/// Why the run's copy of its scene (`DIR/scene.toml`) no longer describes the checkpoint's
+/// scene, or None when it does: an edited copy is not what a resumed run uses.
+fn scene_copy_differs(dir: &Path, scene: &Scene) -> Option<String> {
+    let copy = dir.join(SCENE_COPY);
+    let text = match std::fs::read_to_string(&copy) {
+        Ok(t) => t,
+        Err(e) => return Some(format!("{} cannot be read ({e})", copy.display())),
+    };
+    let edited = format!("{} was edited since the run started (a changed scene is a new run: wgsph run {} --out NEW_DIR)", copy.display(), copy.display());
+    match Scene::from_toml_str(&text, &SceneOrigin::File(copy.clone())) {
+        Ok(s) if s == *scene => None,
+        _ => Some(edited),
+    }
 }
 
 /// Restores `c` into `backend` (a fresh one of the kind that saved it) and runs on to step

@@ -146,7 +146,13 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut probe_writer = match (params.probes.is_empty() || !opts.writes_files, opts.resumed.is_some()) {
         (true, _) => None,
         (false, false) => Some(ProbeWriter::new(&opts.out, &params.probes)),
-        (false, true) => Some(ProbeWriter::resume(&opts.out, &params.probes, start)?),
+        (false, true) => {
+            let (w, missing) = ProbeWriter::resume(&opts.out, &params.probes, start)?;
+            for path in missing {
+                eprintln!("warning: {} is missing: its series restarts at step {start}, without the samples before", path.display());
+            }
+            Some(w)
+        }
     };
     let has_probes = !params.probes.is_empty();
     // The samples the backend took since the last call, added to the series and written.

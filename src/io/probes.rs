@@ -8,7 +8,7 @@
 //! once) and computes the later ones again, so no line is lost or written twice.
 
 use super::atomic::write_atomic;
-use super::rundir::PROBES_DIR;
+use super::rundir::{RunDirError, PROBES_DIR};
 use crate::model::probes::{Probe, ProbeSample, Probes};
 use anyhow::Context;
 use std::io::Write;
@@ -51,34 +51,56 @@ impl ProbeWriter {
 
     /// The writer of a run resumed at step `first_step`: the lines an earlier run wrote for the
     /// steps before it are kept, later ones dropped (they are sampled again), and so is the part
-    /// of a line that a run stopped while appending it left at the end. A file with another
-    /// header (another scene) is started afresh.
-    pub fn resume(out: &Path, probes: &Probes, first_step: u64) -> anyhow::Result<Self> {
+    /// of a line that a run stopped while appending it left at the end. The second value names
+    /// the series whose file is missing (or empty): they restart at `first_step`, and the run
+    /// says so. A file that does not start with its probe's header, or holds a line that is not
+    /// a sample, is not the run's series: it is refused (a [`RunDirError`]), never replaced.
+    pub fn resume(out: &Path, probes: &Probes, first_step: u64) -> anyhow::Result<(Self, Vec<PathBuf>)> {
         let mut w = ProbeWriter::new(out, probes);
+        let mut missing = Vec::new();
+        let refuse = |path: &Path, why: String| -> anyhow::Error {
+            RunDirError(format!(
+                "--resume: {}: {why}; it is not this run's series, and resuming would replace it: move it away (the series then restarts at step {first_step})",
+                path.display()
+            ))
+            .into()
+        };
         for f in &mut w.files {
             let text = match std::fs::read_to_string(&f.path) {
+                Ok(t) if t.is_empty() => {
+                    missing.push(f.path.clone());
+                    continue;
+                }
                 Ok(t) => t,
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    missing.push(f.path.clone());
+                    continue;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::InvalidData => return Err(refuse(&f.path, "is not UTF-8 text".into())),
                 Err(e) => return Err(e).with_context(|| format!("cannot read {}", f.path.display())),
             };
             // Whole lines only: what follows the last newline was being appended when the run stopped.
             let whole = &text[..text.rfind('\n').map_or(0, |i| i + 1)];
             let mut lines = whole.lines();
-            if lines.next() != Some(f.header.as_str()) {
-                continue;
+            let first = lines.next().unwrap_or("");
+            if first != f.header {
+                return Err(refuse(&f.path, format!("its first line is '{}', where the probe's header is '{}'", clip(first), f.header)));
             }
             for (n, line) in lines.enumerate() {
-                let bad = || anyhow::anyhow!("{}: line {} is not a probe sample: '{line}'", f.path.display(), n + 2);
+                let bad = || refuse(&f.path, format!("line {} is not a sample of the probe: '{}'", n + 2, clip(line)));
                 let fields: Vec<&str> = line.split(',').collect();
                 let time: f64 = fields.first().and_then(|s| s.parse().ok()).ok_or_else(bad)?;
                 let step: u64 = fields.get(1).and_then(|s| s.parse().ok()).ok_or_else(bad)?;
                 let values: Vec<f64> = fields[2..].iter().map(|s| s.parse().map_err(|_| bad())).collect::<anyhow::Result<_>>()?;
+                if values.len() != f.header.split(',').count() - 2 {
+                    return Err(bad());
+                }
                 if step < first_step {
                     f.rows.push((step, time, values));
                 }
             }
         }
-        Ok(w)
+        Ok((w, missing))
     }
 
     /// Adds the samples to the series of the probes due at each (a sample holds every probe;
@@ -150,6 +172,14 @@ impl ProbeWriter {
             .zip(&self.files)
             .map(|(p, f)| (p, f.path.as_path(), f.rows.iter().map(|r| (r.1, r.2.as_slice())).collect()))
             .collect()
+    }
+}
+
+/// At most 80 characters of a line, for a message.
+fn clip(line: &str) -> String {
+    match line.char_indices().nth(80) {
+        Some((i, _)) => format!("{}...", &line[..i]),
+        None => line.to_string(),
     }
 }
 
@@ -257,9 +287,35 @@ mod tests {
         let before = std::fs::read_to_string(&path).unwrap();
         // Step 10's line cut within its step: read whole, it would pass for a line of step 1.
         std::fs::write(&path, format!("{before}1.0,1")).unwrap();
-        let mut r = ProbeWriter::resume(dir.path(), &Probes { probes: w.probes.clone() }, 6).unwrap();
+        let (mut r, missing) = ProbeWriter::resume(dir.path(), &Probes { probes: w.probes.clone() }, 6).unwrap();
+        assert!(missing.is_empty());
         r.add(&samples(6..10, 0.0));
         r.write().unwrap();
         assert_eq!(std::fs::read_to_string(&path).unwrap(), before);
+    }
+
+    /// A series that is gone restarts (and is named, for the run to say so); a file that is not
+    /// the probe's series, by its header or by a line, is refused and left as it was.
+    #[test]
+    fn a_resumed_series_names_a_missing_file_and_refuses_a_foreign_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = writer(dir.path());
+        w.add(&samples(0..10, 0.0));
+        w.write().unwrap();
+        let probes = Probes { probes: w.probes.clone() };
+        let (every, second) = (probe_csv(dir.path(), "every"), probe_csv(dir.path(), "second"));
+        std::fs::remove_file(&second).unwrap();
+        let (_, missing) = ProbeWriter::resume(dir.path(), &probes, 6).unwrap();
+        assert_eq!(missing, vec![second.clone()]);
+
+        let kept = std::fs::read_to_string(&every).unwrap();
+        let header = kept.lines().next().unwrap().to_string();
+        for foreign in ["my notes\n".to_string(), format!("{header}\n0,0,1,2\n"), format!("{header}\n0.1,x,1,2,3,4,5,6\n")] {
+            std::fs::write(&every, &foreign).unwrap();
+            let e = ProbeWriter::resume(dir.path(), &probes, 6).err().expect("a foreign file is refused");
+            assert!(e.downcast_ref::<RunDirError>().is_some(), "{e:#}");
+            assert!(e.to_string().contains("every.csv") && e.to_string().contains("move it away"), "{e:#}");
+            assert_eq!(std::fs::read_to_string(&every).unwrap(), foreign);
+        }
     }
 }

@@ -105,3 +105,29 @@ fn flags_for_paths_not_asked_for_are_refused_by_name() {
         assert!(o.stdout.is_empty(), "{args:?}: timed before refusing");
     }
 }
+
+/// `--out FILE.json` of `bench` and `profile` that cannot be written (a directory, a path under
+/// a regular file) is refused before any work, naming the flag and the path; a file that can
+/// be is written whole.
+#[test]
+fn an_unusable_out_file_is_refused_before_the_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().join("notes.txt");
+    std::fs::write(&plain, "mine").unwrap();
+    let under_a_file = plain.join("b.json");
+    let is_dir = dir.path().to_str().unwrap();
+    for (command, path) in [("bench", is_dir), ("bench", under_a_file.to_str().unwrap()), ("profile", is_dir), ("profile", under_a_file.to_str().unwrap())] {
+        let extra: &[&str] = if command == "bench" { &["--n", "2", "--steps", "1", "--paths", "cpu-f32"] } else { &["--particles", "500", "--steps", "1"] };
+        let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).arg(command).args(extra).args(["--out", path]).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{command} --out {path}: {err}");
+        assert!(err.contains(&format!("--out {path}: ")) && err.contains("allowed:"), "{err}");
+        assert!(o.stdout.is_empty(), "{command} --out {path}: worked before refusing");
+    }
+    assert_eq!(std::fs::read_to_string(&plain).unwrap(), "mine");
+    let json = dir.path().join("bench.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["bench", "--n", "2", "--steps", "1", "--paths", "cpu-f32", "--out", json.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(rows[0]["path"], "cpu-f32");
+}

@@ -213,6 +213,40 @@ fn resume_removes_the_partial_files_a_killed_run_left() {
     assert!(mine.exists(), "a file the writer did not name was removed");
 }
 
+/// What `--resume` finds changed in the run's directory: an edited `scene.toml` is said to be
+/// unused (the checkpoint's scene runs on), a probe's missing series is said to restart, and a
+/// file where a probe's series was that is not one is refused (exit 2) and left as it was.
+#[test]
+fn resume_says_what_it_does_not_use_and_refuses_to_replace_a_foreign_probe_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let probe = "probe=[{name=\"p\",type=\"point\",position=[0.2,0.1,0.05]}]";
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "10", "--backend", "cpu", "--checkpoint-every", "10", "--set", probe, "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let (scene, series) = (dir.path().join("o/scene.toml"), dir.path().join("o/probes/p.csv"));
+    let resume = || wgsph(&["run", "--resume", "o", "--steps", "2", "--quiet"], dir.path());
+
+    let o = resume();
+    assert!(o.status.success() && !text(&o.stderr).contains("warning"), "{}", text(&o.stderr));
+
+    let edited = std::fs::read_to_string(&scene).unwrap().replace("viscosity = ", "viscosity = 0.5 # ");
+    std::fs::write(&scene, &edited).unwrap();
+    std::fs::remove_file(&series).unwrap();
+    let o = resume();
+    let stderr = text(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("scene.toml was edited") && stderr.contains("continues the checkpoint's scene"), "{stderr}");
+    assert!(stderr.contains("p.csv is missing: its series restarts at step 10"), "{stderr}");
+    assert_eq!(std::fs::read_to_string(&scene).unwrap(), edited, "the edited copy was changed");
+    assert_eq!(std::fs::read_to_string(&series).unwrap().lines().nth(1).unwrap().split(',').nth(1), Some("10"));
+
+    std::fs::write(&series, "my own notes\n").unwrap();
+    let o = resume();
+    let stderr = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("p.csv: its first line is 'my own notes'") && stderr.contains("move it away"), "{stderr}");
+    assert_eq!(std::fs::read_to_string(&series).unwrap(), "my own notes\n");
+}
+
 /// `--backend auto` (the default) once took a software GPU adapter (llvmpipe, lavapipe) over
 /// the CPU path, which is faster on the same cores. It takes a hardware GPU, else the CPU path,
 /// and says which and why in one line; `--backend gpu` still runs on a software adapter.
