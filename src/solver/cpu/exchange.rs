@@ -869,14 +869,15 @@ impl<R: Real> CpuSolver<R> {
 
     /// After a device step that sampled the probes ([`Self::probes_on_device`]): the device's
     /// row of this step, added over the ranks. A rank whose device gave no row still takes
-    /// part in the collectives (with NaN values), so no rank waits, and stops with its error.
+    /// part in the collectives (with zeros and a flag that it failed), so no rank waits; every
+    /// rank then leaves the step's sample out and stops, the failed one with its error.
     pub(super) fn sample_probes_from_device(&mut self) {
         let (step, count) = (self.step, self.params.probes.value_count());
         let rows = self.on_device(|_, device| device.take_probe_rows());
         let (device, mut failure) = match rows.map(|rows| rows.into_iter().find(|r| r.0 == step)) {
             Ok(Some((_, values))) if values.len() == count => (values, None),
-            Ok(_) => (vec![f64::NAN; count], Some(format!("the device sampled no probe row of step {step}"))),
-            Err(e) => (vec![f64::NAN; count], Some(format!("reading the device's probe rows failed: {e:#}"))),
+            Ok(_) => (vec![0.0; count], Some(format!("the device sampled no probe row of step {step}"))),
+            Err(e) => (vec![0.0; count], Some(format!("reading the device's probe rows failed: {e:#}"))),
         };
         let part = self.ranks.as_deref().expect("across ranks");
         if let Some(e) = failure.as_mut() {
@@ -886,12 +887,14 @@ impl<R: Real> CpuSolver<R> {
         let evaluates = |x: [f64; 3]| part.slabs.owner(grid.layer(V3::<R>::from64(x), part.axis)) == part.comm.rank();
         let p = &self.params.probes;
         let t0 = Instant::now();
-        let (values, reduced) = device_probes_across_ranks(part, &p.probes, &p.offsets(), device, evaluates);
+        let (values, reduced) = device_probes_across_ranks(&*part.comm, &p.probes, &p.offsets(), device, failure.is_some(), evaluates);
         if let Some(part) = self.ranks.as_deref_mut() {
             part.stats.exchange_seconds += t0.elapsed().as_secs_f64();
         }
-        self.note_failure(failure.or(reduced));
-        self.push_probe_sample(values);
+        match failure.or(reduced) {
+            Some(e) => self.note_failure(Some(e)),
+            None => self.push_probe_sample(values),
+        }
     }
 
     /// Every probe's values read from `input` by the ranks together ([`probes_across_ranks`]),
@@ -1595,7 +1598,7 @@ pub(super) fn probes_across_ranks<R: Real>(input: &ProbeInput<R>, part: &RankPar
             sums.extend(f.iter().map(|v| v.to64()));
         }
     }
-    let (mut values, fractions) = match add_probes_over_ranks(part, list, offsets, sums) {
+    let (mut values, fractions) = match add_probes_over_ranks(&*part.comm, list, offsets, sums) {
         Ok(added) => added,
         Err(e) => return (vec![f64::NAN; count], Some(e)),
     };
@@ -1619,7 +1622,11 @@ pub(super) fn probes_across_ranks<R: Real>(input: &ProbeInput<R>, part: &RankPar
 /// the device computed it; a point's and a gauge's values are kept by the rank that
 /// `evaluates` them (whose neighbourhood of them is whole, so they are the one-process run's
 /// bits) and zeroed elsewhere, then the ranks add them up as [`probes_across_ranks`] does.
-pub(super) fn device_probes_across_ranks(part: &RankPart, list: &[Probe], offsets: &[usize], mut device: Vec<f64>, evaluates: impl Fn([f64; 3]) -> bool) -> (Vec<f64>, Option<String>) {
+///
+/// `failed` says that this rank's device gave no row (`device` then holds zeros): the ranks add
+/// that flag with the values, so each of them learns of it in the same collective and returns
+/// an error instead of a sample that lacks the failed rank's part.
+pub(super) fn device_probes_across_ranks(comm: &dyn Communicator, list: &[Probe], offsets: &[usize], mut device: Vec<f64>, failed: bool, evaluates: impl Fn([f64; 3]) -> bool) -> (Vec<f64>, Option<String>) {
     let count = device.len();
     for (probe, &at) in list.iter().zip(offsets) {
         let point = match probe.geometry {
@@ -1632,8 +1639,13 @@ pub(super) fn device_probes_across_ranks(part: &RankPart, list: &[Probe], offset
             device[at..at + probe.geometry.columns().len()].fill(0.0);
         }
     }
-    match add_probes_over_ranks(part, list, offsets, device) {
-        Ok((values, _)) => (values, None),
+    device.push(if failed { 1.0 } else { 0.0 });
+    match add_probes_over_ranks(comm, list, offsets, device) {
+        Ok((values, failed_ranks)) if failed_ranks[0] == 0.0 => (values, None),
+        Ok((values, failed_ranks)) => {
+            let n = failed_ranks[0];
+            (values, Some(format!("{n} rank(s) of {} sampled no probe row of this step on their device; the step's sample is left out", comm.size())))
+        }
         Err(e) => (vec![f64::NAN; count], Some(e)),
     }
 }
@@ -1642,7 +1654,7 @@ pub(super) fn device_probes_across_ranks(part: &RankPart, list: &[Probe], offset
 /// (a front's farthest and count from its own particles), then any further sums to add; each
 /// front's farthest is taken over the ranks that saw fluid in its band. Returns the columns and
 /// the further sums.
-fn add_probes_over_ranks(part: &RankPart, list: &[Probe], offsets: &[usize], mut sums: Vec<f64>) -> Result<(Vec<f64>, Vec<f64>), String> {
+fn add_probes_over_ranks(comm: &dyn Communicator, list: &[Probe], offsets: &[usize], mut sums: Vec<f64>) -> Result<(Vec<f64>, Vec<f64>), String> {
     let count = offsets.last().zip(list.last()).map_or(0, |(&at, p)| at + p.geometry.columns().len());
     let mut farthest = Vec::new();
     for (probe, &at) in list.iter().zip(offsets) {
@@ -1651,7 +1663,7 @@ fn add_probes_over_ranks(part: &RankPart, list: &[Probe], offsets: &[usize], mut
             sums[at] = 0.0;
         }
     }
-    let (mut sums, farthest) = all_sum(&*part.comm, &sums).and_then(|s| Ok((s, all_max(&*part.comm, &farthest)?))).map_err(|e| format!("{e:#}"))?;
+    let (mut sums, farthest) = all_sum(comm, &sums).and_then(|s| Ok((s, all_max(comm, &farthest)?))).map_err(|e| format!("{e:#}"))?;
     let further = sums.split_off(count);
     let mut front = 0;
     for (probe, &at) in list.iter().zip(offsets) {
@@ -1661,4 +1673,52 @@ fn add_probes_over_ranks(part: &RankPart, list: &[Probe], offsets: &[usize], mut
         }
     }
     Ok((sums, further))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::probes::ProbeInterval;
+    use crate::solver::communicator::LocalGroup;
+
+    /// A device row of a point (read by rank 0) and a front (over both ranks), added over two
+    /// ranks; then the same with rank 1's device failing: both ranks return its error and no
+    /// sample, where they once returned NaN columns for the writer to write.
+    #[test]
+    fn a_rank_whose_device_gave_no_probe_row_fails_the_sample_on_every_rank() {
+        let list = vec![
+            Probe { name: "p".into(), interval: ProbeInterval::Steps(1), geometry: ProbeGeometry::Point { position: [0.1, 0.2, 0.3] } },
+            Probe { name: "f".into(), interval: ProbeInterval::Steps(1), geometry: ProbeGeometry::Front { direction: [1.0, 0.0, 0.0], floor: 0.0, height: 0.1 } },
+        ];
+        let offsets = vec![0, 6];
+        let rows = [vec![1.0, 2.0, 3.0, 4.0, 5.0, 0.5, 0.7, 10.0], vec![9.0, 9.0, 9.0, 9.0, 9.0, 9.0, 0.9, 5.0]];
+        for failing in [None, Some(1)] {
+            let results: Vec<(Vec<f64>, Option<String>)> = std::thread::scope(|s| {
+                let handles: Vec<_> = LocalGroup::new(2)
+                    .into_iter()
+                    .map(|comm| {
+                        let (list, offsets) = (&list, &offsets);
+                        let rank = comm.rank();
+                        let failed = failing == Some(rank);
+                        let row = if failed { vec![0.0; 8] } else { rows[rank].clone() };
+                        s.spawn(move || device_probes_across_ranks(&comm, list, offsets, row, failed, |_| rank == 0))
+                    })
+                    .collect();
+                handles.into_iter().map(|h| h.join().unwrap()).collect()
+            });
+            for (rank, (values, error)) in results.iter().enumerate() {
+                match failing {
+                    None => {
+                        assert!(error.is_none(), "rank {rank}: {error:?}");
+                        assert_eq!(values, &vec![1.0, 2.0, 3.0, 4.0, 5.0, 0.5, 0.9, 15.0], "rank {rank}");
+                    }
+                    Some(_) => {
+                        let e = error.as_deref().unwrap_or_else(|| panic!("rank {rank} took a sample that lacks rank 1's part: {values:?}"));
+                        assert!(e.contains("1 rank(s) of 2 sampled no probe row"), "rank {rank}: {e}");
+                        assert!(values.iter().all(|v| v.is_finite()), "rank {rank}: {values:?}");
+                    }
+                }
+            }
+        }
+    }
 }
