@@ -143,14 +143,14 @@ pub struct SceneOverrides {
 impl SceneOverrides {
     /// The scene `name` (a built-in scene or a file) with these changes: the removals first,
     /// then the `--set`s, in order; checked once all have applied.
-    pub fn scene(&self, name: &str) -> anyhow::Result<Scene> {
-        let scene = Scene::load(name)?;
+    pub fn scene(&self, name: &str) -> anyhow::Result<(Scene, Vec<String>)> {
+        let (scene, notes) = Scene::load_noting(name)?;
         let origin = match Scene::builtin(name) {
             Some(_) => crate::model::scene::SceneOrigin::BuiltIn(name.to_string()),
             None => crate::model::scene::SceneOrigin::File(PathBuf::from(name)),
         };
         let all: Vec<Override> = self.unsets.iter().chain(&self.sets).cloned().collect();
-        Ok(scene.with_overrides(&all, &origin)?)
+        Ok((scene.with_overrides(&all, &origin)?, notes))
     }
 }
 
@@ -519,12 +519,29 @@ pub struct BenchArgs {
 /// line on stderr for each fluid block that its particle lattice does not fill exactly (unless
 /// `quiet`).
 pub fn load_scene(name: &str, overrides: &SceneOverrides, particles: Option<u64>, quiet: bool) -> anyhow::Result<Scene> {
-    let mut scene = overrides.scene(name)?;
+    let (scene, warnings) = load_scene_warning(name, overrides, particles)?;
+    if !quiet {
+        print_warnings(&warnings);
+    }
+    Ok(scene)
+}
+
+/// [`load_scene`], with its warnings for the caller to print: the notes of an import (a
+/// setting taken as the nearest wgsph has), then the lattice's ([`lattice_warnings`]).
+pub fn load_scene_warning(name: &str, overrides: &SceneOverrides, particles: Option<u64>) -> anyhow::Result<(Scene, Vec<String>)> {
+    let (mut scene, mut warnings) = overrides.scene(name)?;
     if let Some(n) = particles {
         scene = at_particles(&scene, n)?;
     }
-    warn_lattice(&scene, quiet);
-    Ok(scene)
+    warnings.extend(lattice_warnings(&scene));
+    Ok((scene, warnings))
+}
+
+/// Each warning on its own line of stderr.
+pub fn print_warnings(warnings: &[String]) {
+    for line in warnings {
+        eprintln!("warning: {line}");
+    }
 }
 
 /// `scene` at about `n` fluid particles (`--particles N`): refused, naming the fewest the scene
@@ -535,15 +552,10 @@ pub fn at_particles(scene: &Scene, n: u64) -> anyhow::Result<Scene> {
     Ok(scene)
 }
 
-/// One warning line on stderr for each fluid block of `scene` that its particle lattice does
-/// not fill exactly, and one when the lattice does not start at its rest density (none when
-/// `quiet`).
-pub fn warn_lattice(scene: &Scene, quiet: bool) {
-    if !quiet {
-        for line in scene.lattice_changes().into_iter().chain(scene.rest_density_warning()) {
-            eprintln!("warning: {line}");
-        }
-    }
+/// A warning for each fluid block of `scene` that its particle lattice does not fill exactly,
+/// and one when the lattice does not start at its rest density.
+pub fn lattice_warnings(scene: &Scene) -> Vec<String> {
+    scene.lattice_changes().into_iter().chain(scene.rest_density_warning()).collect()
 }
 
 /// A count of at least 1 (steps, particles, intervals): clap's own range check names the type's

@@ -468,10 +468,10 @@ pub fn summary_line(s: &Summary, out: &Path) -> String {
     )
 }
 
-/// The scene of `wgsph run`: the file or built-in scene, with `--set` and `--particles` (its
-/// lattice warnings are the run's to print).
-pub fn run_scene(args: &RunArgs) -> anyhow::Result<Scene> {
-    super::args::load_scene(&args.scene, &args.overrides, args.particles, true)
+/// The scene of `wgsph run`: the file or built-in scene, with `--set` and `--particles`, and
+/// its warnings (an import's notes, the lattice's), which are the run's to print.
+pub fn run_scene(args: &RunArgs) -> anyhow::Result<(Scene, Vec<String>)> {
+    super::args::load_scene_warning(&args.scene, &args.overrides, args.particles)
 }
 
 /// What is odd about a built-in scene, said in one line when it runs.
@@ -519,8 +519,10 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
             .into());
         }
     }
-    let scene = run_scene(args)?;
-    super::args::warn_lattice(&scene, quiet);
+    let (scene, warnings) = run_scene(args)?;
+    if !quiet {
+        super::args::print_warnings(&warnings);
+    }
     let params = scene.params();
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
     if args.checkpoint_every > 0 && params.rebuild_every > 1 {

@@ -16,7 +16,7 @@ fn wgsph(args: &[&str], dir: &Path) -> Output {
 }
 
 fn import(text: &str) -> Result<Scene, wgsph::SceneError> {
-    scene_from_json(text, "test", &SceneOrigin::Text)
+    scene_from_json(text, "test", &SceneOrigin::Text).map(|(scene, _)| scene)
 }
 
 #[test]
@@ -78,13 +78,12 @@ fn everything_unsupported_is_named_in_one_clear_error() {
         "RigidBodies": [ { "geometryFile": "../models/bunny.obj", "isDynamic": true, "rotationAngle": 1.5 } ],
         "FluidBlocks": [ { "start": [0,0,0], "end": [1,1,1], "denseMode": 2 } ],
         "Emitters": [ { "width": 5 } ],
-        "Simulation": {}
+        "TriangleModels": {}
     }"#;
     let e = import(text).unwrap_err().to_string();
     for field in [
         "Configuration.simulationMethod: is 3; wgsph has WCSPH (0) and DFSPH (4)",
         "Configuration.cflMethod: is 2",
-        "Configuration.boundaryHandlingMethod: is 2 (volume maps, the default)",
         "Configuration.sim2D",
         "Configuration.fancyOption",
         "Fluid.viscosityMethod: is 6",
@@ -94,7 +93,7 @@ fn everything_unsupported_is_named_in_one_clear_error() {
         "RigidBodies[0].rotationAngle",
         "FluidBlocks[0].denseMode",
         "Emitters",
-        "Simulation",
+        "TriangleModels",
     ] {
         assert!(e.contains(field), "missing {field} in: {e}");
     }
@@ -102,7 +101,8 @@ fn everything_unsupported_is_named_in_one_clear_error() {
     let cases = [
         (r#""exponent": 7"#, r#""exponent": 3"#, "Configuration.exponent"),
         (r#""pause": true"#, r#""kernel": 1"#, "Configuration.kernel"),
-        (r#""stopAt": 0.5"#, r#""stopAt": -1"#, "Configuration.stopAt"),
+        (r#""stopAt": 0.5"#, r#""stopAt": 0"#, "Configuration.stopAt: is 0"),
+        (r#""boundaryHandlingMethod": 0"#, r#""boundaryHandlingMethod": 3"#, "Configuration.boundaryHandlingMethod: is 3"),
         (r#""pause": true"#, r#""maxIterations": 0"#, "Configuration.maxIterations"),
         (r#""pause": true"#, r#""maxIterations": 2.5"#, "Configuration.maxIterations"),
         (r#""isDynamic": false"#, r#""particleFile": "walls.bgeo""#, "RigidBodies[0].particleFile"),
@@ -173,4 +173,67 @@ fn a_dfsph_scene_with_adaptive_steps_maps_onto_a_scene_and_runs() {
     assert_eq!(summary["status"], "completed");
     assert!(summary["dfsph"]["pressure_iterations_mean"].as_f64().unwrap() >= 2.0, "{summary}");
     assert!(summary["dt_max"].as_f64().unwrap() <= 0.004 + 1e-12, "{summary}");
+}
+
+const NAMESPACED_TANK: &str = include_str!("../data/splishsplash_namespaced_tank.json");
+
+/// SPlisHSPlasH's current scene files keep each solver's settings in a block of its own
+/// (`Configuration.DFSPH`, `Configuration.WCSPH`) and each fluid method's coefficients in one
+/// named after the method (`"Standard viscosity"`); its default walls are volume maps, and a
+/// scene without `stopAt` runs until stopped. The blocks are read, the other solvers' and
+/// unchosen methods' blocks skipped, and the walls and the end time imported as the nearest
+/// wgsph has, each with a note.
+#[test]
+fn a_scene_of_the_current_format_with_its_solver_and_method_blocks_is_imported_with_notes() {
+    use wgsph::model::scene::PressureSolver;
+    let (s, notes) = scene_from_json(NAMESPACED_TANK, "tank", &SceneOrigin::Text).unwrap();
+    let (p, d) = (&s.physics, &s.physics.dfsph);
+    assert_eq!(p.solver, PressureSolver::Dfsph);
+    assert_eq!((d.min_iterations, d.max_iterations, d.max_divergence_iterations, d.divergence_solve), (3, 60, 40, true));
+    assert_eq!((d.density_error, d.divergence_error), (0.05 / 100.0, 0.2 / 100.0));
+    assert_eq!((p.rest_density, p.viscosity, p.boundary_friction), (998.0, 0.02, 0.5));
+    assert_eq!(s.time.end_time, 5.0);
+    assert_eq!(notes.len(), 2, "{notes:?}");
+    assert!(notes[0].contains("boundaryHandlingMethod is 2 (volume maps") && notes[0].contains("wall particles"), "{notes:?}");
+    assert!(notes[1].contains("stopAt is not given") && notes[1].contains("t = 5 s"), "{notes:?}");
+    assert!(s.boundary.iter().any(|b| matches!(b, Boundary::Container { .. })));
+    // The same settings at the top of Configuration and of the material (the older format)
+    // give the same scene; particles for walls and an end time give no note.
+    let flat = NAMESPACED_TANK
+        .replace("\"WCSPH\":\n\t\t{\n\t\t\t\"stiffness\": 20000,\n\t\t\t\"exponent\": 7\n\t\t},", "")
+        .replace("\"IISPH\":\n\t\t{\n\t\t\t\"maxIterations\": 80\n\t\t},", "")
+        .replace("\"DFSPH\":\n\t\t{", "")
+        .replace("\"enableDivergenceSolver\": true\n\t\t}", "\"enableDivergenceSolver\": true")
+        .replace("\"Standard viscosity\":\n\t\t\t{", "")
+        .replace("\"viscosityBoundary\": 0.01\n\t\t\t},", "\"viscosityBoundary\": 0.01,")
+        .replace("\"boundaryHandlingMethod\": 2", "\"boundaryHandlingMethod\": 0, \"stopAt\": 5");
+    assert!(!flat.contains("DFSPH") && !flat.contains("Standard viscosity"), "{flat}");
+    let (f, flat_notes) = scene_from_json(&flat, "tank", &SceneOrigin::Text).unwrap();
+    assert_eq!((f, flat_notes), (s, vec![]));
+
+    // A key a block does not hold, an XSPH filter, a refused value in a block: named by their
+    // place in the blocks.
+    for (from, to, named) in [
+        ("\"minIterations\": 3", "\"minIterations\": 3, \"omega\": 1", "Configuration.DFSPH.omega: is not a DFSPH parameter"),
+        ("\"exponent\": 7", "\"exponent\": 7, \"gamma\": 2", "Configuration.WCSPH.gamma"),
+        ("\"xsph\": 0.0", "\"xsph\": 0.1", "Materials[0].XSPH.xsph: is 0.1; wgsph has no XSPH"),
+        ("\"viscosity\": 0.02", "\"viscosity\": 0.02, \"kinematic\": 1", "Materials[0].Standard viscosity.kinematic"),
+        ("\"maxIterations\": 60", "\"maxIterations\": 2", "Configuration.DFSPH.minIterations, Configuration.DFSPH.maxIterations"),
+        ("\"viscosity\": 0.02", "\"viscosity\": 1e300", "Materials[0].Standard viscosity.viscosity"),
+    ] {
+        let text = NAMESPACED_TANK.replacen(from, to, 1);
+        assert_ne!(text, NAMESPACED_TANK);
+        let e = scene_from_json(&text, "tank", &SceneOrigin::Text).unwrap_err().to_string();
+        assert!(e.contains(named), "{to}: {e}");
+    }
+
+    // From the command line the notes are warnings (not with --quiet), and the scene runs.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("tank.json"), NAMESPACED_TANK).unwrap();
+    let o = wgsph(&["run", "tank.json", "--steps", "3", "--backend", "cpu", "--out", "o"], dir.path());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("warning: Configuration.boundaryHandlingMethod is 2") && stderr.contains("warning: Configuration.stopAt is not given"), "{stderr}");
+    let o = wgsph(&["run", "tank.json", "--steps", "3", "--backend", "cpu", "--out", "q", "--quiet"], dir.path());
+    assert!(o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("warning"), "{}", String::from_utf8_lossy(&o.stderr));
 }

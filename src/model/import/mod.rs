@@ -8,8 +8,9 @@ use super::scene::{err, Scene, SceneError, SceneOrigin};
 use std::path::Path;
 
 /// A reader of another simulator's scene format: the file's text, the scene's name (the file
-/// stem) and where it came from, for error messages.
-pub type Importer = fn(text: &str, name: &str, origin: &SceneOrigin) -> Result<Scene, SceneError>;
+/// stem) and where it came from, for error messages. Besides the scene it returns its notes:
+/// one line for each setting it imported as the nearest wgsph has (a caller shows them).
+pub type Importer = fn(text: &str, name: &str, origin: &SceneOrigin) -> Result<(Scene, Vec<String>), SceneError>;
 
 /// The foreign formats, by file extension (compared without regard to case).
 pub const IMPORTERS: &[(&str, Importer)] = &[("json", splishsplash::scene_from_json)];
@@ -18,8 +19,14 @@ impl Scene {
     /// A built-in name, a path to a TOML file, or a file of a format in [`IMPORTERS`]
     /// (a SPlisHSPlasH scene, `*.json`).
     pub fn load(name_or_path: &str) -> Result<Scene, SceneError> {
+        Scene::load_noting(name_or_path).map(|(scene, _)| scene)
+    }
+
+    /// [`Scene::load`], with the notes of an import (what it imported as the nearest wgsph
+    /// has; none for a wgsph scene).
+    pub fn load_noting(name_or_path: &str) -> Result<(Scene, Vec<String>), SceneError> {
         if let Some(s) = Scene::builtin(name_or_path) {
-            return Ok(s);
+            return Ok((s, Vec::new()));
         }
         let path = Path::new(name_or_path);
         let origin = SceneOrigin::File(path.to_path_buf());
@@ -33,6 +40,6 @@ impl Scene {
             let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             return import(&text, &name, &origin);
         }
-        Scene::from_toml_str(&text, &origin)
+        Ok((Scene::from_toml_str(&text, &origin)?, Vec::new()))
     }
 }

@@ -5,11 +5,16 @@
 //! CFL-adaptive time step, the kernel), `FluidBlocks` (axis-aligned boxes with translation, scale and
 //! initial velocity), the fluid parameter block (rest density and the standard viscosity), and
 //! static `RigidBodies` that are scaled and translated unit boxes (walls: a tank around the
-//! fluid, or an obstacle). Settings of the viewer and of SPlisHSPlasH's own exports are
-//! skipped. Everything else (another pressure solver, the iteration-count time step rule,
-//! density or volume map boundaries, meshes other than the unit box, rotations, dynamic bodies, particle files,
-//! emitters, animation fields, surface tension, vorticity, drag, elasticity, 2D) is refused
-//! with a message naming each such field, so that no setting is silently dropped.
+//! fluid, or an obstacle). Both layouts are read: settings at the top of `Configuration` and of
+//! a fluid's block, or (SPlisHSPlasH 2.13 on) in blocks named after the solver (`"DFSPH"`) and
+//! the method (`"Standard viscosity"`). Settings of the viewer and of SPlisHSPlasH's own exports,
+//! and the blocks of solvers and methods the scene does not choose, are skipped. Density and
+//! volume map walls become wall particles on the same boxes, and a scene without an end time
+//! gets one, each with a note for the caller to show. Everything else (another pressure solver,
+//! the iteration-count time step rule, meshes other than the unit box, rotations, dynamic
+//! bodies, particle files, emitters, animation fields, surface tension, vorticity, drag,
+//! elasticity, XSPH, 2D) is refused with a message naming each such field, so that no setting
+//! is silently dropped.
 //!
 //! Parameter names and defaults follow SPlisHSPlasH's scene file documentation
 //! (doc/file_format.md of its repository).
@@ -19,6 +24,7 @@ use crate::model::scene::{
     WallParticles,
 };
 use serde_json::{Map, Value};
+use std::collections::HashMap;
 
 /// Keys of the viewer and of SPlisHSPlasH's exports, and solver settings that only apply to
 /// features refused elsewhere (other pressure solvers): skipped.
@@ -38,7 +44,43 @@ const SKIPPED_CONFIGURATION: &[&str] = &[
     "stateExportFPS",
     "enableZSort",
     "velocityUpdateMethod",
+    "enableRigidBodyVTKExport",
+    "enableObjectSplitting",
+    "colorMapType",
+    "renderMaxVelocity",
+    "renderMinVelocity",
 ];
+/// The pressure solvers' own blocks in `Configuration` (SPlisHSPlasH 2.13 on): the two wgsph
+/// has are read; the others hold settings of solvers that `simulationMethod` refuses.
+const SOLVER_BLOCKS: &[&str] = &["WCSPH", "DFSPH", "PCISPH", "PBF", "IISPH", "Projective Fluids", "ICSPH"];
+/// The keys of the blocks wgsph reads.
+const WCSPH_KEYS: &[&str] = &["stiffness", "exponent"];
+const DFSPH_KEYS: &[&str] = &["minIterations", "maxIterations", "maxError", "maxIterationsV", "maxErrorV", "enableDivergenceSolver"];
+/// The non-pressure methods' own blocks in a fluid's parameters (SPlisHSPlasH 2.13 on), which
+/// hold their coefficients; each method is chosen by its `*Method` key, which the import checks
+/// (only the standard viscosity, read from its block, is imported).
+const METHOD_BLOCKS: &[&str] = &[
+    "Bender and Koschier 2017",
+    "Peer et al. 2015",
+    "Peer et al. 2016",
+    "Takahashi et al. 2015 (improved)",
+    "Weiler et al. 2018",
+    "Bender et al. 2017",
+    "Vorticity confinement",
+    "Liu et al. 2021",
+    "Macklin et al. 2014",
+    "Gissler et al. 2017",
+    "Becker & Teschner 2007",
+    "Akinci et al. 2013",
+    "He et al. 2014",
+    "Jeske et al. 2023",
+    "Zorilla, Ritter, et al. 2020",
+    "Becker et al. 2009",
+    "Peer et al. 2018",
+    "Kugelstadt et al. 2021",
+];
+/// The end of a scene that runs until stopped (no `stopAt`), in seconds.
+const END_WITHOUT_STOP_AT: f64 = 5.0;
 const SKIPPED_FLUID: &[&str] = &[
     "colorField",
     "colorMapType",
@@ -48,8 +90,34 @@ const SKIPPED_FLUID: &[&str] = &[
     "emitterReuseParticles",
     "emitterBoxMin",
     "emitterBoxMax",
+    "emitterBoxMin0",
+    "emitterBoxMin1",
+    "emitterBoxMin2",
+    "emitterBoxMax0",
+    "emitterBoxMax1",
+    "emitterBoxMax2",
 ];
-const SKIPPED_RIGID: &[&str] = &["color", "isWall", "mapThickness", "mapResolution", "samplingMode", "mapInvert"];
+/// A rigid body's settings of the viewer and of the boundary maps (whose walls are imported as
+/// particles), its id (for joints), and those only the rigid-body solver reads for a dynamic
+/// body (which is refused).
+const SKIPPED_RIGID: &[&str] = &[
+    "color",
+    "isWall",
+    "mapThickness",
+    "mapResolution",
+    "samplingMode",
+    "mapInvert",
+    "invertSDF",
+    "boundingBoxMin",
+    "boundingBoxMax",
+    "id",
+    "restitution",
+    "friction",
+    "collisionObjectType",
+    "collisionObjectScale",
+    "density",
+    "velocity",
+];
 
 /// What the import found wrong, collected so that one message names every problem.
 struct Problems(Vec<(String, String)>);
@@ -129,16 +197,41 @@ struct FluidParams {
     viscosity_boundary: f64,
 }
 
-fn fluid_params(section: &str, obj: &Map<String, Value>, p: &mut Problems) -> FluidParams {
+/// The fluid's parameters, and where each key was read (`Materials[0].Standard viscosity.viscosity`).
+fn fluid_params(section: &str, obj: &Map<String, Value>, p: &mut Problems) -> (FluidParams, HashMap<String, String>) {
     let mut f = FluidParams { density0: 1000.0, viscosity: 0.01, viscosity_boundary: 0.0 };
     let mut viscosity_method = 1;
+    // Keys at the top of the block, and those of the "Standard viscosity" and "XSPH" blocks.
+    let mut entries: Vec<(&str, &Value, String)> = Vec::new();
     for (key, v) in obj {
         let field = format!("{section}.{key}");
-        match key.as_str() {
+        match (key.as_str(), v.as_object()) {
+            ("Standard viscosity" | "XSPH", Some(block)) => {
+                let allowed: &[&str] = if key == "XSPH" { &["xsph", "xsphBoundary"] } else { &["viscosity", "viscosityBoundary"] };
+                for (inner, w) in block {
+                    if allowed.contains(&inner.as_str()) {
+                        entries.push((inner, w, format!("{field}.{inner}")));
+                    } else {
+                        p.add(format!("{field}.{inner}"), format!("is not a parameter of SPlisHSPlasH's {key} that wgsph can import"));
+                    }
+                }
+            }
+            (k, Some(_)) if METHOD_BLOCKS.contains(&k) => {}
+            _ => entries.push((key, v, field)),
+        }
+    }
+    let read_at = entries.iter().map(|(key, _, field)| (key.to_string(), field.clone())).collect();
+    for (key, v, field) in entries {
+        match key {
             "id" => {}
             "density0" => f.density0 = number(v, &field, p).unwrap_or(f.density0),
             "viscosity" => f.viscosity = number(v, &field, p).unwrap_or(f.viscosity),
             "viscosityBoundary" => f.viscosity_boundary = number(v, &field, p).unwrap_or(0.0),
+            "xsph" | "xsphBoundary" => {
+                if number(v, &field, p).is_some_and(|x| x != 0.0) {
+                    p.add(&field, format!("is {v}; wgsph has no XSPH velocity filter (only 0, off, is supported)"));
+                }
+            }
             "viscosityMethod" => viscosity_method = method(obj, key, 1, section, p),
             "surfaceTensionMethod" | "vorticityMethod" | "dragMethod" | "elasticityMethod" => {
                 let m = method(obj, key, 0, section, p);
@@ -163,15 +256,16 @@ fn fluid_params(section: &str, obj: &Map<String, Value>, p: &mut Problems) -> Fl
             format!("is {m}; wgsph supports 0 (none) and 1 (standard, the kinematic viscosity of Monaghan's term)"),
         ),
     }
-    f
+    (f, read_at)
 }
 
 /// A scene from the text of a SPlisHSPlasH JSON scene file. `name` becomes the scene's name.
-pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<Scene, SceneError> {
+pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(Scene, Vec<String>), SceneError> {
     let fail = |field: &str, message: String| SceneError { origin: origin.to_string(), field: field.into(), message };
     let root: Value = serde_json::from_str(text).map_err(|e| fail(&format!("line {}", e.line()), format!("not valid JSON: {e}")))?;
     let root = root.as_object().ok_or_else(|| fail("json", "the scene must be a JSON object".into()))?;
     let mut p = Problems(Vec::new());
+    let mut notes = Vec::new();
 
     // Configuration.
     let empty = Map::new();
@@ -184,11 +278,32 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     // DFSPH's settings and the CFL rule's, SPlisHSPlasH's defaults where absent (its errors are
     // in per cent).
     let (mut max_error, mut max_error_v, mut enable_divergence) = (0.01, 0.1, true);
-    let (mut max_iterations, mut max_iterations_v) = (100, 100);
+    let (mut min_iterations, mut max_iterations, mut max_iterations_v) = (None, 100, 100);
     let (mut cfl_factor, mut cfl_min_dt, mut cfl_max_dt) = (0.5, 0.0001, 0.005);
+    // The keys at the top of Configuration (SPlisHSPlasH before 2.13 kept every solver's there)
+    // and those of the WCSPH and DFSPH blocks.
+    let mut entries: Vec<(&str, &Value, String)> = Vec::new();
     for (key, v) in config {
         let field = format!("Configuration.{key}");
-        match key.as_str() {
+        match (key.as_str(), v.as_object()) {
+            (block @ ("WCSPH" | "DFSPH"), Some(o)) => {
+                let allowed = if block == "WCSPH" { WCSPH_KEYS } else { DFSPH_KEYS };
+                for (inner, w) in o {
+                    if allowed.contains(&inner.as_str()) {
+                        entries.push((inner, w, format!("{field}.{inner}")));
+                    } else {
+                        p.add(format!("{field}.{inner}"), format!("is not a {block} parameter that wgsph can import"));
+                    }
+                }
+            }
+            (k, Some(_)) if SOLVER_BLOCKS.contains(&k) => {}
+            _ => entries.push((key, v, field)),
+        }
+    }
+    // Where each key was read, for the messages of a scene wgsph refuses.
+    let config_read_at: HashMap<String, String> = entries.iter().map(|(key, _, field)| (key.to_string(), field.clone())).collect();
+    for (key, v, field) in entries {
+        match key {
             "particleRadius" => radius = number(v, &field, &mut p).unwrap_or(radius),
             "timeStepSize" => dt = number(v, &field, &mut p).unwrap_or(dt),
             "gravitation" => gravity = vec3(v, &field, &mut p).unwrap_or(gravity),
@@ -197,6 +312,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             "exponent" => exponent = number(v, &field, &mut p).unwrap_or(exponent),
             "maxError" => max_error = number(v, &field, &mut p).unwrap_or(max_error),
             "maxErrorV" => max_error_v = number(v, &field, &mut p).unwrap_or(max_error_v),
+            "minIterations" => min_iterations = count(v, &field, &mut p).or(min_iterations),
             "maxIterations" => max_iterations = count(v, &field, &mut p).unwrap_or(max_iterations),
             "maxIterationsV" => max_iterations_v = count(v, &field, &mut p).unwrap_or(max_iterations_v),
             "enableDivergenceSolver" => enable_divergence = boolean(v, &field, &mut p).unwrap_or(enable_divergence),
@@ -232,15 +348,16 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             false
         }
     };
-    let boundary_method = method(config, "boundaryHandlingMethod", 2, "Configuration", &mut p);
-    if boundary_method != 0 {
-        p.add(
-            "Configuration.boundaryHandlingMethod",
-            format!(
-                "is {boundary_method}{}; wgsph's walls are particles (Akinci et al. 2012): set it to 0",
-                if config.contains_key("boundaryHandlingMethod") { "" } else { " (volume maps, the default)" }
-            ),
-        );
+    // The maps sample the same boxes as a field instead of particles: the walls are imported as
+    // wgsph's wall particles (Akinci et al. 2012's method, 0), with a note.
+    match method(config, "boundaryHandlingMethod", 2, "Configuration", &mut p) {
+        0 => {}
+        m @ (1 | 2) => notes.push(format!(
+            "Configuration.boundaryHandlingMethod is {m}{} ({}): the walls are imported as wgsph's wall particles (Akinci et al. 2012's method, 0), the same boxes sampled as particles",
+            if config.contains_key("boundaryHandlingMethod") { "" } else { ", the default" },
+            if m == 1 { "density maps, Koschier & Bender 2017" } else { "volume maps, Bender et al. 2019" }
+        )),
+        m => p.add("Configuration.boundaryHandlingMethod", format!("is {m}; SPlisHSPlasH's methods are 0 (particles), 1 (density maps) and 2 (volume maps)")),
     }
     // Kernels: 0 and 4 are the cubic spline (4 precomputed); 1 is Wendland's quintic C2 (the
     // same function as wgsph's `wendland`, support h); 2 with gradient 3 is poly6 with the spiky
@@ -268,17 +385,27 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
         }
         EquationOfState::Tait
     };
+    // SPlisHSPlasH runs a scene without stopAt (or with a negative one) until it is stopped; a
+    // wgsph scene has an end time, which `--time` or `--steps` overrides.
     let end_time = match stop_at {
         Some(t) if t > 0.0 => t,
-        _ => {
-            p.add("Configuration.stopAt", "is missing or not positive; wgsph needs the end time of the run in seconds");
+        Some(t) if t == 0.0 => {
+            p.add("Configuration.stopAt", "is 0; must be the end time of the run in seconds (> 0), or negative to run until stopped");
             1.0
+        }
+        _ => {
+            notes.push(format!(
+                "Configuration.stopAt is {} (SPlisHSPlasH runs until stopped): the scene ends at t = {END_WITHOUT_STOP_AT} s; --time T or --steps N runs another length",
+                if stop_at.is_some() { "negative" } else { "not given" }
+            ));
+            END_WITHOUT_STOP_AT
         }
     };
 
     // Fluid parameter blocks: top-level objects keyed by fluid id, or the older "Materials" list.
     // (fluid id, its parameters, the JSON section they were read from)
-    let mut fluids: Vec<(String, FluidParams, String)> = Vec::new();
+    // (fluid id, its parameters, the JSON section they were read from, where each key was read)
+    let mut fluids: Vec<(String, FluidParams, String, HashMap<String, String>)> = Vec::new();
     let block_ids: Vec<String> = root
         .get("FluidBlocks")
         .and_then(Value::as_array)
@@ -288,7 +415,8 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
         for (i, m) in materials.as_array().map(Vec::as_slice).unwrap_or_default().iter().enumerate() {
             if let Some(o) = object(m, &format!("Materials[{i}]"), &mut p) {
                 let id = o.get("id").and_then(Value::as_str).unwrap_or("Fluid").to_string();
-                fluids.push((id, fluid_params(&format!("Materials[{i}]"), o, &mut p), format!("Materials[{i}]")));
+                let (params, read_at) = fluid_params(&format!("Materials[{i}]"), o, &mut p);
+                fluids.push((id, params, format!("Materials[{i}]"), read_at));
             }
         }
     }
@@ -300,6 +428,8 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     for (key, v) in root {
         match key.as_str() {
             "Configuration" | "Materials" | "RigidBodies" | "FluidBlocks" => {}
+            // The rigid-body solver's settings, which only a dynamic body (refused) uses.
+            "Simulation" => {}
             "FluidModels" | "Emitters" | "AnimationFields" => {
                 if v.as_array().is_none_or(|a| !a.is_empty()) {
                     p.add(key, "is not supported by wgsph (only FluidBlocks create fluid, and no field animates it)");
@@ -307,7 +437,8 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
             }
             id if block_ids.iter().any(|b| b == id) => {
                 if let Some(o) = object(v, id, &mut p) {
-                    fluids.push((id.to_string(), fluid_params(id, o, &mut p), id.to_string()));
+                    let (params, read_at) = fluid_params(id, o, &mut p);
+                    fluids.push((id.to_string(), params, id.to_string(), read_at));
                 }
             }
             _ => p.add(key, "is not a SPlisHSPlasH scene section that wgsph can import"),
@@ -364,7 +495,9 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     let default_fluid = FluidParams { density0: 1000.0, viscosity: 0.01, viscosity_boundary: 0.0 };
     let params_of = |id: &str| fluids.iter().find(|f| f.0 == id).map(|f| f.1).unwrap_or(default_fluid);
     // The JSON section the fluid's parameters come from (its id, where it has none).
-    let fluid_section = block_fluid.first().map(|id| fluids.iter().find(|f| &f.0 == id).map_or(id.clone(), |f| f.2.clone())).unwrap_or_else(|| "Fluid".into());
+    let first_fluid = block_fluid.first().and_then(|id| fluids.iter().find(|f| &f.0 == id));
+    let fluid_section = first_fluid.map(|f| f.2.clone()).or_else(|| block_fluid.first().cloned()).unwrap_or_else(|| "Fluid".into());
+    let fluid_read_at = first_fluid.map(|f| f.3.clone()).unwrap_or_default();
     let fluid = block_fluid.first().map(|id| params_of(id)).unwrap_or(default_fluid);
     for id in &block_fluid {
         if params_of(id) != fluid {
@@ -504,6 +637,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
                     max_iterations,
                     max_divergence_iterations: max_iterations_v,
                     divergence_solve: enable_divergence,
+                    min_iterations: min_iterations.unwrap_or(DfsphSettings::default().min_iterations),
                     ..Default::default()
                 },
                 PressureSolver::Wcsph => Default::default(),
@@ -533,7 +667,8 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
     // A scene the import built but wgsph refuses: the error names the JSON key the value came
     // from, not the wgsph field it became.
     scene.validate(origin).map_err(|e| {
-        let field = json_key(&e.field, &fluid_section, &boundary_sections);
+        let read_at = |key: &str, at: &HashMap<String, String>, section: &str| at.get(key).cloned().unwrap_or_else(|| format!("{section}.{key}"));
+        let field = json_key(&e.field, &boundary_sections, &|key| read_at(key, &config_read_at, "Configuration"), &|key| read_at(key, &fluid_read_at, &fluid_section));
         let mut message = e.message.replace("physics.particle_spacing", "twice Configuration.particleRadius");
         for i in (0..scene.fluid.len()).rev() {
             message = message.replace(&format!("fluid[{i}]"), &format!("FluidBlocks[{i}]"));
@@ -543,12 +678,13 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<S
         }
         SceneError { field, message: format!("{message} (SPlisHSPlasH import)"), ..e }
     })?;
-    Ok(scene)
+    Ok((scene, notes))
 }
 
-/// The SPlisHSPlasH key a field of the imported scene comes from: `fluid` is the section of the
-/// fluid's parameters, `boundaries` the rigid body of each boundary.
-fn json_key(field: &str, fluid: &str, boundaries: &[String]) -> String {
+/// The SPlisHSPlasH key a field of the imported scene comes from: `boundaries` is the rigid
+/// body of each boundary, `config` and `fluid` give where a key of Configuration and of the
+/// fluid's parameters was read (at the top, or in a solver's or method's block).
+fn json_key(field: &str, boundaries: &[String], config: &dyn Fn(&str) -> String, fluid: &dyn Fn(&str) -> String) -> String {
     let indexed = |prefix: &str| -> Option<(usize, &str)> {
         let rest = field.strip_prefix(prefix)?;
         let (index, tail) = rest.split_once(']')?;
@@ -567,21 +703,22 @@ fn json_key(field: &str, fluid: &str, boundaries: &[String]) -> String {
         return boundaries.get(j).cloned().unwrap_or_else(|| "RigidBodies".into());
     }
     match field {
-        "physics.smoothing_length" | "physics.particle_spacing" => "Configuration.particleRadius".into(),
-        "physics.stiffness" | "physics.speed_of_sound" => "Configuration.stiffness".into(),
-        "physics.gravity" => "Configuration.gravitation".into(),
-        "time.dt" => "Configuration.timeStepSize".into(),
-        "time.cfl_number" => "Configuration.cflFactor".into(),
-        "time.dt_min" => "Configuration.cflMinTimeStepSize".into(),
-        "time.dt_max" => "Configuration.cflMaxTimeStepSize".into(),
-        "physics.dfsph.density_error" => "Configuration.maxError".into(),
-        "physics.dfsph.divergence_error" => "Configuration.maxErrorV".into(),
-        "physics.dfsph.max_iterations" | "physics.dfsph.min_iterations" => "Configuration.maxIterations".into(),
-        "physics.dfsph.max_divergence_iterations" | "physics.dfsph.min_divergence_iterations" => "Configuration.maxIterationsV".into(),
-        "time.end_time" => "Configuration.stopAt".into(),
-        "physics.rest_density" => format!("{fluid}.density0"),
-        "physics.viscosity" => format!("{fluid}.viscosity"),
-        "physics.boundary_friction" => format!("{fluid}.viscosityBoundary"),
+        "physics.smoothing_length" | "physics.particle_spacing" => config("particleRadius"),
+        "physics.stiffness" | "physics.speed_of_sound" => config("stiffness"),
+        "physics.gravity" => config("gravitation"),
+        "time.dt" => config("timeStepSize"),
+        "time.cfl_number" => config("cflFactor"),
+        "time.dt_min" => config("cflMinTimeStepSize"),
+        "time.dt_max" => config("cflMaxTimeStepSize"),
+        "physics.dfsph.density_error" => config("maxError"),
+        "physics.dfsph.divergence_error" => config("maxErrorV"),
+        "physics.dfsph.min_iterations" => format!("{}, {}", config("minIterations"), config("maxIterations")),
+        "physics.dfsph.max_iterations" => config("maxIterations"),
+        "physics.dfsph.max_divergence_iterations" | "physics.dfsph.min_divergence_iterations" => config("maxIterationsV"),
+        "time.end_time" => config("stopAt"),
+        "physics.rest_density" => fluid("density0"),
+        "physics.viscosity" => fluid("viscosity"),
+        "physics.boundary_friction" => fluid("viscosityBoundary"),
         "fluid" => "FluidBlocks".into(),
         // The domain and the grid follow from the blocks and the bodies.
         "domain" => "FluidBlocks, RigidBodies (the domain around them)".into(),
