@@ -65,9 +65,16 @@ struct App {
 /// Opens the window and runs until it is closed. Returns the exit code (1 when the simulation
 /// went bad).
 pub fn view(scene: Scene, opts: ViewOptions) -> anyhow::Result<i32> {
-    let event_loop = EventLoop::new().context(
-        "cannot open a window: no display (set DISPLAY or WAYLAND_DISPLAY; on a headless machine run under Xvfb, see the README)",
-    )?;
+    let event_loop = EventLoop::new().map_err(|e| {
+        // Without a display the windowing library's message names its own source file; the
+        // cause is plain, and so is the remedy.
+        let no_display = cfg!(all(unix, not(target_os = "macos"))) && ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"].iter().all(|v| std::env::var_os(v).is_none());
+        if no_display {
+            anyhow::anyhow!("cannot open a window: no display (set DISPLAY or WAYLAND_DISPLAY; on a headless machine run under Xvfb, see docs/pictures.md)")
+        } else {
+            anyhow::anyhow!("cannot open a window: {e}")
+        }
+    })?;
     let mut desc = wgpu::InstanceDescriptor::new_with_display_handle_from_env(Box::new(event_loop.owned_display_handle()));
     desc.backends = backends();
     let instance = wgpu::Instance::new(desc);

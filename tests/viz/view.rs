@@ -146,3 +146,21 @@ fn the_x_server_shows_the_window() {
         assert!(n > 50, "{backend}: the screen shows only {n} colours after {:?}", started.elapsed());
     }
 }
+
+/// Without a display the viewer says so and how to get one, in its own words: not the
+/// windowing library's, which name a source file of its crate.
+#[cfg(all(unix, not(target_os = "macos")))]
+#[test]
+fn without_a_display_the_viewer_says_how_to_get_one() {
+    let out = Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .args(["view", "hydrostatic"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("cannot open a window: no display") && err.contains("Xvfb"), "{err}");
+    assert!(!err.contains(".rs:"), "{err}");
+}
