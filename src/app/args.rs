@@ -46,7 +46,7 @@ pub enum Command {
 
 #[derive(Args, Debug, Clone)]
 pub struct ViewArgs {
-    /// A built-in scene name or a path to a scene TOML file.
+    /// A built-in scene name, a path to a scene TOML file, or a SPlisHSPlasH JSON scene (`*.json`).
     #[arg(default_value = "dam_break")]
     pub scene: String,
     #[command(flatten)]
@@ -156,7 +156,7 @@ impl SceneOverrides {
 
 #[derive(Args, Debug, Clone)]
 pub struct RunArgs {
-    /// A built-in scene name (see `wgsph scenes`) or a path to a scene TOML file.
+    /// A built-in scene name (see `wgsph scenes`), a path to a scene TOML file, or a SPlisHSPlasH JSON scene (`*.json`).
     #[arg(default_value = "dam_break")]
     pub scene: String,
     #[command(flatten)]
@@ -277,7 +277,7 @@ impl Default for RunArgs {
 
 #[derive(Args, Debug, Clone)]
 pub struct CompareArgs {
-    /// A built-in scene name or a path to a scene TOML file.
+    /// A built-in scene name, a path to a scene TOML file, or a SPlisHSPlasH JSON scene (`*.json`).
     #[arg(default_value = "seed")]
     pub scene: String,
     #[command(flatten)]
@@ -390,7 +390,7 @@ impl GpuTuning {
 /// `wgsph profile`.
 #[derive(Args, Debug, Clone)]
 pub struct ProfileArgs {
-    /// A built-in scene name or a path to a scene TOML file.
+    /// A built-in scene name, a path to a scene TOML file, or a SPlisHSPlasH JSON scene (`*.json`).
     #[arg(default_value = "dam_break")]
     pub scene: String,
     #[command(flatten)]
@@ -415,7 +415,7 @@ pub struct ProfileArgs {
 /// `wgsph tradeoff`.
 #[derive(Args, Debug, Clone)]
 pub struct TradeoffArgs {
-    /// A built-in scene name or a path to a scene TOML file.
+    /// A built-in scene name, a path to a scene TOML file, or a SPlisHSPlasH JSON scene (`*.json`).
     #[arg(default_value = "dam_break")]
     pub scene: String,
     #[command(flatten)]

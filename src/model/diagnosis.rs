@@ -366,18 +366,17 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
         } else if too_dense {
             causes.push(format!(
                 "the fluid was compressed to {} rho0: weakly compressible SPH holds while density varies by a few per cent, which needs a speed of sound \
-                 about 10 times the largest flow speed (rho/rho0 - 1 is about the square of the Mach number); raise physics.speed_of_sound (c0 = {}), or check what presses the fluid",
+                 about 10 times the largest flow speed (rho/rho0 - 1 is about the square of the Mach number); {}, or check what presses the fluid",
                 short(ratio),
-                short(c0)
+                raise_sound(scene, c0, None)
             ));
         }
         if too_fast {
             causes.push(format!(
-                "the flow reached Mach {}: beyond about 0.3 the fluid is no longer nearly incompressible; raise physics.speed_of_sound to at least 10 times \
-                 the largest speed ({} now, c0 = {})",
+                "the flow reached Mach {} (a largest speed of {}): beyond about 0.3 the fluid is no longer nearly incompressible; {}",
                 short(mach),
                 short(m.max_speed),
-                short(c0)
+                raise_sound(scene, c0, Some(10.0 * m.max_speed))
             ));
         }
         for (name, count) in scan.map(|s| s.intrusions.found()).unwrap_or_default() {
@@ -438,22 +437,41 @@ pub fn regime_warnings(scene: &Scene, health: &Health) -> Vec<String> {
     } else if ratio > limits.warn_density_ratio {
         out.push(format!(
             "the density reached {} rho0, over limits.warn_density_ratio = {}: weakly compressible SPH stands in for a liquid while density varies by a few per cent, \
-             so the results are less accurate where it was compressed; a higher physics.speed_of_sound (c0 = {}) keeps density closer to rho0",
+             so the results are less accurate where it was compressed; a higher speed of sound keeps density closer to rho0: {}",
             short(ratio),
             short(limits.warn_density_ratio),
-            short(c0)
+            raise_sound(scene, c0, None)
         ));
     }
     // Without a speed of sound (DFSPH) there is no Mach number.
     if c0 > 0.0 && mach > limits.warn_mach {
         out.push(format!(
             "the speed reached {} (Mach {} against c0 = {}), over limits.warn_mach = {}: beyond about 0.3 the fluid is no longer nearly incompressible \
-             (rho/rho0 - 1 is about Mach^2); raise physics.speed_of_sound to about 10 times the largest speed",
+             (rho/rho0 - 1 is about Mach^2); {}",
             short(health.max_speed),
             short(mach),
             short(c0),
-            short(limits.warn_mach)
+            short(limits.warn_mach),
+            raise_sound(scene, c0, Some(10.0 * health.max_speed))
         ));
     }
     out
+}
+
+/// What raises the speed of sound c0 of `scene` (to `target` where given): the field the scene
+/// sets it by. A scene that gives the stiffness k gets the k that `target` needs, since c0
+/// grows as the square root of k (k = rho0 c0^2, or rho0 c0^2 / 7 for Tait).
+fn raise_sound(scene: &Scene, c0: f64, target: Option<f64>) -> String {
+    match (scene.physics.stiffness, target) {
+        (Some(k), Some(t)) if c0 > 0.0 => format!(
+            "raise physics.stiffness (k = {} gives c0 = {}; c0 = {}, 10 times the largest speed, needs k = {}), or give physics.speed_of_sound instead",
+            short(k),
+            short(c0),
+            short(t),
+            short(k * (t / c0).powi(2))
+        ),
+        (Some(k), _) => format!("raise physics.stiffness (k = {} gives c0 = {}; c0 grows as the square root of k)", short(k), short(c0)),
+        (None, Some(t)) => format!("raise physics.speed_of_sound to at least 10 times the largest speed (c0 = {} now, {} needed)", short(c0), short(t)),
+        (None, None) => format!("raise physics.speed_of_sound (c0 = {})", short(c0)),
+    }
 }

@@ -124,7 +124,14 @@ fn a_50_m_per_s_impact_stops_on_its_mach_number() {
         assert!(bad.too_fast && (bad.measured.max_speed - 50.0).abs() < 0.1, "{who}: {bad:?}");
         assert!(f.contains("Mach 1.25") && f.contains("over limits.max_mach"), "{who}: {f}");
         assert!(f.contains("Cause: ") && f.contains("the flow reached Mach 1.25"), "{who}: {f}");
+        assert!(f.contains("raise physics.speed_of_sound to at least 10 times the largest speed (c0 = 40 now, 50"), "{who}: {f}");
     }
+    // The same speed of sound given by the linear equation of state's stiffness, k = rho0 c0^2
+    // = 1.6e6: the remedy names the field the scene sets, and the k that c0 = 500 needs.
+    let scene = impact().equation_of_state(EquationOfState::Linear).stiffness(1.6e6).build();
+    let mut b = common::cpu::<f64>(&scene);
+    let f = failure(&mut b, &scene, 20, 20);
+    assert!(f.contains("raise physics.stiffness (k = 1600000 gives c0 = 40; c0 = 50") && f.contains("10 times the largest speed, needs k = 2.5"), "{f}");
 }
 
 #[test]
@@ -387,5 +394,5 @@ fn a_dfsph_run_too_dense_is_told_of_its_solve_not_of_a_speed_of_sound() {
     assert!(dfsph[0].contains("DFSPH's constant-density solve holds the average density error within physics.dfsph.density_error = 0.0001"), "{dfsph:?}");
     assert!(dfsph[0].contains("the fluid also started at 1.03384 rho0") && !dfsph[0].contains("speed_of_sound"), "{dfsph:?}");
     let wcsph = regime_warnings(&tank().build(), &health);
-    assert!(wcsph[0].contains("a higher physics.speed_of_sound (c0 = 20)"), "{wcsph:?}");
+    assert!(wcsph[0].contains("a higher speed of sound keeps density closer to rho0: raise physics.speed_of_sound (c0 = 20)"), "{wcsph:?}");
 }
