@@ -109,6 +109,7 @@ fn run_command(command: Command, join: Option<ranks::Join>) -> anyhow::Result<i3
             for (name, description, _) in BUILTIN_SCENES {
                 println!("{name:<12} {description}");
             }
+            println!("(a SCENE may also be a wgsph TOML file, or a SPlisHSPlasH JSON scene: docs/scenes.md)");
             Ok(0)
         }
     }

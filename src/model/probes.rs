@@ -183,11 +183,12 @@ impl Scene {
         let probes = self
             .probe
             .iter()
-            .map(|p| {
+            .flat_map(|p| p.row().into_iter().map(move |(name, position)| (p, name, position)))
+            .map(|(p, name, position)| {
                 let geometry = match p.kind {
-                    ProbeType::Point => ProbeGeometry::Point { position: p.position.unwrap_or_default() },
+                    ProbeType::Point => ProbeGeometry::Point { position: position.unwrap_or_default() },
                     ProbeType::Gauge => {
-                        let position = p.position.unwrap_or_default();
+                        let position = position.unwrap_or_default();
                         ProbeGeometry::Gauge {
                             x: position[0],
                             z: position[2],
@@ -221,7 +222,7 @@ impl Scene {
                     (Some(k), None) => ProbeInterval::Steps(k),
                     (None, None) => ProbeInterval::Steps(1),
                 };
-                Probe { name: p.name.clone(), interval, geometry }
+                Probe { name, interval, geometry }
             })
             .collect();
         Probes { probes }
@@ -238,8 +239,30 @@ impl Scene {
     /// Every `[[probe]]` table checked: names unique and file-safe, geometry inside the domain
     /// and outside every solid, intervals and counts within bounds.
     pub(crate) fn validate_probes(&self, origin: &SceneOrigin) -> Result<(), SceneError> {
-        if self.probe.len() > MAX_PROBES {
-            return Err(err(origin, "probe", format!("has {} probes; at most {MAX_PROBES} are allowed", self.probe.len())));
+        // Every probe a table declares (a row declares several), by name.
+        let mut names: Vec<(String, usize)> = Vec::new();
+        for (i, p) in self.probe.iter().enumerate() {
+            let row = |f: &str, why: &str| err(origin, format!("probe[{i}] ('{}').{f}", p.name), why.to_string());
+            // (A type without rows is told below that the fields do not apply to it.)
+            let rows = matches!(p.kind, ProbeType::Point | ProbeType::Gauge);
+            match if rows { (p.to, p.count) } else { (None, None) } {
+                (Some(_), None) => return Err(row("to", "is given without count; a row of probes needs both (count = N probes from position to to)")),
+                (None, Some(_)) => return Err(row("count", "is given without to; a row of probes needs both (count = N probes from position to to)")),
+                (_, Some(n)) if !(2..=MAX_PROBES as u32).contains(&n) => {
+                    return Err(row("count", &format!("is {n}; a row holds 2 to {MAX_PROBES} probes")));
+                }
+                _ => {}
+            }
+            names.extend(p.row().into_iter().map(|(name, _)| (name, i)));
+        }
+        if names.len() > MAX_PROBES {
+            return Err(err(origin, "probe", format!("declares {} probes (a row counting each of its own); at most {MAX_PROBES} are allowed", names.len())));
+        }
+        for (k, (name, i)) in names.iter().enumerate() {
+            if let Some((_, j)) = names[..k].iter().find(|(other, j)| other == name && j != i) {
+                return Err(err(origin, format!("probe[{i}].name"), format!(
+                    "gives the probe '{name}', which probe[{j}] declares too; names must be unique (each has its own file, and a row's are NAME_0, NAME_1, ...)")));
+            }
         }
         let (lo, hi) = (self.domain.min, self.domain.max);
         let solids = self.named_solids();
@@ -252,9 +275,7 @@ impl Scene {
                 return Err(err(origin, format!("probe[{i}].name"), format!(
                     "is '{}'; a probe's name names its file probes/NAME.csv: 1 to 64 letters, digits, '_' or '-'", p.name)));
             }
-            if let Some(k) = self.probe[..i].iter().position(|q| q.name == p.name) {
-                return Err(err(origin, format!("probe[{i}].name"), format!("'{}' is also the name of probe[{k}]; names must be unique (each has its own file)", p.name)));
-            }
+
             match (p.every_steps, p.every_seconds) {
                 (Some(_), Some(_)) => {
                     return Err(err(origin, field("every_steps"), "and every_seconds are both given; give one (every K steps, or every T seconds of simulated time)"));
@@ -266,16 +287,17 @@ impl Scene {
                 _ => {}
             }
             // A point that must lie inside the domain and outside every solid (on a face is fine).
+            // (`f` names the field.)
             let placed = |f: &str, x: [f64; 3]| -> Result<(), SceneError> {
                 if !x.iter().all(|c| c.is_finite()) {
-                    return Err(err(origin, field(f), format!("is {}; every component must be finite", short3(x))));
+                    return Err(err(origin, f, format!("is {}; every component must be finite", short3(x))));
                 }
                 if (0..3).any(|a| x[a] < lo[a] || x[a] > hi[a]) {
-                    return Err(err(origin, field(f), format!("{} lies outside the domain {}..{}; a probe must be inside it", short3(x), short3(lo), short3(hi))));
+                    return Err(err(origin, f, format!("{} lies outside the domain {}..{}; a probe must be inside it", short3(x), short3(lo), short3(hi))));
                 }
                 for (name, r, _) in &solids {
                     if (0..3).all(|a| x[a] > r.min[a] + tolerance && x[a] < r.max[a] - tolerance) {
-                        return Err(err(origin, field(f), format!(
+                        return Err(err(origin, f, format!(
                             "{} lies inside {name}, which fills {}..{}; a probe must be in the fluid's space (on a solid's face is allowed)",
                             short3(x), short3(r.min), short3(r.max))));
                     }
@@ -298,11 +320,19 @@ impl Scene {
                     let Some(position) = p.position else {
                         return Err(err(origin, field("position"), "is missing; a point or gauge probe needs position = [x, y, z]"));
                     };
-                    placed("position", position)?;
-                    if let Some(t) = p.top {
-                        if !(t.is_finite() && t > position[1] && t <= hi[1]) {
-                            return Err(err(origin, field("top"), format!(
-                                "is {}; must be above the gauge's bottom y = {} and at most the domain's top {}", short(t), short(position[1]), short(hi[1]))));
+                    placed(&field("position"), position)?;
+                    if let Some(to) = p.to {
+                        placed(&field("to"), to)?;
+                    }
+                    // Each probe of a row (the ends are checked above, by their fields).
+                    for (name, at) in p.row() {
+                        let at = at.unwrap_or(position);
+                        placed(&format!("probe[{i}] ('{}'), the row's probe '{name}' at", p.name), at)?;
+                        if let Some(t) = p.top {
+                            if !(t.is_finite() && t > at[1] && t <= hi[1]) {
+                                return Err(err(origin, field("top"), format!(
+                                    "is {}; must be above the bottom y = {} of the gauge '{name}' and at most the domain's top {}", short(t), short(at[1]), short(hi[1]))));
+                            }
                         }
                     }
                 }

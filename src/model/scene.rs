@@ -848,6 +848,12 @@ pub struct ProbeSpec {
     /// gauge: the y of the line's top; default the domain's top.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub top: Option<f64>,
+    /// point, gauge: with `count`, a row of `count` probes evenly spaced from `position` to
+    /// `to` (both included), named NAME_0, NAME_1, ... (zero-padded), each with its own file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub to: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub count: Option<u32>,
     /// force: the index of the solid in the scene's `[[boundary]]` list (a box or a container).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub boundary: Option<usize>,
@@ -890,8 +896,8 @@ impl ProbeType {
     /// The geometry fields a probe of this type may have.
     pub(crate) fn fields(self) -> &'static [&'static str] {
         match self {
-            ProbeType::Point => &["position"],
-            ProbeType::Gauge => &["position", "top"],
+            ProbeType::Point => &["position", "to", "count"],
+            ProbeType::Gauge => &["position", "top", "to", "count"],
             ProbeType::Force => &["boundary", "min", "max", "moment_about"],
             ProbeType::Front => &["direction", "floor", "height"],
         }
@@ -909,6 +915,8 @@ impl ProbeSpec {
         };
         add("position", self.position.is_some());
         add("top", self.top.is_some());
+        add("to", self.to.is_some());
+        add("count", self.count.is_some());
         add("boundary", self.boundary.is_some());
         add("min", self.min.is_some());
         add("max", self.max.is_some());
@@ -917,6 +925,26 @@ impl ProbeSpec {
         add("floor", self.floor.is_some());
         add("height", self.height.is_some());
         g
+    }
+
+    /// The probes this table declares, by name and position: one, or the row from `position`
+    /// to `to` where `count` is given (the positions of the table's other geometry: its own
+    /// position, unset where it has none).
+    pub fn row(&self) -> Vec<(String, Option<[f64; 3]>)> {
+        match (self.position, self.to, self.count) {
+            (Some(a), Some(b), Some(n)) if n >= 2 => {
+                let width = (n - 1).to_string().len();
+                (0..n)
+                    .map(|k| {
+                        let t = k as f64 / (n - 1) as f64;
+                        // The ends exactly as given.
+                        let x = std::array::from_fn(|i| if k == n - 1 { b[i] } else { a[i] + t * (b[i] - a[i]) });
+                        (format!("{}_{k:0width$}", self.name), Some(x))
+                    })
+                    .collect()
+            }
+            _ => vec![(self.name.clone(), self.position)],
+        }
     }
 
     /// A point probe at `position` sampled every `every_steps` steps.
@@ -931,6 +959,8 @@ impl ProbeSpec {
             kind,
             position: None,
             top: None,
+            to: None,
+            count: None,
             boundary: None,
             min: None,
             max: None,

@@ -73,6 +73,7 @@ fn scenes_lists_the_built_in_scenes() {
     for name in ["seed", "dam_break", "hydrostatic"] {
         assert!(text.contains(name), "{text}");
     }
+    assert!(text.contains("TOML file") && text.contains("SPlisHSPlasH JSON scene"), "{text}");
 }
 
 #[test]

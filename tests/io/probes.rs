@@ -84,7 +84,7 @@ fn probes_that_cannot_work_are_refused_naming_the_probe() {
         (point("far", "[0.2, 3.0, 0.05]"), vec!["probe[0] ('far').position", "outside the domain"]),
         // Inside the container's floor layers (the wall particles lie below y = 0).
         (point("buried", "[0.2, -0.03, 0.05]"), vec!["probe[0] ('buried').position", "inside boundary[0]", "on a solid's face is allowed"]),
-        (point("twice", "[0.2, 0.1, 0.05]") + &point("twice", "[0.1, 0.1, 0.05]"), vec!["probe[1].name", "'twice' is also the name of probe[0]"]),
+        (point("twice", "[0.2, 0.1, 0.05]") + &point("twice", "[0.1, 0.1, 0.05]"), vec!["probe[1].name", "the probe 'twice', which probe[0] declares too"]),
         (point("a/b", "[0.2, 0.1, 0.05]"), vec!["probe[0].name", "'a/b'", "letters, digits"]),
         (point("both", "[0.2, 0.1, 0.05]") + "every_steps = 2\nevery_seconds = 0.1\n", vec!["probe[0] ('both').every_steps", "both given"]),
         (point("never", "[0.2, 0.1, 0.05]") + "every_steps = 0\n", vec!["('never').every_steps", "is 0"]),
@@ -108,6 +108,66 @@ fn probes_that_cannot_work_are_refused_naming_the_probe() {
     let dfsph = || common::TestScene::small_tank().dfsph();
     assert!(dfsph().probe(ProbeSpec { boundary: Some(0), ..ProbeSpec::of("walls", ProbeType::Force) }).build().params().probes.force_count() == 1);
     assert!(dfsph().probe(ProbeSpec::point("inside", [0.1, 0.1, 0.1], 5)).build().params().probes.probes.len() == 1);
+}
+
+/// A point or gauge table with `to` and `count` is a row of probes: evenly spaced, both ends
+/// included, named NAME_0.. (zero-padded), each checked as a probe of its own, each counted
+/// towards the 64 a scene may hold; a run writes a file and a plot for each.
+#[test]
+fn a_row_of_probes_is_probes_evenly_spaced_from_position_to_to() {
+    let scene = tank_with("[[probe]]\nname = \"row\"\ntype = \"point\"\nposition = [0.1, 0.1, 0.05]\nto = [0.3, 0.1, 0.05]\ncount = 3\nevery_steps = 2\n\n[[probe]]\nname = \"g\"\ntype = \"gauge\"\nposition = [0.0, 0.0, 0.05]\nto = [0.4, 0.0, 0.05]\ncount = 11\ntop = 0.5\n").unwrap();
+    let p = scene.params().probes;
+    let names: Vec<&str> = p.probes.iter().map(|q| q.name.as_str()).collect();
+    assert_eq!(names[..4], ["row_0", "row_1", "row_2", "g_00"]);
+    assert_eq!((names.len(), names[13]), (14, "g_10"));
+    let xs: Vec<[f64; 3]> = p.probes[..3]
+        .iter()
+        .map(|q| match q.geometry {
+            ProbeGeometry::Point { position } => position,
+            ref other => panic!("{other:?}"),
+        })
+        .collect();
+    assert_eq!(xs, [[0.1, 0.1, 0.05], [0.2, 0.1, 0.05], [0.3, 0.1, 0.05]]);
+    assert!(p.probes[..3].iter().all(|q| q.interval == ProbeInterval::Steps(2)));
+    match p.probes[13].geometry {
+        ProbeGeometry::Gauge { x, z, bottom, top, .. } => assert_eq!((x, z, bottom, top), (0.4, 0.05, 0.0, 0.5)),
+        ref other => panic!("{other:?}"),
+    }
+    // The table round-trips as a row.
+    assert_eq!(Scene::from_toml_str(&scene.to_toml(), &SceneOrigin::Text).unwrap(), scene);
+
+    let row = |at: &str, to: &str, count: &str| format!("[[probe]]\nname = \"r\"\ntype = \"point\"\nposition = {at}\n{to}{count}");
+    let cases = [
+        (row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", ""), vec!["probe[0] ('r').to", "without count"]),
+        (row("[0.1, 0.1, 0.05]", "", "count = 3\n"), vec!["probe[0] ('r').count", "without to"]),
+        (row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", "count = 1\n"), vec!["('r').count", "is 1; a row holds 2 to 64"]),
+        (row("[0.1, 0.1, 0.05]", "to = [0.3, 3.0, 0.05]\n", "count = 3\n"), vec!["probe[0] ('r').to", "outside the domain"]),
+        (row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", "count = 60\n") + &row("[0.1, 0.2, 0.05]", "to = [0.3, 0.2, 0.05]\n", "count = 5\n").replace("\"r\"", "\"s\""), vec!["declares 65 probes", "at most 64"]),
+        (row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", "count = 2\n") + "\n[[probe]]\nname = \"r_1\"\ntype = \"point\"\nposition = [0.2, 0.2, 0.05]\n", vec!["probe[1].name", "the probe 'r_1', which probe[0] declares too"]),
+        ("[[probe]]\nname = \"f\"\ntype = \"force\"\nboundary = 0\ncount = 2\n".into(), vec!["('f').count", "does not apply to a probe of type \"force\""]),
+    ];
+    for (probes, expected) in cases {
+        let e = tank_with(&probes).expect_err(&probes);
+        for part in expected {
+            assert!(e.contains(part), "'{part}' is not in the error for\n{probes}\n{e}");
+        }
+    }
+    // A gauge row whose top is below one of its bottoms names that gauge.
+    let e = tank_with("[[probe]]\nname = \"g\"\ntype = \"gauge\"\nposition = [0.1, 0.0, 0.05]\nto = [0.3, 0.4, 0.05]\ncount = 3\ntop = 0.3\n").unwrap_err();
+    assert!(e.contains("('g').top") && e.contains("the gauge 'g_2'"), "{e}");
+
+    // A run writes each probe's series and plot.
+    let dir = tempfile::tempdir().unwrap();
+    let set = "probe=[{name=\"row\",type=\"point\",position=[0.1,0.1,0.05],to=[0.3,0.1,0.05],count=3}]";
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .args(["run", "hydrostatic", "--particles", "300", "--steps", "3", "--backend", "cpu", "--quiet", "--set", set, "--out", "o"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let files: Vec<String> = probe_files(&dir.path().join("o")).into_iter().map(|(name, _)| name).collect();
+    assert_eq!(files, ["row_0.csv", "row_1.csv", "row_2.csv"]);
+    assert!((0..3).all(|k| dir.path().join(format!("o/probes/row_{k}.png")).exists()));
 }
 
 fn probe_files(dir: &Path) -> Vec<(String, String)> {
