@@ -48,7 +48,7 @@ fn drop_scene() -> Scene {
             dfsph: Default::default(),
         },
         time: Time::fixed(2.5e-4, 0.5),
-        fluid: vec![FluidBlock { min: [0.15, 0.25, 0.15], max: [0.35, 0.45, 0.35], jitter: 0.05, velocity: [0.0; 3] }],
+        fluid: vec![FluidBlock::new([0.15, 0.25, 0.15], [0.35, 0.45, 0.35])],
         boundary: vec![Boundary::Container { min: [0.0; 3], max: [0.5; 3], open_top: false, walls: WallParticles::default() }],
         camera: None,
         limits: Default::default(),

@@ -87,7 +87,7 @@ pub fn block_scene(n: u32) -> Scene {
             dfsph: Default::default(),
         },
         time: Time::fixed(0.0004, 0.08),
-        fluid: vec![FluidBlock { min: [half; 3], max: [half + l; 3], jitter: 0.0, velocity: [0.0; 3] }],
+        fluid: vec![FluidBlock { jitter: 0.0, ..FluidBlock::new([half; 3], [half + l; 3]) }],
         boundary: vec![Boundary::Container {
             min: [half; 3],
             max: [walls[0] - half, walls[1] - half, walls[2] - half],

@@ -374,6 +374,12 @@ impl Scene {
                     "is {} thick along {}, too thin for one layer of the particle spacing {}; make it thicker or the spacing smaller",
                     short(b.max[a] - b.min[a]), ["x", "y", "z"][a], short(self.physics.particle_spacing))));
             }
+            if self.fluid_block_count(i) == 0 {
+                return Err(err(origin, format!("fluid[{i}].shape"), format!(
+                    "is \"{}\", and no lattice point of the box {}..{} lies inside it at the particle spacing {}; make the box larger or the spacing smaller",
+                    b.shape.name(), short3(b.min), short3(b.max), short(self.physics.particle_spacing))));
+            }
+            // A shape is checked by its box: it starts clear of solids and other blocks.
             let block = (b.min, b.max);
             for (name, region, _) in &solids {
                 if boxes_overlap(block, (region.min, region.max), tolerance) {

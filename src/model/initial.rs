@@ -162,7 +162,7 @@ impl Scene {
         let mut id = 0u64;
         for (i, b) in self.fluid.iter().enumerate() {
             let j = b.jitter * s;
-            for q in points(self.fluid_lattice(i)) {
+            for q in points(self.fluid_lattice(i)).filter(|&q| b.shape.contains(b.min, b.max, q)) {
                 let mut q = q;
                 if j > 0.0 {
                     for c in q.iter_mut() {

@@ -66,6 +66,21 @@ pub fn wall_axis(min: f64, max: f64, s: f64) -> AxisLattice {
     AxisLattice { origin: min, spacing: length / n, count: n as u64 }
 }
 
+/// The first index in `lo..hi` where `past` holds, `hi` where it holds nowhere; `past` must
+/// hold on a tail of the range (false, then true).
+pub fn first_index(lo: u64, hi: u64, past: impl Fn(u64) -> bool) -> u64 {
+    let (mut lo, mut hi) = (lo, hi);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if past(mid) {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    lo
+}
+
 /// The points of three axis lattices; x runs fastest.
 pub fn points(axes: [AxisLattice; 3]) -> impl Iterator<Item = [f64; 3]> {
     (0..axes[2].count).flat_map(move |k| (0..axes[1].count).flat_map(move |j| (0..axes[0].count).map(move |i| [axes[0].point(i), axes[1].point(j), axes[2].point(k)])))

@@ -547,7 +547,8 @@ fn default_rebuild_every() -> u32 {
     1
 }
 
-/// A box of fluid filled on a lattice of the physics spacing, with seeded random offsets.
+/// A box of fluid filled on a lattice of the physics spacing, with seeded random offsets; or
+/// the part of that lattice inside a shape inscribed in the box.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FluidBlock {
@@ -558,6 +559,68 @@ pub struct FluidBlock {
     pub jitter: f64,
     #[serde(default)]
     pub velocity: [f64; 3],
+    /// The shape the box's lattice is cut to (the whole box by default).
+    #[serde(default, skip_serializing_if = "FluidShape::is_box")]
+    pub shape: FluidShape,
+}
+
+impl FluidBlock {
+    /// A box of fluid at rest, with the default jitter.
+    pub fn new(min: [f64; 3], max: [f64; 3]) -> Self {
+        FluidBlock { min, max, jitter: default_jitter(), velocity: [0.0; 3], shape: FluidShape::Box }
+    }
+}
+
+/// The shape of a fluid block, inscribed in its box `min..max`: the lattice points of the box
+/// inside it are the block's particles.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FluidShape {
+    /// The whole box.
+    #[default]
+    Box,
+    /// The ellipsoid touching the box's faces (a sphere in a cube): a drop.
+    Ellipsoid,
+    /// The cylinder along x, y or z touching the box's faces across it (a circle in a square
+    /// cross-section): a jet, a column.
+    CylinderX,
+    CylinderY,
+    CylinderZ,
+}
+
+impl FluidShape {
+    fn is_box(&self) -> bool {
+        *self == FluidShape::Box
+    }
+
+    /// Its name in a scene file.
+    pub fn name(self) -> &'static str {
+        match self {
+            FluidShape::Box => "box",
+            FluidShape::Ellipsoid => "ellipsoid",
+            FluidShape::CylinderX => "cylinder_x",
+            FluidShape::CylinderY => "cylinder_y",
+            FluidShape::CylinderZ => "cylinder_z",
+        }
+    }
+
+    /// Whether `x` lies inside the shape inscribed in `min..max` (on its surface counts).
+    pub fn contains(self, min: [f64; 3], max: [f64; 3], x: [f64; 3]) -> bool {
+        // The squared distance from the axis (or centre) along axis a, in half-extents.
+        let term = |a: usize| {
+            let (centre, half) = (0.5 * (min[a] + max[a]), 0.5 * (max[a] - min[a]));
+            let d = (x[a] - centre) / half;
+            d * d
+        };
+        let across = |along: usize| (0..3).filter(|&a| a != along).map(term).sum::<f64>();
+        match self {
+            FluidShape::Box => true,
+            FluidShape::Ellipsoid => (0..3).map(term).sum::<f64>() <= 1.0,
+            FluidShape::CylinderX => across(0) <= 1.0,
+            FluidShape::CylinderY => across(1) <= 1.0,
+            FluidShape::CylinderZ => across(2) <= 1.0,
+        }
+    }
 }
 
 fn default_jitter() -> f64 {
@@ -753,7 +816,9 @@ impl Scene {
         use super::numbers::short;
         let s = self.physics.particle_spacing;
         let mut out = Vec::new();
-        for (i, b) in self.fluid.iter().enumerate() {
+        // A shape's particles are those of its box's lattice inside it: the box's sides need
+        // not be whole spacings.
+        for (i, b) in self.fluid.iter().enumerate().filter(|(_, b)| b.shape == FluidShape::Box) {
             let axes = self.fluid_lattice(i);
             let stated: [f64; 3] = std::array::from_fn(|a| b.max[a] - b.min[a]);
             if (0..3).all(|a| super::lattice::whole_spacings(stated[a], s).is_some()) {
@@ -779,7 +844,38 @@ impl Scene {
 
     /// Fluid particles of the scene, counted from the lattice sizes without creating them.
     pub fn fluid_particle_count(&self) -> u64 {
-        (0..self.fluid.len()).map(|i| self.fluid_lattice(i).iter().map(|a| a.count).product::<u64>()).sum()
+        (0..self.fluid.len()).map(|i| self.fluid_block_count(i)).sum()
+    }
+
+    /// Fluid particles of block `i`: the box's lattice, or the part of it inside its shape,
+    /// counted row by row along x (a convex shape holds an interval of each row, around the
+    /// point nearest its centre), so that a block of a billion particles is counted in a
+    /// million binary searches.
+    pub fn fluid_block_count(&self, i: usize) -> u64 {
+        let axes = self.fluid_lattice(i);
+        let b = &self.fluid[i];
+        if b.shape == FluidShape::Box {
+            return axes.iter().map(|a| a.count).product();
+        }
+        let x = axes[0];
+        if x.count == 0 {
+            return 0;
+        }
+        let centre = ((0.5 * (b.min[0] + b.max[0]) - x.origin) / x.spacing - 0.5).round().clamp(0.0, (x.count - 1) as f64) as u64;
+        let mut n = 0;
+        for k in 0..axes[2].count {
+            for j in 0..axes[1].count {
+                let (y, z) = (axes[1].point(j), axes[2].point(k));
+                let inside = |i: u64| b.shape.contains(b.min, b.max, [x.point(i), y, z]);
+                if !inside(centre) {
+                    continue;
+                }
+                let first = crate::model::lattice::first_index(0, centre, |i| inside(i));
+                let end = crate::model::lattice::first_index(centre, x.count, |i| !inside(i));
+                n += end - first;
+            }
+        }
+        n
     }
 
     /// Particle count (fluid and walls, walls over-estimated by the full shell of their box,

@@ -290,7 +290,7 @@ impl TestScene {
     /// Adds a block of fluid at rest filling [min, max], with the default jitter of 0.05
     /// spacings; `jitter` and `moving_at` change it.
     pub fn fluid(mut self, min: [f64; 3], max: [f64; 3]) -> TestScene {
-        self.scene.fluid.push(FluidBlock { min, max, jitter: 0.05, velocity: [0.0; 3] });
+        self.scene.fluid.push(FluidBlock::new(min, max));
         self
     }
 

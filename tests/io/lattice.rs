@@ -107,3 +107,55 @@ fn a_tank_not_a_whole_number_of_spacings_has_all_its_wall_layers_on_every_side()
     before.dedup_by(|a, b| (*a - *b).abs() < 1e-12);
     assert!((before[0] + 0.06).abs() < 1e-12 && (before[1] + 0.02).abs() < 1e-12, "{before:?}");
 }
+
+/// A block's `shape` cuts its box's lattice to the ellipsoid or cylinder inscribed in it: the
+/// particles are exactly the lattice points inside, the count computed without creating them
+/// is theirs, the volume is the shape's to within the lattice's steps, and the scene file
+/// keeps the shape (a box says nothing). A shape too small to hold a lattice point is refused.
+#[test]
+fn a_shaped_block_holds_the_lattice_points_of_its_box_inside_the_shape() {
+    use wgsph::model::lattice::points;
+    use wgsph::model::scene::{FluidShape, Scene, SceneOrigin};
+    let (min, max) = ([0.3, 0.3, 0.0], [0.5, 0.5, 0.2]);
+    for (shape, volume) in [
+        (FluidShape::Ellipsoid, 4.0 / 3.0 * std::f64::consts::PI * 0.1f64.powi(3)),
+        (FluidShape::CylinderX, std::f64::consts::PI * 0.01 * 0.2),
+        (FluidShape::CylinderY, std::f64::consts::PI * 0.01 * 0.2),
+        (FluidShape::CylinderZ, std::f64::consts::PI * 0.01 * 0.2),
+    ] {
+        let mut scene = TestScene::new().domain([-0.2; 3], [1.2, 1.2, 0.4]).smoothing_length(0.02).particle_spacing(0.01).without_fluid().fluid(min, max).jitter(0.0).closed_container([0.0; 3], [1.0, 1.0, 0.2]).build();
+        scene.fluid[0].shape = shape;
+        let inside: Vec<[f64; 3]> = points(scene.fluid_lattice(0)).filter(|&q| shape.contains(min, max, q)).collect();
+        let state = scene.initial_state();
+        assert_eq!(state.fluid_positions, inside, "{shape:?}");
+        assert_eq!(scene.fluid_particle_count(), inside.len() as u64, "{shape:?}");
+        let filled = inside.len() as f64 * 0.01f64.powi(3);
+        assert!((filled / volume - 1.0).abs() < 0.05, "{shape:?}: {filled} against {volume}");
+        // Every particle inside the inscribed shape, none of the box's corners.
+        assert!(inside.iter().all(|q| (0..3).all(|a| q[a] > min[a] && q[a] < max[a])));
+        assert!(!inside.iter().any(|q| (q[0] - 0.305).abs() < 1e-9 && (q[1] - 0.305).abs() < 1e-9 && (q[2] - 0.005).abs() < 1e-9), "{shape:?}");
+        let text = scene.to_toml();
+        assert!(text.contains(&format!("shape = \"{}\"", shape.name())), "{text}");
+        assert_eq!(Scene::from_toml_str(&text, &SceneOrigin::Text).unwrap(), scene);
+    }
+    let boxed = column().build();
+    assert!(!boxed.to_toml().contains("shape"));
+    // A box 1.6 spacings wide holds two points along each axis, 0.5 spacings from its centre:
+    // outside the inscribed ellipsoid (3 (0.5 / 0.8)^2 > 1).
+    let mut tiny = TestScene::new().domain([-0.2; 3], [1.2; 3]).smoothing_length(0.08).particle_spacing(0.04).fluid([0.4; 3], [0.464; 3]).closed_container([0.0; 3], [1.0; 3]).build();
+    tiny.fluid[0].shape = FluidShape::Ellipsoid;
+    let e = tiny.validate(&SceneOrigin::Text).unwrap_err().to_string();
+    assert!(e.contains("fluid[0].shape") && e.contains("\"ellipsoid\"") && e.contains("no lattice point"), "{e}");
+}
+
+/// A drop (an ellipsoid block) falls into the tank from the command line, on the CPU path.
+#[test]
+fn a_drop_runs_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = wgsph(&["run", "hydrostatic", "--steps", "5", "--backend", "cpu", "--quiet", "--set", "fluid=[{min=[0.0,0.0,0.0],max=[0.4,0.3,0.1]},{min=[0.15,0.4,0.0],max=[0.25,0.5,0.1],shape=\"ellipsoid\"}]", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.path().join("o/summary.json")).unwrap()).unwrap();
+    let scene = wgsph::model::scene::Scene::load(dir.path().join("o/scene.toml").to_str().unwrap()).unwrap();
+    assert_eq!(s["fluid_particles"].as_u64(), Some(scene.fluid_particle_count()));
+    assert_eq!(scene.fluid[1].shape, wgsph::model::scene::FluidShape::Ellipsoid);
+}

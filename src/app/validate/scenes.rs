@@ -147,7 +147,7 @@ impl Tank {
             fluid: self
                 .fluid
                 .iter()
-                .map(|&(min, max, velocity)| FluidBlock { min, max, jitter: 0.0, velocity })
+                .map(|&(min, max, velocity)| FluidBlock { min, max, jitter: 0.0, velocity, shape: Default::default() })
                 .collect(),
             boundary,
             camera: None,

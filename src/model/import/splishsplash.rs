@@ -485,7 +485,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
         let (a, b) = (t(start), t(end));
         let min = [a[0].min(b[0]), a[1].min(b[1]), a[2].min(b[2])];
         let max = [a[0].max(b[0]), a[1].max(b[1]), a[2].max(b[2])];
-        blocks.push(FluidBlock { min, max, jitter: 0.0, velocity });
+        blocks.push(FluidBlock { min, max, jitter: 0.0, velocity, shape: Default::default() });
         block_fluid.push(o.get("id").and_then(Value::as_str).unwrap_or("Fluid").to_string());
     }
     if blocks.is_empty() {
