@@ -214,7 +214,7 @@ fn a_scene_of_the_current_format_with_its_solver_and_method_blocks_is_imported_w
     // A key a block does not hold, an XSPH filter, a refused value in a block: named by their
     // place in the blocks.
     for (from, to, named) in [
-        ("\"minIterations\": 3", "\"minIterations\": 3, \"omega\": 1", "Configuration.DFSPH.omega: is not a DFSPH parameter"),
+        ("\"minIterations\": 3", "\"minIterations\": 3, \"omega\": 1", "Configuration.DFSPH.omega: is not a parameter of SPlisHSPlasH's DFSPH block"),
         ("\"exponent\": 7", "\"exponent\": 7, \"gamma\": 2", "Configuration.WCSPH.gamma"),
         ("\"xsph\": 0.0", "\"xsph\": 0.1", "Materials[0].XSPH.xsph: is 0.1; wgsph has no XSPH"),
         ("\"viscosity\": 0.02", "\"viscosity\": 0.02, \"kinematic\": 1", "Materials[0].Standard viscosity.kinematic"),

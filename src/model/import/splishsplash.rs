@@ -189,6 +189,31 @@ fn object<'a>(v: &'a Value, field: &str, p: &mut Problems) -> Option<&'a Map<Str
     o
 }
 
+/// The keys of a section (`Configuration`, a fluid's parameters) to read, each with the field it
+/// was read at: those at its top and those of the blocks in `read` (a block's name and the keys
+/// it may hold; another key there is a problem). The other blocks in `skipped` are left out:
+/// they belong to solvers or methods the scene does not choose, which their selectors check.
+fn section_entries<'a>(obj: &'a Map<String, Value>, section: &str, read: &[(&str, &[&str])], skipped: &[&str], p: &mut Problems) -> Vec<(&'a str, &'a Value, String)> {
+    let mut entries = Vec::new();
+    for (key, v) in obj {
+        let field = format!("{section}.{key}");
+        match (read.iter().find(|(name, _)| name == key), v.as_object()) {
+            (Some((block, allowed)), Some(o)) => {
+                for (inner, w) in o {
+                    if allowed.contains(&inner.as_str()) {
+                        entries.push((inner.as_str(), w, format!("{field}.{inner}")));
+                    } else {
+                        p.add(format!("{field}.{inner}"), format!("is not a parameter of SPlisHSPlasH's {block} block that wgsph can import"));
+                    }
+                }
+            }
+            (None, Some(_)) if skipped.contains(&key.as_str()) => {}
+            _ => entries.push((key.as_str(), v, field)),
+        }
+    }
+    entries
+}
+
 /// The fluid parameters of one fluid id.
 #[derive(Clone, Copy, PartialEq, Debug)]
 struct FluidParams {
@@ -202,24 +227,7 @@ fn fluid_params(section: &str, obj: &Map<String, Value>, p: &mut Problems) -> (F
     let mut f = FluidParams { density0: 1000.0, viscosity: 0.01, viscosity_boundary: 0.0 };
     let mut viscosity_method = 1;
     // Keys at the top of the block, and those of the "Standard viscosity" and "XSPH" blocks.
-    let mut entries: Vec<(&str, &Value, String)> = Vec::new();
-    for (key, v) in obj {
-        let field = format!("{section}.{key}");
-        match (key.as_str(), v.as_object()) {
-            ("Standard viscosity" | "XSPH", Some(block)) => {
-                let allowed: &[&str] = if key == "XSPH" { &["xsph", "xsphBoundary"] } else { &["viscosity", "viscosityBoundary"] };
-                for (inner, w) in block {
-                    if allowed.contains(&inner.as_str()) {
-                        entries.push((inner, w, format!("{field}.{inner}")));
-                    } else {
-                        p.add(format!("{field}.{inner}"), format!("is not a parameter of SPlisHSPlasH's {key} that wgsph can import"));
-                    }
-                }
-            }
-            (k, Some(_)) if METHOD_BLOCKS.contains(&k) => {}
-            _ => entries.push((key, v, field)),
-        }
-    }
+    let entries = section_entries(obj, section, &[("Standard viscosity", &["viscosity", "viscosityBoundary"]), ("XSPH", &["xsph", "xsphBoundary"])], METHOD_BLOCKS, p);
     let read_at = entries.iter().map(|(key, _, field)| (key.to_string(), field.clone())).collect();
     for (key, v, field) in entries {
         match key {
@@ -282,24 +290,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
     let (mut cfl_factor, mut cfl_min_dt, mut cfl_max_dt) = (0.5, 0.0001, 0.005);
     // The keys at the top of Configuration (SPlisHSPlasH before 2.13 kept every solver's there)
     // and those of the WCSPH and DFSPH blocks.
-    let mut entries: Vec<(&str, &Value, String)> = Vec::new();
-    for (key, v) in config {
-        let field = format!("Configuration.{key}");
-        match (key.as_str(), v.as_object()) {
-            (block @ ("WCSPH" | "DFSPH"), Some(o)) => {
-                let allowed = if block == "WCSPH" { WCSPH_KEYS } else { DFSPH_KEYS };
-                for (inner, w) in o {
-                    if allowed.contains(&inner.as_str()) {
-                        entries.push((inner, w, format!("{field}.{inner}")));
-                    } else {
-                        p.add(format!("{field}.{inner}"), format!("is not a {block} parameter that wgsph can import"));
-                    }
-                }
-            }
-            (k, Some(_)) if SOLVER_BLOCKS.contains(&k) => {}
-            _ => entries.push((key, v, field)),
-        }
-    }
+    let entries = section_entries(config, "Configuration", &[("WCSPH", WCSPH_KEYS), ("DFSPH", DFSPH_KEYS)], SOLVER_BLOCKS, &mut p);
     // Where each key was read, for the messages of a scene wgsph refuses.
     let config_read_at: HashMap<String, String> = entries.iter().map(|(key, _, field)| (key.to_string(), field.clone())).collect();
     for (key, v, field) in entries {
