@@ -242,14 +242,14 @@ impl Scene {
         // Every probe a table declares (a row declares several), by name.
         let mut names: Vec<(String, usize)> = Vec::new();
         for (i, p) in self.probe.iter().enumerate() {
-            let row = |f: &str, why: &str| err(origin, format!("probe[{i}] ('{}').{f}", p.name), why.to_string());
+            let refuse = |f: &str, why: &str| err(origin, format!("probe[{i}] ('{}').{f}", p.name), why.to_string());
             // (A type without rows is told below that the fields do not apply to it.)
             let rows = matches!(p.kind, ProbeType::Point | ProbeType::Gauge);
             match if rows { (p.to, p.count) } else { (None, None) } {
-                (Some(_), None) => return Err(row("to", "is given without count; a row of probes needs both (count = N probes from position to to)")),
-                (None, Some(_)) => return Err(row("count", "is given without to; a row of probes needs both (count = N probes from position to to)")),
+                (Some(_), None) => return Err(refuse("to", "is given without count; a row of probes needs both (count = N probes from position to to)")),
+                (None, Some(_)) => return Err(refuse("count", "is given without to; a row of probes needs both (count = N probes from position to to)")),
                 (_, Some(n)) if !(2..=MAX_PROBES as u32).contains(&n) => {
-                    return Err(row("count", &format!("is {n}; a row holds 2 to {MAX_PROBES} probes")));
+                    return Err(refuse("count", &format!("is {n}; a row holds 2 to {MAX_PROBES} probes")));
                 }
                 _ => {}
             }
@@ -275,7 +275,6 @@ impl Scene {
                 return Err(err(origin, format!("probe[{i}].name"), format!(
                     "is '{}'; a probe's name names its file probes/NAME.csv: 1 to 64 letters, digits, '_' or '-'", p.name)));
             }
-
             match (p.every_steps, p.every_seconds) {
                 (Some(_), Some(_)) => {
                     return Err(err(origin, field("every_steps"), "and every_seconds are both given; give one (every K steps, or every T seconds of simulated time)"));
@@ -324,10 +323,13 @@ impl Scene {
                     if let Some(to) = p.to {
                         placed(&field("to"), to)?;
                     }
-                    // Each probe of a row (the ends are checked above, by their fields).
+                    // Each probe of a row, and each gauge's top (a table without a row is its
+                    // one probe, placed above).
                     for (name, at) in p.row() {
                         let at = at.unwrap_or(position);
-                        placed(&format!("probe[{i}] ('{}'), the row's probe '{name}' at", p.name), at)?;
+                        if p.count.is_some() {
+                            placed(&format!("probe[{i}] ('{}'), the row's probe '{name}' at", p.name), at)?;
+                        }
                         if let Some(t) = p.top {
                             if !(t.is_finite() && t > at[1] && t <= hi[1]) {
                                 return Err(err(origin, field("top"), format!(

@@ -394,7 +394,6 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
     };
 
     // Fluid parameter blocks: top-level objects keyed by fluid id, or the older "Materials" list.
-    // (fluid id, its parameters, the JSON section they were read from)
     // (fluid id, its parameters, the JSON section they were read from, where each key was read)
     let mut fluids: Vec<(String, FluidParams, String, HashMap<String, String>)> = Vec::new();
     let block_ids: Vec<String> = root
