@@ -201,9 +201,34 @@ impl Scene {
         }
         for (i, b) in self.boundary.iter().enumerate() {
             let f = format!("boundary[{i}]");
+            if let Boundary::Mesh(m) = b {
+                finite3(&format!("{f}.scale"), m.scale)?;
+                if m.scale.contains(&0.0) {
+                    return Err(err(origin, format!("{f}.scale"), format!("is {}; every factor must be non-zero", short3(m.scale))));
+                }
+                finite3(&format!("{f}.translate"), m.translate)?;
+                finite3(&format!("{f}.rotation_axis"), m.rotation_axis)?;
+                if !m.rotation_degrees.is_finite() {
+                    return Err(err(origin, format!("{f}.rotation_degrees"), format!("is {}; must be a finite number", m.rotation_degrees)));
+                }
+                if m.rotation_degrees != 0.0 && m.rotation_axis == [0.0; 3] {
+                    return Err(err(origin, format!("{f}.rotation_axis"), "is zero; a rotation needs a non-zero axis"));
+                }
+                if let Some(crc) = &m.crc32 {
+                    if !(crc.len() == 8 && crc.chars().all(|c| c.is_ascii_hexdigit())) {
+                        return Err(err(origin, format!("{f}.crc32"), format!("is '{crc}'; must be the file's CRC-32 as 8 hexadecimal digits (or left out)")));
+                    }
+                }
+                if m.surface.0.is_none() {
+                    return Err(err(origin, format!("{f}.file"), format!("'{}' has not been read (a scene built in code reads its meshes with Scene::read_meshes)", m.file)));
+                }
+            }
             match b {
-                Boundary::Container { min, max, walls, .. } | Boundary::Box { min, max, walls } => {
-                    ordered(&f, *min, *max)?;
+                Boundary::Container { .. } | Boundary::Box { .. } | Boundary::Mesh(_) => {
+                    let walls = b.walls().expect("a particle boundary");
+                    if let Boundary::Container { min, max, .. } | Boundary::Box { min, max, .. } = b {
+                        ordered(&f, *min, *max)?;
+                    }
                     let s = walls.spacing.unwrap_or(p.particle_spacing);
                     positive(&format!("{f}.spacing"), s)?;
                     if let Some(rd) = walls.rest_density {
@@ -216,7 +241,7 @@ impl Scene {
                     if walls.layers == Some(0) {
                         return Err(err(origin, format!("{f}.layers"), "is 0; must be at least 1"));
                     }
-                    let (lo, hi) = self.wall_span(b).expect("a container or a box");
+                    let (lo, hi) = self.wall_span(b).expect("a particle boundary");
                     if !inside(lo) || !inside(hi) {
                         return Err(err(origin, &f, format!(
                             "its wall particles span {}..{}, outside the domain {}..{}; enlarge the domain",
@@ -374,7 +399,13 @@ impl Scene {
                     "is {} thick along {}, too thin for one layer of the particle spacing {}; make it thicker or the spacing smaller",
                     short(b.max[a] - b.min[a]), ["x", "y", "z"][a], short(self.physics.particle_spacing))));
             }
-            if self.fluid_block_count(i) == 0 {
+            let count = self.fluid_block_count(i);
+            if count == 0 && self.boundary.iter().any(|b| matches!(b, Boundary::Mesh(_))) {
+                return Err(err(origin, format!("fluid[{i}]"), format!(
+                    "the block {}..{} has no lattice point on the fluid's side of the mesh boundaries at least half a spacing from their surfaces; move it into the fluid's space",
+                    short3(b.min), short3(b.max))));
+            }
+            if count == 0 {
                 return Err(err(origin, format!("fluid[{i}].shape"), format!(
                     "is \"{}\", and no lattice point of the box {}..{} lies inside it at the particle spacing {}; make the box larger or the spacing smaller",
                     b.shape.name(), short3(b.min), short3(b.max), short(self.physics.particle_spacing))));

@@ -6,7 +6,8 @@ use super::lattice::{fluid_axis, points, wall_axis, whole_spacings, AxisLattice}
 use super::numbers::short3;
 use super::params::{Grid, Params};
 use super::real::V3;
-use super::scene::{Boundary, BoundaryVolume, DensityMethod, InitialPressure, Kernel, Scene};
+use super::mesh::SurfaceIndex;
+use super::scene::{Boundary, BoundaryVolume, DensityMethod, InitialPressure, Kernel, MeshWall, Scene};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
@@ -15,6 +16,32 @@ use rayon::prelude::*;
 pub struct SolidRegion {
     pub min: [f64; 3],
     pub max: [f64; 3],
+}
+
+/// Where fluid may start beside the mesh boundaries: a fluid block's lattice point on a mesh's
+/// wall side, or nearer to its surface than half the particle spacing (where a lattice point
+/// beside a flat wall starts), is left out, so a block poured into a curved tank fills it.
+pub struct MeshCut {
+    meshes: Vec<(SurfaceIndex, bool, [f64; 3], [f64; 3])>,
+    clearance: f64,
+}
+
+impl MeshCut {
+    /// Whether a fluid particle may start at `q`.
+    pub fn keeps(&self, q: [f64; 3]) -> bool {
+        self.meshes.iter().all(|(index, fluid_inside, lo, hi)| {
+            let near_box = (0..3).all(|a| q[a] > lo[a] - self.clearance && q[a] < hi[a] + self.clearance);
+            if !near_box {
+                return !fluid_inside;
+            }
+            index.inside(q) == *fluid_inside && index.distance_within_reach(q).is_none_or(|d| d >= self.clearance)
+        })
+    }
+
+    /// Whether no mesh cuts anything.
+    pub fn is_empty(&self) -> bool {
+        self.meshes.is_empty()
+    }
 }
 
 /// One fluid particle at t = 0, as [`Scene::visit_fluid`] hands it over.
@@ -93,7 +120,9 @@ impl Scene {
                     out.push((name("-z"), slab(2, min[2] - l, min[2]), s));
                     out.push((name("+z"), slab(2, max[2], max[2] + l), s));
                 }
-                Boundary::Plane { .. } => {}
+                // A mesh's solid is not a box: the fluid beside it is cut by its surface
+                // ([`MeshCut`]) and probes are checked against it (`validate_probes`).
+                Boundary::Plane { .. } | Boundary::Mesh(_) => {}
             }
         }
         out
@@ -159,10 +188,11 @@ impl Scene {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(self.seed);
         let continuity = self.physics.density == DensityMethod::Continuity;
         let params = self.params();
+        let cut = self.mesh_cut();
         let mut id = 0u64;
         for (i, b) in self.fluid.iter().enumerate() {
             let j = b.jitter * s;
-            for q in points(self.fluid_lattice(i)).filter(|&q| b.shape.contains(b.min, b.max, q)) {
+            for q in points(self.fluid_lattice(i)).filter(|&q| b.shape.contains(b.min, b.max, q) && cut.keeps(q)) {
                 let mut q = q;
                 if j > 0.0 {
                     for c in q.iter_mut() {
@@ -174,6 +204,30 @@ impl Scene {
                 id += 1;
             }
         }
+    }
+
+    /// A mesh boundary's placed surface, indexed for the distances its walls and the fluid
+    /// beside them are sampled by.
+    pub fn mesh_index(&self, m: &MeshWall) -> SurfaceIndex {
+        SurfaceIndex::new(m.placed_triangles(), self.wall_thickness(&m.walls).max(self.physics.particle_spacing))
+    }
+
+    /// What the mesh boundaries leave out of the fluid blocks.
+    pub fn mesh_cut(&self) -> MeshCut {
+        let s = self.physics.particle_spacing;
+        let meshes = self
+            .boundary
+            .iter()
+            .filter_map(|b| match b {
+                Boundary::Mesh(m) => {
+                    let (lo, hi) = m.bounds();
+                    Some((self.mesh_index(m), m.fluid_inside, lo, hi))
+                }
+                _ => None,
+            })
+            .collect();
+        // A point half a spacing from a face on the lattice is kept, whatever the rounding.
+        MeshCut { meshes, clearance: 0.5 * s * (1.0 - 1e-6) }
     }
 
     /// The wall particles at t = 0 (an [`InitialState`] without fluid).
@@ -190,10 +244,25 @@ impl Scene {
         let s = self.physics.particle_spacing;
         let params = self.params();
         let mut st = InitialState::default();
-        for (index, b) in self.boundary.iter().enumerate() {
+        for (boundary_index, b) in self.boundary.iter().enumerate() {
             let (min, max, walls, open_top, hollow_box) = match b {
                 Boundary::Container { min, max, walls, open_top } => (min, max, walls, *open_top, false),
                 Boundary::Box { min, max, walls } => (min, max, walls, false, true),
+                Boundary::Mesh(m) => {
+                    // On the lattice of the domain's corner, so that meshes and fluid blocks
+                    // that start on it meet as a container's walls meet its fluid.
+                    let ws = m.walls.spacing.unwrap_or(s);
+                    let mass = m.walls.rest_density.unwrap_or(self.physics.rest_density) * ws.powi(3);
+                    let index = self.mesh_index(m);
+                    for q in index.band_points(self.domain.min, ws, self.wall_thickness(&m.walls), !m.fluid_inside) {
+                        if keep(q) {
+                            st.wall_positions.push(q);
+                            st.wall_masses.push(mass);
+                            st.wall_boundaries.push(boundary_index as u32);
+                        }
+                    }
+                    continue;
+                }
                 Boundary::Plane { .. } => continue,
             };
             let ws = walls.spacing.unwrap_or(s);
@@ -213,7 +282,7 @@ impl Scene {
                     if !inner(&q, lo, hi) && keep(q) {
                         st.wall_positions.push(q);
                         st.wall_masses.push(mass);
-                        st.wall_boundaries.push(index as u32);
+                        st.wall_boundaries.push(boundary_index as u32);
                     }
                 }
             } else {
@@ -245,7 +314,7 @@ impl Scene {
                             if !inner(&q, *min, cavity_hi) && keep(q) {
                                 st.wall_positions.push(q);
                                 st.wall_masses.push(mass_of([cx, cy, cz]));
-                                st.wall_boundaries.push(index as u32);
+                                st.wall_boundaries.push(boundary_index as u32);
                             }
                         }
                     }
@@ -260,13 +329,13 @@ impl Scene {
             let scales: Vec<f64> = self
                 .boundary
                 .iter()
-                .map(|b| match b {
-                    Boundary::Container { walls, .. } | Boundary::Box { walls, .. } => {
+                .map(|b| match b.walls() {
+                    Some(walls) => {
                         let ws = walls.spacing.unwrap_or(s);
                         let wall = FlatWall { spacing: ws, layers: self.wall_layers(walls) };
                         akinci_flat_wall_scale(p.kernel, p.smoothing_length, s, params.fluid_mass, p.rest_density, wall)
                     }
-                    Boundary::Plane { .. } => 1.0,
+                    None => 1.0,
                 })
                 .collect();
             st.wall_masses = psi.iter().zip(&st.wall_boundaries).map(|(&m, &b)| m * scales[b as usize]).collect();

@@ -10,6 +10,7 @@ pub mod initial;
 pub mod kernels;
 pub mod lanes;
 pub mod lattice;
+pub mod mesh;
 pub mod numbers;
 pub mod overrides;
 pub mod params;

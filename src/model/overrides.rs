@@ -8,7 +8,7 @@
 //! a change that takes several fields (`--set physics.solver=dfsph --unset
 //! physics.speed_of_sound`) passes through no half-made scene.
 
-use super::scene::{Scene, SceneError, SceneOrigin};
+use super::scene::{Boundary, Scene, SceneError, SceneOrigin};
 
 /// One `--set KEY=VALUE`, or `--unset KEY` (no value).
 #[derive(Clone, Debug, PartialEq)]
@@ -74,7 +74,18 @@ impl Scene {
                 }
             })?;
         }
-        let scene: Scene = tree.try_into().expect("read back above");
+        let mut scene: Scene = tree.try_into().expect("read back above");
+        // A mesh keeps the triangles already read while its file is the same; another file is
+        // read (and its CRC-32 recorded) anew.
+        for (i, b) in scene.boundary.iter_mut().enumerate() {
+            if let Boundary::Mesh(m) = b {
+                match self.boundary.get(i) {
+                    Some(Boundary::Mesh(before)) if before.file == m.file => m.surface = before.surface.clone(),
+                    _ => m.crc32 = None,
+                }
+            }
+        }
+        scene.read_meshes(origin).map_err(|e| SceneError { origin: format!("{} with {}", e.origin, overrides.iter().map(|o| o.text.as_str()).collect::<Vec<_>>().join(" ")), ..e })?;
         scene.validate(origin).map_err(|e| {
             // Named by the overrides of the refused field (or those within it), else by all.
             let related = |o: &&Override| e.field == o.key || e.field.starts_with(&format!("{}.", o.key)) || o.key.starts_with(&format!("{}.", e.field));

@@ -226,7 +226,12 @@ impl Scene {
         let holds_the_fluid = |min: &[f64; 3], max: &[f64; 3]| {
             !self.fluid.is_empty() && self.fluid.iter().all(|f| (0..3).all(|a| f.min[a] >= min[a] && f.max[a] <= max[a]))
         };
-        let closed = self.boundary.iter().any(|b| matches!(b, Boundary::Container { min, max, open_top: false, .. } if holds_the_fluid(min, max)));
+        // A mesh that holds the fluid is closed: the fluid outside it is cut away at the start.
+        let closed = self.boundary.iter().any(|b| match b {
+            Boundary::Container { min, max, open_top: false, .. } => holds_the_fluid(min, max),
+            Boundary::Mesh(m) => m.fluid_inside,
+            _ => false,
+        });
         if !closed {
             return (self.domain.min, self.domain.max);
         }

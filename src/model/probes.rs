@@ -228,10 +228,11 @@ impl Scene {
         Probes { probes }
     }
 
-    /// The box a box or container boundary spans (a container's cavity).
+    /// The box a box, container or mesh boundary spans (a container's cavity).
     fn boundary_extent(&self, index: usize) -> ([f64; 3], [f64; 3]) {
         match self.boundary.get(index) {
             Some(Boundary::Box { min, max, .. }) | Some(Boundary::Container { min, max, .. }) => (*min, *max),
+            Some(Boundary::Mesh(m)) => m.bounds(),
             _ => ([0.0; 3], [0.0; 3]),
         }
     }
@@ -266,6 +267,15 @@ impl Scene {
         }
         let (lo, hi) = (self.domain.min, self.domain.max);
         let solids = self.named_solids();
+        let meshes: Vec<_> = self
+            .boundary
+            .iter()
+            .enumerate()
+            .filter_map(|(k, b)| match b {
+                Boundary::Mesh(m) if !self.probe.is_empty() => Some((k, self.mesh_index(m), m.fluid_inside, self.wall_thickness(&m.walls))),
+                _ => None,
+            })
+            .collect();
         let tolerance = 1e-9 * self.physics.particle_spacing;
         let mut forces = 0;
         let mut fronts = 0;
@@ -299,6 +309,18 @@ impl Scene {
                         return Err(err(origin, f, format!(
                             "{} lies inside {name}, which fills {}..{}; a probe must be in the fluid's space (on a solid's face is allowed)",
                             short3(x), short3(r.min), short3(r.max))));
+                    }
+                }
+                for (k, index, fluid_inside, thickness) in &meshes {
+                    // On the walls' side of the surface (not on it): inside a solid mesh, or
+                    // within a tank mesh's walls.
+                    let depth = index.distance_within_reach(x).unwrap_or(f64::INFINITY);
+                    let in_walls = if *fluid_inside { !index.inside(x) && depth < *thickness } else { index.inside(x) };
+                    if in_walls && depth > tolerance {
+                        let what = if *fluid_inside { "the walls of" } else { "the solid of" };
+                        return Err(err(origin, f, format!(
+                            "{} lies in {what} boundary[{k}] (the mesh); a probe must be in the fluid's space (on the mesh's surface is allowed)",
+                            short3(x))));
                     }
                 }
                 Ok(())
@@ -341,17 +363,17 @@ impl Scene {
                 ProbeType::Force => {
                     forces += 1;
                     let Some(boundary) = p.boundary else {
-                        return Err(err(origin, field("boundary"), "is missing; a force probe needs boundary = INDEX, the index of a box or container in the [[boundary]] list (from 0)"));
+                        return Err(err(origin, field("boundary"), "is missing; a force probe needs boundary = INDEX, the index of a box, container or mesh in the [[boundary]] list (from 0)"));
                     };
                     match self.boundary.get(boundary) {
-                        Some(Boundary::Box { .. }) | Some(Boundary::Container { .. }) => {}
+                        Some(Boundary::Box { .. }) | Some(Boundary::Container { .. }) | Some(Boundary::Mesh(_)) => {}
                         Some(Boundary::Plane { .. }) => {
                             return Err(err(origin, field("boundary"), format!(
-                                "is {boundary}, an analytic plane, which has no wall particles to feel a force; must be the index of a box or container")));
+                                "is {boundary}, an analytic plane, which has no wall particles to feel a force; must be the index of a box, container or mesh")));
                         }
                         None => {
                             return Err(err(origin, field("boundary"), format!(
-                                "is {boundary}; the scene has {} [[boundary]] tables (indices from 0); must be the index of a box or container", self.boundary.len())));
+                                "is {boundary}; the scene has {} [[boundary]] tables (indices from 0); must be the index of a box, container or mesh", self.boundary.len())));
                         }
                     }
                     finite3("min", &p.min)?;

@@ -6,6 +6,7 @@
 //! at t = 0 in [`super::initial`].
 
 use super::lattice::wall_axis;
+use super::mesh::{MeshSurface, Placement, Triangle};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -655,10 +656,91 @@ pub enum Boundary {
         #[serde(default)]
         restitution: f64,
     },
+    /// Wall particles lining a closed triangle mesh read from a file: an obstacle of any shape,
+    /// or a tank holding the fluid inside it.
+    Mesh(MeshWall),
+}
+
+/// A `[[boundary]] type = "mesh"` table: the file, where its triangles sit in the scene, and
+/// on which side the fluid is (see [`super::mesh`] for how its walls are sampled).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MeshWall {
+    /// A Wavefront OBJ or STL file; a relative path is taken from the scene file's folder,
+    /// and the scene is written back with the absolute path.
+    pub file: String,
+    /// The file's coordinates are multiplied by this per axis first (e.g. 0.001 for a file in
+    /// millimetres).
+    #[serde(default = "unit_scale")]
+    pub scale: [f64; 3],
+    /// Then turned by `rotation_degrees` about this axis (right-handed)...
+    #[serde(default = "default_rotation_axis")]
+    pub rotation_axis: [f64; 3],
+    #[serde(default)]
+    pub rotation_degrees: f64,
+    /// ... and moved by this.
+    #[serde(default)]
+    pub translate: [f64; 3],
+    /// `false` (default): a solid obstacle, the fluid around it and the walls inside its
+    /// surface; `true`: a tank, the fluid inside the surface and the walls outside it.
+    #[serde(default)]
+    pub fluid_inside: bool,
+    /// The file's CRC-32 (8 hex digits) when it was read: a run's `scene.toml` and checkpoints
+    /// record it, so that a resumed run refuses a mesh file changed since. Optional in a scene.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crc32: Option<String>,
+    #[serde(flatten)]
+    pub walls: WallParticles,
+    /// The file's triangles (in its own coordinates), read with the scene.
+    #[serde(skip)]
+    pub surface: MeshSurface,
+}
+
+impl MeshWall {
+    pub fn placement(&self) -> Placement {
+        Placement { scale: self.scale, axis: self.rotation_axis, degrees: self.rotation_degrees, translate: self.translate }
+    }
+
+    /// Its triangles in the scene's coordinates (none before the file is read).
+    pub fn placed_triangles(&self) -> Vec<Triangle> {
+        self.surface.0.as_ref().map(|t| self.placement().apply_all(t)).unwrap_or_default()
+    }
+
+    /// The box around its placed surface.
+    pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        super::mesh::bounds(&self.placed_triangles())
+    }
+}
+
+fn unit_scale() -> [f64; 3] {
+    [1.0; 3]
+}
+
+fn default_rotation_axis() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
 }
 
 fn default_true() -> bool {
     true
+}
+
+impl Boundary {
+    /// How a particle boundary's walls are sampled (none for a plane).
+    pub fn walls(&self) -> Option<&WallParticles> {
+        match self {
+            Boundary::Container { walls, .. } | Boundary::Box { walls, .. } => Some(walls),
+            Boundary::Mesh(m) => Some(&m.walls),
+            Boundary::Plane { .. } => None,
+        }
+    }
+
+    fn walls_mut(&mut self) -> Option<&mut WallParticles> {
+        match self {
+            Boundary::Container { walls, .. } | Boundary::Box { walls, .. } => Some(walls),
+            Boundary::Mesh(m) => Some(&mut m.walls),
+            Boundary::Plane { .. } => None,
+        }
+    }
 }
 
 /// How a particle boundary is sampled.
@@ -681,7 +763,7 @@ pub struct WallParticles {
 impl Scene {
     /// Parses and validates a scene.
     pub fn from_toml_str(text: &str, origin: &SceneOrigin) -> Result<Scene, SceneError> {
-        let scene: Scene = toml::from_str(text).map_err(|e| {
+        let mut scene: Scene = toml::from_str(text).map_err(|e| {
             let field = e
                 .span()
                 .map(|s| {
@@ -691,6 +773,7 @@ impl Scene {
                 .unwrap_or_else(|| "toml".into());
             err(origin, field, readable_parse_error(e.message()))
         })?;
+        scene.read_meshes(origin)?;
         scene.validate(origin)?;
         Ok(scene)
     }
@@ -717,10 +800,8 @@ impl Scene {
             *m *= factor.powi(3);
         }
         for b in &mut s.boundary {
-            if let Boundary::Container { walls, .. } | Boundary::Box { walls, .. } = b {
-                if let Some(sp) = &mut walls.spacing {
-                    *sp *= factor;
-                }
+            if let Some(sp) = b.walls_mut().and_then(|w| w.spacing.as_mut()) {
+                *sp *= factor;
             }
         }
         // Coarser wall layers are thicker: the domain grows where they would stick out of it.
@@ -735,17 +816,25 @@ impl Scene {
         s
     }
 
-    /// The region a container's or a box's wall particles occupy: a container's walls lie
-    /// outside its faces, `layers` spacings deep; a box's inside it.
+    /// The region a container's, a box's or a mesh's wall particles occupy: a container's
+    /// walls lie outside its faces, `layers` spacings deep; a box's inside it; a mesh's inside
+    /// its surface's box, or outside it by as much when the fluid is inside the mesh.
     pub fn wall_span(&self, b: &Boundary) -> Option<([f64; 3], [f64; 3])> {
+        let grown = |min: [f64; 3], max: [f64; 3], d: f64| ([min[0] - d, min[1] - d, min[2] - d], [max[0] + d, max[1] + d, max[2] + d]);
         match b {
-            Boundary::Container { min, max, walls, .. } => {
-                let d = self.wall_layers(walls) as f64 * walls.spacing.unwrap_or(self.physics.particle_spacing);
-                Some(([min[0] - d, min[1] - d, min[2] - d], [max[0] + d, max[1] + d, max[2] + d]))
-            }
+            Boundary::Container { min, max, walls, .. } => Some(grown(*min, *max, self.wall_thickness(walls))),
             Boundary::Box { min, max, .. } => Some((*min, *max)),
-            _ => None,
+            Boundary::Mesh(m) => {
+                let (min, max) = m.bounds();
+                Some(if m.fluid_inside { grown(min, max, self.wall_thickness(&m.walls)) } else { (min, max) })
+            }
+            Boundary::Plane { .. } => None,
         }
+    }
+
+    /// How deep a particle boundary's walls are: `layers` of its spacing.
+    pub fn wall_thickness(&self, walls: &WallParticles) -> f64 {
+        self.wall_layers(walls) as f64 * walls.spacing.unwrap_or(self.physics.particle_spacing)
     }
 
     /// The scene refined or coarsened to about `fluid_particles` fluid particles.
@@ -854,6 +943,25 @@ impl Scene {
     pub fn fluid_block_count(&self, i: usize) -> u64 {
         let axes = self.fluid_lattice(i);
         let b = &self.fluid[i];
+        let cut = self.mesh_cut();
+        if !cut.is_empty() {
+            // Beside a mesh each point is asked (in rows of z, in parallel).
+            use rayon::prelude::*;
+            return (0..axes[2].count)
+                .into_par_iter()
+                .map(|k| {
+                    let z = axes[2].point(k);
+                    let mut n = 0;
+                    for j in 0..axes[1].count {
+                        for i in 0..axes[0].count {
+                            let q = [axes[0].point(i), axes[1].point(j), z];
+                            n += (b.shape.contains(b.min, b.max, q) && cut.keeps(q)) as u64;
+                        }
+                    }
+                    n
+                })
+                .sum();
+        }
         if b.shape == FluidShape::Box {
             return axes.iter().map(|a| a.count).product();
         }
@@ -884,13 +992,23 @@ impl Scene {
         let s = self.physics.particle_spacing;
         let mut n = self.fluid_particle_count();
         for b in &self.boundary {
-            if let Boundary::Container { min, max, walls, .. } | Boundary::Box { min, max, walls } = b {
-                let ws = walls.spacing.unwrap_or(s);
-                let l = self.wall_layers(walls) as f64 * ws;
-                let (lo, hi) = ([min[0] - l, min[1] - l, min[2] - l], [max[0] + l, max[1] + l, max[2] + l]);
-                let outer = (0..3).map(|a| wall_axis(lo[a], hi[a], ws).count).product::<u64>();
-                let inner = (0..3).map(|a| wall_axis(min[a], max[a], ws).count.saturating_sub(2)).product::<u64>();
-                n += outer.saturating_sub(inner);
+            match b {
+                Boundary::Container { min, max, walls, .. } | Boundary::Box { min, max, walls } => {
+                    let ws = walls.spacing.unwrap_or(s);
+                    let l = self.wall_layers(walls) as f64 * ws;
+                    let (lo, hi) = ([min[0] - l, min[1] - l, min[2] - l], [max[0] + l, max[1] + l, max[2] + l]);
+                    let outer = (0..3).map(|a| wall_axis(lo[a], hi[a], ws).count).product::<u64>();
+                    let inner = (0..3).map(|a| wall_axis(min[a], max[a], ws).count.saturating_sub(2)).product::<u64>();
+                    n += outer.saturating_sub(inner);
+                }
+                // The surface's area times the walls' depth, in lattice cells (an estimate:
+                // a curved or slanted surface takes a little more).
+                Boundary::Mesh(m) => {
+                    let ws = m.walls.spacing.unwrap_or(s);
+                    let area: f64 = m.placed_triangles().iter().map(super::mesh::area).sum();
+                    n += (area * self.wall_thickness(&m.walls) / ws.powi(3)).ceil() as u64;
+                }
+                Boundary::Plane { .. } => {}
             }
         }
         n
@@ -900,6 +1018,7 @@ impl Scene {
     /// domain alone when the scene has neither).
     pub fn view_bounds(&self) -> ([f64; 3], [f64; 3]) {
         let mut boxes: Vec<([f64; 3], [f64; 3])> = self.solid_regions().iter().map(|r| (r.min, r.max)).collect();
+        boxes.extend(self.boundary.iter().filter(|b| matches!(b, Boundary::Mesh(_))).filter_map(|b| self.wall_span(b)));
         boxes.extend(self.fluid.iter().map(|f| (f.min, f.max)));
         if boxes.is_empty() {
             return (self.domain.min, self.domain.max);
@@ -919,10 +1038,7 @@ impl Scene {
     pub fn wall_spacing(&self) -> f64 {
         self.boundary
             .iter()
-            .filter_map(|b| match b {
-                Boundary::Container { walls, .. } | Boundary::Box { walls, .. } => Some(walls.spacing.unwrap_or(self.physics.particle_spacing)),
-                Boundary::Plane { .. } => None,
-            })
+            .filter_map(|b| b.walls().map(|w| w.spacing.unwrap_or(self.physics.particle_spacing)))
             .reduce(f64::min)
             .unwrap_or(self.physics.particle_spacing)
     }

@@ -14,3 +14,4 @@ mod checkpoint;
 mod run_dir;
 mod surface;
 mod probes;
+mod meshes;

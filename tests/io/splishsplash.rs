@@ -70,8 +70,8 @@ fn a_json_scene_runs_from_the_command_line_and_is_recorded_as_toml() {
 
 #[test]
 fn everything_unsupported_is_named_in_one_clear_error() {
-    // Another solver (IISPH), the iteration-count step rule, volume maps (the default), a mesh,
-    // an emitter.
+    // Another solver (IISPH), the iteration-count step rule, volume maps (the default), a
+    // dynamic body, an emitter.
     let text = r#"{
         "Configuration": { "particleRadius": 0.025, "stopAt": 2, "sim2D": true, "fancyOption": 3, "simulationMethod": 3, "cflMethod": 2 },
         "Fluid": { "viscosity": 0.01, "viscosityMethod": 6, "surfaceTensionMethod": 2 },
@@ -88,9 +88,7 @@ fn everything_unsupported_is_named_in_one_clear_error() {
         "Configuration.fancyOption",
         "Fluid.viscosityMethod: is 6",
         "Fluid.surfaceTensionMethod: is 2",
-        "RigidBodies[0].geometryFile: is '../models/bunny.obj'",
         "RigidBodies[0].isDynamic",
-        "RigidBodies[0].rotationAngle",
         "FluidBlocks[0].denseMode",
         "Emitters",
         "TriangleModels",
@@ -236,4 +234,45 @@ fn a_scene_of_the_current_format_with_its_solver_and_method_blocks_is_imported_w
     assert!(stderr.contains("warning: Configuration.boundaryHandlingMethod is 2") && stderr.contains("warning: Configuration.stopAt is not given"), "{stderr}");
     let o = wgsph(&["run", "tank.json", "--steps", "3", "--backend", "cpu", "--out", "q", "--quiet"], dir.path());
     assert!(o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("warning"), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// A rigid body of another mesh (or a turned unit box) becomes a mesh boundary: its file read
+/// from the scene file's folder, turned by rotationAngle (radians there) about rotationAxis,
+/// scaled and moved, the fluid inside it where mapInvert says so. A file that cannot be read
+/// is named by its JSON key.
+#[test]
+fn a_rigid_body_of_another_mesh_becomes_a_mesh_boundary() {
+    let dir = tempfile::tempdir().unwrap();
+    let cube = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+        f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 4 8 7 3\nf 1 5 8 4\nf 2 3 7 6\n";
+    std::fs::create_dir_all(dir.path().join("models")).unwrap();
+    std::fs::create_dir_all(dir.path().join("scenes")).unwrap();
+    std::fs::write(dir.path().join("models/cube.obj"), cube).unwrap();
+    let obstacle = r#""geometryFile": "../models/UnitBox.obj",
+			"translation": [0.7, 0.05, 0.05],
+			"scale": [0.1, 0.1, 0.1],"#;
+    let mesh = r#""geometryFile": "../models/cube.obj",
+			"translation": [0.7, 0.0, 0.03],
+			"rotationAxis": [0, 1, 0],
+			"rotationAngle": 0.5,
+			"scale": [0.05, 0.05, 0.05],"#;
+    let text = DAM_BREAK.replacen(obstacle, mesh, 1);
+    assert_ne!(text, DAM_BREAK);
+    let path = dir.path().join("scenes/mesh.json");
+    std::fs::write(&path, &text).unwrap();
+    let scene = Scene::load(path.to_str().unwrap()).unwrap();
+    let m = scene.boundary.iter().find_map(|b| match b { Boundary::Mesh(m) => Some(m.clone()), _ => None }).expect("a mesh boundary");
+    assert!(m.file.ends_with("cube.obj") && Path::new(&m.file).is_absolute(), "{}", m.file);
+    assert!((m.rotation_degrees - 0.5f64.to_degrees()).abs() < 1e-12 && m.rotation_axis == [0.0, 1.0, 0.0]);
+    assert_eq!((m.scale, m.translate, m.fluid_inside), ([0.05; 3], [0.7, 0.0, 0.03], false));
+    let walls = scene.initial_walls();
+    let index = scene.boundary.iter().position(|b| matches!(b, Boundary::Mesh(_))).unwrap() as u32;
+    assert!(walls.wall_boundaries.iter().filter(|&&b| b == index).count() > 5);
+    // The import runs.
+    let o = wgsph(&["run", "scenes/mesh.json", "--steps", "5", "--backend", "cpu", "--quiet", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A mesh file that is not there.
+    std::fs::write(&path, text.replace("cube.obj", "bunny.obj")).unwrap();
+    let e = Scene::load(path.to_str().unwrap()).unwrap_err().to_string();
+    assert!(e.contains("RigidBodies[1].geometryFile") && e.contains("bunny.obj") && e.contains("cannot read"), "{e}");
 }

@@ -4,8 +4,10 @@
 pub mod splishsplash;
 
 use super::builtin::BUILTIN_SCENES;
-use super::scene::{err, Scene, SceneError, SceneOrigin};
-use std::path::Path;
+use super::mesh::{open_edges, parse_mesh, MeshSurface};
+use super::numbers::short3;
+use super::scene::{err, Boundary, Scene, SceneError, SceneOrigin};
+use std::path::{Path, PathBuf};
 
 /// A reader of another simulator's scene format: the file's text, the scene's name (the file
 /// stem) and where it came from, for error messages. Besides the scene it returns its notes:
@@ -41,5 +43,48 @@ impl Scene {
             return import(&text, &name, &origin);
         }
         Ok((Scene::from_toml_str(&text, &origin)?, Vec::new()))
+    }
+}
+
+impl Scene {
+    /// Reads the files of the scene's mesh boundaries that are not read yet. A relative path is
+    /// taken from the folder of the scene's file (`origin`; the working directory for a scene
+    /// that is not a file) and replaced by the absolute one, so that the scene written into a
+    /// run's folder finds the file from there. A mesh whose scene records its CRC-32 must still
+    /// have it; one that does not records it now. A mesh must be closed (see [`super::mesh`]).
+    pub fn read_meshes(&mut self, origin: &SceneOrigin) -> Result<(), SceneError> {
+        let folder = match origin {
+            SceneOrigin::File(p) => p.parent().map(Path::to_path_buf).unwrap_or_default(),
+            _ => PathBuf::new(),
+        };
+        for (i, b) in self.boundary.iter_mut().enumerate() {
+            let Boundary::Mesh(m) = b else { continue };
+            if m.surface.0.is_some() {
+                continue;
+            }
+            let field = format!("boundary[{i}].file");
+            let given = Path::new(&m.file);
+            let path = if given.is_absolute() { given.to_path_buf() } else { folder.join(given) };
+            let bytes = std::fs::read(&path).map_err(|e| err(origin, &field, format!("'{}': cannot read the mesh file: {e}", path.display())))?;
+            let crc = format!("{:08x}", crc32fast::hash(&bytes));
+            if let Some(recorded) = &m.crc32 {
+                if !recorded.eq_ignore_ascii_case(&crc) {
+                    return Err(err(origin, &field, format!(
+                        "'{}' has changed since this scene recorded it (CRC-32 {crc}, recorded {recorded}); the walls would not be the ones it was run with: restore the file, or remove boundary[{i}].crc32 to use it as it is",
+                        path.display())));
+                }
+            }
+            let extension = path.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
+            let triangles = parse_mesh(&bytes, &extension).map_err(|e| err(origin, &field, format!("'{}' {e}", path.display())))?;
+            if let Some((count, at)) = open_edges(&triangles) {
+                return Err(err(origin, &field, format!(
+                    "'{}' is not a closed surface: {count} of its edges belong to an odd number of triangles (one near {} in the file's coordinates); a mesh boundary must be closed so that its inside is defined (fill its holes)",
+                    path.display(), short3(at))));
+            }
+            m.file = std::path::absolute(&path).unwrap_or(path).to_string_lossy().into_owned();
+            m.crc32 = Some(crc);
+            m.surface = MeshSurface::new(triangles);
+        }
+        Ok(())
     }
 }

@@ -4,15 +4,15 @@
 //! WCSPH with its stiffness and exponent or DFSPH with its tolerances and iteration limits, the
 //! CFL-adaptive time step, the kernel), `FluidBlocks` (axis-aligned boxes with translation, scale and
 //! initial velocity), the fluid parameter block (rest density and the standard viscosity), and
-//! static `RigidBodies` that are scaled and translated unit boxes (walls: a tank around the
-//! fluid, or an obstacle). Both layouts are read: settings at the top of `Configuration` and of
+//! static `RigidBodies`: scaled and translated unit boxes become a tank around the fluid or an
+//! obstacle box, and other meshes (OBJ or STL; a box turned by `rotationAngle`) mesh walls,
+//! with the fluid inside them where `mapInvert` says so. Both layouts are read: settings at the top of `Configuration` and of
 //! a fluid's block, or (SPlisHSPlasH 2.13 on) in blocks named after the solver (`"DFSPH"`) and
 //! the method (`"Standard viscosity"`). Settings of the viewer and of SPlisHSPlasH's own exports,
 //! and the blocks of solvers and methods the scene does not choose, are skipped. Density and
 //! volume map walls become wall particles on the same boxes, and a scene without an end time
 //! gets one, each with a note for the caller to show. Everything else (another pressure solver,
-//! the iteration-count time step rule, meshes other than the unit box, rotations, dynamic
-//! bodies, particle files, emitters, animation fields, surface tension, vorticity, drag,
+//! the iteration-count time step rule, dynamic bodies, particle files, emitters, animation fields, surface tension, vorticity, drag,
 //! elasticity, XSPH, 2D) is refused with a message naming each such field, so that no setting
 //! is silently dropped.
 //!
@@ -20,8 +20,8 @@
 //! (doc/file_format.md of its repository).
 
 use crate::model::scene::{
-    Boundary, DfsphSettings, Domain, EquationOfState, FluidBlock, Kernel, Physics, PressureSolver, Scene, SceneError, SceneOrigin, Time,
-    WallParticles,
+    Boundary, DfsphSettings, Domain, EquationOfState, FluidBlock, Kernel, MeshWall, Physics, PressureSolver, Scene, SceneError, SceneOrigin,
+    Time, WallParticles,
 };
 use serde_json::{Map, Value};
 use std::collections::HashMap;
@@ -106,7 +106,6 @@ const SKIPPED_RIGID: &[&str] = &[
     "mapThickness",
     "mapResolution",
     "samplingMode",
-    "mapInvert",
     "invertSDF",
     "boundingBoxMin",
     "boundingBoxMax",
@@ -344,7 +343,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
     match method(config, "boundaryHandlingMethod", 2, "Configuration", &mut p) {
         0 => {}
         m @ (1 | 2) => notes.push(format!(
-            "Configuration.boundaryHandlingMethod is {m}{} ({}): the walls are imported as wgsph's wall particles (Akinci et al. 2012's method, 0), the same boxes sampled as particles",
+            "Configuration.boundaryHandlingMethod is {m}{} ({}): the walls are imported as wgsph's wall particles (Akinci et al. 2012's method, 0), the same boxes and meshes sampled as particles",
             if config.contains_key("boundaryHandlingMethod") { "" } else { ", the default" },
             if m == 1 { "density maps, Koschier & Bender 2017" } else { "volume maps, Bender et al. 2019" }
         )),
@@ -495,24 +494,23 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
         }
     }
 
-    // Rigid bodies: static unit boxes.
+    // Rigid bodies: static unit boxes, and other meshes.
     let mut walls: Vec<([f64; 3], [f64; 3], String)> = Vec::new();
+    let mut meshes: Vec<(MeshWall, String)> = Vec::new();
     for (i, r) in arr("RigidBodies", &mut p).iter().enumerate() {
         let section = format!("RigidBodies[{i}]");
         let Some(o) = object(r, &section, &mut p) else { continue };
         let (mut translation, mut scale, mut geometry) = ([0.0; 3], [1.0; 3], None);
+        let (mut axis, mut angle, mut invert) = ([1.0, 0.0, 0.0], 0.0, false);
         for (key, v) in o {
             let field = format!("{section}.{key}");
             match key.as_str() {
                 "geometryFile" => geometry = v.as_str().map(str::to_string),
                 "translation" => translation = vec3(v, &field, &mut p).unwrap_or(translation),
                 "scale" => scale = vec3(v, &field, &mut p).unwrap_or(scale),
-                "rotationAxis" => {}
-                "rotationAngle" => {
-                    if number(v, &field, &mut p).is_some_and(|a| a != 0.0) {
-                        p.add(&field, format!("is {v}; wgsph's walls are axis-aligned boxes (rotationAngle 0)"));
-                    }
-                }
+                "rotationAxis" => axis = vec3(v, &field, &mut p).unwrap_or(axis),
+                "rotationAngle" => angle = number(v, &field, &mut p).unwrap_or(angle),
+                "mapInvert" => invert = boolean(v, &field, &mut p).unwrap_or(invert),
                 "isDynamic" => {
                     if boolean(v, &field, &mut p) == Some(true) {
                         p.add(&field, "is true; wgsph's walls are static");
@@ -523,15 +521,32 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
                 _ => p.add(&field, "is not a rigid body parameter that wgsph can import"),
             }
         }
+        let unit_box = |g: &str| g.replace('\\', "/").rsplit('/').next().is_some_and(|f| f.eq_ignore_ascii_case("UnitBox.obj"));
         match geometry {
-            Some(g) if g.replace('\\', "/").rsplit('/').next().is_some_and(|f| f.eq_ignore_ascii_case("UnitBox.obj")) => {
+            Some(g) if unit_box(&g) && angle == 0.0 => {
                 // UnitBox.obj is the unit cube centred on the origin, scaled then translated.
                 let half = [scale[0].abs() / 2.0, scale[1].abs() / 2.0, scale[2].abs() / 2.0];
                 let min = [translation[0] - half[0], translation[1] - half[1], translation[2] - half[2]];
                 let max = [translation[0] + half[0], translation[1] + half[1], translation[2] + half[2]];
                 walls.push((min, max, section));
             }
-            Some(g) => p.add(format!("{section}.geometryFile"), format!("is '{g}'; wgsph imports only boxes (UnitBox.obj)")),
+            // Another mesh: its walls line its surface, on the side mapInvert leaves to them
+            // (a mesh whose fluid is inside, a tank, when it is set). The file is read with
+            // the scene, from the scene file's folder.
+            Some(g) => meshes.push((
+                MeshWall {
+                    file: g.replace('\\', "/"),
+                    scale,
+                    rotation_axis: axis,
+                    rotation_degrees: angle.to_degrees(),
+                    translate: translation,
+                    fluid_inside: invert,
+                    crc32: None,
+                    walls: WallParticles::default(),
+                    surface: Default::default(),
+                },
+                section,
+            )),
             None => p.add(format!("{section}.geometryFile"), "is missing"),
         }
     }
@@ -569,6 +584,10 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
             boundary_sections.push(section.clone());
         }
     }
+    for (mesh, section) in meshes {
+        boundary.push(Boundary::Mesh(mesh));
+        boundary_sections.push(section);
+    }
 
     if !p.0.is_empty() {
         let (field, message) = if p.0.len() == 1 {
@@ -591,7 +610,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
             hi[a] = hi[a].max(max[a] + margin);
         }
     }
-    let scene = Scene {
+    let mut scene = Scene {
         name: name.to_string(),
         description: format!("imported from the SPlisHSPlasH scene {origin}"),
         seed: 1,
@@ -656,18 +675,31 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
     };
     // A scene the import built but wgsph refuses: the error names the JSON key the value came
     // from, not the wgsph field it became.
-    scene.validate(origin).map_err(|e| {
+    let fluid_blocks = scene.fluid.len();
+    let named = |e: SceneError| {
         let read_at = |key: &str, at: &HashMap<String, String>, section: &str| at.get(key).cloned().unwrap_or_else(|| format!("{section}.{key}"));
         let field = json_key(&e.field, &boundary_sections, &|key| read_at(key, &config_read_at, "Configuration"), &|key| read_at(key, &fluid_read_at, &fluid_section));
         let mut message = e.message.replace("physics.particle_spacing", "twice Configuration.particleRadius");
-        for i in (0..scene.fluid.len()).rev() {
+        for i in (0..fluid_blocks).rev() {
             message = message.replace(&format!("fluid[{i}]"), &format!("FluidBlocks[{i}]"));
         }
         for (j, section) in boundary_sections.iter().enumerate().rev() {
             message = message.replace(&format!("boundary[{j}]"), section);
         }
         SceneError { field, message: format!("{message} (SPlisHSPlasH import)"), ..e }
-    })?;
+    };
+    // The meshes' files are read (from the scene file's folder) and their walls taken into the
+    // domain, with the margin of the boxes'.
+    scene.read_meshes(origin).map_err(named)?;
+    for b in &scene.boundary {
+        if let (Boundary::Mesh(_), Some((min, max))) = (b, scene.wall_span(b)) {
+            for a in 0..3 {
+                scene.domain.min[a] = scene.domain.min[a].min(min[a] - margin);
+                scene.domain.max[a] = scene.domain.max[a].max(max[a] + margin);
+            }
+        }
+    }
+    scene.validate(origin).map_err(named)?;
     Ok((scene, notes))
 }
 
@@ -689,8 +721,9 @@ fn json_key(field: &str, boundaries: &[String], config: &dyn Fn(&str) -> String,
         };
         return format!("FluidBlocks[{i}]{key}");
     }
-    if let Some((j, _)) = indexed("boundary[") {
-        return boundaries.get(j).cloned().unwrap_or_else(|| "RigidBodies".into());
+    if let Some((j, tail)) = indexed("boundary[") {
+        let section = boundaries.get(j).cloned().unwrap_or_else(|| "RigidBodies".into());
+        return if tail == ".file" { format!("{section}.geometryFile") } else { section };
     }
     match field {
         "physics.smoothing_length" | "physics.particle_spacing" => config("particleRadius"),
