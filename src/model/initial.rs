@@ -188,10 +188,10 @@ impl Scene {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(self.seed);
         let continuity = self.physics.density == DensityMethod::Continuity;
         let params = self.params();
-        let cut = self.mesh_cut();
         let mut id = 0u64;
         for (i, b) in self.fluid.iter().enumerate() {
             let j = b.jitter * s;
+            let cut = self.mesh_cut(i);
             for q in points(self.fluid_lattice(i)).filter(|&q| b.shape.contains(b.min, b.max, q) && cut.keeps(q)) {
                 let mut q = q;
                 if j > 0.0 {
@@ -212,16 +212,21 @@ impl Scene {
         SurfaceIndex::new(m.placed_triangles(), self.wall_thickness(&m.walls).max(self.physics.particle_spacing))
     }
 
-    /// What the mesh boundaries leave out of the fluid blocks.
-    pub fn mesh_cut(&self) -> MeshCut {
+    /// What the mesh boundaries leave out of fluid block `i`: only the meshes that can reach
+    /// it are indexed (a tank mesh always can, since it cuts away all that lies outside it), so
+    /// a block clear of every mesh is counted and filled as without one.
+    pub fn mesh_cut(&self, i: usize) -> MeshCut {
         let s = self.physics.particle_spacing;
+        let block = &self.fluid[i];
+        // The block's lattice may stand out of its box by up to half a spacing.
+        let reaches = |lo: [f64; 3], hi: [f64; 3]| (0..3).all(|a| lo[a] - s < block.max[a] + s && hi[a] + s > block.min[a] - s);
         let meshes = self
             .boundary
             .iter()
             .filter_map(|b| match b {
                 Boundary::Mesh(m) => {
                     let (lo, hi) = m.bounds();
-                    Some((self.mesh_index(m), m.fluid_inside, lo, hi))
+                    (m.fluid_inside || reaches(lo, hi)).then(|| (self.mesh_index(m), m.fluid_inside, lo, hi))
                 }
                 _ => None,
             })

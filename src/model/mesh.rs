@@ -423,11 +423,12 @@ impl SurfaceIndex {
     /// `inside` side of the surface (or the outside, when false) and nearer to it than
     /// `depth` (at most the reach), ordered with x running fastest.
     pub fn band_points(&self, origin: [f64; 3], spacing: f64, depth: f64, inside: bool) -> Vec<[f64; 3]> {
-        let mut cells: Vec<&[i64; 3]> = self.cells.keys().collect();
-        cells.sort_unstable_by_key(|c| [c[2], c[1], c[0]]);
-        let mut found: Vec<[i64; 3]> = Vec::new();
+        use rayon::prelude::*;
+        let cells: Vec<&[i64; 3]> = self.cells.keys().collect();
         let point = |a: usize, i: i64| origin[a] + (i as f64 + 0.5) * spacing;
-        for cell in cells {
+        // Each cube's points are found on their own (in parallel), then put in order.
+        let mut found: Vec<[i64; 3]> = cells.par_iter().flat_map_iter(|&cell| {
+            let mut found = Vec::new();
             // The lattice indices whose points fall in this cube, one more each way for the
             // rounding, each then kept by the cube its point falls in.
             let range = |a: usize| {
@@ -448,7 +449,8 @@ impl SurfaceIndex {
                     }
                 }
             }
-        }
+            found
+        }).collect();
         found.sort_unstable_by_key(|c| [c[2], c[1], c[0]]);
         found.into_iter().map(|[i, j, k]| [point(0, i), point(1, j), point(2, k)]).collect()
     }

@@ -943,7 +943,7 @@ impl Scene {
     pub fn fluid_block_count(&self, i: usize) -> u64 {
         let axes = self.fluid_lattice(i);
         let b = &self.fluid[i];
-        let cut = self.mesh_cut();
+        let cut = self.mesh_cut(i);
         if !cut.is_empty() {
             // Beside a mesh each point is asked (in rows of z, in parallel).
             use rayon::prelude::*;

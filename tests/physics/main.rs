@@ -12,3 +12,4 @@ mod coarse_walls;
 mod validation;
 mod dfsph;
 mod pressure;
+mod meshes;
