@@ -109,7 +109,8 @@ fn run_command(command: Command, join: Option<ranks::Join>) -> anyhow::Result<i3
             for (name, description, _) in BUILTIN_SCENES {
                 println!("{name:<12} {description}");
             }
-            println!("(a SCENE may also be a wgsph TOML file, or a SPlisHSPlasH JSON scene: docs/scenes.md)");
+            println!("(a SCENE may also be a wgsph TOML file, or a SPlisHSPlasH JSON scene: docs/scenes.md;");
+            println!(" the repository's scenes/ folder holds these and dam_break_pier.toml, walls read from a mesh file)");
             Ok(0)
         }
     }

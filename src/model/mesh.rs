@@ -235,6 +235,11 @@ pub fn bounds(triangles: &[Triangle]) -> ([f64; 3], [f64; 3]) {
     (lo, hi)
 }
 
+/// The distance from `p` to the box `lo..hi` (0 inside it).
+fn box_distance(p: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    (0..3).map(|a| (lo[a] - p[a]).max(p[a] - hi[a]).max(0.0).powi(2)).sum::<f64>().sqrt()
+}
+
 /// A triangle's area.
 pub fn area(t: &Triangle) -> f64 {
     let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
@@ -321,8 +326,9 @@ pub struct SurfaceIndex {
     column_count: [usize; 2],
     column_size: [f64; 2],
     /// The triangles within `reach` of some point of each cube of side `reach` (for the
-    /// distances).
-    cells: HashMap<[i64; 3], Vec<u32>>,
+    /// distances), each with a lower bound of its distance from the cube's centre, nearest
+    /// first.
+    cells: HashMap<[i64; 3], Vec<(f64, u32)>>,
     reach: f64,
 }
 
@@ -354,24 +360,32 @@ impl SurfaceIndex {
                 }
             }
         }
-        let mut cells: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+        let mut cells: HashMap<[i64; 3], Vec<(f64, u32)>> = HashMap::new();
         // A point of a cube lies within half its diagonal of the centre: a triangle within
         // `reach` of any point of it lies within reach + that of the centre.
         let margin = reach + 0.5 * 3f64.sqrt() * reach;
         for (i, t) in triangles.iter().enumerate() {
             let (tlo, thi) = bounds(std::slice::from_ref(t));
+            // A triangle much smaller than a cube is placed by its box, whose distance is a
+            // lower bound of its own and cheaper; a large one (a tank's face) by itself, so
+            // that it lands only in the cubes along it.
+            let large = (0..3).any(|a| thi[a] - tlo[a] > 2.0 * reach);
             let first: [i64; 3] = std::array::from_fn(|a| ((tlo[a] - reach) / reach).floor() as i64);
             let last: [i64; 3] = std::array::from_fn(|a| ((thi[a] + reach) / reach).floor() as i64);
             for z in first[2]..=last[2] {
                 for y in first[1]..=last[1] {
                     for x in first[0]..=last[0] {
                         let centre = [(x as f64 + 0.5) * reach, (y as f64 + 0.5) * reach, (z as f64 + 0.5) * reach];
-                        if distance_squared(centre, t) <= margin * margin {
-                            cells.entry([x, y, z]).or_default().push(i as u32);
+                        let near = if large { distance_squared(centre, t).sqrt() } else { box_distance(centre, tlo, thi) };
+                        if near <= margin {
+                            cells.entry([x, y, z]).or_default().push((near, i as u32));
                         }
                     }
                 }
             }
+        }
+        for near in cells.values_mut() {
+            near.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
         }
         SurfaceIndex { triangles, lo, hi, nudge, columns, column_count, column_size, cells, reach }
     }
@@ -413,10 +427,22 @@ impl SurfaceIndex {
 
     /// The distance from `p` to the surface, where it is below `reach`.
     pub fn distance_within_reach(&self, p: [f64; 3]) -> Option<f64> {
-        let near = self.cells.get(&self.cell_of(p))?;
-        let d2 = near.iter().map(|&i| distance_squared(p, &self.triangles[i as usize])).fold(f64::INFINITY, f64::min);
-        let d = d2.sqrt();
-        (d < self.reach).then_some(d)
+        let cell = self.cell_of(p);
+        let near = self.cells.get(&cell)?;
+        // A triangle is at least its distance from the centre (of which the list holds a lower
+        // bound) less p's from the centre away from p: past the first that cannot come nearer
+        // than the nearest found, none can.
+        let centre = cell.map(|c| (c as f64 + 0.5) * self.reach);
+        let off = sub(p, centre);
+        let off = dot(off, off).sqrt();
+        let mut best = f64::INFINITY;
+        for &(from_centre, i) in near {
+            if from_centre - off >= best {
+                break;
+            }
+            best = best.min(distance_squared(p, &self.triangles[i as usize]).sqrt());
+        }
+        (best < self.reach).then_some(best)
     }
 
     /// The points `origin + (i + 1/2) spacing` (per axis) of the lattice that lie on the

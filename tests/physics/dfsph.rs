@@ -11,7 +11,7 @@ use wgsph::Snapshot;
 
 /// Water 0.2 m deep at rest in a closed tank of wall particles, DFSPH with a fixed dt of 2 ms,
 /// a little viscosity to let the settling die down.
-fn still_tank() -> TestScene {
+pub(crate) fn still_tank() -> TestScene {
     TestScene::new()
         .named("still")
         .domain([-0.1; 3], [0.3, 0.4, 0.3])

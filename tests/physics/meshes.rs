@@ -2,25 +2,17 @@
 //! DFSPH's tolerance, as a container of wall particles does.
 
 use crate::common;
-use crate::common::TestScene;
-use wgsph::model::scene::{Boundary, Kernel, MeshWall, SceneOrigin, WallParticles};
+use crate::dfsph::still_tank;
+use wgsph::model::scene::{Boundary, MeshWall, SceneOrigin, WallParticles};
 
 /// Water in a round tank: the cylinder of scenes/meshes/cylinder.obj scaled to radius 0.1 m
 /// and 0.3 m high, the fluid inside it; a block 0.2 m on a side is cut to the cylinder's
 /// 0.2 m of depth. DFSPH with a fixed dt of 2 ms, as the still tank of the DFSPH tests.
 #[test]
 fn a_round_tank_from_a_mesh_holds_still_water() {
-    let mut scene = TestScene::new()
-        .named("round")
-        .domain([-0.06, -0.06, -0.06], [0.26, 0.36, 0.26])
-        .kernel(Kernel::CubicSpline)
-        .dfsph()
-        .viscosity(0.001)
-        .boundary_friction(0.0)
-        .dt(0.002)
-        .fluid([0.0; 3], [0.2, 0.2, 0.2])
-        .jitter(0.0)
-        .build();
+    // The DFSPH tests' still tank, its container replaced by the mesh.
+    let mut scene = still_tank().named("round").domain([-0.06, -0.06, -0.06], [0.26, 0.36, 0.26]).build();
+    scene.boundary.clear();
     scene.boundary.push(Boundary::Mesh(MeshWall {
         file: format!("{}/scenes/meshes/cylinder.obj", env!("CARGO_MANIFEST_DIR")),
         scale: [0.1, 0.3, 0.1],
