@@ -247,6 +247,15 @@ impl Scene {
                             "its wall particles span {}..{}, outside the domain {}..{}; enlarge the domain",
                             short3(lo), short3(hi), short3(self.domain.min), short3(self.domain.max))));
                     }
+                    // A solid thinner than the wall lattice would hold no wall particle, and the
+                    // fluid would pass through it unseen.
+                    if let Boundary::Mesh(m) = b {
+                        if !self.mesh_index(m).has_band_point(self.domain.min, s, self.wall_thickness(walls), !m.fluid_inside) {
+                            return Err(err(origin, &f, format!(
+                                "no lattice point of the wall spacing {} lies on the walls' side of the mesh's surface (a solid thinner than that spacing would hold no wall particle); make it thicker, or give it a smaller spacing",
+                                short(s))));
+                        }
+                    }
                 }
                 Boundary::Plane { point, normal, restitution } => {
                     finite3(&format!("{f}.point"), *point)?;

@@ -451,34 +451,43 @@ impl SurfaceIndex {
     pub fn band_points(&self, origin: [f64; 3], spacing: f64, depth: f64, inside: bool) -> Vec<[f64; 3]> {
         use rayon::prelude::*;
         let cells: Vec<&[i64; 3]> = self.cells.keys().collect();
-        let point = |a: usize, i: i64| origin[a] + (i as f64 + 0.5) * spacing;
         // Each cube's points are found on their own (in parallel), then put in order.
-        let mut found: Vec<[i64; 3]> = cells.par_iter().flat_map_iter(|&cell| {
-            let mut found = Vec::new();
-            // The lattice indices whose points fall in this cube, one more each way for the
-            // rounding, each then kept by the cube its point falls in.
-            let range = |a: usize| {
-                let lo = ((cell[a] as f64 * self.reach - origin[a]) / spacing - 0.5).floor() as i64 - 1;
-                let hi = (((cell[a] + 1) as f64 * self.reach - origin[a]) / spacing - 0.5).ceil() as i64 + 1;
-                lo..=hi
-            };
-            for k in range(2) {
-                for j in range(1) {
-                    for i in range(0) {
-                        let p = [point(0, i), point(1, j), point(2, k)];
-                        if self.cell_of(p) != *cell {
-                            continue;
-                        }
-                        if self.distance_within_reach(p).is_some_and(|d| d < depth) && self.inside(p) == inside {
-                            found.push([i, j, k]);
-                        }
+        let mut found: Vec<[i64; 3]> = cells.par_iter().flat_map_iter(|&cell| self.cube_band_points(cell, origin, spacing, depth, inside)).collect();
+        found.sort_unstable_by_key(|c| [c[2], c[1], c[0]]);
+        let point = |a: usize, i: i64| origin[a] + (i as f64 + 0.5) * spacing;
+        found.into_iter().map(|[i, j, k]| [point(0, i), point(1, j), point(2, k)]).collect()
+    }
+
+    /// Whether [`SurfaceIndex::band_points`] would find any point (it stops at the first).
+    pub fn has_band_point(&self, origin: [f64; 3], spacing: f64, depth: f64, inside: bool) -> bool {
+        self.cells.keys().any(|cell| !self.cube_band_points(cell, origin, spacing, depth, inside).is_empty())
+    }
+
+    /// The lattice indices of [`SurfaceIndex::band_points`] whose points fall in one cube.
+    fn cube_band_points(&self, cell: &[i64; 3], origin: [f64; 3], spacing: f64, depth: f64, inside: bool) -> Vec<[i64; 3]> {
+        let point = |a: usize, i: i64| origin[a] + (i as f64 + 0.5) * spacing;
+        let mut found = Vec::new();
+        // The lattice indices whose points fall in this cube, one more each way for the
+        // rounding, each then kept by the cube its point falls in.
+        let range = |a: usize| {
+            let lo = ((cell[a] as f64 * self.reach - origin[a]) / spacing - 0.5).floor() as i64 - 1;
+            let hi = (((cell[a] + 1) as f64 * self.reach - origin[a]) / spacing - 0.5).ceil() as i64 + 1;
+            lo..=hi
+        };
+        for k in range(2) {
+            for j in range(1) {
+                for i in range(0) {
+                    let p = [point(0, i), point(1, j), point(2, k)];
+                    if self.cell_of(p) != *cell {
+                        continue;
+                    }
+                    if self.distance_within_reach(p).is_some_and(|d| d < depth) && self.inside(p) == inside {
+                        found.push([i, j, k]);
                     }
                 }
             }
-            found
-        }).collect();
-        found.sort_unstable_by_key(|c| [c[2], c[1], c[0]]);
-        found.into_iter().map(|[i, j, k]| [point(0, i), point(1, j), point(2, k)]).collect()
+        }
+        found
     }
 }
 

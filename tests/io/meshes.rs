@@ -157,6 +157,15 @@ fn a_mesh_file_is_found_recorded_and_checked() {
     // A mesh whose walls reach out of the domain.
     let e = load(&write(dir.path(), "scenes/out.toml", &scene_text(fluid, &boundaries.replace("translate = [0.2, 0.0, 0.2]", "translate = [0.45, 0.0, 0.2]")))).unwrap_err();
     assert!(e.contains("boundary[1]") && e.contains("outside the domain"), "{e}");
+    // A plate thinner than the wall spacing would hold no wall particle: refused, and taken
+    // with walls of a finer spacing.
+    let plate = boundaries.replace("scale = [0.1, 0.1, 0.1]\ntranslate = [0.2, 0.0, 0.2]", "scale = [0.1, 0.005, 0.1]\ntranslate = [0.2, 0.1, 0.2]");
+    assert_ne!(plate, boundaries);
+    let e = load(&write(dir.path(), "scenes/plate.toml", &scene_text(fluid, &plate))).unwrap_err();
+    assert!(e.contains("boundary[1]") && e.contains("no lattice point of the wall spacing 0.02"), "{e}");
+    let fine = scene_text(fluid, &format!("{plate}spacing = 0.004\n"));
+    let scene = load(&write(dir.path(), "scenes/plate.toml", &fine)).unwrap();
+    assert_eq!(scene.initial_walls().wall_boundaries.iter().filter(|&&b| b == 1).count(), 25 * 25);
     // A probe inside the solid (the mesh's surface is allowed).
     let probe = |at: &str| format!("{}[[probe]]\nname = \"p\"\ntype = \"point\"\nposition = {at}\n", scene_text(fluid, boundaries));
     let e = load(&write(dir.path(), "scenes/probe.toml", &probe("[0.25, 0.05, 0.25]"))).unwrap_err();
