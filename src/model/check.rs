@@ -219,7 +219,7 @@ impl Scene {
                         return Err(err(origin, format!("{f}.crc32"), format!("is '{crc}'; must be the file's CRC-32 as 8 hexadecimal digits (or left out)")));
                     }
                 }
-                if m.surface.0.is_none() {
+                if m.surface.triangles().is_none() {
                     return Err(err(origin, format!("{f}.file"), format!("'{}' has not been read (a scene built in code reads its meshes with Scene::read_meshes)", m.file)));
                 }
             }

@@ -10,6 +10,7 @@ use super::mesh::SurfaceIndex;
 use super::scene::{Boundary, BoundaryVolume, DensityMethod, InitialPressure, Kernel, MeshWall, Scene};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// A solid region (inside of an obstacle or of a tank's walls) that fluid must never enter.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -22,7 +23,7 @@ pub struct SolidRegion {
 /// wall side, or nearer to its surface than half the particle spacing (where a lattice point
 /// beside a flat wall starts), is left out, so a block poured into a curved tank fills it.
 pub struct MeshCut {
-    meshes: Vec<(SurfaceIndex, bool, [f64; 3], [f64; 3])>,
+    meshes: Vec<(Arc<SurfaceIndex>, bool, [f64; 3], [f64; 3])>,
     clearance: f64,
 }
 
@@ -207,9 +208,9 @@ impl Scene {
     }
 
     /// A mesh boundary's placed surface, indexed for the distances its walls and the fluid
-    /// beside them are sampled by.
-    pub fn mesh_index(&self, m: &MeshWall) -> SurfaceIndex {
-        SurfaceIndex::new(m.placed_triangles(), self.wall_thickness(&m.walls).max(self.physics.particle_spacing))
+    /// beside them are sampled by (built once per placement and reach, see [`super::mesh::MeshSurface::index`]).
+    pub fn mesh_index(&self, m: &MeshWall) -> Arc<SurfaceIndex> {
+        m.surface.index(&m.placement(), self.wall_thickness(&m.walls).max(self.physics.particle_spacing))
     }
 
     /// What the mesh boundaries leave out of fluid block `i`: only the meshes that can reach

@@ -11,7 +11,7 @@
 //! triangles is refused.
 
 use std::collections::HashMap;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 /// A triangle's three corners.
 pub type Triangle = [[f64; 3]; 3];
@@ -193,28 +193,73 @@ impl Placement {
     }
 }
 
-/// A mesh file's triangles in its own coordinates, shared by the copies of a scene.
+/// A mesh file's triangles in its own coordinates, shared by the copies of a scene, with the
+/// indexes built of them so far: the scene's checks, its walls and its fluid's cut each need the
+/// placed surface indexed for the same reach, and building the index of a large mesh costs more
+/// than any one of them.
 #[derive(Clone, Default)]
-pub struct MeshSurface(pub Option<Arc<Vec<Triangle>>>);
+pub struct MeshSurface {
+    triangles: Option<Arc<Vec<Triangle>>>,
+    indexes: Arc<Mutex<Vec<(IndexKey, Arc<SurfaceIndex>)>>>,
+}
+
+/// What an index depends on besides the triangles: the placement and the reach, bit for bit.
+type IndexKey = [u64; 11];
+
+/// How many indexes a surface keeps: a run asks for one or two reaches (its scene's and, with
+/// `--particles`, the file's), a resolution study one per resolution.
+const KEPT_INDEXES: usize = 4;
 
 impl MeshSurface {
     pub fn new(triangles: Vec<Triangle>) -> Self {
-        MeshSurface(Some(Arc::new(triangles)))
+        MeshSurface { triangles: Some(Arc::new(triangles)), indexes: Arc::default() }
+    }
+
+    /// The file's triangles; `None` before the file is read.
+    pub fn triangles(&self) -> Option<&[Triangle]> {
+        self.triangles.as_deref().map(Vec::as_slice)
+    }
+
+    /// The surface placed by `placement` and indexed for distances below `reach`: built once,
+    /// then shared by every copy of the scene that asks for the same placement and reach.
+    pub fn index(&self, placement: &Placement, reach: f64) -> Arc<SurfaceIndex> {
+        let mut key = [0u64; 11];
+        let numbers = placement.scale.iter().chain(&placement.axis).chain([&placement.degrees]).chain(&placement.translate).chain([&reach]);
+        for (k, x) in key.iter_mut().zip(numbers) {
+            *k = x.to_bits();
+        }
+        // A poisoned lock only means another thread panicked while building: start afresh.
+        let mut kept = self.indexes.lock().unwrap_or_else(|e| {
+            let mut kept = e.into_inner();
+            kept.clear();
+            kept
+        });
+        if let Some((_, index)) = kept.iter().find(|(k, _)| *k == key) {
+            return index.clone();
+        }
+        let placed = self.triangles().map(|t| placement.apply_all(t)).unwrap_or_default();
+        let index = Arc::new(SurfaceIndex::new(placed, reach));
+        if kept.len() == KEPT_INDEXES {
+            kept.remove(0);
+        }
+        kept.push((key, index.clone()));
+        index
     }
 }
 
 impl std::fmt::Debug for MeshSurface {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match &self.0 {
+        match &self.triangles {
             Some(t) => write!(f, "MeshSurface({} triangles)", t.len()),
             None => write!(f, "MeshSurface(not read)"),
         }
     }
 }
 
+/// Two surfaces are equal when their triangles are; the indexes are a cache.
 impl PartialEq for MeshSurface {
     fn eq(&self, other: &Self) -> bool {
-        match (&self.0, &other.0) {
+        match (&self.triangles, &other.triangles) {
             (Some(a), Some(b)) => Arc::ptr_eq(a, b) || a == b,
             (None, None) => true,
             _ => false,
@@ -529,6 +574,30 @@ mod tests {
                 .collect();
         }
         tris
+    }
+
+    #[test]
+    fn an_index_is_built_once_per_placement_and_reach_and_shared_by_copies() {
+        let surface = MeshSurface::new(cube());
+        let copy = surface.clone();
+        let at = Placement { scale: [2.0; 3], axis: [0.0, 1.0, 0.0], degrees: 30.0, translate: [1.0, 0.0, 0.0] };
+        let first = surface.index(&at, 0.25);
+        assert!(Arc::ptr_eq(&first, &copy.index(&at, 0.25)), "a copy of the scene builds it again");
+        // Another reach or placement is another index, placed as asked.
+        assert!(!Arc::ptr_eq(&first, &surface.index(&at, 0.125)));
+        let moved = Placement { translate: [3.0, 0.0, 0.0], ..at };
+        let other = surface.index(&moved, 0.25);
+        assert!(!Arc::ptr_eq(&first, &other));
+        assert!(other.inside(moved.apply([0.5, 0.5, 0.5])) && !other.inside(at.apply([0.5, 0.5, 0.5])));
+        // Only the last few are kept; one dropped is built again, the same.
+        for k in 0..KEPT_INDEXES {
+            surface.index(&at, 1.0 + k as f64);
+        }
+        let again = surface.index(&at, 0.25);
+        assert!(!Arc::ptr_eq(&first, &again));
+        assert_eq!(again.band_points([0.0; 3], 0.25, 0.5, true), first.band_points([0.0; 3], 0.25, 0.5, true));
+        // The cache is not part of what the surface is.
+        assert_eq!(MeshSurface::new(cube()), surface);
     }
 
     #[test]

@@ -703,7 +703,7 @@ impl MeshWall {
 
     /// Its triangles in the scene's coordinates (none before the file is read).
     pub fn placed_triangles(&self) -> Vec<Triangle> {
-        self.surface.0.as_ref().map(|t| self.placement().apply_all(t)).unwrap_or_default()
+        self.surface.triangles().map(|t| self.placement().apply_all(t)).unwrap_or_default()
     }
 
     /// The box around its placed surface.

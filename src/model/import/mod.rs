@@ -59,7 +59,7 @@ impl Scene {
         };
         for (i, b) in self.boundary.iter_mut().enumerate() {
             let Boundary::Mesh(m) = b else { continue };
-            if m.surface.0.is_some() {
+            if m.surface.triangles().is_some() {
                 continue;
             }
             let field = format!("boundary[{i}].file");
