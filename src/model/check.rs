@@ -34,6 +34,10 @@ pub const REST_DENSITY_RANGE: (f64, f64) = (1e-9, 1e9);
 pub const SPEED_OF_SOUND_RANGE: (f64, f64) = (1e-6, 1e8);
 /// The allowed delta of density diffusion (0 = off) and alpha of artificial viscosity.
 pub const DENSITY_DIFFUSION_RANGE: (f64, f64) = (0.0, 1.0);
+/// gamma of surface tension and beta of adhesion (Akinci et al. 2013). Both act as
+/// accelerations that do not change with the particle size; at 100 the cohesion outweighs
+/// gravity a hundred times over.
+pub const SURFACE_TENSION_RANGE: (f64, f64) = (0.0, 100.0);
 pub const ARTIFICIAL_VISCOSITY_RANGE: (f64, f64) = (0.0, 1.0);
 /// The largest kinematic viscosity and the largest |gravity| (see [`REST_DENSITY_RANGE`]).
 pub const MAX_VISCOSITY: f64 = 1e9;
@@ -390,6 +394,21 @@ impl Scene {
             return Err(err(origin, "physics.artificial_viscosity", format!(
                 "is {}; must be between {} (off) and {} (alpha of Monaghan's artificial viscosity; 0.01 to 0.1 is usual)",
                 short(p.artificial_viscosity), short(lo), short(hi))));
+        }
+        let (lo, hi) = SURFACE_TENSION_RANGE;
+        for (field, value, what) in [("surface_tension", p.surface_tension, "gamma of Akinci et al.'s surface tension; SPlisHSPlasH's default is 0.05"), ("wall_adhesion", p.wall_adhesion, "beta of Akinci et al.'s adhesion; SPlisHSPlasH's default is 0.01")] {
+            if !(value.is_finite() && (lo..=hi).contains(&value)) {
+                return Err(err(origin, format!("physics.{field}"), format!("is {}; must be between {} (off) and {} ({what})", short(value), short(lo), short(hi))));
+            }
+            if value > 0.0 && p.solver == PressureSolver::Dfsph {
+                return Err(err(origin, format!("physics.{field}"), format!(
+                    "is {}; surface tension and adhesion are weakly compressible forces in wgsph so far: use solver = \"wcsph\", or set {field} = 0", short(value))));
+            }
+        }
+        if p.wall_adhesion > 0.0 && !self.boundary.iter().any(|b| b.walls().is_some()) {
+            return Err(err(origin, "physics.wall_adhesion", format!(
+                "is {}; adhesion pulls the fluid towards wall particles and the scene has none (analytic planes have no particles): add a container, box or mesh boundary, or set wall_adhesion = 0",
+                short(p.wall_adhesion))));
         }
         if p.initial_pressure == InitialPressure::Hydrostatic && !continuity {
             return Err(err(origin, "physics.initial_pressure", "is \"hydrostatic\", which sets each particle's density, and only the continuity equation keeps a density that was set: add physics.density = \"continuity\", or use initial_pressure = \"zero\""));

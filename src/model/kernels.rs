@@ -107,6 +107,31 @@ impl<R: Real> KernelCoefficients<R> {
     }
 }
 
+/// The shape of Akinci et al.'s cohesion spline (2013, Eq. 2) at q = r / h < 1, without its
+/// factor 32 / (pi h^3): (1 - q)^3 q^3 beyond q = 1/2, 2 (1 - q)^3 q^3 - 1/64 within, so that
+/// particles closer than about 0.3 h repel and farther ones attract. Twin of `cohesion_shape` in
+/// wgsl/shared/common.wgsl.
+pub fn cohesion_shape<R: Real>(q: R) -> R {
+    let d = R::one() - q;
+    let t = d * d * d * q * q * q;
+    if q > R::of(0.5) {
+        t
+    } else {
+        R::of(2.0) * t - R::of(1.0 / 64.0)
+    }
+}
+
+/// The shape of Akinci et al.'s adhesion spline (2013, Eq. 7) at q = r / h, without its factor
+/// 0.007 / h^3: (-4 q^2 + 6 q - 2)^(1/4) for 1/2 < q < 1, zero elsewhere (a pull that peaks at
+/// 3/4 h). Twin of `adhesion_shape` in wgsl/shared/common.wgsl.
+pub fn adhesion_shape<R: Real>(q: R) -> R {
+    if q > R::of(0.5) && q < R::one() {
+        (R::of(6.0) * q - R::of(4.0) * q * q - R::of(2.0)).max(R::zero()).sqrt().sqrt()
+    } else {
+        R::zero()
+    }
+}
+
 /// The kernel on eight distances at once ([`Pack`] lanes): each lane is the scalar function's
 /// value bit for bit (both branches computed, one kept), for the CPU path's batches of a cell's
 /// particles.

@@ -61,6 +61,9 @@ pub struct Params {
     pub density_diffusion: f64,
     /// alpha of Monaghan's artificial viscosity (0: off).
     pub artificial_viscosity: f64,
+    /// gamma of Akinci et al.'s surface tension and beta of their adhesion (0: off).
+    pub surface_tension: f64,
+    pub wall_adhesion: f64,
 }
 
 impl Params {
@@ -84,6 +87,16 @@ impl Params {
     /// alpha h_s c0 of Monaghan's artificial viscosity (Monaghan 1992, Eq. 4.1), h_s = h / 2.
     pub fn artificial_viscosity_factor(&self) -> f64 {
         self.artificial_viscosity * 0.5 * self.h * self.speed_of_sound()
+    }
+    /// gamma m 32 / (pi h^3), the cohesion's factor outside its spline (Akinci et al. 2013,
+    /// Eq. 2, with r = q h): 0 when surface tension is off.
+    pub fn cohesion_factor(&self) -> f64 {
+        self.surface_tension * self.fluid_mass * 32.0 / (std::f64::consts::PI * self.h.powi(3))
+    }
+    /// beta 0.007 / h^3, the adhesion's factor outside its spline (Akinci et al. 2013, Eq. 7,
+    /// with r = q h): 0 when adhesion is off.
+    pub fn adhesion_factor(&self) -> f64 {
+        self.wall_adhesion * 0.007 / self.h.powi(3)
     }
     pub fn uses_gravity(&self) -> bool {
         self.gravity.iter().any(|&g| g != 0.0)
@@ -314,6 +327,8 @@ impl Scene {
             continuity_density: p.density == DensityMethod::Continuity,
             density_diffusion: p.density_diffusion,
             artificial_viscosity: p.artificial_viscosity,
+            surface_tension: p.surface_tension,
+            wall_adhesion: p.wall_adhesion,
         }
     }
 }

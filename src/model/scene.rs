@@ -297,6 +297,14 @@ pub struct Physics {
     /// only; 0 = off. Beside `viscosity`, which acts on every pair.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub artificial_viscosity: f64,
+    /// gamma of Akinci et al.'s surface tension (2013): cohesion between fluid particles and a
+    /// term that shrinks the surface's curvature; 0 = off. SPlisHSPlasH's default is 0.05.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub surface_tension: f64,
+    /// beta of Akinci et al.'s adhesion (2013): wall particles pull the fluid near them;
+    /// 0 = off. SPlisHSPlasH's default is 0.01.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub wall_adhesion: f64,
     /// The density and pressure of the fluid at t = 0: at rest, or hydrostatic (continuity
     /// density only).
     #[serde(default, skip_serializing_if = "InitialPressure::is_default")]

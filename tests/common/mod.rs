@@ -84,6 +84,8 @@ impl TestScene {
                     density: Default::default(),
                     density_diffusion: 0.0,
                     artificial_viscosity: 0.0,
+                    surface_tension: 0.0,
+                    wall_adhesion: 0.0,
                     initial_pressure: Default::default(),
                     dfsph: Default::default(),
                 },
@@ -232,6 +234,18 @@ impl TestScene {
     /// alpha of Monaghan's artificial viscosity.
     pub fn artificial_viscosity(mut self, alpha: f64) -> TestScene {
         self.scene.physics.artificial_viscosity = alpha;
+        self
+    }
+
+    /// gamma of Akinci et al.'s surface tension.
+    pub fn surface_tension(mut self, gamma: f64) -> TestScene {
+        self.scene.physics.surface_tension = gamma;
+        self
+    }
+
+    /// beta of Akinci et al.'s adhesion to the wall particles.
+    pub fn wall_adhesion(mut self, beta: f64) -> TestScene {
+        self.scene.physics.wall_adhesion = beta;
         self
     }
 

@@ -74,7 +74,7 @@ fn everything_unsupported_is_named_in_one_clear_error() {
     // dynamic body, an emitter.
     let text = r#"{
         "Configuration": { "particleRadius": 0.025, "stopAt": 2, "sim2D": true, "fancyOption": 3, "simulationMethod": 3, "cflMethod": 2 },
-        "Fluid": { "viscosity": 0.01, "viscosityMethod": 6, "surfaceTensionMethod": 2 },
+        "Fluid": { "viscosity": 0.01, "viscosityMethod": 6, "surfaceTensionMethod": 5 },
         "RigidBodies": [ { "geometryFile": "../models/bunny.obj", "isDynamic": true, "rotationAngle": 1.5 } ],
         "FluidBlocks": [ { "start": [0,0,0], "end": [1,1,1], "denseMode": 2 } ],
         "Emitters": [ { "width": 5 } ],
@@ -87,7 +87,7 @@ fn everything_unsupported_is_named_in_one_clear_error() {
         "Configuration.sim2D",
         "Configuration.fancyOption",
         "Fluid.viscosityMethod: is 6",
-        "Fluid.surfaceTensionMethod: is 2",
+        "Fluid.surfaceTensionMethod: is 5; wgsph supports 0 (none) and 2 (Akinci et al. 2013",
         "RigidBodies[0].isDynamic",
         "FluidBlocks[0].denseMode",
         "Emitters",
@@ -234,6 +234,27 @@ fn a_scene_of_the_current_format_with_its_solver_and_method_blocks_is_imported_w
     assert!(stderr.contains("warning: Configuration.boundaryHandlingMethod is 2") && stderr.contains("warning: Configuration.stopAt is not given"), "{stderr}");
     let o = wgsph(&["run", "tank.json", "--steps", "3", "--backend", "cpu", "--out", "q", "--quiet"], dir.path());
     assert!(o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("warning"), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// SPlisHSPlasH's "Akinci et al. 2013" surface tension becomes wgsph's surface tension and
+/// adhesion: its coefficients from the top of the fluid's block or from the method's own block,
+/// SPlisHSPlasH's defaults where absent; a value wgsph refuses is named by its JSON key.
+#[test]
+fn akinci_surface_tension_maps_onto_surface_tension_and_adhesion() {
+    let with = |keys: &str| DAM_BREAK.replacen("\"viscosityMethod\": 1,", &format!("\"viscosityMethod\": 1, {keys}"), 1);
+    let p = import(&with(r#""surfaceTensionMethod": 2, "surfaceTension": 0.3, "surfaceTensionBoundary": 0.2,"#)).unwrap().physics;
+    assert_eq!((p.surface_tension, p.wall_adhesion), (0.3, 0.2));
+    let p = import(&with(r#""surfaceTensionMethod": 2, "Akinci et al. 2013": { "surfaceTension": 0.4 },"#)).unwrap().physics;
+    assert_eq!((p.surface_tension, p.wall_adhesion), (0.4, 0.01));
+    let p = import(&with(r#""surfaceTensionMethod": 2,"#)).unwrap().physics;
+    assert_eq!((p.surface_tension, p.wall_adhesion), (0.05, 0.01));
+    // A coefficient of another method's (here none) is not used.
+    let p = import(&with(r#""surfaceTensionMethod": 0, "surfaceTension": 0.3,"#)).unwrap().physics;
+    assert_eq!((p.surface_tension, p.wall_adhesion), (0.0, 0.0));
+    let e = import(&with(r#""surfaceTensionMethod": 2, "surfaceTension": -1,"#)).unwrap_err().to_string();
+    assert!(e.contains("Fluid.surfaceTension") && e.contains("must be between 0"), "{e}");
+    let e = import(&with(r#""surfaceTensionMethod": 2, "Akinci et al. 2013": { "surfaceTensionBoundary": 1e9 },"#)).unwrap_err().to_string();
+    assert!(e.contains("Fluid.Akinci et al. 2013.surfaceTensionBoundary"), "{e}");
 }
 
 /// A rigid body of another mesh (or a turned unit box) becomes a mesh boundary: its file read

@@ -1,5 +1,5 @@
-//! Continuity density, density diffusion (with the hydrostatic correction), artificial viscosity
-//! and the hydrostatic start: the GPU against the f64 CPU path for each, fused and in two
+//! Continuity density, density diffusion (with the hydrostatic correction), artificial viscosity,
+//! surface tension and adhesion, and the hydrostatic start: the GPU against the f64 CPU path for each, fused and in two
 //! passes, and a saved state that continues bit for bit.
 
 use crate::common;
@@ -20,7 +20,8 @@ fn variants() -> Vec<(&'static str, Scene)> {
         ("artificial viscosity (summation)", tank().viscosity(0.0).artificial_viscosity(0.1).build()),
         ("Adami wall pressure (summation)", tank().boundary_pressure(BoundaryPressure::Adami).build()),
         ("Adami wall pressure + continuity + diffusion", tank().boundary_pressure(BoundaryPressure::Adami).continuity().density_diffusion(0.1).hydrostatic_start().build()),
-        ("everything", tank().continuity().density_diffusion(0.1).artificial_viscosity(0.05).hydrostatic_start().build()),
+        ("everything", tank().continuity().density_diffusion(0.1).artificial_viscosity(0.05).hydrostatic_start().surface_tension(0.5).wall_adhesion(2.0).build()),
+        ("surface tension and adhesion (summation)", tank().surface_tension(0.5).wall_adhesion(2.0).build()),
     ]
 }
 

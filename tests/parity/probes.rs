@@ -51,10 +51,12 @@ fn every_probe_type_agrees_with_its_cpu_twin() {
 #[test]
 fn every_probe_type_agrees_with_its_cpu_twin_on_adami_walls() {
     // A point on a wall reads the walls' extrapolation, and a force probe the wall particles'
-    // own pressures (with artificial viscosity, whose wall term a force probe takes too).
+    // own pressures (with artificial viscosity and adhesion, whose wall terms a force probe
+    // takes too).
     let mut scene = probed_tank();
     scene.physics.boundary_pressure = wgsph::model::scene::BoundaryPressure::Adami;
     scene.physics.artificial_viscosity = 0.05;
+    scene.physics.wall_adhesion = 2.0;
     every_probe_type_agrees_on(scene);
 }
 

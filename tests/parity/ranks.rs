@@ -267,6 +267,11 @@ fn what_does_not_run_across_ranks_yet_is_refused_by_name() {
         let e = open(&every2, &choice.on_ranks(ranks.clone())).err().expect("refused").to_string();
         assert!(e.contains("time.neighbour_rebuild_every") && e.contains("must be 1"), "{e}");
     }
+    let tension = TestScene::small_tank().surface_tension(0.1).build();
+    for choice in [BackendChoice::cpu(Precision::F64), BackendChoice::gpu()] {
+        let e = open(&tension, &choice.on_ranks(ranks.clone())).err().expect("refused").to_string();
+        assert!(e.contains("physics.surface_tension") && e.contains("one rank"), "{e}");
+    }
 }
 
 /// DFSPH across ranks: the ghosts take their owners' velocities after every velocity change

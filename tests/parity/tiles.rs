@@ -20,6 +20,7 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         ("Adami wall pressure, artificial viscosity", tank().boundary_pressure(BoundaryPressure::Adami).viscosity(0.0).artificial_viscosity(0.1).build()),
         ("continuity, diffusion, hydrostatic start", tank().continuity().density_diffusion(0.1).hydrostatic_start().build()),
         ("planes only", tank().without_walls().plane([0.0; 3], [0.0, 1.0, 0.0], 0.5).build()),
+        ("surface tension, adhesion", tank().surface_tension(0.5).wall_adhesion(2.0).build()),
         ("solid box", tank().solid_box([0.3, 0.0, 0.05], [0.4, 0.1, 0.15]).build()),
         ("dam break", Scene::load("dam_break").unwrap().with_fluid_particles(2000)),
         ("DFSPH", tank().dfsph().build()),

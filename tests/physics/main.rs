@@ -13,3 +13,4 @@ mod validation;
 mod dfsph;
 mod pressure;
 mod meshes;
+mod surface_tension;

@@ -39,6 +39,10 @@ fn particle_id(w: f32) -> u32 {
 override CONTINUITY: bool = false;
 override DENSITY_DIFFUSION: bool = false;       // delta-SPH diffusion (with CONTINUITY only)
 override ARTIFICIAL_VISCOSITY: bool = false;    // Monaghan's, on approaching pairs
+// Akinci et al. 2013: cohesion and curvature between fluid particles (with the normals of
+// surface_normals.wgsl), and the walls' adhesion.
+override SURFACE_TENSION: bool = false;
+override WALL_ADHESION: bool = false;
 // The neighbour stencil as 9 runs of 3 cells (true) or as 27 single cells (false, kept to
 // measure what the runs gain; the same neighbours in the same order).
 override STENCIL_RUNS: bool = true;
@@ -79,7 +83,8 @@ struct Params {
     fluid_count: u32,
     wall_count: u32,
     plane_count: u32,
-    pad0: u32,
+    // gamma of surface tension (src/model/params.rs).
+    surface_tension: f32,
     // xyz: unit normal, w: offset (plane n.x = w).
     planes: array<vec4<f32>, 8>,
     // x: restitution.
@@ -111,8 +116,9 @@ struct Params {
     artificial_viscosity_factor: f32,
     // The solid boxes backed by their faces (SOLID_BOXES), and their corners (xyz).
     solid_box_count: u32,
-    pad4: u32,
-    pad5: u32,
+    // gamma m 32 / (pi h^3) of cohesion, beta 0.007 / h^3 of adhesion (src/model/params.rs).
+    cohesion_factor: f32,
+    adhesion_factor: f32,
     solid_box_min: array<vec4<f32>, 8>,
     solid_box_max: array<vec4<f32>, 8>,
 }
@@ -240,6 +246,21 @@ fn kernel_grad(rij: vec3<f32>, r: f32) -> vec3<f32> {
         dwdr = select(-params.grad_coef * d * d, params.grad_coef * q * (3.0 * q - 2.0), q <= 0.5);
     }
     return select(rij * (dwdr / r), vec3<f32>(0.0), r >= params.h || r <= 1e-12 * params.h);
+}
+
+// Akinci et al. 2013 Eq. 2's cohesion spline at q = r / h < 1 without its factor 32 / (pi h^3);
+// the twin of cohesion_shape in src/model/kernels.rs.
+fn cohesion_shape(q: f32) -> f32 {
+    let d = 1.0 - q;
+    let t = d * d * d * q * q * q;
+    return select(2.0 * t - 1.0 / 64.0, t, q > 0.5);
+}
+
+// Akinci et al. 2013 Eq. 7's adhesion spline at q = r / h without its factor 0.007 / h^3: zero
+// outside 1/2 < q < 1; the twin of adhesion_shape in src/model/kernels.rs.
+fn adhesion_shape(q: f32) -> f32 {
+    let a = sqrt(sqrt(max(6.0 * q - 4.0 * q * q - 2.0, 0.0)));
+    return select(0.0, a, q > 0.5 && q < 1.0);
 }
 
 // Whether viscosity is the Morris/Monaghan term built on grad W (the cubic spline's and

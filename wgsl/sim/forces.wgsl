@@ -1,6 +1,6 @@
 // Accelerations: the symmetric pressure force (report Eq. 6), viscosity (Eq. 7 with the volumes
 // m_k / rho_k of Eq. 4, in the symmetric form of Mueller et al. 2003 Eq. 14), Monaghan's
-// artificial viscosity, wall particles and gravity.
+// artificial viscosity, Akinci et al.'s surface tension and adhesion, wall particles and gravity.
 // Twin of src/solver/cpu/forces.rs, which explains the wall and viscosity models. One invocation
 // walks one particle's stencil; forces_tiled.wgsl walks a subgroup's together, with the pair
 // terms below.
@@ -16,6 +16,8 @@
 // With ADAMI_WALL_PRESSURE, each wall particle's pressure (x) and density (y) of this step
 // (wall_pressure.wgsl); not bound otherwise.
 //! array wall_fields: vec2<f32>, read, optional
+// With SURFACE_TENSION, each fluid particle's normal (surface_normals.wgsl); not bound otherwise.
+//! array normals: vec4<f32>, read, optional
 //! array accelerations: vec4<f32>, read_write
 
 // What a fluid particle brings to its pairs.
@@ -25,20 +27,30 @@ struct OwnParticle {
     rho: f32,
     p: f32,
     p_over: f32,            // p / rho^2
+    n: vec3<f32>,           // the surface normal (SURFACE_TENSION)
+}
+
+fn surface_normal_of(i: u32) -> vec3<f32> {
+    var n = vec3<f32>(0.0);
+    if (SURFACE_TENSION) {
+        n = normals_at(i).xyz;
+    }
+    return n;
 }
 
 fn own_particle(i: u32) -> OwnParticle {
     let rho = densities_at(i);
     let p = pressures_at(i);
-    return OwnParticle(positions_at(i).xyz, velocities_at(i).xyz, rho, p, p / (rho * rho));
+    return OwnParticle(positions_at(i).xyz, velocities_at(i).xyz, rho, p, p / (rho * rho), surface_normal_of(i));
 }
 
-// A fluid neighbour's part of a pair; its velocity only where a term reads it.
+// A fluid neighbour's part of a pair; its velocity and normal only where a term reads them.
 struct FluidCandidate {
     x: vec3<f32>,
     u: vec3<f32>,
     rho: f32,
     p: f32,
+    n: vec3<f32>,
 }
 
 fn reads_velocities() -> bool {
@@ -54,7 +66,7 @@ fn fluid_candidate(j: u32, xj: vec3<f32>) -> FluidCandidate {
     if (reads_velocities()) {
         u = velocities_at(j).xyz;
     }
-    return FluidCandidate(xj, u, densities_at(j), pressures_at(j));
+    return FluidCandidate(xj, u, densities_at(j), pressures_at(j), surface_normal_of(j));
 }
 
 // The sums over the neighbours, without their constant factors (applied by
@@ -66,6 +78,9 @@ struct ForceSums {
     wall_visc: vec3<f32>,
     fluid_artificial: vec3<f32>,
     wall_artificial: vec3<f32>,
+    // Surface tension with its factors (subtracted as it is), adhesion without its factor.
+    tension: vec3<f32>,
+    adhesion: vec3<f32>,
 }
 
 // The terms of fluid neighbour n, added where `counted` (its own stencil's candidate) and n is
@@ -91,6 +106,14 @@ fn add_fluid_pair(sums: ptr<function, ForceSums>, own: OwnParticle, n: FluidCand
     if (ARTIFICIAL_VISCOSITY) {
         let approach = dot(uij, rij);
         (*sums).fluid_artificial += select(vec3<f32>(0.0), grad * (approach / ((r2 + eps) * (own.rho + n.rho))), counts && approach < 0.0);
+    }
+    if (SURFACE_TENSION) {
+        // Akinci et al. 2013 Eq. 1-6: K_ij (gamma m C(r) x_ij / r + gamma (n_i - n_j)),
+        // K_ij = 2 rho0 / (rho_i + rho_j); no cohesion where the direction is undefined.
+        let k = 2.0 * params.rest_density / (own.rho + n.rho);
+        var pull = (own.n - n.n) * params.surface_tension;
+        pull += select(vec3<f32>(0.0), rij * (params.cohesion_factor * cohesion_shape(r / params.h) / r), r > 1e-12 * params.h);
+        (*sums).tension += select(vec3<f32>(0.0), pull * k, counts);
     }
 }
 
@@ -132,6 +155,10 @@ fn add_wall_pair(sums: ptr<function, ForceSums>, own: OwnParticle, n: WallCandid
         let approach = dot(own.u, rij);
         (*sums).wall_artificial += select(vec3<f32>(0.0), grad * (n.w.w * approach / ((r2 + eps) * own.rho)), counts && approach < 0.0);
     }
+    if (WALL_ADHESION) {
+        // Akinci et al. 2013 Eq. 7: m_w A(r) x_iw / r, m_w = rho0 V_w.
+        (*sums).adhesion += select(vec3<f32>(0.0), rij * (n.w.w * adhesion_shape(r / params.h) / r), counts && r > 1e-12 * params.h);
+    }
 }
 
 // The acceleration (xyz) from the sums, and the density (w), which the integration keeps in the
@@ -150,6 +177,12 @@ fn finish_acceleration(own: OwnParticle, sums: ForceSums) -> vec4<f32> {
         let av = params.artificial_viscosity_factor;
         a += sums.fluid_artificial * (2.0 * av * params.fluid_mass) + sums.wall_artificial * (av * params.boundary_friction);
     }
+    if (SURFACE_TENSION) {
+        a -= sums.tension;
+    }
+    if (WALL_ADHESION) {
+        a -= sums.adhesion * params.adhesion_factor;
+    }
     if (GRAVITY) {
         a += params.gravity.xyz;
     }
@@ -158,7 +191,7 @@ fn finish_acceleration(own: OwnParticle, sums: ForceSums) -> vec4<f32> {
 
 fn no_sums() -> ForceSums {
     let zero = vec3<f32>(0.0);
-    return ForceSums(zero, zero, zero, zero, zero, zero);
+    return ForceSums(zero, zero, zero, zero, zero, zero, zero, zero);
 }
 
 // The acceleration of fluid particle i, one particle over its stencil.

@@ -17,7 +17,11 @@ fn shuffled_fluid(n: FluidCandidate, k: u32) -> FluidCandidate {
     if (reads_velocities()) {
         u = subgroupShuffle(n.u, k);
     }
-    return FluidCandidate(subgroupShuffle(n.x, k), u, subgroupShuffle(n.rho, k), subgroupShuffle(n.p, k));
+    var normal = vec3<f32>(0.0);
+    if (SURFACE_TENSION) {
+        normal = subgroupShuffle(n.n, k);
+    }
+    return FluidCandidate(subgroupShuffle(n.x, k), u, subgroupShuffle(n.rho, k), subgroupShuffle(n.p, k), normal);
 }
 
 alias TileOwn = OwnParticle;

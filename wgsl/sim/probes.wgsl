@@ -201,7 +201,7 @@ var<workgroup> group_values: array<vec4<f32>, PROBE_WORKGROUP>;
 
 // Adds the force fluid particle i exerts on the force probes' wall particles (and its moments)
 // to slot_sums: the reaction to the wall terms of its acceleration in forces.wgsl, m_i times
-// minus what wall particle w adds to a_i (pressure, viscosity, artificial viscosity).
+// minus what wall particle w adds to a_i (pressure, viscosity, artificial viscosity, adhesion).
 fn add_wall_forces(i: u32, forces: u32) {
     let viscous = VISCOSITY && params.viscosity > 0.0;
     let eps = 0.01 * params.h2;
@@ -247,6 +247,9 @@ fn add_wall_forces(i: u32, forces: u32) {
                 if (approach < 0.0) {
                     a += grad * (artificial_factor * w.w * approach / (r2 + eps));
                 }
+            }
+            if (WALL_ADHESION && r > 1e-12 * params.h) {
+                a -= rij * (params.adhesion_factor * w.w * adhesion_shape(r / params.h) / r);
             }
             let f = a * (-params.fluid_mass);
             for (var k = 0u; k < forces; k++) {

@@ -140,6 +140,8 @@ impl Tank {
                 density: Default::default(),
                 density_diffusion: 0.0,
                 artificial_viscosity: 0.0,
+                surface_tension: 0.0,
+                wall_adhesion: 0.0,
                 initial_pressure: Default::default(),
                 dfsph: Default::default(),
             },

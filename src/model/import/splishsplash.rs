@@ -8,11 +8,12 @@
 //! obstacle box, and other meshes (OBJ or STL; a box turned by `rotationAngle`) mesh walls,
 //! with the fluid inside them where `mapInvert` says so. Both layouts are read: settings at the top of `Configuration` and of
 //! a fluid's block, or (SPlisHSPlasH 2.13 on) in blocks named after the solver (`"DFSPH"`) and
-//! the method (`"Standard viscosity"`). Settings of the viewer and of SPlisHSPlasH's own exports,
+//! the method (`"Standard viscosity"`). Akinci et al.'s surface tension (`surfaceTensionMethod`
+//! 2) becomes wgsph's surface tension and adhesion, with their coefficients. Settings of the viewer and of SPlisHSPlasH's own exports,
 //! and the blocks of solvers and methods the scene does not choose, are skipped. Density and
 //! volume map walls become wall particles on the same boxes, and a scene without an end time
 //! gets one, each with a note for the caller to show. Everything else (another pressure solver,
-//! the iteration-count time step rule, dynamic bodies, particle files, emitters, animation fields, surface tension, vorticity, drag,
+//! the iteration-count time step rule, dynamic bodies, particle files, emitters, animation fields, other surface tension methods, vorticity, drag,
 //! elasticity, XSPH, 2D) is refused with a message naming each such field, so that no setting
 //! is silently dropped.
 //!
@@ -71,7 +72,6 @@ const METHOD_BLOCKS: &[&str] = &[
     "Macklin et al. 2014",
     "Gissler et al. 2017",
     "Becker & Teschner 2007",
-    "Akinci et al. 2013",
     "He et al. 2014",
     "Jeske et al. 2023",
     "Zorilla, Ritter, et al. 2020",
@@ -219,14 +219,26 @@ struct FluidParams {
     density0: f64,
     viscosity: f64,
     viscosity_boundary: f64,
+    /// Akinci et al. 2013's coefficients (surfaceTensionMethod 2), 0 for no surface tension.
+    surface_tension: f64,
+    surface_tension_boundary: f64,
 }
 
 /// The fluid's parameters, and where each key was read (`Materials[0].Standard viscosity.viscosity`).
 fn fluid_params(section: &str, obj: &Map<String, Value>, p: &mut Problems) -> (FluidParams, HashMap<String, String>) {
-    let mut f = FluidParams { density0: 1000.0, viscosity: 0.01, viscosity_boundary: 0.0 };
+    let mut f = FluidParams { density0: 1000.0, viscosity: 0.01, viscosity_boundary: 0.0, surface_tension: 0.0, surface_tension_boundary: 0.0 };
     let mut viscosity_method = 1;
-    // Keys at the top of the block, and those of the "Standard viscosity" and "XSPH" blocks.
-    let entries = section_entries(obj, section, &[("Standard viscosity", &["viscosity", "viscosityBoundary"]), ("XSPH", &["xsph", "xsphBoundary"])], METHOD_BLOCKS, p);
+    let mut surface_tension_method = 0;
+    // SPlisHSPlasH's defaults of Akinci et al. 2013's coefficients.
+    let (mut surface_tension, mut surface_tension_boundary) = (0.05, 0.01);
+    // Keys at the top of the block, and those of the "Standard viscosity", "XSPH" and "Akinci et
+    // al. 2013" blocks.
+    let read = [
+        ("Standard viscosity", &["viscosity", "viscosityBoundary"][..]),
+        ("XSPH", &["xsph", "xsphBoundary"][..]),
+        ("Akinci et al. 2013", &["surfaceTension", "surfaceTensionBoundary"][..]),
+    ];
+    let entries = section_entries(obj, section, &read, METHOD_BLOCKS, p);
     let read_at = entries.iter().map(|(key, _, field)| (key.to_string(), field.clone())).collect();
     for (key, v, field) in entries {
         match key {
@@ -240,18 +252,31 @@ fn fluid_params(section: &str, obj: &Map<String, Value>, p: &mut Problems) -> (F
                 }
             }
             "viscosityMethod" => viscosity_method = method(obj, key, 1, section, p),
-            "surfaceTensionMethod" | "vorticityMethod" | "dragMethod" | "elasticityMethod" => {
+            "surfaceTensionMethod" => surface_tension_method = method(obj, key, 0, section, p),
+            "surfaceTension" => surface_tension = number(v, &field, p).unwrap_or(surface_tension),
+            "surfaceTensionBoundary" => surface_tension_boundary = number(v, &field, p).unwrap_or(surface_tension_boundary),
+            "vorticityMethod" | "dragMethod" | "elasticityMethod" => {
                 let m = method(obj, key, 0, section, p);
                 if m != 0 {
                     p.add(&field, format!("is {m}; wgsph has no {} (only 0, none, is supported)", &key[..key.len() - "Method".len()]));
                 }
             }
-            "surfaceTension" | "vorticity" | "drag" | "viscosityOmega" | "inertiaInverse" | "youngsModulus" | "poissonsRatio"
+            "vorticity" | "drag" | "viscosityOmega" | "inertiaInverse" | "youngsModulus" | "poissonsRatio"
             | "alpha" | "elasticityMaxIter" | "elasticityMaxError" | "viscoMaxIter" | "viscoMaxError" | "viscoMaxIterOmega"
             | "viscoMaxErrorOmega" => {} // coefficients of the methods checked above
             k if SKIPPED_FLUID.contains(&k) => {}
             _ => p.add(&field, "is not a SPlisHSPlasH fluid parameter that wgsph can import"),
         }
+    }
+    match surface_tension_method {
+        0 => {}
+        // SPlisHSPlasH's "Akinci et al. 2013" is wgsph's surface tension and adhesion, its
+        // coefficients gamma and beta.
+        2 => (f.surface_tension, f.surface_tension_boundary) = (surface_tension, surface_tension_boundary),
+        m => p.add(
+            format!("{section}.surfaceTensionMethod"),
+            format!("is {m}; wgsph supports 0 (none) and 2 (Akinci et al. 2013, cohesion, curvature and adhesion)"),
+        ),
     }
     match viscosity_method {
         0 => f.viscosity = 0.0,
@@ -481,7 +506,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
         p.add("FluidBlocks", "has no block; wgsph imports fluid only from FluidBlocks");
     }
     // wgsph simulates one fluid: every block must use the same parameters.
-    let default_fluid = FluidParams { density0: 1000.0, viscosity: 0.01, viscosity_boundary: 0.0 };
+    let default_fluid = FluidParams { density0: 1000.0, viscosity: 0.01, viscosity_boundary: 0.0, surface_tension: 0.0, surface_tension_boundary: 0.0 };
     let params_of = |id: &str| fluids.iter().find(|f| f.0 == id).map(|f| f.1).unwrap_or(default_fluid);
     // The JSON section the fluid's parameters come from (its id, where it has none).
     let first_fluid = block_fluid.first().and_then(|id| fluids.iter().find(|f| &f.0 == id));
@@ -637,6 +662,9 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
             density: Default::default(),
             density_diffusion: 0.0,
             artificial_viscosity: 0.0,
+            surface_tension: fluid.surface_tension,
+            // Adhesion pulls towards wall particles: a scene without them has none to feel.
+            wall_adhesion: if boundary.iter().any(|b| b.walls().is_some()) { fluid.surface_tension_boundary } else { 0.0 },
             initial_pressure: Default::default(),
             // The DFSPH keys of a WCSPH scene are not read (as there).
             dfsph: match solver {
@@ -742,6 +770,8 @@ fn json_key(field: &str, boundaries: &[String], config: &dyn Fn(&str) -> String,
         "physics.rest_density" => fluid("density0"),
         "physics.viscosity" => fluid("viscosity"),
         "physics.boundary_friction" => fluid("viscosityBoundary"),
+        "physics.surface_tension" => fluid("surfaceTension"),
+        "physics.wall_adhesion" => fluid("surfaceTensionBoundary"),
         "fluid" => "FluidBlocks".into(),
         // The domain and the grid follow from the blocks and the bodies.
         "domain" => "FluidBlocks, RigidBodies (the domain around them)".into(),

@@ -7,7 +7,7 @@
 //! the same operations, so the same bits.
 
 use super::cell_batches::{wide, ListChunk, NeighbourLists, RowMasks};
-use crate::model::kernels::{viscous_nu, KernelCoefficients, Neighbours};
+use crate::model::kernels::{adhesion_shape, cohesion_shape, viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::lanes::{Pack, PackV3, LANES};
 use crate::model::params::Grid;
 use crate::model::real::{as_arrays, Real, V3};
@@ -40,6 +40,14 @@ pub struct ForcesInput<'a, R> {
     pub fluid_points: &'a [[R; 4]],
     /// Each wall particle's position and mass ([`forces`] only).
     pub wall_points: &'a [[R; 4]],
+    /// gamma of surface tension, its cohesion factor gamma m 32 / (pi h^3) and beta 0.007 / h^3
+    /// of adhesion (`Params::cohesion_factor`, `Params::adhesion_factor`; 0: off).
+    pub surface_tension: R,
+    pub cohesion_factor: R,
+    pub adhesion_factor: R,
+    /// With surface tension, each fluid particle's normal of this step (surface_normals.rs);
+    /// empty otherwise.
+    pub normals: &'a [V3<R>],
 }
 
 /// a_i = -sum_k m_k (p_i/rho_i^2 + p_k/rho_k^2) grad W_ik + viscosity + walls + g.
@@ -57,9 +65,17 @@ pub struct ForcesInput<'a, R> {
 /// pressure and density, p_i/rho_i^2 + p_w/rho_w^2, extrapolated from the fluid
 /// (wall_pressure.rs; Adami, Hu & Adams 2012). A wall particle takes part in viscosity at rest
 /// with the volume m_w/rho_i, scaled by the boundary friction.
+///
+/// Surface tension (Akinci, Akinci & Teschner 2013, Eq. 1-6) adds
+/// -sum_j K_ij (gamma m_j C(r) x_ij / r + gamma (n_i - n_j)), K_ij = 2 rho0 / (rho_i + rho_j):
+/// cohesion along the pair with the spline C of [`cohesion_shape`] and the curvature term with
+/// the normals of surface_normals.rs; adhesion (Eq. 7) adds -beta sum_w m_w A(r) x_iw / r with
+/// the spline A of [`adhesion_shape`], m_w = rho0 V_w the wall particle's mass. Both are computed
+/// one particle at a time (the neighbour lists' batches do not carry them).
 pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     let lists = input.lists;
-    if lists.chunks().is_empty() {
+    let akinci = input.surface_tension > R::zero() || input.adhesion_factor > R::zero();
+    if lists.chunks().is_empty() || akinci {
         accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
         return;
     }
@@ -80,6 +96,9 @@ pub struct ForceSums<R> {
     pub wall_visc: V3<R>,
     pub fluid_artificial: V3<R>,
     pub wall_artificial: V3<R>,
+    /// Surface tension with its factors (subtracted as it is) and adhesion without its factor.
+    pub tension: V3<R>,
+    pub adhesion: V3<R>,
 }
 
 /// What the pair terms of a batch's particles need of them.
@@ -203,6 +222,8 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
                 wall_visc: V3(wall_visc[k]),
                 fluid_artificial: V3(fluid_artificial[k]),
                 wall_artificial: V3(wall_artificial[k]),
+                tension: V3::zero(),
+                adhesion: V3::zero(),
             };
             accelerations[i - first] = finish(input, i, &sums);
         }
@@ -238,6 +259,12 @@ fn finish<R: Real>(input: &ForcesInput<R>, i: usize, sums: &ForceSums<R>) -> V3<
     if terms.artificial {
         let av = input.artificial_viscosity_factor;
         a += sums.fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + sums.wall_artificial * (av * input.boundary_friction);
+    }
+    if input.surface_tension > R::zero() {
+        a -= sums.tension;
+    }
+    if input.adhesion_factor > R::zero() {
+        a -= sums.adhesion * input.adhesion_factor;
     }
     if input.gravity != V3::zero() {
         a += input.gravity;
@@ -280,6 +307,13 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
     let artificial = input.artificial_viscosity_factor > R::zero();
     let mut fluid_artificial = V3::zero();
     let mut wall_artificial = V3::zero();
+    let tension = input.surface_tension > R::zero();
+    let adhesion = input.adhesion_factor > R::zero();
+    let ni = if tension { input.normals[i] } else { V3::zero() };
+    // Below this a pair's direction is undefined (the particle itself): no cohesion or adhesion.
+    let tiny = R::of(1e-12) * kernel.h;
+    let mut tension_sum = V3::zero();
+    let mut adhesion_sum = V3::zero();
     for (k0, k1) in input.grid.stencil_runs(c) {
         for j in input.fluid.span(k0, k1) {
             let rij = xi - input.fluid.positions[j];
@@ -307,6 +341,14 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
                 if approach < R::zero() {
                     fluid_artificial += grad * (approach / ((r2 + eps) * (rho_i + rho_j)));
                 }
+            }
+            if tension {
+                let k = R::of(2.0) * input.rest_density / (rho_i + rho_j);
+                let mut pull = (ni - input.normals[j]) * input.surface_tension;
+                if r > tiny {
+                    pull += rij * (input.cohesion_factor * cohesion_shape(r / kernel.h) / r);
+                }
+                tension_sum += pull * k;
             }
         }
         for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {
@@ -337,8 +379,20 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
                     wall_artificial += grad * (mw * approach / ((r2 + eps) * rho_i));
                 }
             }
+            if adhesion && r > tiny {
+                adhesion_sum += rij * (mw * adhesion_shape(r / kernel.h) / r);
+            }
         }
     }
-    let sums = ForceSums { fluid_pressure, fluid_visc, wall_pressure, wall_visc, fluid_artificial, wall_artificial };
+    let sums = ForceSums {
+        fluid_pressure,
+        fluid_visc,
+        wall_pressure,
+        wall_visc,
+        fluid_artificial,
+        wall_artificial,
+        tension: tension_sum,
+        adhesion: adhesion_sum,
+    };
     finish(input, i, &sums)
 }

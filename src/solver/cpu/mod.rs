@@ -28,6 +28,7 @@ pub mod probes;
 pub mod reorder;
 pub mod resident_exchange;
 mod resident_steps;
+pub mod surface_normals;
 pub mod wall_pressure;
 
 use super::backend::{Backend, StateArray, StatePiece};
@@ -89,6 +90,9 @@ pub struct CpuSolver<R: Real> {
     wall_fields: Vec<[R; 2]>,
     /// The original index of each sorted wall particle.
     wall_order: Vec<u32>,
+    /// With surface tension: each fluid particle's normal of the last forces stage, in cell
+    /// order (empty otherwise).
+    normals: Vec<V3<R>>,
     step: u64,
     health: Health,
     /// Simulated time and the steps' dt (adaptive dt makes them differ from step x dt).
@@ -146,6 +150,7 @@ impl<R: Real> CpuSolver<R> {
             wall_starts: Vec::new(),
             wall_fields: Vec::new(),
             wall_order: Vec::new(),
+            normals: Vec::new(),
             step: 0,
             health: Health::default(),
             time: 0.0,
@@ -222,6 +227,7 @@ impl<R: Real> CpuSolver<R> {
             + (self.counts.len() + self.starts.len() + self.wall_starts.len()) as u64 * 4
             + self.wall_positions.len() as u64 * (v3 + r)
             + self.wall_fields.len() as u64 * 2 * r
+            + self.normals.capacity() as u64 * v3
             + self.dfsph.as_ref().map_or(0, |d| d.memory_bytes())
             + (self.carried_densities.len() + self.scratch_r.capacity() + 4 * (self.fluid_points.capacity() + self.wall_points.capacity())) as u64 * r
             + self.lists.bytes()
@@ -365,11 +371,34 @@ impl<R: Real> CpuSolver<R> {
             lists: &self.lists,
             fluid_points: &self.fluid_points,
             wall_points: &self.wall_points,
+            surface_tension: R::of(p.surface_tension),
+            cohesion_factor: R::of(p.cohesion_factor()),
+            adhesion_factor: R::of(p.adhesion_factor()),
+            normals: &self.normals,
         }
+    }
+
+    /// Stage 3a: with surface tension, each fluid particle's normal from the fields of the
+    /// last density stage (none otherwise).
+    fn surface_normals(&self) -> Vec<V3<R>> {
+        if self.params.surface_tension <= 0.0 {
+            return Vec::new();
+        }
+        let input = surface_normals::SurfaceNormalsInput {
+            kernel: &self.kernel,
+            grid: &self.grid,
+            fluid_mass: R::of(self.params.fluid_mass),
+            fluid: Neighbours { positions: &self.positions, starts: &self.starts },
+            densities: &self.densities,
+        };
+        let mut normals = vec![V3::zero(); self.positions.len()];
+        surface_normals::surface_normals(&input, &mut normals);
+        normals
     }
 
     /// Stage 3: accelerations.
     pub fn compute_forces(&mut self) {
+        self.normals = self.surface_normals();
         let mut accelerations = std::mem::take(&mut self.accelerations);
         if !self.lists.chunks().is_empty() {
             forces::pressure_terms(&self.densities, &self.pressures, &mut self.fluid_points);
@@ -386,7 +415,9 @@ impl<R: Real> CpuSolver<R> {
         let (mut x, mut v) = (vec![V3::zero(); n], vec![V3::zero(); n]);
         let mut rho = vec![R::zero(); self.carried_densities.len()];
         let domain = (V3::from64(self.params.domain_min), V3::from64(self.params.domain_max));
-        let found = forces_integrate::forces_and_integrate(&self.forces_input(), R::of(self.params.dt), &self.backstops, domain, &mut x, &mut v, &mut rho);
+        let normals = self.surface_normals();
+        let input = forces::ForcesInput { normals: &normals, ..self.forces_input() };
+        let found = forces_integrate::forces_and_integrate(&input, R::of(self.params.dt), &self.backstops, domain, &mut x, &mut v, &mut rho);
         (x, v, found)
     }
 
@@ -633,6 +664,7 @@ impl<R: Real> CpuSolver<R> {
             wall_fields: &self.wall_fields,
             gravity: V3::from64(p.gravity),
             artificial_viscosity_factor: R::of(p.artificial_viscosity_factor()),
+            adhesion_factor: R::of(p.adhesion_factor()),
         }
     }
 

@@ -6,7 +6,7 @@
 //! the solves, on the pressure `wall_push_pressure` gives the step's wall push. What each probe measures is in
 //! [`crate::model::probes`] and docs/probes.md.
 
-use crate::model::kernels::{viscous_nu, KernelCoefficients, Neighbours};
+use crate::model::kernels::{adhesion_shape, viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::params::Grid;
 use crate::model::probes::{Probe, ProbeGeometry, GAUGE_FRACTION};
 use crate::model::real::{Real, V3};
@@ -41,6 +41,8 @@ pub struct ProbeInput<'a, R> {
     pub gravity: V3<R>,
     /// alpha h_s c0 of artificial viscosity (0: off).
     pub artificial_viscosity_factor: R,
+    /// beta 0.007 / h^3 of adhesion (0: off).
+    pub adhesion_factor: R,
 }
 
 /// Under DFSPH, the pressure whose wall force as the force probes sum it (the consistent form,
@@ -264,8 +266,8 @@ pub fn probe_particles<R: Real>(input: &ProbeInput<R>, probes: &[Probe], counted
 
 /// The force (and its moment about `centres[k]`) fluid particle `i` exerts on the wall
 /// particles of each force probe k: the reaction to the wall terms of its acceleration in
-/// forces.rs (pressure, viscosity and artificial viscosity), m_i times minus what wall particle w
-/// adds to a_i.
+/// forces.rs (pressure, viscosity, artificial viscosity and adhesion), m_i times minus what wall
+/// particle w adds to a_i.
 pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &[V3<R>]) -> Vec<R> {
     let kernel = input.kernel;
     let gradient_viscosity = kernel.kind.gradient_viscosity();
@@ -287,6 +289,7 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
     let visc_factor = nu * input.boundary_friction / rho_i;
     let artificial = input.artificial_viscosity_factor > R::zero();
     let artificial_factor = input.artificial_viscosity_factor * input.boundary_friction / rho_i;
+    let adhesion = input.adhesion_factor > R::zero();
     let mut out = vec![R::zero(); FORCE_SLOTS * centres.len()];
     if input.wall_masses.is_empty() {
         return out;
@@ -321,6 +324,9 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
                 if approach < R::zero() {
                     a += grad * (artificial_factor * mw * approach / (r2 + eps));
                 }
+            }
+            if adhesion && r > R::of(1e-12) * kernel.h {
+                a -= rij * (input.adhesion_factor * mw * adhesion_shape(r / kernel.h) / r);
             }
             let f = a * (-input.fluid_mass);
             for (k, c) in centres.iter().enumerate() {

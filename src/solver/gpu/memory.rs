@@ -148,6 +148,14 @@ impl MemoryPlan {
         self
     }
 
+    /// The plan with surface tension's normals (a vec4 per fluid particle); nothing without.
+    pub fn with_surface_normals(mut self, fluid: u64, used: bool) -> MemoryPlan {
+        if used {
+            self.buffers.push(PlannedBuffer { label: "surface normals", bytes: padded(fluid * 16), bytes_per_fluid_particle: 16, single_binding: false });
+        }
+        self
+    }
+
     /// The plan with the neighbour lists (`capacity` slots and a count per fluid particle;
     /// nothing for a capacity of 0).
     pub fn with_neighbour_lists(mut self, fluid: u64, capacity: u32) -> MemoryPlan {

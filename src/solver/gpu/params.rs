@@ -97,7 +97,8 @@ uniform_block! {
         fluid_count: u32 => "u32",
         wall_count: u32 => "u32",
         plane_count: u32 => "u32",
-        pad0: u32 => "u32",
+        /// gamma of surface tension.
+        surface_tension: f32 => "f32",
         /// xyz: unit normal, w: offset (plane n.x = w).
         planes: [Vec4f; MAX_PLANES] => "array<vec4<f32>, 8>",
         /// x: restitution.
@@ -130,8 +131,9 @@ uniform_block! {
         artificial_viscosity_factor: f32 => "f32",
         /// The solid boxes backed by their faces, and their corners (xyz).
         solid_box_count: u32 => "u32",
-        pad4: u32 => "u32",
-        pad5: u32 => "u32",
+        /// gamma m 32 / (pi h^3) of cohesion, beta 0.007 / h^3 of adhesion.
+        cohesion_factor: f32 => "f32",
+        adhesion_factor: f32 => "f32",
         solid_box_min: [Vec4f; MAX_SOLID_BOXES] => "array<vec4<f32>, 8>",
         solid_box_max: [Vec4f; MAX_SOLID_BOXES] => "array<vec4<f32>, 8>",
     }
@@ -180,7 +182,7 @@ impl GpuParams {
             fluid_count,
             wall_count,
             plane_count: p.planes.len() as u32,
-            pad0: 0,
+            surface_tension: p.surface_tension as f32,
             planes,
             plane_restitution: restitution,
             speed_of_sound: p.speed_of_sound() as f32,
@@ -203,8 +205,8 @@ impl GpuParams {
             diffusion_factor: p.diffusion_factor() as f32,
             artificial_viscosity_factor: p.artificial_viscosity_factor() as f32,
             solid_box_count: p.solid_boxes.len() as u32,
-            pad4: 0,
-            pad5: 0,
+            cohesion_factor: p.cohesion_factor() as f32,
+            adhesion_factor: p.adhesion_factor() as f32,
             solid_box_min: box_min,
             solid_box_max: box_max,
         }

@@ -325,6 +325,10 @@ impl GpuSolver {
             }
         }
         rec.begin(ProfiledStage::Forces);
+        // With surface tension, the normals its curvature term reads (profiled with the forces).
+        if let (Some(stage), Some(group)) = (&w.surface_normals, &g.surface_normals) {
+            self.dispatch_particles(rec, stage, group);
+        }
         if self.pipelines.fused {
             self.dispatch_particles(rec, &w.advance, &g.advance);
         } else if let Some(forces) = &g.forces {
@@ -606,6 +610,11 @@ impl GpuSolver {
     /// place; `step_fields` asks for them).
     pub(super) fn record_accelerations(&mut self) {
         let mut rec = PlainRecorder::new(&self.ctx.device, "accelerations");
+        let stages = self.wcsph_stages();
+        let normals = self.groups[self.fields_state].wcsph.as_ref().and_then(|g| g.surface_normals.as_ref());
+        if let (Some(stage), Some(group)) = (&stages.surface_normals, normals) {
+            self.dispatch_particles(&mut rec, stage, group);
+        }
         let in_place = self.groups[self.fields_state].wcsph.as_ref().and_then(|g| g.forces.as_ref());
         let group = match in_place {
             Some(group) => group,

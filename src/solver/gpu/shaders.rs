@@ -50,6 +50,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/dfsph_integrate.wgsl", include_str!("../../../wgsl/sim/dfsph_integrate.wgsl")),
     ("sim/probes.wgsl", include_str!("../../../wgsl/sim/probes.wgsl")),
     ("sim/wall_pressure.wgsl", include_str!("../../../wgsl/sim/wall_pressure.wgsl")),
+    ("sim/surface_normals.wgsl", include_str!("../../../wgsl/sim/surface_normals.wgsl")),
     ("sim/fields.wgsl", include_str!("../../../wgsl/sim/fields.wgsl")),
     ("sim/neighbour_skin.wgsl", include_str!("../../../wgsl/sim/neighbour_skin.wgsl")),
     ("sim/ghost_velocities.wgsl", include_str!("../../../wgsl/sim/ghost_velocities.wgsl")),
@@ -168,6 +169,8 @@ pub fn constants(params: &Params) -> Vec<(&'static str, f64)> {
         ("CONTINUITY", flag(params.continuity_density)),
         ("DENSITY_DIFFUSION", flag(params.continuity_density && params.density_diffusion > 0.0)),
         ("ARTIFICIAL_VISCOSITY", flag(params.artificial_viscosity > 0.0)),
+        ("SURFACE_TENSION", flag(params.surface_tension > 0.0)),
+        ("WALL_ADHESION", flag(params.wall_adhesion > 0.0)),
     ]
 }
 

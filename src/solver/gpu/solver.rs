@@ -73,6 +73,8 @@ pub(super) struct WcsphBindGroups {
     pub density_listed: Option<wgpu::BindGroup>,
     /// With the Adami wall pressure: the wall stage's.
     pub wall_pressure: Option<wgpu::BindGroup>,
+    /// With surface tension: the normals stage's.
+    pub surface_normals: Option<wgpu::BindGroup>,
     /// The forces into the state's spare buffer (the state in place; the fused step makes its
     /// forces' groups on request, see `GpuSolver::accelerations`).
     pub forces: Option<wgpu::BindGroup>,
@@ -159,6 +161,9 @@ pub(super) struct WcsphStages {
     /// With `boundary_pressure = "adami"`: the wall particles' pressure (wall_pressure.wgsl),
     /// after the density stage, one invocation per wall particle.
     pub wall_pressure: Option<Stage>,
+    /// With `surface_tension` above zero: each fluid particle's normal (surface_normals.wgsl),
+    /// before the forces, one invocation per fluid particle.
+    pub surface_normals: Option<Stage>,
     /// The forces alone: every step with adaptive dt; otherwise only when the accelerations are
     /// asked for (`step_fields`).
     pub forces: Stage,
@@ -215,6 +220,8 @@ pub struct GpuSolver {
     /// With the Adami wall pressure: each sorted wall particle's pressure and density
     /// (`vec2<f32>`).
     pub(super) wall_fields: Option<wgpu::Buffer>,
+    /// With surface tension: each fluid particle's normal (surface_normals.wgsl).
+    pub(super) normals: Option<wgpu::Buffer>,
     /// The neighbour lists, where the step keeps them.
     pub(super) neighbour_lists: Option<NeighbourLists>,
     /// The neighbour skin, where the options ask for one.
@@ -290,6 +297,8 @@ struct ArrayCounts {
     wall_fields: u64,
     /// The neighbour lists' slots (fluid particles times the capacity), else 0.
     list_slots: u64,
+    /// The fluid particles with surface tension, else 0 (the normals are then not bound).
+    normals: u64,
 }
 
 impl ArrayCounts {
@@ -300,6 +309,7 @@ impl ArrayCounts {
             "wall_cell_blocks" => self.wall_cell_blocks,
             "wall_cell_firsts" => self.wall_cell_firsts,
             "wall_fields" => self.wall_fields,
+            "normals" => self.normals,
             "neighbours" => self.list_slots,
             "neighbour_counts" => if self.list_slots > 0 { self.fluid } else { 0 },
             "status" | "solve_dispatch" => 0,
@@ -344,6 +354,7 @@ impl GpuSolver {
         // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
         let has_walls = w > 0;
         let adami = params.boundary_pressure == BoundaryPressure::Adami && has_walls && params.dfsph.is_none();
+        let surface_tension = params.surface_tension > 0.0 && params.dfsph.is_none();
         // Walls never move: sorted by cell once, on the host, with the same counting sort, and
         // their cell starts kept for the cells that hold walls. Across ranks the walls near a
         // slab change as it moves (`load_walls`): room for as many wall cells as wall particles.
@@ -363,6 +374,7 @@ impl GpuSolver {
             wall_cell_firsts: if has_walls { wall_cell_room } else { 0 },
             wall_fields: if adami { w } else { 0 },
             list_slots: 0,
+            normals: if surface_tension { n } else { 0 },
         };
         // Forces and integration can be fused with fixed dt, unless the fused stage's bindings
         // exceed the adapter's (arrays in many segments): then they run as two passes.
@@ -398,7 +410,7 @@ impl GpuSolver {
         let layout = arrays.layout;
         let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_cell_starts(counts.wall_cell_firsts);
         let plan = if dfsph { plan.with_dfsph(n) } else { plan.with_wall_fields(counts.wall_fields) }.with_neighbour_lists(n, list_capacity.unwrap_or(0));
-        let plan = plan.with_neighbour_skin(n, options.neighbour_skin.is_some());
+        let plan = plan.with_neighbour_skin(n, options.neighbour_skin.is_some()).with_surface_normals(n, surface_tension);
         plan.check(&ctx)?;
         let aliases = array_places(&arrays);
         let in_place: Vec<(&str, Alias)> = aliases.iter().copied().chain(if layout == StateLayout::InPlace { IN_PLACE.to_vec() } else { Vec::new() }).collect();
@@ -468,6 +480,8 @@ impl GpuSolver {
                     },
                     // One invocation per wall particle, at the density stage's workgroup size.
                     wall_pressure: if adami { Some(stage("wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
+                    // One invocation per fluid particle, at the forces' workgroup size.
+                    surface_normals: if surface_tension { Some(stage("surface_normals", "surface_normals", &len, &sized(ws.forces))?) } else { None },
                     forces: neighbour_stage("forces", "forces", ws.forces)?,
                     advance: if fused {
                         stage("forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
@@ -519,6 +533,7 @@ impl GpuSolver {
             let rest: Vec<[f32; 2]> = vec![[0.0, params.rest_density as f32]; w as usize];
             storage_init(device, "wall fields", bytemuck::cast_slice(&rest))
         });
+        let normals = surface_tension.then(|| storage(device, "surface normals", n * 16));
 
         let store = StateStore::new(device, layout, n, dfsph);
         // With continuity density the w of each velocity carries the particle's density.
@@ -552,8 +567,8 @@ impl GpuSolver {
             let spare = (layout == StateLayout::InPlace).then(|| store.spare(c));
             let acc = spare.clone().or_else(|| accelerations.clone()).unwrap_or_else(|| placeholder.clone());
             let bins = spare.unwrap_or_else(|| dst.velocities.clone());
-            let (starts, densities, pressures, status, wall_positions, wall_cell_blocks, wall_cell_firsts, wall_fields, lists) =
-                (&starts, &densities, &pressures, &status, &wall_positions, &wall_cell_blocks, &wall_cell_firsts, &wall_fields, &lists);
+            let (starts, densities, pressures, status, wall_positions, wall_cell_blocks, wall_cell_firsts, wall_fields, normals, lists) =
+                (&starts, &densities, &pressures, &status, &wall_positions, &wall_cell_blocks, &wall_cell_firsts, &wall_fields, &normals, &lists);
             move |name: &str| -> wgpu::Buffer {
                 match name {
                     "positions" => src.positions.clone(),
@@ -568,6 +583,7 @@ impl GpuSolver {
                     "wall_cell_blocks" => wall_cell_blocks.clone(),
                     "wall_cell_firsts" => wall_cell_firsts.clone(),
                     "wall_fields" => wall_fields.clone().expect("bound only with the Adami wall pressure"),
+                    "normals" => normals.clone().expect("bound only with surface tension"),
                     "neighbours" => lists.as_ref().expect("bound only with neighbour lists").slots.clone(),
                     "neighbour_counts" => lists.as_ref().expect("bound only with neighbour lists").counts.clone(),
                     "status" => status.clone(),
@@ -606,6 +622,7 @@ impl GpuSolver {
                     density: w.density.bind_group(device, "density", u, &b),
                     density_listed: w.density_listed.as_ref().map(|stage| stage.bind_group(device, "density_listed", u, &b)),
                     wall_pressure: w.wall_pressure.as_ref().map(|stage| stage.bind_group(device, "wall_pressure", u, &b)),
+                    surface_normals: w.surface_normals.as_ref().map(|stage| stage.bind_group(device, "surface_normals", u, &b)),
                     forces: (layout == StateLayout::InPlace).then(|| w.forces.bind_group(device, "forces", u, &b)),
                     advance: if fused {
                         w.advance.bind_group(device, "forces_and_integrate", u, &without_accelerations(c))
@@ -701,6 +718,7 @@ impl GpuSolver {
             wall_cell_blocks,
             wall_cell_firsts,
             wall_fields,
+            normals,
             neighbour_lists: lists,
             skin,
             wall_order,
@@ -751,6 +769,7 @@ impl GpuSolver {
                     "wall_cell_blocks" => &self.wall_cell_blocks,
                     "wall_cell_firsts" => &self.wall_cell_firsts,
                     "wall_fields" => self.wall_fields.as_ref().expect("bound only with the Adami wall pressure"),
+                    "normals" => self.normals.as_ref().expect("bound only with surface tension"),
                     "accelerations" => &buffer,
                     other => panic!("no buffer holds the array '{other}'"),
                 }
@@ -1059,6 +1078,7 @@ impl GpuSolver {
             .chain(s.pressures.as_ref())
             .chain(planned_accelerations)
             .chain(s.wall_fields.as_ref())
+            .chain(s.normals.as_ref())
             .chain(s.neighbour_lists.iter().flat_map(|l| [&l.slots, &l.counts]))
             .chain(s.skin.iter().flat_map(|k| [&k.rebuild_positions, &k.left]))
             .map(|b| b.size())
