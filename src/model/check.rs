@@ -400,10 +400,6 @@ impl Scene {
             if !(value.is_finite() && (lo..=hi).contains(&value)) {
                 return Err(err(origin, format!("physics.{field}"), format!("is {}; must be between {} (off) and {} ({what})", short(value), short(lo), short(hi))));
             }
-            if value > 0.0 && p.solver == PressureSolver::Dfsph {
-                return Err(err(origin, format!("physics.{field}"), format!(
-                    "is {}; surface tension and adhesion are weakly compressible forces in wgsph so far: use solver = \"wcsph\", or set {field} = 0", short(value))));
-            }
         }
         if p.wall_adhesion > 0.0 && !self.boundary.iter().any(|b| b.walls().is_some()) {
             return Err(err(origin, "physics.wall_adhesion", format!(

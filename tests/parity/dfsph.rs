@@ -17,13 +17,14 @@ fn small_tank(kernel: Kernel) -> TestScene {
     TestScene::small_tank().kernel(kernel).dfsph().dt(0.001)
 }
 
-/// The variants every test runs: the three kernels, Akinci walls, adaptive dt, no viscosity.
+/// The variants every test runs: the three kernels, Akinci walls, adaptive dt, no viscosity,
+/// surface tension with adhesion.
 fn variants() -> Vec<(Scene, &'static str)> {
     vec![
         (small_tank(Kernel::Mueller).build(), "mueller"),
         (small_tank(Kernel::CubicSpline).boundary_volume(BoundaryVolume::Akinci).build(), "cubic spline, akinci walls"),
         (small_tank(Kernel::CubicSpline).viscosity(0.0).adaptive().dt_max(0.002).build(), "cubic spline, adaptive dt, inviscid"),
-        (small_tank(Kernel::Wendland).build(), "wendland"),
+        (small_tank(Kernel::Wendland).surface_tension(0.5).wall_adhesion(2.0).build(), "wendland, surface tension, adhesion"),
     ]
 }
 

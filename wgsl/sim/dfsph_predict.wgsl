@@ -1,5 +1,5 @@
-// DFSPH, between the two solves: the accelerations of every force but pressure (viscosity and
-// gravity), the step's dt (adaptive dt) and the predicted velocities v* = v + dt a, written to
+// DFSPH, between the two solves: the accelerations of every force but pressure (viscosity,
+// surface tension, adhesion and gravity), the step's dt (adaptive dt) and the predicted velocities v* = v + dt a, written to
 // the other buffer of the state pair. Twin of src/solver/cpu/dfsph_predict.rs, one function per
 // entry point.
 
@@ -17,15 +17,19 @@
 //! array pressure_sum: f32, read_write
 // Adaptive dt: the maxima, dt, time and dt range.
 //! array status: u32, atomic, whole
+// With SURFACE_TENSION, each fluid particle's normal (surface_normals.wgsl); not bound otherwise.
+//! array normals: vec4<f32>, read, optional
 
-// Viscosity and gravity on fluid particle i: the viscosity term of wgsl/sim/forces.wgsl (the
-// CPU twin, src/solver/cpu/forces.rs, explains it), without pressure.
+// Viscosity, surface tension, adhesion and gravity on fluid particle i: the terms of
+// wgsl/sim/forces.wgsl (the CPU twin, src/solver/cpu/forces.rs, explains them), without
+// pressure.
 fn non_pressure_acceleration(i: u32) -> vec3<f32> {
     var g = vec3<f32>(0.0);
     if (GRAVITY) {
         g = params.gravity.xyz;
     }
-    if (!(VISCOSITY && params.viscosity > 0.0)) {
+    let viscous = VISCOSITY && params.viscosity > 0.0;
+    if (!(viscous || SURFACE_TENSION || WALL_ADHESION)) {
         return g;
     }
     let eps = 0.01 * params.h2;
@@ -34,6 +38,14 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
     let c = cell_coords(xi);
     var fluid_visc = vec3<f32>(0.0);
     var wall_visc = vec3<f32>(0.0);
+    let rho_i = densities_at(i);
+    var ni = vec3<f32>(0.0);
+    if (SURFACE_TENSION) {
+        ni = normals_at(i).xyz;
+    }
+    let tiny = 1e-12 * params.h;
+    var tension = vec3<f32>(0.0);
+    var adhesion = vec3<f32>(0.0);
     for (var run = 0u; run < stencil_span_count(); run++) {
         let cells = stencil_run(c, run);
         for (var j = starts_at(cells.x); j < starts_at(cells.y); j++) {
@@ -43,12 +55,23 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
                 continue;
             }
             let r = sqrt(r2);
-            let inv_rho = 1.0 / densities_at(j);
-            let uij = ui - velocities_at(j).xyz;
-            if (gradient_viscosity()) {
-                fluid_visc += kernel_grad(rij, r) * (inv_rho * dot(uij, rij) / (r2 + eps));
-            } else {
-                fluid_visc -= uij * (inv_rho * kernel_laplacian(r));
+            if (viscous) {
+                let inv_rho = 1.0 / densities_at(j);
+                let uij = ui - velocities_at(j).xyz;
+                if (gradient_viscosity()) {
+                    fluid_visc += kernel_grad(rij, r) * (inv_rho * dot(uij, rij) / (r2 + eps));
+                } else {
+                    fluid_visc -= uij * (inv_rho * kernel_laplacian(r));
+                }
+            }
+            if (SURFACE_TENSION) {
+                // Akinci et al. 2013, as in forces.wgsl's add_fluid_pair.
+                let k = 2.0 * params.rest_density / (rho_i + densities_at(j));
+                var pull = (ni - normals_at(j).xyz) * params.surface_tension;
+                if (r > tiny) {
+                    pull += rij * (params.cohesion_factor * cohesion_shape(r / params.h) / r);
+                }
+                tension += pull * k;
             }
         }
         if (WALLS) {
@@ -60,18 +83,28 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
                     continue;
                 }
                 let r = sqrt(r2);
-                if (gradient_viscosity()) {
-                    wall_visc += kernel_grad(rij, r) * (w.w * dot(ui, rij) / (r2 + eps));
-                } else {
-                    wall_visc -= ui * (w.w * kernel_laplacian(r));
+                if (viscous) {
+                    if (gradient_viscosity()) {
+                        wall_visc += kernel_grad(rij, r) * (w.w * dot(ui, rij) / (r2 + eps));
+                    } else {
+                        wall_visc -= ui * (w.w * kernel_laplacian(r));
+                    }
+                }
+                if (WALL_ADHESION && r > tiny) {
+                    adhesion += rij * (w.w * adhesion_shape(r / params.h) / r);
                 }
             }
         }
     }
-    let rho_i = densities_at(i);
     let nu = viscous_nu();
-    let visc = fluid_visc * (nu * params.rest_density * params.fluid_mass / rho_i) + wall_visc * (nu * params.boundary_friction / rho_i);
-    return visc + g;
+    var a = fluid_visc * (nu * params.rest_density * params.fluid_mass / rho_i) + wall_visc * (nu * params.boundary_friction / rho_i);
+    if (SURFACE_TENSION) {
+        a -= tension;
+    }
+    if (WALL_ADHESION) {
+        a -= adhesion * params.adhesion_factor;
+    }
+    return a + g;
 }
 
 // Fixed dt: v*_i = v_i + dt a_i; the constant-density solve's stiffness sum starts at 0.

@@ -1,9 +1,9 @@
-//! DFSPH, between the two solves: the accelerations of every force but pressure (viscosity and
-//! gravity), the step's dt (adaptive dt) and the predicted velocities v* = v + dt a. Twin of wgsl/sim/dfsph_predict.wgsl, one function per
+//! DFSPH, between the two solves: the accelerations of every force but pressure (viscosity,
+//! surface tension, adhesion and gravity), the step's dt (adaptive dt) and the predicted velocities v* = v + dt a. Twin of wgsl/sim/dfsph_predict.wgsl, one function per
 //! entry point (`predict_velocities` with a fixed dt; `non_pressure_accelerations`,
 //! `choose_dt` and `predict_from_accelerations` with adaptive dt).
 
-use crate::model::kernels::{viscous_nu, KernelCoefficients, Neighbours};
+use crate::model::kernels::{adhesion_shape, cohesion_shape, viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::params::{AdaptiveDt, Grid};
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
@@ -21,15 +21,24 @@ pub struct PredictInput<'a, R> {
     pub densities: &'a [R],
     pub walls: Neighbours<'a, R>,
     pub wall_masses: &'a [R],
+    /// Surface tension and adhesion as in [`super::forces::ForcesInput`] (0: off); the normals
+    /// of the step's densities, empty without surface tension.
+    pub surface_tension: R,
+    pub cohesion_factor: R,
+    pub adhesion_factor: R,
+    pub normals: &'a [V3<R>],
 }
 
-/// Viscosity and gravity on fluid particle i (wgsl `non_pressure_acceleration`): the viscosity
-/// term of the weakly compressible forces (src/solver/cpu/forces.rs explains it), without
-/// pressure.
+/// Viscosity, surface tension, adhesion and gravity on fluid particle i (wgsl
+/// `non_pressure_acceleration`): the terms of the weakly compressible forces
+/// (src/solver/cpu/forces.rs explains them), without pressure.
 pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> V3<R> {
     let gravity = input.gravity != V3::zero();
     let g = if gravity { input.gravity } else { V3::zero() };
-    if input.viscosity <= R::zero() {
+    let viscous = input.viscosity > R::zero();
+    let tension = input.surface_tension > R::zero();
+    let adhesion = input.adhesion_factor > R::zero();
+    if !(viscous || tension || adhesion) {
         return g;
     }
     let kernel = input.kernel;
@@ -41,6 +50,11 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
     let c = input.grid.cell_coords(xi);
     let mut fluid_visc = V3::zero();
     let mut wall_visc = V3::zero();
+    let rho_i = input.densities[i];
+    let ni = if tension { input.normals[i] } else { V3::zero() };
+    let tiny = R::of(1e-12) * kernel.h;
+    let mut tension_sum = V3::zero();
+    let mut adhesion_sum = V3::zero();
     for (k0, k1) in input.grid.stencil_runs(c) {
         for j in input.fluid.span(k0, k1) {
             let rij = xi - input.fluid.positions[j];
@@ -49,12 +63,22 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
                 continue;
             }
             let r = r2.sqrt();
-            let inv_rho = R::one() / input.densities[j];
-            let uij = ui - input.velocities[j];
-            if gradient_viscosity {
-                fluid_visc += kernel.grad_w(rij, r) * (inv_rho * uij.dot(rij) / (r2 + eps));
-            } else {
-                fluid_visc -= uij * (inv_rho * kernel.lap_w(r));
+            if viscous {
+                let inv_rho = R::one() / input.densities[j];
+                let uij = ui - input.velocities[j];
+                if gradient_viscosity {
+                    fluid_visc += kernel.grad_w(rij, r) * (inv_rho * uij.dot(rij) / (r2 + eps));
+                } else {
+                    fluid_visc -= uij * (inv_rho * kernel.lap_w(r));
+                }
+            }
+            if tension {
+                let k = R::of(2.0) * input.rest_density / (rho_i + input.densities[j]);
+                let mut pull = (ni - input.normals[j]) * input.surface_tension;
+                if r > tiny {
+                    pull += rij * (input.cohesion_factor * cohesion_shape(r / kernel.h) / r);
+                }
+                tension_sum += pull * k;
             }
         }
         for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {
@@ -65,17 +89,27 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
             }
             let r = r2.sqrt();
             let mw = input.wall_masses[j];
-            if gradient_viscosity {
-                wall_visc += kernel.grad_w(rij, r) * (mw * ui.dot(rij) / (r2 + eps));
-            } else {
-                wall_visc -= ui * (mw * kernel.lap_w(r));
+            if viscous {
+                if gradient_viscosity {
+                    wall_visc += kernel.grad_w(rij, r) * (mw * ui.dot(rij) / (r2 + eps));
+                } else {
+                    wall_visc -= ui * (mw * kernel.lap_w(r));
+                }
+            }
+            if adhesion && r > tiny {
+                adhesion_sum += rij * (mw * adhesion_shape(r / kernel.h) / r);
             }
         }
     }
-    let rho_i = input.densities[i];
     let nu = viscous_nu(kernel.kind, input.viscosity);
-    let visc = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
-    visc + g
+    let mut a = fluid_visc * (nu * input.rest_density * input.fluid_mass / rho_i) + wall_visc * (nu * input.boundary_friction / rho_i);
+    if tension {
+        a -= tension_sum;
+    }
+    if adhesion {
+        a -= adhesion_sum * input.adhesion_factor;
+    }
+    a + g
 }
 
 /// Fixed dt: v*_i = v_i + dt a_i into `velocities_out`; the constant-density solve's stiffness

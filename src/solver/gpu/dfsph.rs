@@ -180,6 +180,8 @@ pub(super) struct DfsphStages {
     pub check: [Stage; 2],
     pub integrate: Stage,
     pub step_accelerations: Stage,
+    /// With surface tension: the normals of the factors' densities, before the prediction.
+    pub surface_normals: Option<Stage>,
 }
 
 /// DFSPH's arrays.
@@ -208,6 +210,7 @@ pub(super) struct DfsphGroups {
     pub predict_density: wgpu::BindGroup,
     pub pressure_apply: wgpu::BindGroup,
     pub integrate: wgpu::BindGroup,
+    pub surface_normals: Option<wgpu::BindGroup>,
 }
 
 /// DFSPH on the GPU: its settings, pipelines, arrays and bind groups.
@@ -240,6 +243,8 @@ pub(super) struct SharedBuffers<'a> {
     pub accelerations: &'a wgpu::Buffer,
     /// The neighbour lists and their counts, where the solves walk lists.
     pub lists: Option<&'a super::buffers::NeighbourLists>,
+    /// The fluid's normals, with surface tension.
+    pub normals: Option<&'a wgpu::Buffer>,
 }
 
 /// Threads per workgroup of the solves' passes, whose dispatch size the GPU's checks write.
@@ -299,6 +304,7 @@ impl DfsphStages {
             check: [one("check_convergence", &control(0, warm))?, one("check_convergence", &control(1, warm))?],
             integrate: one("integrate", &sized(sizes.integrate))?,
             step_accelerations: one("step_accelerations", &sized(sizes.integrate))?,
+            surface_normals: if params.surface_tension > 0.0 { Some(one("surface_normals", &solve)?) } else { None },
         })
     }
 }
@@ -312,6 +318,7 @@ fn entry_file(entry: &str) -> &'static str {
         "pressure_warm_start" | "predict_density" | "pressure_apply" => "dfsph_pressure",
         "begin_solve" | "check_convergence" => "dfsph_convergence",
         "integrate" | "step_accelerations" => "dfsph_integrate",
+        "surface_normals" => "surface_normals",
         other => panic!("no DFSPH entry point {other}"),
     }
 }
@@ -423,6 +430,7 @@ impl DfsphGpu {
                         "warm_divergence" => b.warm_divergence.clone(),
                         "neighbours" => s.lists.expect("bound only with neighbour lists").slots.clone(),
                         "neighbour_counts" => s.lists.expect("bound only with neighbour lists").counts.clone(),
+                        "normals" => s.normals.expect("bound only with surface tension").clone(),
                         other => panic!("no DFSPH buffer holds the array '{other}'"),
                     }
                 }
@@ -447,6 +455,7 @@ impl DfsphGpu {
                 predict_density: st.predict_density.bind_group(device, "predict_density", uniform, &predicted),
                 pressure_apply: st.pressure_apply.bind_group(device, "pressure_apply", uniform, &predicted),
                 integrate: st.integrate.bind_group(device, "integrate", uniform, &predicted),
+                surface_normals: st.surface_normals.as_ref().map(|stage| stage.bind_group(device, "surface_normals", uniform, &own)),
             }
         }).collect();
         let control_buffers = |name: &str| match name {

@@ -467,6 +467,11 @@ impl GpuSolver {
         // Across ranks, where the host samples force probes this step.
         self.keep_prediction_start(rec, read);
         rec.begin(ProfiledStage::DfsphPredict);
+        // With surface tension, the normals its curvature term reads (profiled with the
+        // prediction).
+        if let (Some(stage), Some(group)) = (&d.stages.surface_normals, &g.surface_normals) {
+            self.dispatch_particles(rec, stage, group);
+        }
         match (&d.stages.adaptive, &g.adaptive) {
             (Some([accelerations, choose, predict]), Some([ga, gc, gp])) => {
                 self.dispatch_particles(rec, accelerations, ga);
@@ -651,6 +656,7 @@ impl GpuSolver {
                 wall_cell_firsts: &self.wall_cell_firsts,
                 accelerations: &buffer,
                 lists: self.neighbour_lists.as_ref(),
+                normals: self.normals.as_ref(),
             };
             self.step_accelerations_groups = Some((0..self.store.phases()).map(|c| d.step_accelerations_group(&self.ctx, &shared, &self.uniform, c)).collect());
         }
@@ -676,14 +682,19 @@ impl GpuSolver {
             S::DivergenceWarmStart => self.dispatch_particles(&mut rec, &st.divergence_warm_start, &g.divergence_warm_start),
             S::DivergenceRate => self.dispatch_particles(&mut rec, &st.divergence_rate, &g.divergence_rate),
             S::DivergenceApply => self.dispatch_particles(&mut rec, &st.divergence_apply, &g.divergence_apply),
-            S::Predict => match (&st.adaptive, &g.adaptive) {
-                (Some([a, choose, p]), Some([ga, gc, gp])) => {
-                    self.dispatch_particles(&mut rec, a, ga);
-                    self.dispatch_one(&mut rec, choose, gc);
-                    self.dispatch_particles(&mut rec, p, gp);
+            S::Predict => {
+                if let (Some(stage), Some(group)) = (&st.surface_normals, &g.surface_normals) {
+                    self.dispatch_particles(&mut rec, stage, group);
                 }
-                _ => self.dispatch_particles(&mut rec, &st.predict, &g.predict),
-            },
+                match (&st.adaptive, &g.adaptive) {
+                    (Some([a, choose, p]), Some([ga, gc, gp])) => {
+                        self.dispatch_particles(&mut rec, a, ga);
+                        self.dispatch_one(&mut rec, choose, gc);
+                        self.dispatch_particles(&mut rec, p, gp);
+                    }
+                    _ => self.dispatch_particles(&mut rec, &st.predict, &g.predict),
+                }
+            }
             S::PressureWarmStart => self.dispatch_particles(&mut rec, &st.pressure_warm_start, &g.pressure_warm_start),
             S::PredictDensity => self.dispatch_particles(&mut rec, &st.predict_density, &g.predict_density),
             S::PressureApply => self.dispatch_particles(&mut rec, &st.pressure_apply, &g.pressure_apply),

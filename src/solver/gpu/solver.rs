@@ -354,7 +354,7 @@ impl GpuSolver {
         // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
         let has_walls = w > 0;
         let adami = params.boundary_pressure == BoundaryPressure::Adami && has_walls && params.dfsph.is_none();
-        let surface_tension = params.surface_tension > 0.0 && params.dfsph.is_none();
+        let surface_tension = params.surface_tension > 0.0;
         // Walls never move: sorted by cell once, on the host, with the same counting sort, and
         // their cell starts kept for the cells that hold walls. Across ranks the walls near a
         // slab change as it moves (`load_walls`): room for as many wall cells as wall particles.
@@ -683,6 +683,7 @@ impl GpuSolver {
                 wall_cell_firsts: &wall_cell_firsts,
                 accelerations: accelerations.as_ref().unwrap_or(&placeholder),
                 lists: lists.as_ref(),
+                normals: normals.as_ref(),
             };
             let buffers = DfsphBuffers::new(&ctx, n, solve_threads(&ws), max_groups_per_dim);
             DfsphGpu::new(&ctx, params.dfsph.as_ref().expect("DFSPH"), stages, buffers, &shared, &uniform)
