@@ -110,7 +110,8 @@ fn run_command(command: Command, join: Option<ranks::Join>) -> anyhow::Result<i3
                 println!("{name:<12} {description}");
             }
             println!("(a SCENE may also be a wgsph TOML file, or a SPlisHSPlasH JSON scene: docs/scenes.md;");
-            println!(" the repository's scenes/ folder holds these and dam_break_pier.toml, walls read from a mesh file)");
+            println!(" the repository's scenes/ folder holds these, dam_break_pier.toml, walls read from a mesh file,");
+            println!(" and weightless_cube.toml, water held together by surface tension)");
             Ok(0)
         }
     }

@@ -169,13 +169,14 @@ fn every_rank_writes_its_piece_of_the_one_snapshot_file_one_process_writes() {
     }
 }
 
-/// The moving block with Akinci's volumes (a wall's mass from its wall neighbours) and Adami's
-/// wall pressure (from the fluid near the wall, one ghost layer more): both read the walls a
-/// rank holds, which follow the slab.
+/// The moving block with Akinci's volumes (a wall's mass from its wall neighbours), Adami's
+/// wall pressure (from the fluid near the wall, one ghost layer more) and Akinci's adhesion:
+/// all read the walls a rank holds, which follow the slab.
 fn moving_block_akinci_adami() -> Scene {
     let mut scene = moving_block();
     scene.physics.boundary_volume = wgsph::model::scene::BoundaryVolume::Akinci;
     scene.physics.boundary_pressure = BoundaryPressure::Adami;
+    scene.physics.wall_adhesion = 2.0;
     scene
 }
 
@@ -195,7 +196,10 @@ fn each_rank_holds_the_walls_near_its_slab_and_takes_new_ones_when_the_bounds_mo
     }
     assert!(runs[0].1.stats.rebalances > 0, "the bounds moved");
     assert!(runs.iter().any(|r| r.0 != r.1.walls), "a rank whose bounds moved took other walls: {:?}", runs.iter().map(|r| (r.0, r.1.walls)).collect::<Vec<_>>());
-    assert!(runs[0].3 == one, "3 ranks with walls per rank, Akinci volumes and Adami pressure against one rank");
+    assert!(runs[0].3 == one, "3 ranks with walls per rank, Akinci volumes, Adami pressure and adhesion against one rank");
+    let mut dry = scene.clone();
+    dry.physics.wall_adhesion = 0.0;
+    assert!(one_rank(&dry, 100) != one, "the adhesion took part");
 }
 
 #[test]
@@ -570,7 +574,7 @@ fn gpu_ranks_with_walls_near_their_slabs_and_adami_pressure_compute_what_one_gpu
     });
     assert!(runs[0].0.stats.rebalances > 0, "the bounds moved");
     assert!(runs.iter().all(|r| r.0.walls < total_walls(&scene)), "every rank holds only the walls near its slab");
-    assert!(runs[0].1 == one, "3 GPU ranks, walls per rank, Akinci and Adami, against one GPU, bit for bit");
+    assert!(runs[0].1 == one, "3 GPU ranks, walls per rank, Akinci volumes, Adami pressure and adhesion, against one GPU, bit for bit");
 }
 
 fn total_walls(scene: &Scene) -> usize {

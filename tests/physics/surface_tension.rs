@@ -5,7 +5,8 @@
 use crate::common;
 use crate::common::TestScene;
 
-use wgsph::model::scene::EquationOfState;
+use std::path::Path;
+use wgsph::model::scene::{EquationOfState, PressureSolver, Scene};
 use wgsph::model::state::Snapshot;
 
 /// Water without gravity, 1 cm particles (h = 2 cm), c0 = 10 m/s, Tait with clamped negative
@@ -48,13 +49,20 @@ fn extents(s: &Snapshot) -> (f64, f64, f64) {
     (axis, diagonal, radius)
 }
 
+/// The example scene scenes/weightless_cube.toml: a 10 cm cube of 1,000 particles without
+/// gravity, surface tension 0.3.
+fn weightless_cube() -> Scene {
+    Scene::load(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/weightless_cube.toml").to_str().unwrap()).unwrap()
+}
+
 #[test]
 fn a_weightless_cube_pulls_itself_into_a_ball_and_without_surface_tension_flies_apart() {
-    // 10 x 10 x 10 particles: a ball of its volume has the radius (3 V / 4 pi)^(1/3).
+    // A ball of the cube's volume has the radius (3 V / 4 pi)^(1/3).
     let ball = (3.0 * 0.1f64.powi(3) / (4.0 * std::f64::consts::PI)).cbrt();
-    let cube = weightless().fluid([0.0; 3], [0.1; 3]);
+    let cube = weightless_cube();
+    assert_eq!((cube.physics.surface_tension, cube.fluid_particle_count()), (0.3, 1000));
     let steps = 750; // 0.3 s
-    let mut round = common::cpu::<f32>(&cube.clone().surface_tension(0.3).build());
+    let mut round = common::cpu::<f32>(&cube);
     let (axis, diagonal, _) = extents(&round.snapshot());
     assert!(diagonal / axis > 1.6, "a cube at the start: diagonal {diagonal} / axis {axis}");
     round.step(steps);
@@ -64,13 +72,19 @@ fn a_weightless_cube_pulls_itself_into_a_ball_and_without_surface_tension_flies_
     assert!(radius > 0.8 * ball && radius < 1.05 * ball, "a ball of the cube's volume has the radius {ball}; the fluid reaches {radius}");
     // Without surface tension nothing holds the surface particles: the cube's pressure pushes
     // them apart.
-    let mut apart = common::cpu::<f32>(&cube.clone().build());
+    let mut free = cube.clone();
+    free.physics.surface_tension = 0.0;
+    let mut apart = common::cpu::<f32>(&free);
     apart.step(steps);
     let (_, _, radius) = extents(&apart.snapshot());
     assert!(radius > 1.3 * ball, "without surface tension the fluid reaches only {radius}");
     // DFSPH holds the density at rest instead of an equation of state: the same ball, at 2 ms
     // steps.
-    let mut round = common::cpu::<f32>(&cube.dfsph().dt(0.002).surface_tension(0.3).build());
+    let mut incompressible = cube;
+    incompressible.physics.solver = PressureSolver::Dfsph;
+    incompressible.physics.speed_of_sound = None;
+    incompressible.time.dt = 0.002;
+    let mut round = common::cpu::<f32>(&incompressible);
     round.step(150);
     assert!(round.health().is_ok(), "{:?}", round.health());
     let (axis, diagonal, radius) = extents(&round.snapshot());
