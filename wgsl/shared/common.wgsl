@@ -263,6 +263,26 @@ fn adhesion_shape(q: f32) -> f32 {
     return select(0.0, a, q > 0.5 && q < 1.0);
 }
 
+// Akinci et al. 2013 Eq. 1-6: what fluid neighbour j at r_ij = x_i - x_j (|r_ij| = r < h) pulls
+// particle i by, with its factors: K_ij (gamma m C(r) x_ij / r + gamma (n_i - n_j)),
+// K_ij = 2 rho0 / (rho_i + rho_j); no cohesion where the direction is undefined. The twin of
+// SurfaceTension::pair in src/solver/cpu/forces.rs.
+fn surface_tension_pair(rij: vec3<f32>, r: f32, rho_i: f32, rho_j: f32, ni: vec3<f32>, nj: vec3<f32>) -> vec3<f32> {
+    let k = 2.0 * params.rest_density / (rho_i + rho_j);
+    var pull = (ni - nj) * params.surface_tension;
+    if (r > 1e-12 * params.h) {
+        pull += rij * (params.cohesion_factor * cohesion_shape(r / params.h) / r);
+    }
+    return pull * k;
+}
+
+// Akinci et al. 2013 Eq. 7 without beta 0.007 / h^3: m_w A(r) x_iw / r for a wall particle of
+// mass m_w (rho0 V_w); zero where the direction is undefined. The twin of adhesion_pair in
+// src/solver/cpu/forces.rs.
+fn adhesion_pair(rij: vec3<f32>, r: f32, mw: f32) -> vec3<f32> {
+    return select(vec3<f32>(0.0), rij * (mw * adhesion_shape(r / params.h) / r), r > 1e-12 * params.h);
+}
+
 // Whether viscosity is the Morris/Monaghan term built on grad W (the cubic spline's and
 // Wendland's, whose Laplacians change sign) rather than Mueller's viscosity Laplacian; the twin
 // of Kernel::gradient_viscosity (src/model/scene.rs).

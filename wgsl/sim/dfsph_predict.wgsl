@@ -43,7 +43,6 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
     if (SURFACE_TENSION) {
         ni = normals_at(i).xyz;
     }
-    let tiny = 1e-12 * params.h;
     var tension = vec3<f32>(0.0);
     var adhesion = vec3<f32>(0.0);
     for (var run = 0u; run < stencil_span_count(); run++) {
@@ -65,13 +64,7 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
                 }
             }
             if (SURFACE_TENSION) {
-                // Akinci et al. 2013, as in forces.wgsl's add_fluid_pair.
-                let k = 2.0 * params.rest_density / (rho_i + densities_at(j));
-                var pull = (ni - normals_at(j).xyz) * params.surface_tension;
-                if (r > tiny) {
-                    pull += rij * (params.cohesion_factor * cohesion_shape(r / params.h) / r);
-                }
-                tension += pull * k;
+                tension += surface_tension_pair(rij, r, rho_i, densities_at(j), ni, normals_at(j).xyz);
             }
         }
         if (WALLS) {
@@ -90,8 +83,8 @@ fn non_pressure_acceleration(i: u32) -> vec3<f32> {
                         wall_visc -= ui * (w.w * kernel_laplacian(r));
                     }
                 }
-                if (WALL_ADHESION && r > tiny) {
-                    adhesion += rij * (w.w * adhesion_shape(r / params.h) / r);
+                if (WALL_ADHESION) {
+                    adhesion += adhesion_pair(rij, r, w.w);
                 }
             }
         }

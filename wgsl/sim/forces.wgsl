@@ -108,12 +108,7 @@ fn add_fluid_pair(sums: ptr<function, ForceSums>, own: OwnParticle, n: FluidCand
         (*sums).fluid_artificial += select(vec3<f32>(0.0), grad * (approach / ((r2 + eps) * (own.rho + n.rho))), counts && approach < 0.0);
     }
     if (SURFACE_TENSION) {
-        // Akinci et al. 2013 Eq. 1-6: K_ij (gamma m C(r) x_ij / r + gamma (n_i - n_j)),
-        // K_ij = 2 rho0 / (rho_i + rho_j); no cohesion where the direction is undefined.
-        let k = 2.0 * params.rest_density / (own.rho + n.rho);
-        var pull = (own.n - n.n) * params.surface_tension;
-        pull += select(vec3<f32>(0.0), rij * (params.cohesion_factor * cohesion_shape(r / params.h) / r), r > 1e-12 * params.h);
-        (*sums).tension += select(vec3<f32>(0.0), pull * k, counts);
+        (*sums).tension += select(vec3<f32>(0.0), surface_tension_pair(rij, r, own.rho, n.rho, own.n, n.n), counts);
     }
 }
 
@@ -156,8 +151,7 @@ fn add_wall_pair(sums: ptr<function, ForceSums>, own: OwnParticle, n: WallCandid
         (*sums).wall_artificial += select(vec3<f32>(0.0), grad * (n.w.w * approach / ((r2 + eps) * own.rho)), counts && approach < 0.0);
     }
     if (WALL_ADHESION) {
-        // Akinci et al. 2013 Eq. 7: m_w A(r) x_iw / r, m_w = rho0 V_w.
-        (*sums).adhesion += select(vec3<f32>(0.0), rij * (n.w.w * adhesion_shape(r / params.h) / r), counts && r > 1e-12 * params.h);
+        (*sums).adhesion += select(vec3<f32>(0.0), adhesion_pair(rij, r, n.w.w), counts);
     }
 }
 

@@ -248,8 +248,8 @@ fn add_wall_forces(i: u32, forces: u32) {
                     a += grad * (artificial_factor * w.w * approach / (r2 + eps));
                 }
             }
-            if (WALL_ADHESION && r > 1e-12 * params.h) {
-                a -= rij * (params.adhesion_factor * w.w * adhesion_shape(r / params.h) / r);
+            if (WALL_ADHESION) {
+                a -= adhesion_pair(rij, r, w.w) * params.adhesion_factor;
             }
             let f = a * (-params.fluid_mass);
             for (var k = 0u; k < forces; k++) {

@@ -3,7 +3,8 @@
 //! entry point (`predict_velocities` with a fixed dt; `non_pressure_accelerations`,
 //! `choose_dt` and `predict_from_accelerations` with adaptive dt).
 
-use crate::model::kernels::{adhesion_shape, cohesion_shape, viscous_nu, KernelCoefficients, Neighbours};
+use super::forces::{adhesion_pair, SurfaceTension};
+use crate::model::kernels::{viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::params::{AdaptiveDt, Grid};
 use crate::model::real::{Real, V3};
 use rayon::prelude::*;
@@ -52,7 +53,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
     let mut wall_visc = V3::zero();
     let rho_i = input.densities[i];
     let ni = if tension { input.normals[i] } else { V3::zero() };
-    let tiny = R::of(1e-12) * kernel.h;
+    let akinci = SurfaceTension { rest_density: input.rest_density, h: kernel.h, gamma: input.surface_tension, cohesion_factor: input.cohesion_factor };
     let mut tension_sum = V3::zero();
     let mut adhesion_sum = V3::zero();
     for (k0, k1) in input.grid.stencil_runs(c) {
@@ -73,12 +74,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
                 }
             }
             if tension {
-                let k = R::of(2.0) * input.rest_density / (rho_i + input.densities[j]);
-                let mut pull = (ni - input.normals[j]) * input.surface_tension;
-                if r > tiny {
-                    pull += rij * (input.cohesion_factor * cohesion_shape(r / kernel.h) / r);
-                }
-                tension_sum += pull * k;
+                tension_sum += akinci.pair(rij, r, rho_i, input.densities[j], ni, input.normals[j]);
             }
         }
         for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {
@@ -96,8 +92,8 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
                     wall_visc -= ui * (mw * kernel.lap_w(r));
                 }
             }
-            if adhesion && r > tiny {
-                adhesion_sum += rij * (mw * adhesion_shape(r / kernel.h) / r);
+            if adhesion {
+                adhesion_sum += adhesion_pair(kernel.h, rij, r, mw);
             }
         }
     }

@@ -87,6 +87,40 @@ pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     });
 }
 
+/// Akinci et al.'s surface tension as its pair term uses it (Akinci et al. 2013, Eq. 1-6).
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceTension<R> {
+    pub rest_density: R,
+    pub h: R,
+    /// gamma, and gamma m 32 / (pi h^3) (`Params::cohesion_factor`).
+    pub gamma: R,
+    pub cohesion_factor: R,
+}
+
+impl<R: Real> SurfaceTension<R> {
+    /// What fluid neighbour j at r_ij = x_i - x_j (|r_ij| = r < h) pulls particle i by, with its
+    /// factors: K_ij (gamma m C(r) x_ij / r + gamma (n_i - n_j)), K_ij = 2 rho0 / (rho_i + rho_j);
+    /// no cohesion where the direction is undefined (wgsl `surface_tension_pair`).
+    pub fn pair(&self, rij: V3<R>, r: R, rho_i: R, rho_j: R, ni: V3<R>, nj: V3<R>) -> V3<R> {
+        let k = R::of(2.0) * self.rest_density / (rho_i + rho_j);
+        let mut pull = (ni - nj) * self.gamma;
+        if r > R::of(1e-12) * self.h {
+            pull += rij * (self.cohesion_factor * cohesion_shape(r / self.h) / r);
+        }
+        pull * k
+    }
+}
+
+/// Akinci et al. 2013, Eq. 7, without beta 0.007 / h^3: m_w A(r) x_iw / r for a wall particle of
+/// mass m_w (rho0 V_w); zero where the direction is undefined (wgsl `adhesion_pair`).
+pub fn adhesion_pair<R: Real>(h: R, rij: V3<R>, r: R, mw: R) -> V3<R> {
+    if r > R::of(1e-12) * h {
+        rij * (mw * adhesion_shape(r / h) / r)
+    } else {
+        V3::zero()
+    }
+}
+
 /// The sums of a particle's neighbour loops, without their constant factors.
 #[derive(Clone, Copy, Debug)]
 pub struct ForceSums<R> {
@@ -310,8 +344,7 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
     let tension = input.surface_tension > R::zero();
     let adhesion = input.adhesion_factor > R::zero();
     let ni = if tension { input.normals[i] } else { V3::zero() };
-    // Below this a pair's direction is undefined (the particle itself): no cohesion or adhesion.
-    let tiny = R::of(1e-12) * kernel.h;
+    let akinci = SurfaceTension { rest_density: input.rest_density, h: kernel.h, gamma: input.surface_tension, cohesion_factor: input.cohesion_factor };
     let mut tension_sum = V3::zero();
     let mut adhesion_sum = V3::zero();
     for (k0, k1) in input.grid.stencil_runs(c) {
@@ -343,12 +376,7 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
                 }
             }
             if tension {
-                let k = R::of(2.0) * input.rest_density / (rho_i + rho_j);
-                let mut pull = (ni - input.normals[j]) * input.surface_tension;
-                if r > tiny {
-                    pull += rij * (input.cohesion_factor * cohesion_shape(r / kernel.h) / r);
-                }
-                tension_sum += pull * k;
+                tension_sum += akinci.pair(rij, r, rho_i, rho_j, ni, input.normals[j]);
             }
         }
         for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {
@@ -379,8 +407,8 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
                     wall_artificial += grad * (mw * approach / ((r2 + eps) * rho_i));
                 }
             }
-            if adhesion && r > tiny {
-                adhesion_sum += rij * (mw * adhesion_shape(r / kernel.h) / r);
+            if adhesion {
+                adhesion_sum += adhesion_pair(kernel.h, rij, r, mw);
             }
         }
     }

@@ -6,7 +6,8 @@
 //! the solves, on the pressure `wall_push_pressure` gives the step's wall push. What each probe measures is in
 //! [`crate::model::probes`] and docs/probes.md.
 
-use crate::model::kernels::{adhesion_shape, viscous_nu, KernelCoefficients, Neighbours};
+use super::forces::adhesion_pair;
+use crate::model::kernels::{viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::params::Grid;
 use crate::model::probes::{Probe, ProbeGeometry, GAUGE_FRACTION};
 use crate::model::real::{Real, V3};
@@ -325,8 +326,8 @@ pub fn particle_wall_forces<R: Real>(input: &ProbeInput<R>, i: usize, centres: &
                     a += grad * (artificial_factor * mw * approach / (r2 + eps));
                 }
             }
-            if adhesion && r > R::of(1e-12) * kernel.h {
-                a -= rij * (input.adhesion_factor * mw * adhesion_shape(r / kernel.h) / r);
+            if adhesion {
+                a -= adhesion_pair(kernel.h, rij, r, mw) * input.adhesion_factor;
             }
             let f = a * (-input.fluid_mass);
             for (k, c) in centres.iter().enumerate() {
