@@ -51,6 +51,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("sim/probes.wgsl", include_str!("../../../wgsl/sim/probes.wgsl")),
     ("sim/wall_pressure.wgsl", include_str!("../../../wgsl/sim/wall_pressure.wgsl")),
     ("sim/surface_normals.wgsl", include_str!("../../../wgsl/sim/surface_normals.wgsl")),
+    ("sim/surface_normals_tiled.wgsl", include_str!("../../../wgsl/sim/surface_normals_tiled.wgsl")),
     ("sim/fields.wgsl", include_str!("../../../wgsl/sim/fields.wgsl")),
     ("sim/neighbour_skin.wgsl", include_str!("../../../wgsl/sim/neighbour_skin.wgsl")),
     ("sim/ghost_velocities.wgsl", include_str!("../../../wgsl/sim/ghost_velocities.wgsl")),

@@ -480,8 +480,9 @@ impl GpuSolver {
                     },
                     // One invocation per wall particle, at the density stage's workgroup size.
                     wall_pressure: if adami { Some(stage("wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
-                    // One invocation per fluid particle, at the forces' workgroup size.
-                    surface_normals: if surface_tension { Some(stage("surface_normals", "surface_normals", &len, &sized(ws.forces))?) } else { None },
+                    // One invocation per fluid particle, at the forces' workgroup size; with tiles
+                    // a subgroup's stencils walked together.
+                    surface_normals: if surface_tension { Some(neighbour_stage("surface_normals", "surface_normals", ws.forces)?) } else { None },
                     forces: neighbour_stage("forces", "forces", ws.forces)?,
                     advance: if fused {
                         stage("forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
