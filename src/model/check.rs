@@ -34,11 +34,11 @@ pub const REST_DENSITY_RANGE: (f64, f64) = (1e-9, 1e9);
 pub const SPEED_OF_SOUND_RANGE: (f64, f64) = (1e-6, 1e8);
 /// The allowed delta of density diffusion (0 = off) and alpha of artificial viscosity.
 pub const DENSITY_DIFFUSION_RANGE: (f64, f64) = (0.0, 1.0);
+pub const ARTIFICIAL_VISCOSITY_RANGE: (f64, f64) = (0.0, 1.0);
 /// gamma of surface tension and beta of adhesion (Akinci et al. 2013). Both act as
 /// accelerations that do not change with the particle size; at 100 the cohesion outweighs
 /// gravity a hundred times over.
 pub const SURFACE_TENSION_RANGE: (f64, f64) = (0.0, 100.0);
-pub const ARTIFICIAL_VISCOSITY_RANGE: (f64, f64) = (0.0, 1.0);
 /// The largest kinematic viscosity and the largest |gravity| (see [`REST_DENSITY_RANGE`]).
 pub const MAX_VISCOSITY: f64 = 1e9;
 pub const MAX_GRAVITY: f64 = 1e9;

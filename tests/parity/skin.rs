@@ -34,7 +34,7 @@ fn scenes() -> Vec<(&'static str, Scene)> {
     vec![
         ("small tank (walls, plane, viscosity)", tank().build()),
         ("cubic spline, linear, unclamped", tank().kernel(Kernel::CubicSpline).equation_of_state(EquationOfState::Linear).clamp_negative_pressure(false).build()),
-        ("Adami wall pressure, artificial viscosity", tank().boundary_pressure(BoundaryPressure::Adami).viscosity(0.0).artificial_viscosity(0.1).build()),
+        ("Adami wall pressure, artificial viscosity, surface tension, adhesion", tank().boundary_pressure(BoundaryPressure::Adami).viscosity(0.0).artificial_viscosity(0.1).surface_tension(0.5).wall_adhesion(2.0).build()),
         ("continuity, diffusion, hydrostatic start", tank().continuity().density_diffusion(0.1).hydrostatic_start().build()),
         ("continuity, Adami wall pressure", tank().continuity().boundary_pressure(BoundaryPressure::Adami).build()),
         ("planes only", tank().without_walls().plane([0.0; 3], [0.0, 1.0, 0.0], 0.5).build()),
@@ -45,6 +45,7 @@ fn scenes() -> Vec<(&'static str, Scene)> {
 
 /// The scenes (indices into `scenes`) on which a skin's walks are compared with each other, and
 /// the ones an adapter after the first runs: Adami's wall pressure with artificial viscosity,
+/// surface tension and adhesion,
 /// continuity density with diffusion, and the dam break (its walls and viscosity).
 const WALKS_COMPARED_ON: [usize; 3] = [2, 3, 7];
 
