@@ -107,7 +107,7 @@ impl<R: Real> KernelCoefficients<R> {
     }
 }
 
-/// The shape of Akinci et al.'s cohesion spline (2013, Eq. 2) at q = r / h < 1, without its
+/// The shape of Akinci et al.'s cohesion spline (2013) at q = r / h < 1, without its
 /// factor 32 / (pi h^3): (1 - q)^3 q^3 beyond q = 1/2, 2 (1 - q)^3 q^3 - 1/64 within, so that
 /// particles closer than about 0.3 h repel and farther ones attract. Twin of `cohesion_shape` in
 /// wgsl/shared/common.wgsl.
@@ -121,7 +121,7 @@ pub fn cohesion_shape<R: Real>(q: R) -> R {
     }
 }
 
-/// The shape of Akinci et al.'s adhesion spline (2013, Eq. 7) at q = r / h, without its factor
+/// The shape of Akinci et al.'s adhesion spline (2013) at q = r / h, without its factor
 /// 0.007 / h^3: (-4 q^2 + 6 q - 2)^(1/4) for 1/2 < q < 1, zero elsewhere (a pull that peaks at
 /// 3/4 h). Twin of `adhesion_shape` in wgsl/shared/common.wgsl.
 pub fn adhesion_shape<R: Real>(q: R) -> R {

@@ -89,11 +89,11 @@ impl Params {
         self.artificial_viscosity * 0.5 * self.h * self.speed_of_sound()
     }
     /// gamma m 32 / (pi h^3), the cohesion's factor outside its spline (Akinci et al. 2013,
-    /// Eq. 2, with r = q h): 0 when surface tension is off.
+    /// with r = q h): 0 when surface tension is off.
     pub fn cohesion_factor(&self) -> f64 {
         self.surface_tension * self.fluid_mass * 32.0 / (std::f64::consts::PI * self.h.powi(3))
     }
-    /// beta 0.007 / h^3, the adhesion's factor outside its spline (Akinci et al. 2013, Eq. 7,
+    /// beta 0.007 / h^3, the adhesion's factor outside its spline (Akinci et al. 2013,
     /// with r = q h): 0 when adhesion is off.
     pub fn adhesion_factor(&self) -> f64 {
         self.wall_adhesion * 0.007 / self.h.powi(3)

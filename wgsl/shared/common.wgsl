@@ -248,7 +248,7 @@ fn kernel_grad(rij: vec3<f32>, r: f32) -> vec3<f32> {
     return select(rij * (dwdr / r), vec3<f32>(0.0), r >= params.h || r <= 1e-12 * params.h);
 }
 
-// Akinci et al. 2013 Eq. 2's cohesion spline at q = r / h < 1 without its factor 32 / (pi h^3);
+// Akinci et al.'s (2013) cohesion spline at q = r / h < 1 without its factor 32 / (pi h^3);
 // the twin of cohesion_shape in src/model/kernels.rs.
 fn cohesion_shape(q: f32) -> f32 {
     let d = 1.0 - q;
@@ -256,14 +256,14 @@ fn cohesion_shape(q: f32) -> f32 {
     return select(2.0 * t - 1.0 / 64.0, t, q > 0.5);
 }
 
-// Akinci et al. 2013 Eq. 7's adhesion spline at q = r / h without its factor 0.007 / h^3: zero
+// Akinci et al.'s (2013) adhesion spline at q = r / h without its factor 0.007 / h^3: zero
 // outside 1/2 < q < 1; the twin of adhesion_shape in src/model/kernels.rs.
 fn adhesion_shape(q: f32) -> f32 {
     let a = sqrt(sqrt(max(6.0 * q - 4.0 * q * q - 2.0, 0.0)));
     return select(0.0, a, q > 0.5 && q < 1.0);
 }
 
-// Akinci et al. 2013 Eq. 1-6: what fluid neighbour j at r_ij = x_i - x_j (|r_ij| = r < h) pulls
+// Akinci et al.'s (2013) cohesion and curvature: what fluid neighbour j at r_ij = x_i - x_j (|r_ij| = r < h) pulls
 // particle i by, with its factors: K_ij (gamma m C(r) x_ij / r + gamma (n_i - n_j)),
 // K_ij = 2 rho0 / (rho_i + rho_j); no cohesion where the direction is undefined. The twin of
 // SurfaceTension::pair in src/solver/cpu/forces.rs.
@@ -276,7 +276,7 @@ fn surface_tension_pair(rij: vec3<f32>, r: f32, rho_i: f32, rho_j: f32, ni: vec3
     return pull * k;
 }
 
-// Akinci et al. 2013 Eq. 7 without beta 0.007 / h^3: m_w A(r) x_iw / r for a wall particle of
+// Akinci et al.'s (2013) adhesion without beta 0.007 / h^3: m_w A(r) x_iw / r for a wall particle of
 // mass m_w (rho0 V_w); zero where the direction is undefined. The twin of adhesion_pair in
 // src/solver/cpu/forces.rs.
 fn adhesion_pair(rij: vec3<f32>, r: f32, mw: f32) -> vec3<f32> {

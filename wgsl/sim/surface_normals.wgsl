@@ -1,5 +1,5 @@
 // Each fluid particle's surface normal n_i = h sum_j (m_j / rho_j) grad W_ij over its fluid
-// neighbours (Akinci, Akinci & Teschner 2013, Eq. 5), for the curvature term of surface tension
+// neighbours (Akinci, Akinci & Teschner 2013), for the curvature term of surface tension
 // in the forces. Runs after the density stage, only in a scene with physics.surface_tension > 0;
 // one invocation per fluid particle. Twin of src/solver/cpu/surface_normals.rs, which explains
 // the normal.

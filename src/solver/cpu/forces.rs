@@ -66,10 +66,10 @@ pub struct ForcesInput<'a, R> {
 /// (wall_pressure.rs; Adami, Hu & Adams 2012). A wall particle takes part in viscosity at rest
 /// with the volume m_w/rho_i, scaled by the boundary friction.
 ///
-/// Surface tension (Akinci, Akinci & Teschner 2013, Eq. 1-6) adds
+/// Surface tension (Akinci, Akinci & Teschner 2013: cohesion and curvature) adds
 /// -sum_j K_ij (gamma m_j C(r) x_ij / r + gamma (n_i - n_j)), K_ij = 2 rho0 / (rho_i + rho_j):
 /// cohesion along the pair with the spline C of [`cohesion_shape`] and the curvature term with
-/// the normals of surface_normals.rs; adhesion (Eq. 7) adds -beta sum_w m_w A(r) x_iw / r with
+/// the normals of surface_normals.rs; their adhesion adds -beta sum_w m_w A(r) x_iw / r with
 /// the spline A of [`adhesion_shape`], m_w = rho0 V_w the wall particle's mass. Both are computed
 /// one particle at a time (the neighbour lists' batches do not carry them).
 pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
@@ -87,7 +87,7 @@ pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     });
 }
 
-/// Akinci et al.'s surface tension as its pair term uses it (Akinci et al. 2013, Eq. 1-6).
+/// Akinci et al.'s surface tension as its pair term uses it (Akinci et al. 2013).
 #[derive(Clone, Copy, Debug)]
 pub struct SurfaceTension<R> {
     pub rest_density: R,
@@ -111,7 +111,7 @@ impl<R: Real> SurfaceTension<R> {
     }
 }
 
-/// Akinci et al. 2013, Eq. 7, without beta 0.007 / h^3: m_w A(r) x_iw / r for a wall particle of
+/// Akinci et al.'s (2013) adhesion without beta 0.007 / h^3: m_w A(r) x_iw / r for a wall particle of
 /// mass m_w (rho0 V_w); zero where the direction is undefined (wgsl `adhesion_pair`).
 pub fn adhesion_pair<R: Real>(h: R, rij: V3<R>, r: R, mw: R) -> V3<R> {
     if r > R::of(1e-12) * h {

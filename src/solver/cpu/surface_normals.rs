@@ -1,7 +1,7 @@
 //! Each fluid particle's surface normal, with `physics.surface_tension` above zero: twin of
 //! wgsl/sim/surface_normals.wgsl.
 //!
-//! Akinci, Akinci & Teschner (2013, ACM Trans. Graph. 32(6), Eq. 5):
+//! Akinci, Akinci & Teschner (2013, ACM Trans. Graph. 32(6)), the normal of their curvature term:
 //!
 //! ```text
 //! n_i = h sum_j (m_j / rho_j) grad W_ij
