@@ -3,7 +3,7 @@
 //! same state after many steps, bit for bit, in f32 and f64, for every term and kernel, with
 //! and without walls, and with the grid rebuilt every second step (particles then sit outside
 //! the cell they were sorted into). DFSPH's factors pass lists and sums eight particles at a
-//! time the same way.
+//! time the same way, and so do the surface normals and the surface tension and adhesion terms.
 
 use crate::common;
 use crate::common::TestScene;
@@ -22,9 +22,12 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         ("cubic, grid rebuilt every 2nd step", tank().kernel(Kernel::CubicSpline).neighbour_rebuild_every(2).build()),
         ("planes only, no wall particles", tank().without_walls().build()),
         ("Adami wall pressure", tank().boundary_pressure(BoundaryPressure::Adami).build()),
+        ("surface tension and adhesion, Adami walls", tank().surface_tension(0.5).wall_adhesion(2.0).boundary_pressure(BoundaryPressure::Adami).build()),
+        ("surface tension and adhesion, cubic, grid rebuilt every 2nd step", tank().kernel(Kernel::CubicSpline).surface_tension(0.5).wall_adhesion(2.0).neighbour_rebuild_every(2).build()),
         ("DFSPH (the factors pass), cubic, viscosity", tank().kernel(Kernel::CubicSpline).viscosity(0.005).dfsph().build()),
         ("DFSPH, Akinci walls, grid rebuilt every 2nd step", tank().dfsph().boundary_volume(BoundaryVolume::Akinci).neighbour_rebuild_every(2).build()),
         ("DFSPH, planes only", tank().without_walls().dfsph().build()),
+        ("DFSPH, surface tension and adhesion", tank().dfsph().surface_tension(0.5).wall_adhesion(2.0).build()),
     ]
 }
 

@@ -7,11 +7,11 @@ use super::dfsph_convergence::{begin_solve, check_convergence, SolveLimits};
 use super::dfsph_divergence::{divergence_apply, divergence_rate, divergence_warm_start};
 use super::dfsph_factors::{density_and_factor, FactorsInput, FactorsOutput};
 use super::dfsph_integrate::{integrate, keep_warm_start, step_accelerations};
-use super::surface_normals::{surface_normals, SurfaceNormalsInput};
 use super::dfsph_predict::{choose_dt, non_pressure_accelerations, predict_from_accelerations, predict_velocities, PredictInput};
 use super::dfsph_pressure::{predict_density, pressure_apply, pressure_warm_start};
 use super::dfsph_shared::{error_threshold, factor_epsilon, Pairs, SolveInput, WarmStart, WARM_START_SHARE};
 use super::exchange::GhostLink;
+use super::forces::SurfaceTension;
 use super::integrate::{Backstops, StepHealth};
 use crate::model::kernels::{KernelCoefficients, Neighbours};
 use crate::model::params::{Grid, Params};
@@ -65,6 +65,9 @@ pub struct StepParts<'a, R: Real> {
     pub wall_positions: &'a [V3<R>],
     pub wall_starts: &'a [u32],
     pub wall_masses: &'a [R],
+    /// With surface tension, each fluid particle's normal from the factors' densities
+    /// (surface_normals.rs, which the solver runs before the prediction); empty otherwise.
+    pub normals: &'a [V3<R>],
     /// The step about to run (for the viscosity schedule).
     pub step: u64,
     /// Whether the factors pass runs eight particles at a time ([`super::CpuSolver::use_lanes`]).
@@ -229,19 +232,6 @@ impl<R: Real> DfsphCpu<R> {
         let p = s.params;
         let n = s.velocities.len();
         s.scratch.resize(n, V3::zero());
-        // With surface tension, the normals of the factors' densities (surface_normals.rs).
-        let mut normals = Vec::new();
-        if p.surface_tension > 0.0 {
-            let input = SurfaceNormalsInput {
-                kernel: s.kernel,
-                grid: s.grid,
-                fluid_mass: R::of(p.fluid_mass),
-                fluid: Neighbours { positions: s.positions, starts: s.starts },
-                densities: s.densities,
-            };
-            normals = vec![V3::zero(); n];
-            surface_normals(&input, &mut normals);
-        }
         let input = PredictInput {
             kernel: s.kernel,
             grid: s.grid,
@@ -255,10 +245,9 @@ impl<R: Real> DfsphCpu<R> {
             densities: s.densities,
             walls: Neighbours { positions: s.wall_positions, starts: s.wall_starts },
             wall_masses: s.wall_masses,
-            surface_tension: R::of(p.surface_tension),
-            cohesion_factor: R::of(p.cohesion_factor()),
+            tension: SurfaceTension::of(p),
             adhesion_factor: R::of(p.adhesion_factor()),
-            normals: &normals,
+            normals: s.normals,
         };
         let dt = match p.adaptive {
             None => {

@@ -24,8 +24,7 @@ pub struct PredictInput<'a, R> {
     pub wall_masses: &'a [R],
     /// Surface tension and adhesion as in [`super::forces::ForcesInput`] (0: off); the normals
     /// of the step's densities, empty without surface tension.
-    pub surface_tension: R,
-    pub cohesion_factor: R,
+    pub tension: SurfaceTension<R>,
     pub adhesion_factor: R,
     pub normals: &'a [V3<R>],
 }
@@ -37,7 +36,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
     let gravity = input.gravity != V3::zero();
     let g = if gravity { input.gravity } else { V3::zero() };
     let viscous = input.viscosity > R::zero();
-    let tension = input.surface_tension > R::zero();
+    let tension = input.tension.on();
     let adhesion = input.adhesion_factor > R::zero();
     if !(viscous || tension || adhesion) {
         return g;
@@ -53,7 +52,6 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
     let mut wall_visc = V3::zero();
     let rho_i = input.densities[i];
     let ni = if tension { input.normals[i] } else { V3::zero() };
-    let akinci = SurfaceTension { rest_density: input.rest_density, h: kernel.h, gamma: input.surface_tension, cohesion_factor: input.cohesion_factor };
     let mut tension_sum = V3::zero();
     let mut adhesion_sum = V3::zero();
     for (k0, k1) in input.grid.stencil_runs(c) {
@@ -74,7 +72,7 @@ pub fn non_pressure_acceleration<R: Real>(input: &PredictInput<R>, i: usize) -> 
                 }
             }
             if tension {
-                tension_sum += akinci.pair(rij, r, rho_i, input.densities[j], ni, input.normals[j]);
+                tension_sum += input.tension.pair(rij, r, rho_i, input.densities[j], ni, input.normals[j]);
             }
         }
         for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {

@@ -9,7 +9,7 @@
 use super::cell_batches::{wide, ListChunk, NeighbourLists, RowMasks};
 use crate::model::kernels::{adhesion_shape, cohesion_shape, viscous_nu, KernelCoefficients, Neighbours};
 use crate::model::lanes::{Pack, PackV3, LANES};
-use crate::model::params::Grid;
+use crate::model::params::{Grid, Params};
 use crate::model::real::{as_arrays, Real, V3};
 use crate::model::scene::BoundaryPressure;
 use rayon::prelude::*;
@@ -40,10 +40,9 @@ pub struct ForcesInput<'a, R> {
     pub fluid_points: &'a [[R; 4]],
     /// Each wall particle's position and mass ([`forces`] only).
     pub wall_points: &'a [[R; 4]],
-    /// gamma of surface tension, its cohesion factor gamma m 32 / (pi h^3) and beta 0.007 / h^3
-    /// of adhesion (`Params::cohesion_factor`, `Params::adhesion_factor`; 0: off).
-    pub surface_tension: R,
-    pub cohesion_factor: R,
+    /// Akinci et al.'s surface tension (gamma 0: off) and beta 0.007 / h^3 of their adhesion
+    /// (`Params::adhesion_factor`; 0: off).
+    pub tension: SurfaceTension<R>,
     pub adhesion_factor: R,
     /// With surface tension, each fluid particle's normal of this step (surface_normals.rs);
     /// empty otherwise.
@@ -70,12 +69,10 @@ pub struct ForcesInput<'a, R> {
 /// -sum_j K_ij (gamma m_j C(r) x_ij / r + gamma (n_i - n_j)), K_ij = 2 rho0 / (rho_i + rho_j):
 /// cohesion along the pair with the spline C of [`cohesion_shape`] and the curvature term with
 /// the normals of surface_normals.rs; their adhesion adds -beta sum_w m_w A(r) x_iw / r with
-/// the spline A of [`adhesion_shape`], m_w = rho0 V_w the wall particle's mass. Both are computed
-/// one particle at a time (the neighbour lists' batches do not carry them).
+/// the spline A of [`adhesion_shape`], m_w = rho0 V_w the wall particle's mass.
 pub fn forces<R: Real>(input: &ForcesInput<R>, accelerations: &mut [V3<R>]) {
     let lists = input.lists;
-    let akinci = input.surface_tension > R::zero() || input.adhesion_factor > R::zero();
-    if lists.chunks().is_empty() || akinci {
+    if lists.chunks().is_empty() {
         accelerations.par_iter_mut().enumerate().for_each(|(i, acc)| *acc = particle_acceleration(input, i));
         return;
     }
@@ -98,6 +95,20 @@ pub struct SurfaceTension<R> {
 }
 
 impl<R: Real> SurfaceTension<R> {
+    /// The scene's surface tension (gamma 0 when it has none).
+    pub fn of(params: &Params) -> SurfaceTension<R> {
+        SurfaceTension {
+            rest_density: R::of(params.rest_density),
+            h: R::of(params.h),
+            gamma: R::of(params.surface_tension),
+            cohesion_factor: R::of(params.cohesion_factor()),
+        }
+    }
+
+    pub fn on(&self) -> bool {
+        self.gamma > R::zero()
+    }
+
     /// What fluid neighbour j at r_ij = x_i - x_j (|r_ij| = r < h) pulls particle i by, with its
     /// factors: K_ij (gamma m C(r) x_ij / r + gamma (n_i - n_j)), K_ij = 2 rho0 / (rho_i + rho_j);
     /// no cohesion where the direction is undefined (wgsl `surface_tension_pair`).
@@ -109,6 +120,37 @@ impl<R: Real> SurfaceTension<R> {
         }
         pull * k
     }
+
+    /// [`SurfaceTension::pair`] lane by lane, the same operations in the same order.
+    #[inline(always)]
+    fn pair_lanes(&self, rij: PackV3<R>, r: Pack<R>, rho_i: Pack<R>, rho_j: Pack<R>, ni: PackV3<R>, nj: PackV3<R>) -> PackV3<R> {
+        let k = Pack::splat(R::of(2.0) * self.rest_density) / (rho_i + rho_j);
+        let curvature = (ni - nj).scale(Pack::splat(self.gamma));
+        let cohesion = curvature + rij.scale(Pack::splat(self.cohesion_factor) * cohesion_shape_lanes(r / Pack::splat(self.h)) / r);
+        let defined = Pack::splat(R::of(1e-12) * self.h).lt(r);
+        PackV3::select(defined, cohesion, curvature).scale(k)
+    }
+}
+
+/// [`cohesion_shape`] lane by lane.
+#[inline(always)]
+fn cohesion_shape_lanes<R: Real>(q: Pack<R>) -> Pack<R> {
+    let d = Pack::splat(R::one()) - q;
+    let t = d * d * d * q * q * q;
+    Pack::select(Pack::splat(R::of(0.5)).lt(q), t, Pack::splat(R::of(2.0)) * t - Pack::splat(R::of(1.0 / 64.0)))
+}
+
+/// [`adhesion_pair`] lane by lane (with [`adhesion_shape`]'s spline), the same operations in the
+/// same order.
+#[inline(always)]
+fn adhesion_pair_lanes<R: Real>(h: R, rij: PackV3<R>, r: Pack<R>, mw: Pack<R>) -> PackV3<R> {
+    let zero = Pack::zero();
+    let q = r / Pack::splat(h);
+    let radicand = Pack::splat(R::of(6.0)) * q - Pack::splat(R::of(4.0)) * q * q - Pack::splat(R::of(2.0));
+    let spline = Pack::select(radicand.lt(zero), zero, radicand).sqrt().sqrt();
+    let shape = Pack::select(Pack::splat(R::of(0.5)).lt(q).and(q.lt(Pack::splat(R::one()))), spline, zero);
+    let defined = Pack::splat(R::of(1e-12) * h).lt(r);
+    PackV3::select(defined, rij.scale(mw * shape / r), PackV3::zero())
 }
 
 /// Akinci et al.'s (2013) adhesion without beta 0.007 / h^3: m_w A(r) x_iw / r for a wall particle of
@@ -143,6 +185,8 @@ struct Lanes<R: Real> {
     rho: Pack<R>,
     /// p_i / rho_i^2.
     p_over: Pack<R>,
+    /// The surface normal (zero without surface tension).
+    n: PackV3<R>,
 }
 
 /// The terms a scene uses; the others are skipped, as they are compiled out on the GPU.
@@ -153,6 +197,8 @@ struct Terms {
     artificial: bool,
     /// Adami's wall pressure: each wall particle's own pressure inside the sum.
     adami: bool,
+    tension: bool,
+    adhesion: bool,
 }
 
 impl Terms {
@@ -162,6 +208,8 @@ impl Terms {
             viscous: input.viscosity > R::zero(),
             artificial: input.artificial_viscosity_factor > R::zero(),
             adami: input.boundary_pressure == BoundaryPressure::Adami,
+            tension: input.tension.on(),
+            adhesion: input.adhesion_factor > R::zero(),
         }
     }
 }
@@ -176,13 +224,16 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
     let eps = Pack::splat(R::of(0.01) * kernel.h2);
     let zero = Pack::zero();
     let velocities = as_arrays(input.velocities);
+    let normals = as_arrays(input.normals);
     for batch in &chunk.batches {
         let index = batch.indices();
         let (x, p_over) = PackV3::gather_with_w(input.fluid_points, &index);
-        let pi = Lanes { x, u: PackV3::gather(velocities, &index), rho: Pack::gather(input.densities, &index), p_over };
+        let n = if terms.tension { PackV3::gather(normals, &index) } else { PackV3::zero() };
+        let pi = Lanes { x, u: PackV3::gather(velocities, &index), rho: Pack::gather(input.densities, &index), p_over, n };
         let mut fluid_pressure = PackV3::zero();
         let mut fluid_visc = PackV3::zero();
         let mut fluid_artificial = PackV3::zero();
+        let mut tension = PackV3::zero();
         let (rows, counts) = chunk.fluid_rows(batch);
         let mut live = RowMasks::new(&counts);
         for index in rows {
@@ -211,10 +262,16 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
                     fluid_artificial = PackV3::select(valid.and(approach.lt(zero)), term, fluid_artificial);
                 }
             }
+            if terms.tension {
+                let (rho_j, nj) = (Pack::gather(input.densities, index), PackV3::gather(normals, index));
+                let pull = input.tension.pair_lanes(rij, r, pi.rho, rho_j, pi.n, nj);
+                tension = PackV3::select(valid, tension + pull, tension);
+            }
         }
         let mut wall_pressure = PackV3::zero();
         let mut wall_visc = PackV3::zero();
         let mut wall_artificial = PackV3::zero();
+        let mut adhesion = PackV3::zero();
         let (rows, counts) = chunk.wall_rows(batch);
         let mut live = RowMasks::new(&counts);
         for index in rows {
@@ -244,9 +301,14 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
                 let term = wall_artificial + grad.scale(mw * approach / ((r2 + eps) * pi.rho));
                 wall_artificial = PackV3::select(valid.and(approach.lt(zero)), term, wall_artificial);
             }
+            if terms.adhesion {
+                let pull = adhesion_pair_lanes(kernel.h, rij, r, mw);
+                adhesion = PackV3::select(valid, adhesion + pull, adhesion);
+            }
         }
         let (fluid_pressure, fluid_visc, wall_pressure) = (fluid_pressure.to_arrays(), fluid_visc.to_arrays(), wall_pressure.to_arrays());
         let (wall_visc, fluid_artificial, wall_artificial) = (wall_visc.to_arrays(), fluid_artificial.to_arrays(), wall_artificial.to_arrays());
+        let (tension, adhesion) = (tension.to_arrays(), adhesion.to_arrays());
         for k in 0..batch.lanes as usize {
             let i = batch.first as usize + k;
             let sums = ForceSums {
@@ -256,8 +318,8 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
                 wall_visc: V3(wall_visc[k]),
                 fluid_artificial: V3(fluid_artificial[k]),
                 wall_artificial: V3(wall_artificial[k]),
-                tension: V3::zero(),
-                adhesion: V3::zero(),
+                tension: V3(tension[k]),
+                adhesion: V3(adhesion[k]),
             };
             accelerations[i - first] = finish(input, i, &sums);
         }
@@ -294,7 +356,7 @@ fn finish<R: Real>(input: &ForcesInput<R>, i: usize, sums: &ForceSums<R>) -> V3<
         let av = input.artificial_viscosity_factor;
         a += sums.fluid_artificial * (R::of(2.0) * av * input.fluid_mass) + sums.wall_artificial * (av * input.boundary_friction);
     }
-    if input.surface_tension > R::zero() {
+    if input.tension.on() {
         a -= sums.tension;
     }
     if input.adhesion_factor > R::zero() {
@@ -341,10 +403,9 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
     let artificial = input.artificial_viscosity_factor > R::zero();
     let mut fluid_artificial = V3::zero();
     let mut wall_artificial = V3::zero();
-    let tension = input.surface_tension > R::zero();
+    let tension = input.tension.on();
     let adhesion = input.adhesion_factor > R::zero();
     let ni = if tension { input.normals[i] } else { V3::zero() };
-    let akinci = SurfaceTension { rest_density: input.rest_density, h: kernel.h, gamma: input.surface_tension, cohesion_factor: input.cohesion_factor };
     let mut tension_sum = V3::zero();
     let mut adhesion_sum = V3::zero();
     for (k0, k1) in input.grid.stencil_runs(c) {
@@ -376,7 +437,7 @@ pub fn particle_acceleration<R: Real>(input: &ForcesInput<R>, i: usize) -> V3<R>
                 }
             }
             if tension {
-                tension_sum += akinci.pair(rij, r, rho_i, rho_j, ni, input.normals[j]);
+                tension_sum += input.tension.pair(rij, r, rho_i, rho_j, ni, input.normals[j]);
             }
         }
         for j in if walls { input.walls.span(k0, k1) } else { 0..0 } {

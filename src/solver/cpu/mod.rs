@@ -371,18 +371,18 @@ impl<R: Real> CpuSolver<R> {
             lists: &self.lists,
             fluid_points: &self.fluid_points,
             wall_points: &self.wall_points,
-            surface_tension: R::of(p.surface_tension),
-            cohesion_factor: R::of(p.cohesion_factor()),
+            tension: forces::SurfaceTension::of(p),
             adhesion_factor: R::of(p.adhesion_factor()),
             normals: &self.normals,
         }
     }
 
-    /// Stage 3a: with surface tension, each fluid particle's normal from the fields of the
-    /// last density stage (none otherwise).
-    fn surface_normals(&self) -> Vec<V3<R>> {
+    /// With surface tension, each fluid particle's normal from the fields of the last density
+    /// stage (WCSPH) or factors stage (DFSPH), into `normals`; emptied otherwise.
+    fn surface_normals_into(&self, normals: &mut Vec<V3<R>>) {
         if self.params.surface_tension <= 0.0 {
-            return Vec::new();
+            normals.clear();
+            return;
         }
         let input = surface_normals::SurfaceNormalsInput {
             kernel: &self.kernel,
@@ -390,15 +390,23 @@ impl<R: Real> CpuSolver<R> {
             fluid_mass: R::of(self.params.fluid_mass),
             fluid: Neighbours { positions: &self.positions, starts: &self.starts },
             densities: &self.densities,
+            lists: &self.lists,
+            fluid_points: &self.fluid_points,
         };
-        let mut normals = vec![V3::zero(); self.positions.len()];
-        surface_normals::surface_normals(&input, &mut normals);
-        normals
+        surface_normals::surface_normals(&input, normals);
+    }
+
+    /// Stage 3a (wgsl/sim/surface_normals.wgsl): the normals the forces or DFSPH's prediction
+    /// read, kept in the solver's array.
+    fn update_surface_normals(&mut self) {
+        let mut normals = std::mem::take(&mut self.normals);
+        self.surface_normals_into(&mut normals);
+        self.normals = normals;
     }
 
     /// Stage 3: accelerations.
     pub fn compute_forces(&mut self) {
-        self.normals = self.surface_normals();
+        self.update_surface_normals();
         let mut accelerations = std::mem::take(&mut self.accelerations);
         if !self.lists.chunks().is_empty() {
             forces::pressure_terms(&self.densities, &self.pressures, &mut self.fluid_points);
@@ -415,7 +423,8 @@ impl<R: Real> CpuSolver<R> {
         let (mut x, mut v) = (vec![V3::zero(); n], vec![V3::zero(); n]);
         let mut rho = vec![R::zero(); self.carried_densities.len()];
         let domain = (V3::from64(self.params.domain_min), V3::from64(self.params.domain_max));
-        let normals = self.surface_normals();
+        let mut normals = Vec::new();
+        self.surface_normals_into(&mut normals);
         let input = forces::ForcesInput { normals: &normals, ..self.forces_input() };
         let found = forces_integrate::forces_and_integrate(&input, R::of(self.params.dt), &self.backstops, domain, &mut x, &mut v, &mut rho);
         (x, v, found)
@@ -491,6 +500,7 @@ impl<R: Real> CpuSolver<R> {
             wall_positions: &self.wall_positions,
             wall_starts: &self.wall_starts,
             wall_masses: &self.wall_masses,
+            normals: &self.normals,
             step: self.step,
             lanes: self.lanes,
             particles,
@@ -527,6 +537,9 @@ impl<R: Real> CpuSolver<R> {
     /// step's dt after the prediction.
     pub fn dfsph_stage(&mut self, stage: crate::solver::backend::DfsphStage) -> Option<f64> {
         use crate::solver::backend::DfsphStage;
+        if stage == DfsphStage::Predict {
+            self.update_surface_normals();
+        }
         let (d, mut s) = self.dfsph_parts()?;
         let volume = R::of(s.params.fluid_mass / s.params.rest_density);
         let input = dfsph_shared::SolveInput { pairs: &d.pairs, volume, factors: &d.factors, wall_gradients: &d.wall_gradients, ghosts: &[] };
@@ -601,6 +614,8 @@ impl<R: Real> CpuSolver<R> {
             self.link_ghosts();
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
             dfsph.factors_stage(&mut parts);
+            // The prediction's surface normals, from the factors' densities.
+            self.update_surface_normals();
             let points = due.then(|| self.sample_probe_points());
             let (dfsph, mut parts) = self.dfsph_parts().expect("a DFSPH scene");
             let dt = dfsph.solve(&mut parts);
