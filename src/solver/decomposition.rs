@@ -45,11 +45,15 @@ pub fn cell_runs(dims: [u32; 3], axis: usize, layers: std::ops::Range<u32>) -> V
 /// of a second one for the ghosts' densities and pressures.
 pub const HALO_LAYERS: u32 = 2;
 
-/// The ghost layers a scene needs: [`HALO_LAYERS`], and one more with Adami's wall pressure,
-/// where a wall particle next to the face takes its pressure from the fluid one layer beyond
-/// it (Adami et al. 2012, Eq. 27), whose density needs the layer beyond that.
-pub fn halo_layers(adami_walls: bool) -> u32 {
-    HALO_LAYERS + adami_walls as u32
+/// The ghost layers a scene needs: [`HALO_LAYERS`], and one more where the forces on an own
+/// particle read a value its neighbours sum over their own neighbourhood from densities:
+/// Adami's wall pressure, where a wall particle next to the face takes its pressure from the
+/// fluid one layer beyond it (Adami et al. 2012, Eq. 27), and Akinci's surface tension, whose
+/// curvature term reads a fluid neighbour's normal n_j = h sum_k m_k / rho_k grad W_jk (Akinci
+/// et al. 2013). In both the densities one layer beyond the inner ghosts must be whole, which
+/// needs the layer beyond that.
+pub fn halo_layers(adami_walls: bool, surface_tension: bool) -> u32 {
+    HALO_LAYERS + (adami_walls || surface_tension) as u32
 }
 
 /// The slabs: rank r owns the cell layers `bounds[r]..bounds[r + 1]`; `bounds[0]` is 0 and the

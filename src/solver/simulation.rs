@@ -27,7 +27,6 @@ use super::backend::Backend;
 use super::communicator::Ranks;
 use crate::model::check::{host_memory_shortfall, CPU_BYTES_PER_PARTICLE};
 use crate::model::initial::InitialState;
-use crate::model::numbers::short;
 use crate::model::params::Params;
 use crate::model::real::Real;
 use crate::model::scene::{Scene, SceneError, SceneOrigin};
@@ -228,11 +227,6 @@ fn open_part(scene: &Scene, params: &Params, initial: Option<InitialState>, choi
     };
     if params.rebuild_every != 1 {
         return refuse("time.neighbour_rebuild_every", format!("is {}; across ranks ({size}) the exchange runs with every rebuild of the grid, so it must be 1", params.rebuild_every));
-    }
-    if params.surface_tension > 0.0 {
-        return refuse("physics.surface_tension", format!(
-            "is {}; across ranks ({size}) a ghost particle's surface normal would miss the neighbours beyond the band: run it on one rank, or set surface_tension = 0",
-            short(params.surface_tension)));
     }
     let cpu_name = match choice.precision {
         Precision::F64 => "the CPU path in f64",

@@ -271,11 +271,6 @@ fn what_does_not_run_across_ranks_yet_is_refused_by_name() {
         let e = open(&every2, &choice.on_ranks(ranks.clone())).err().expect("refused").to_string();
         assert!(e.contains("time.neighbour_rebuild_every") && e.contains("must be 1"), "{e}");
     }
-    let tension = TestScene::small_tank().surface_tension(0.1).build();
-    for choice in [BackendChoice::cpu(Precision::F64), BackendChoice::gpu()] {
-        let e = open(&tension, &choice.on_ranks(ranks.clone())).err().expect("refused").to_string();
-        assert!(e.contains("physics.surface_tension") && e.contains("one rank"), "{e}");
-    }
 }
 
 /// DFSPH across ranks: the ghosts take their owners' velocities after every velocity change
@@ -338,6 +333,33 @@ fn moving_block_dfsph() -> Scene {
     scene.physics.speed_of_sound = None;
     scene.time.dt = 0.002;
     scene
+}
+
+/// The moving block with Akinci's surface tension, whose curvature term reads each fluid
+/// neighbour's normal (summed over that neighbour's neighbours: one ghost layer more), with
+/// WCSPH and with DFSPH (60 steps: the block crosses the faces of 3 slabs).
+fn moving_blocks_with_surface_tension() -> [Scene; 2] {
+    [moving_block(), moving_block_dfsph()].map(|mut scene| {
+        scene.physics.surface_tension = 0.2;
+        scene
+    })
+}
+
+#[test]
+fn surface_tension_across_ranks_computes_what_one_rank_computes() {
+    for scene in moving_blocks_with_surface_tension() {
+        let name = format!("{:?}", scene.physics.solver);
+        let one = one_rank(&scene, 60);
+        let runs = on_ranks(&scene, 3, 10, Precision::F64, &|b: &mut dyn Backend| {
+            b.step(60)?;
+            Ok((b.rank_report().expect("across ranks"), b.snapshot()?))
+        });
+        assert!(runs.iter().map(|r| r.0.stats.migrated).sum::<u64>() > 0, "{name}: particles crossed the faces");
+        assert!(runs[0].1 == one, "{name}: 3 ranks with surface tension against one rank, bit for bit");
+        let mut dry = scene.clone();
+        dry.physics.surface_tension = 0.0;
+        assert!(one_rank(&dry, 60) != one, "{name}: the surface tension took part");
+    }
 }
 
 #[test]
@@ -575,6 +597,24 @@ fn gpu_ranks_with_walls_near_their_slabs_and_adami_pressure_compute_what_one_gpu
     assert!(runs[0].0.stats.rebalances > 0, "the bounds moved");
     assert!(runs.iter().all(|r| r.0.walls < total_walls(&scene)), "every rank holds only the walls near its slab");
     assert!(runs[0].1 == one, "3 GPU ranks, walls per rank, Akinci volumes, Adami pressure and adhesion, against one GPU, bit for bit");
+}
+
+#[test]
+fn surface_tension_on_gpu_ranks_computes_what_one_gpu_computes() {
+    let Some(ctx) = common::contexts().into_iter().next() else { return };
+    for scene in moving_blocks_with_surface_tension() {
+        let one = one_gpu(&ctx, &scene, 60);
+        let runs = gpu_on_ranks(&ctx, &scene, 3, 10, &|b: &mut dyn Backend| {
+            for _ in 0..6 {
+                b.step(10)?;
+            }
+            Ok((b.rank_report().expect("across ranks"), b.snapshot()?))
+        });
+        let name = format!("{:?}", scene.physics.solver);
+        assert!(runs.iter().map(|r| r.0.stats.migrated).sum::<u64>() > 0, "{name}: particles crossed the faces");
+        // With adaptive dt off the time is the same sum of the same dt.
+        assert!(runs[0].1 == one, "{name}: 3 GPU ranks with surface tension against one GPU, bit for bit");
+    }
 }
 
 fn total_walls(scene: &Scene) -> usize {

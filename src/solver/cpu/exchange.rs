@@ -967,7 +967,7 @@ impl<R: Real> CpuSolver<R> {
         let mut counts = vec![0u64; grid.dims[axis] as usize];
         initial.visit_fluid(|p| counts[layer_of(p.position) as usize] += 1);
         let total = counts.iter().sum::<u64>() as usize;
-        let slabs = Slabs::balanced(&counts, comm.size(), halo_layers(params.boundary_pressure == BoundaryPressure::Adami))?;
+        let slabs = Slabs::balanced(&counts, comm.size(), halo_layers(params.boundary_pressure == BoundaryPressure::Adami, params.surface_tension > 0.0))?;
         let mine = slabs.layers_of(comm.rank());
         let walls = initial.walls();
         let mut part = walls.near(&grid, axis, mine.clone(), slabs.halo);
