@@ -312,6 +312,40 @@ pub struct Physics {
 }
 
 impl Physics {
+    /// Water of rest density 1000 with support `smoothing_length` on a lattice of
+    /// `particle_spacing`, every other setting at a scene file's default (as if only those two
+    /// were given): Mueller kernel, linear equation of state with neither stiffness nor speed of
+    /// sound (a scene sets one), no viscosity, no-slip mirrored walls, gravity 9.81 m/s^2 down,
+    /// WCSPH with summation density, no diffusion, surface tension or adhesion. Set the others
+    /// with struct update syntax: `Physics { kernel: Kernel::Wendland, ..Physics::new(h, s) }`.
+    pub fn new(smoothing_length: f64, particle_spacing: f64) -> Physics {
+        Physics {
+            smoothing_length,
+            rest_density: default_rest_density(),
+            particle_spacing,
+            particle_mass: None,
+            kernel: default_kernel(),
+            equation_of_state: default_eos(),
+            stiffness: None,
+            speed_of_sound: None,
+            clamp_negative_pressure: false,
+            viscosity: 0.0,
+            viscosity_schedule: Vec::new(),
+            boundary_friction: default_boundary_friction(),
+            boundary_pressure: Default::default(),
+            gravity: default_gravity(),
+            solver: Default::default(),
+            boundary_volume: Default::default(),
+            dfsph: Default::default(),
+            density: Default::default(),
+            density_diffusion: 0.0,
+            artificial_viscosity: 0.0,
+            surface_tension: 0.0,
+            wall_adhesion: 0.0,
+            initial_pressure: Default::default(),
+        }
+    }
+
     /// The mass of a fluid particle: `particle_mass`, or rho0 s^3 (a lattice cell of water).
     pub fn fluid_mass(&self) -> f64 {
         self.particle_mass.unwrap_or(self.rest_density * self.particle_spacing.powi(3))

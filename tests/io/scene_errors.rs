@@ -36,6 +36,15 @@ fn the_good_scene_and_the_built_in_scenes_are_accepted() {
     }
 }
 
+/// A scene built in code from `Physics::new(h, s)` gets what a scene file giving only h, s and
+/// the stiffness gets (the defaults are written once, in the scene's reading).
+#[test]
+fn physics_built_in_code_takes_a_scene_files_defaults() {
+    use wgsph::model::scene::Physics;
+    let read = Scene::from_toml_str(GOOD, &SceneOrigin::Text).unwrap().physics;
+    assert_eq!(Physics { stiffness: Some(1000.0), ..Physics::new(0.1, 0.05) }, read);
+}
+
 #[test]
 fn built_in_scenes_match_the_files_in_scenes_dir() {
     for (name, _, text) in BUILTIN_SCENES {

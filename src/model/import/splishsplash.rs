@@ -641,31 +641,19 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
         seed: 1,
         domain: Domain { min: lo, max: hi },
         physics: Physics {
-            smoothing_length: h,
             rest_density: fluid.density0,
-            particle_spacing: spacing,
-            particle_mass: None,
             kernel,
             equation_of_state: eos,
             stiffness: (solver == PressureSolver::Wcsph).then_some(stiffness),
-            speed_of_sound: None,
-            clamp_negative_pressure: false,
             viscosity: fluid.viscosity,
-            viscosity_schedule: vec![],
             // SPlisHSPlasH's boundary viscosity is a coefficient of its own; wgsph scales the
             // fluid's by boundary_friction.
             boundary_friction: if fluid.viscosity > 0.0 { fluid.viscosity_boundary / fluid.viscosity } else { 0.0 },
-            boundary_pressure: Default::default(),
             gravity,
             solver,
-            boundary_volume: Default::default(),
-            density: Default::default(),
-            density_diffusion: 0.0,
-            artificial_viscosity: 0.0,
             surface_tension: fluid.surface_tension,
             // Adhesion pulls towards wall particles: a scene without them has none to feel.
             wall_adhesion: if boundary.iter().any(|b| b.walls().is_some()) { fluid.surface_tension_boundary } else { 0.0 },
-            initial_pressure: Default::default(),
             // The DFSPH keys of a WCSPH scene are not read (as there).
             dfsph: match solver {
                 PressureSolver::Dfsph => DfsphSettings {
@@ -679,6 +667,7 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
                 },
                 PressureSolver::Wcsph => Default::default(),
             },
+            ..Physics::new(h, spacing)
         },
         time: if adaptive {
             Time {
