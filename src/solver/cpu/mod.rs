@@ -25,6 +25,8 @@ pub mod integrate;
 pub mod neighbour_skin;
 pub mod prefix_sum;
 pub mod probes;
+pub mod rank_device;
+mod rank_gather;
 pub mod reorder;
 pub mod resident_exchange;
 mod resident_steps;
@@ -107,7 +109,7 @@ pub struct CpuSolver<R: Real> {
     /// This rank's share when the simulation runs across ranks (`None`: one process).
     ranks: Option<Box<exchange::RankPart>>,
     /// Across ranks on a device: the stages between the exchange and the step's bookkeeping.
-    device: Option<exchange::SharedDeviceStages<R>>,
+    device: Option<rank_device::SharedDeviceStages<R>>,
     /// Across ranks on a device: whether it holds what the host holds (resident steps).
     device_held: resident_steps::DeviceHeld,
 }
@@ -172,7 +174,7 @@ impl<R: Real> CpuSolver<R> {
     pub(crate) fn install_walls(&mut self, initial: &InitialState) {
         self.install_walls_on_host(initial);
         if let Some(device) = &self.device {
-            exchange::lock(device).set_walls(initial);
+            rank_device::lock(device).set_walls(initial);
         }
     }
 
@@ -953,7 +955,7 @@ impl<R: Real> Backend for CpuSolver<R> {
     }
     fn adapter(&self) -> String {
         if let Some(device) = &self.device {
-            return exchange::lock(device).describe();
+            return rank_device::lock(device).describe();
         }
         let threads = rayon::current_num_threads();
         let noun = if threads == 1 { "thread" } else { "threads" };

@@ -18,7 +18,8 @@
 //! next (a health check needs only the counts the steps gather); whatever reads the host's
 //! arrays takes them back first (`CpuSolver::take_back_held`), so nothing sees them stale.
 
-use super::exchange::{check_link_ids, Carried, GhostLink, Held, ResidentBand, ResidentSolves, ResidentStep};
+use super::exchange::{check_link_ids, Carried, GhostLink, Held};
+use super::rank_device::{ResidentBand, ResidentSolves, ResidentStep};
 use super::resident_exchange::SlabFaces;
 use super::CpuSolver;
 use crate::model::real::{Real, V3};
