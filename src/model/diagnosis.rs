@@ -358,6 +358,17 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
                 short(pressure)
             ));
         }
+        // Akinci et al.'s cohesion pulls every fluid pair within h together, a tension the
+        // pressure has to hold: too large a gamma compresses the fluid, and its collapse into a
+        // ball can throw particles faster than the speed of sound allows.
+        if (too_dense || too_fast) && params.surface_tension > 0.0 {
+            causes.push(format!(
+                "the surface tension: physics.surface_tension = {} pulls the fluid together (Akinci et al.'s cohesion acts on every pair within h, \
+                 a tension the pressure has to hold; 0.05 to 1 holds a drop together at any resolution): lower it, or {}",
+                short(params.surface_tension),
+                if dfsph { "lower time.dt".to_string() } else { raise_sound(scene, c0, None) }
+            ));
+        }
         if too_dense && dfsph {
             causes.push(format!(
                 "the fluid was compressed to {} rho0, which DFSPH's constant-density solve should have prevented: lower time.dt, or check what presses the fluid",

@@ -1,8 +1,9 @@
 //! Blow-ups caught and explained: the health of a run describes its first bad step, however long
 //! after it the host reads it; a run stops when the fluid leaves the weakly compressible regime
 //! (too dense, too fast); and the diagnosis names the cause the figures of the failing step and
-//! the state show (fluid inside a solid, torn, or out of the domain and by which face), or says
-//! that the cause is unknown. On the f64 CPU reference and on every GPU adapter found.
+//! the state show (fluid inside a solid, torn, or out of the domain and by which face, a surface
+//! tension that crushes it), or says that the cause is unknown. On the f64 CPU reference and on
+//! every GPU adapter found.
 
 use crate::common;
 use crate::common::TestScene;
@@ -185,6 +186,39 @@ fn a_fluid_too_soft_for_its_weight_is_stopped_and_named_by_its_density() {
         assert!(f.contains("Cause: the fluid was compressed to"), "{who}: {f}");
         assert!(!f.contains("the CFL condition") && !f.contains("the flow reached Mach"), "{who}: {f}");
     }
+}
+
+/// A weightless 6 x 6 x 6 block with surface tension 60, far above the 0.05 to 1 that holds a
+/// drop together: its cohesion crushes it beyond 1.5 rho0 within steps (at 0.3 it pulls itself
+/// together below 1.1 rho0).
+#[test]
+fn a_surface_tension_that_crushes_the_fluid_is_named() {
+    let block = |gamma: f64| {
+        TestScene::new()
+            .named("cube")
+            .domain([-0.1; 3], [0.22; 3])
+            .smoothing_length(0.04)
+            .particle_spacing(0.02)
+            .equation_of_state(EquationOfState::Tait)
+            .speed_of_sound(10.0)
+            .clamp_negative_pressure(true)
+            .gravity([0.0; 3])
+            .fluid([0.0; 3], [0.12; 3])
+            .surface_tension(gamma)
+            .build()
+    };
+    let crushing = block(60.0);
+    for mut b in backends(&crushing, &crushing.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &crushing, 400, 10);
+        assert!(f.contains("over limits.max_density_ratio"), "{who}: {f}");
+        assert!(f.contains("Cause: the surface tension: physics.surface_tension = 60 pulls the fluid together"), "{who}: {f}");
+        assert!(f.contains("lower it, or raise physics.speed_of_sound (c0 = 10)"), "{who}: {f}");
+    }
+    let holding = block(0.3);
+    let mut cpu = common::cpu_from::<f64>(&holding, &holding.initial_state());
+    let summary = run_checked(&mut cpu, &holding, 400, 10);
+    assert!(summary.failure.is_none() && summary.max_density_ratio < 1.1, "{:?}, {}", summary.failure, summary.max_density_ratio);
 }
 
 #[test]
