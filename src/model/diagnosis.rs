@@ -25,6 +25,12 @@ pub const START_STEPS: u64 = 20;
 pub const VISCOUS_NUMBER: f64 = 0.125;
 /// The force condition dt <= 0.25 sqrt(h / |a|) (Monaghan 1992).
 pub const FORCE_NUMBER: f64 = 0.25;
+/// The largest surface tension gamma and wall adhesion beta that the diagnosis takes for usual:
+/// gamma 0.05 (SPlisHSPlasH's default) to 1 holds a drop together, beta 0.01 to 5 wets a wall
+/// (tests/physics/surface_tension.rs spreads a drop with 5). Where a blow-up follows larger
+/// values, it names them.
+pub const SURFACE_TENSION_USUAL: f64 = 1.0;
+pub const WALL_ADHESION_USUAL: f64 = 5.0;
 
 /// Fluid particles found inside each solid of a scene (past the first layer of its wall
 /// particles), counted from positions handed over one at a time.
@@ -359,14 +365,14 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
             ));
         }
         // Akinci et al.'s cohesion pulls every fluid pair within h together, a tension the
-        // pressure has to hold: too large a gamma compresses the fluid, and its collapse into a
-        // ball can throw particles faster than the speed of sound allows.
-        if (too_dense || too_fast) && params.surface_tension > 0.0 {
+        // pressure has to hold: a gamma beyond what holds a drop together compresses the fluid,
+        // and its collapse throws particles out (a higher speed of sound holds the compression
+        // but not the throw: measured on a weightless block, docs/output.md).
+        if (too_dense || too_fast || m.escaped > 0) && params.surface_tension > SURFACE_TENSION_USUAL {
             causes.push(format!(
-                "the surface tension: physics.surface_tension = {} pulls the fluid together (Akinci et al.'s cohesion acts on every pair within h, \
-                 a tension the pressure has to hold; 0.05 to 1 holds a drop together at any resolution): lower it, or {}",
-                short(params.surface_tension),
-                if dfsph { "lower time.dt".to_string() } else { raise_sound(scene, c0, None) }
+                "the surface tension: physics.surface_tension = {} is above the 0.05 to {SURFACE_TENSION_USUAL} that holds a drop together at any resolution, \
+                 and Akinci et al.'s cohesion pulls every pair within h together, a tension the pressure has to hold, whose collapse throws particles out: lower it",
+                short(params.surface_tension)
             ));
         }
         if too_dense && dfsph {
@@ -388,6 +394,17 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
                 short(mach),
                 short(m.max_speed),
                 raise_sound(scene, c0, Some(10.0 * m.max_speed))
+            ));
+        }
+        // Akinci et al.'s adhesion pulls fluid within h of a wall particle towards it: a beta
+        // beyond what wets a wall overcomes the walls' pressure and draws the fluid into them
+        // (a higher speed of sound does not stop it: measured on a drop, docs/output.md).
+        let intruded = scan.is_some_and(|s| !s.intrusions.found().is_empty());
+        if (intruded || m.escaped > 0 || too_dense) && params.wall_adhesion > WALL_ADHESION_USUAL {
+            causes.push(format!(
+                "the wall adhesion: physics.wall_adhesion = {} is above the 0.01 to {WALL_ADHESION_USUAL} that wets a wall, and Akinci et al.'s adhesion \
+                 pulls the fluid within h of the walls into them, against the walls' pressure: lower it",
+                short(params.wall_adhesion)
             ));
         }
         for (name, count) in scan.map(|s| s.intrusions.found()).unwrap_or_default() {

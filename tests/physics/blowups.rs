@@ -212,13 +212,38 @@ fn a_surface_tension_that_crushes_the_fluid_is_named() {
         let who = b.adapter();
         let f = failure(b.as_mut(), &crushing, 400, 10);
         assert!(f.contains("over limits.max_density_ratio"), "{who}: {f}");
-        assert!(f.contains("Cause: the surface tension: physics.surface_tension = 60 pulls the fluid together"), "{who}: {f}");
-        assert!(f.contains("lower it, or raise physics.speed_of_sound (c0 = 10)"), "{who}: {f}");
+        assert!(f.contains("Cause: the surface tension: physics.surface_tension = 60 is above the 0.05 to 1 that holds a drop together"), "{who}: {f}");
+        assert!(f.contains("whose collapse throws particles out: lower it;"), "{who}: {f}");
     }
     let holding = block(0.3);
     let mut cpu = common::cpu_from::<f64>(&holding, &holding.initial_state());
     let summary = run_checked(&mut cpu, &holding, 400, 10);
     assert!(summary.failure.is_none() && summary.max_density_ratio < 1.1, "{:?}, {}", summary.failure, summary.max_density_ratio);
+}
+
+/// A weightless block of 5 x 5 x 5 particles on the floor of a closed tank with wall adhesion
+/// 20, four times what wets a wall: the adhesion draws the fluid into the floor, and the run
+/// stops on a particle that went through it, naming the adhesion before the leak.
+#[test]
+fn a_wall_adhesion_that_draws_the_fluid_into_the_wall_is_named() {
+    let scene = TestScene::new()
+        .named("drop")
+        .domain([-0.1; 3], [0.4, 0.3, 0.4])
+        .equation_of_state(EquationOfState::Tait)
+        .speed_of_sound(10.0)
+        .clamp_negative_pressure(true)
+        .gravity([0.0; 3])
+        .fluid([0.1, 0.0, 0.1], [0.2, 0.1, 0.2])
+        .closed_container([0.0; 3], [0.3, 0.2, 0.3])
+        .surface_tension(0.3)
+        .wall_adhesion(20.0)
+        .build();
+    for mut b in backends(&scene, &scene.initial_state()) {
+        let who = b.adapter();
+        let f = failure(b.as_mut(), &scene, 1500, 10);
+        assert!(f.contains("Cause: the wall adhesion: physics.wall_adhesion = 20 is above the 0.01 to 5 that wets a wall"), "{who}: {f}");
+        assert!(f.contains("fluid particles are inside boundary[0]"), "{who}: {f}");
+    }
 }
 
 #[test]
