@@ -210,6 +210,17 @@ fn the_hydrostatic_tank_on_one_two_and_four_ranks_writes_the_same_snapshots() {
     same_on_every_rank_count("hydrostatic", &["--particles", "800", "--steps", "100", "--snapshot-every", "50"]);
 }
 
+/// Surface tension across ranks (a third ghost layer): the weightless cube pulling itself
+/// into a ball, on 1, 2 and 4 ranks.
+#[test]
+fn the_weightless_cube_with_surface_tension_on_one_two_and_four_ranks_writes_the_same_snapshots() {
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/weightless_cube.toml");
+    let s = same_on_every_rank_count(scene, &["--steps", "200", "--snapshot-every", "100"]);
+    if let Some(four) = s.get(2).and_then(|s| s.ranks.clone()) {
+        assert!(four.per_rank.iter().map(|r| r.migrated).sum::<u64>() > 0, "the cube's corners cross slab faces: {four:?}");
+    }
+}
+
 #[test]
 fn a_rank_without_particles_takes_part() {
     let Some(m) = mpi() else { return };
