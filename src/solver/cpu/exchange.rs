@@ -16,14 +16,13 @@
 use super::ghost_velocities::{gather_ghost_velocities, scatter_ghost_velocities};
 use super::resident_exchange::SlabFaces;
 use super::CpuSolver;
-use super::rank_device::{lock, DeviceStages};
 use crate::model::initial::{FluidParticle, InitialState};
 use crate::model::real::{as_arrays, Real, V3};
 use crate::solver::communicator::{all_max, all_sum, Communicator};
 use crate::model::scene::BoundaryPressure;
 use crate::solver::decomposition::{cell_runs, halo_layers, imbalance, slab_axis, RankReport, RankStats, Slabs};
 use std::ops::Range;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// A rank's share of a simulation across ranks: its communicator and slabs, and what the
@@ -604,11 +603,12 @@ impl<R: Real> CpuSolver<R> {
     /// fluid twice: to count it per layer, then to keep this rank's), so no rank holds every
     /// particle.
     pub(crate) fn new_part(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64) -> anyhow::Result<Self> {
-        Self::new_part_with(params, initial, comm, balance_every, None)
+        Ok(Self::new_part_and_walls(params, initial, comm, balance_every)?.0)
     }
 
-    /// [`CpuSolver::new_part`], with the stages after the exchange on `device` where given.
-    pub(super) fn new_part_with(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64, device: Option<Box<dyn DeviceStages<R>>>) -> anyhow::Result<Self> {
+    /// [`CpuSolver::new_part`], and the rank's part of the initial state (its fluid and the
+    /// walls near its slab), which a device takes its walls from.
+    pub(super) fn new_part_and_walls(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64) -> anyhow::Result<(Self, InitialState)> {
         let grid = params.grid.cast::<R>();
         let axis = slab_axis(grid.dims);
         let layer_of = |p: [f64; 3]| grid.layer(V3::from64(p), axis);
@@ -631,10 +631,6 @@ impl<R: Real> CpuSolver<R> {
             }
         });
         let mut solver = Self::new(params, &part);
-        if let Some(mut device) = device {
-            device.set_walls(&part);
-            solver.device = Some(Arc::new(Mutex::new(device)));
-        }
         solver.ids = chosen.iter().map(|&i| i as u32).collect();
         if solver.dfsph.is_some() {
             // In the held particles' order (they start from zero, as alone).
@@ -656,7 +652,7 @@ impl<R: Real> CpuSolver<R> {
             walls,
             balanced_step: None,
         }));
-        Ok(solver)
+        Ok((solver, part))
     }
 
     /// The slots of this rank's own particles, as ranges of the cell-sorted arrays: all of
@@ -694,7 +690,7 @@ impl<R: Real> CpuSolver<R> {
             node_ranks: p.comm.node_rank().1,
             threads: rayon::current_num_threads(),
             adapter: crate::solver::backend::Backend::adapter(self),
-            stats: RankStats { bus_bytes: self.device.as_ref().map_or(0, |d| lock(d).bus_bytes()), ..p.stats.clone() },
+            stats: RankStats { bus_bytes: self.device_bus_bytes(), ..p.stats.clone() },
         })
     }
 

@@ -149,8 +149,16 @@ pub struct DfsphHeld<'a, R: Real> {
 impl<R: Real> CpuSolver<R> {
     /// One rank's part on a device: like [`CpuSolver::new_part`], with the step's stages after
     /// the exchange run by `device`.
-    pub(crate) fn new_part_on(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64, device: Box<dyn DeviceStages<R>>) -> anyhow::Result<Self> {
-        Self::new_part_with(params, initial, comm, balance_every, Some(device))
+    pub(crate) fn new_part_on(params: &crate::model::params::Params, initial: InitialSource<'_>, comm: Arc<dyn Communicator>, balance_every: u64, mut device: Box<dyn DeviceStages<R>>) -> anyhow::Result<Self> {
+        let (mut solver, part) = Self::new_part_and_walls(params, initial, comm, balance_every)?;
+        device.set_walls(&part);
+        solver.device = Some(Arc::new(Mutex::new(device)));
+        Ok(solver)
+    }
+
+    /// The bytes the rank's device moved over the bus (0 without a device).
+    pub(super) fn device_bus_bytes(&self) -> u64 {
+        self.device.as_ref().map_or(0, |d| lock(d).bus_bytes())
     }
 
     /// The held arrays, lent to the device stages, with which of them are `ghosts` (and with
