@@ -12,7 +12,7 @@ use crate::model::params::Params;
 use crate::model::real::V3;
 use crate::model::scene::Scene;
 use crate::solver::gpu::memory::MemoryPlan;
-use crate::solver::gpu::schedule::{DFSPH_PROFILED_STAGES, PROFILED_STAGES};
+use crate::solver::gpu::schedule::{DFSPH_PROFILED_STAGES, PROFILED_STAGES, SURFACE_NORMALS_ROW};
 use crate::solver::gpu::{GpuContext, GpuOptions};
 use crate::solver::gpu::device::TILE_LANES;
 use crate::solver::{open_with, Backend, BackendChoice};
@@ -131,6 +131,13 @@ pub fn stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool, fused: bool) -> [
     ]
 }
 
+/// Bytes the surface normals stage must read and write per step (the row before the forces in
+/// a scene with surface tension), counted as [`stage_bytes`] counts: positions, the densities
+/// and the cell starts in, the normals out.
+pub fn surface_normals_bytes(n: u64, cells: u64) -> u64 {
+    n * 16 + n * 4 + (cells + 1) * 4 + n * 16
+}
+
 /// Bytes each stage of [`DFSPH_PROFILED_STAGES`] must read and write per step, counted as
 /// [`stage_bytes`] counts them, with `pressure` and `divergence` iterations per step (each
 /// iteration a velocity change and a new error; the warm start one more pass of each).
@@ -228,7 +235,15 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
             dfsph_stage_bytes(n, w, cells, params.adaptive.is_some(), params.uses_viscosity(), p, d).to_vec(),
             DFSPH_PROFILED_STAGES.to_vec(),
         ),
-        None => (stage_bytes(n, w, cells, params.adaptive.is_some(), gpu.fused()).to_vec(), if gpu.fused() { FUSED_STAGE_NAMES } else { PROFILED_STAGES }.to_vec()),
+        None => {
+            let mut bytes = stage_bytes(n, w, cells, params.adaptive.is_some(), gpu.fused()).to_vec();
+            let mut names = if gpu.fused() { FUSED_STAGE_NAMES } else { PROFILED_STAGES }.to_vec();
+            if params.surface_tension > 0.0 {
+                bytes.insert(SURFACE_NORMALS_ROW, surface_normals_bytes(n, cells));
+                names.insert(SURFACE_NORMALS_ROW, "surface_normals");
+            }
+            (bytes, names)
+        }
     };
 
     let (timing, times_ns): (&str, Vec<(String, f64, u64)>) = match totals {

@@ -49,6 +49,29 @@ fn stage_times_are_positive_and_shares_sum_to_100() {
     }
 }
 
+/// With surface tension the normals stage is a row of its own between the density and the
+/// forces (fused and in two passes), with its time and its bytes.
+#[test]
+fn the_surface_normals_are_a_row_of_their_own() {
+    let mut scene = small_dam_break();
+    scene.physics.surface_tension = 0.05;
+    for (ctx, fuse) in common::contexts().into_iter().flat_map(|c| [(c.clone(), true), (c, false)]) {
+        if !ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            continue;
+        }
+        let adapter = ctx.describe();
+        let p = profile(ctx, &scene, 3, GpuOptions { fuse_forces_and_integration: Some(fuse), ..Default::default() }).unwrap();
+        let names: Vec<&str> = p.stages.iter().map(|s| s.stage.as_str()).collect();
+        let mut expected = if fuse { FUSED_STAGE_NAMES } else { PROFILED_STAGES }.to_vec();
+        expected.insert(5, "surface_normals");
+        assert_eq!(names, expected, "{adapter}");
+        let normals = &p.stages[5];
+        assert!(normals.time_us > 0.0 && normals.bytes_per_step > 0, "{adapter}: {normals:?}");
+        let shares: f64 = p.stages.iter().map(|s| s.share_percent).sum();
+        assert!((shares - 100.0).abs() < 1e-6, "{adapter}: shares sum to {shares}");
+    }
+}
+
 /// The profiled recording runs the same dispatches as the normal step, only split into passes.
 #[test]
 fn profiled_steps_match_normal_steps() {

@@ -23,8 +23,13 @@ pub const DFSPH_PROFILED_STAGES: [&str; 9] =
     ["bin_count", "prefix_sum", "bin_scatter", "reorder", "dfsph_factors", "divergence_solve", "dfsph_predict", "pressure_solve", "dfsph_integrate"];
 
 /// Every profiled stage of both methods: the weakly compressible step's seven, then DFSPH's
-/// own five.
-pub const ALL_PROFILED_STAGES: usize = 12;
+/// own five, then the surface normals (a row of their own before the forces, in a weakly
+/// compressible scene with surface tension; DFSPH times them with its prediction).
+pub const ALL_PROFILED_STAGES: usize = 13;
+
+/// The row of the surface normals in a weakly compressible profile with surface tension: after
+/// `density`, before `forces`.
+pub const SURFACE_NORMALS_ROW: usize = 5;
 
 /// A profiled stage: an index into the timestamps (the first seven those of
 /// [`PROFILED_STAGES`]).
@@ -42,6 +47,7 @@ pub enum ProfiledStage {
     DfsphPredict = 9,
     PressureSolve = 10,
     DfsphIntegrate = 11,
+    SurfaceNormals = 12,
 }
 
 impl ProfiledStage {
@@ -324,11 +330,12 @@ impl GpuSolver {
                 probes.record(rec.pass(), read, self.steps);
             }
         }
-        rec.begin(ProfiledStage::Forces);
-        // With surface tension, the normals its curvature term reads (profiled with the forces).
+        // With surface tension, the normals its curvature term reads.
         if let (Some(stage), Some(group)) = (&w.surface_normals, &g.surface_normals) {
+            rec.begin(ProfiledStage::SurfaceNormals);
             self.dispatch_particles(rec, stage, group);
         }
+        rec.begin(ProfiledStage::Forces);
         if self.pipelines.fused {
             self.dispatch_particles(rec, &w.advance, &g.advance);
         } else if let Some(forces) = &g.forces {
@@ -710,7 +717,8 @@ impl GpuSolver {
     }
 
     /// Runs `steps` steps in the order of [`GpuSolver::schedule`], each stage in its own timed
-    /// pass, and returns the total GPU time of each stage of [`PROFILED_STAGES`] (DFSPH:
+    /// pass, and returns the total GPU time of each stage of [`PROFILED_STAGES`], with surface
+    /// tension the normals' inserted at [`SURFACE_NORMALS_ROW`] (DFSPH:
     /// [`DFSPH_PROFILED_STAGES`]) in nanoseconds (a stage that did not run, like the binning
     /// between neighbour rebuilds, adds 0). `None` when the device has no timestamp queries.
     /// Each step is submitted and read back on its own: slower than `advance`, but the GPU time
@@ -754,7 +762,11 @@ impl GpuSolver {
         Ok(Some(if self.dfsph.is_some() {
             ProfiledStage::DFSPH.iter().map(|&s| totals[s as usize]).collect()
         } else {
-            totals[..PROFILED_STAGES.len()].to_vec()
+            let mut rows = totals[..PROFILED_STAGES.len()].to_vec();
+            if self.params.surface_tension > 0.0 {
+                rows.insert(SURFACE_NORMALS_ROW, totals[ProfiledStage::SurfaceNormals as usize]);
+            }
+            rows
         }))
     }
 }
