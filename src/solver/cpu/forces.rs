@@ -244,8 +244,9 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
             let r = r2.sqrt();
             let grad = kernel.grad_w_lanes(rij, r);
             fluid_pressure = PackV3::select(valid, fluid_pressure - grad.scale(pi.p_over + pj_over), fluid_pressure);
+            // The neighbours' densities, gathered once for the terms that read them.
+            let rho_j = if terms.viscous || terms.artificial || terms.tension { Pack::gather(input.densities, index) } else { zero };
             if terms.viscous || terms.artificial {
-                let rho_j = Pack::gather(input.densities, index);
                 let uij = pi.u - PackV3::gather(velocities, index);
                 if terms.viscous {
                     let inv_rho = Pack::splat(R::one()) / rho_j;
@@ -263,8 +264,7 @@ fn chunk_accelerations<R: Real>(input: &ForcesInput<R>, chunk: &ListChunk, accel
                 }
             }
             if terms.tension {
-                let (rho_j, nj) = (Pack::gather(input.densities, index), PackV3::gather(normals, index));
-                let pull = input.tension.pair_lanes(rij, r, pi.rho, rho_j, pi.n, nj);
+                let pull = input.tension.pair_lanes(rij, r, pi.rho, rho_j, pi.n, PackV3::gather(normals, index));
                 tension = PackV3::select(valid, tension + pull, tension);
             }
         }
