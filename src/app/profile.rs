@@ -12,18 +12,14 @@ use crate::model::params::Params;
 use crate::model::real::V3;
 use crate::model::scene::Scene;
 use crate::solver::gpu::memory::MemoryPlan;
-use crate::solver::gpu::schedule::{DFSPH_PROFILED_STAGES, PROFILED_STAGES, SURFACE_NORMALS_ROW};
+use crate::solver::gpu::schedule::ProfiledStage;
+pub use crate::solver::gpu::schedule::FUSED_STAGE_NAMES;
 use crate::solver::gpu::{GpuContext, GpuOptions};
 use crate::solver::gpu::device::TILE_LANES;
 use crate::solver::{open_with, Backend, BackendChoice};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
-
-/// The rows of a profile whose forces and integration are one pass: the fused pass is timed as
-/// `forces_integrate`, and what remains of the integration pass (one thread updating the step's
-/// status words) as `bookkeeping`.
-pub const FUSED_STAGE_NAMES: [&str; 7] = ["bin_count", "prefix_sum", "bin_scatter", "reorder", "density", "forces_integrate", "bookkeeping"];
 
 /// The status words one thread reads and writes after each step (wgsl/sim/integrate.wgsl
 /// finish_step).
@@ -97,7 +93,7 @@ pub struct Profile {
     pub divergence_iterations_per_step: Option<f64>,
 }
 
-/// Bytes each stage of `PROFILED_STAGES` must read and write per step, for `n` fluid particles,
+/// Bytes each stage of [`ProfiledStage::WCSPH`] must read and write per step, for `n` fluid particles,
 /// `w` walls and `cells` grid cells: every array element the stage touches counted once (the
 /// compulsory traffic; neighbour loads are assumed to hit the cache after their first load, so
 /// this is a lower bound). `vec4<f32>` = 16 bytes, `u32`/`f32` = 4 bytes.
@@ -138,7 +134,7 @@ pub fn surface_normals_bytes(n: u64, cells: u64) -> u64 {
     n * 16 + n * 4 + (cells + 1) * 4 + n * 16
 }
 
-/// Bytes each stage of [`DFSPH_PROFILED_STAGES`] must read and write per step, counted as
+/// Bytes each stage of [`ProfiledStage::DFSPH`] must read and write per step, counted as
 /// [`stage_bytes`] counts them, with `pressure` and `divergence` iterations per step (each
 /// iteration a velocity change and a new error; the warm start one more pass of each).
 pub fn dfsph_stage_bytes(n: u64, w: u64, cells: u64, adaptive: bool, viscous: bool, pressure: f64, divergence: f64) -> [u64; 9] {
@@ -225,31 +221,23 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
             ((a.pressure.total - b.pressure.total) as f64 / s, (a.divergence.total - b.divergence.total) as f64 / s)
         })
     };
-    let (timing, totals) = match gpu.profile_stages(steps)? {
-        Some(totals) => ("timestamp queries", Some(totals)),
-        None => ("host (whole steps, submit and wait)", None),
-    };
+    let rows = gpu.profiled_rows();
+    let totals = gpu.profile_stages(steps)?;
     let iterations = per_step(gpu.health()?.iterations, gpu.steps_done() - profiled_steps);
-    let (bytes, names): (Vec<u64>, Vec<&str>) = match iterations {
-        Some((p, d)) => (
-            dfsph_stage_bytes(n, w, cells, params.adaptive.is_some(), params.uses_viscosity(), p, d).to_vec(),
-            DFSPH_PROFILED_STAGES.to_vec(),
-        ),
-        None => {
-            let mut bytes = stage_bytes(n, w, cells, params.adaptive.is_some(), gpu.fused()).to_vec();
-            let mut names = if gpu.fused() { FUSED_STAGE_NAMES } else { PROFILED_STAGES }.to_vec();
-            if params.surface_tension > 0.0 {
-                bytes.insert(SURFACE_NORMALS_ROW, surface_normals_bytes(n, cells));
-                names.insert(SURFACE_NORMALS_ROW, "surface_normals");
-            }
-            (bytes, names)
-        }
+    // The bytes of each row, counted by the method's own table.
+    let adaptive = params.adaptive.is_some();
+    let wcsph_bytes = stage_bytes(n, w, cells, adaptive, gpu.fused());
+    let dfsph_bytes = iterations.map(|(p, d)| dfsph_stage_bytes(n, w, cells, adaptive, params.uses_viscosity(), p, d));
+    let row_bytes = |stage: ProfiledStage| match (stage, &dfsph_bytes) {
+        (ProfiledStage::SurfaceNormals, _) => surface_normals_bytes(n, cells),
+        (stage, Some(dfsph)) => dfsph[ProfiledStage::DFSPH.iter().position(|&s| s == stage).expect("a DFSPH stage")],
+        (stage, None) => wcsph_bytes[stage as usize],
     };
 
     let (timing, times_ns): (&str, Vec<(String, f64, u64)>) = match totals {
         Some(totals) => (
             "timestamp queries",
-            names.iter().zip(totals).zip(bytes).map(|((s, t), b)| (s.to_string(), t / steps as f64, b)).collect(),
+            totals.into_iter().map(|(stage, t)| (stage.name(gpu.fused()).to_string(), t / steps as f64, row_bytes(stage))).collect(),
         ),
         None => {
             let mut total = 0.0;
@@ -259,7 +247,7 @@ pub fn profile(ctx: GpuContext, scene: &Scene, steps: u64, options: GpuOptions) 
                 gpu.wait()?;
                 total += t.elapsed().as_secs_f64() * 1e9;
             }
-            (timing, vec![("step".to_string(), total / steps as f64, bytes.iter().sum())])
+            ("host (whole steps, submit and wait)", vec![("step".to_string(), total / steps as f64, rows.into_iter().map(row_bytes).sum())])
         }
     };
     let t = Instant::now();

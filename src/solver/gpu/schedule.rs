@@ -27,9 +27,10 @@ pub const DFSPH_PROFILED_STAGES: [&str; 9] =
 /// compressible scene with surface tension; DFSPH times them with its prediction).
 pub const ALL_PROFILED_STAGES: usize = 13;
 
-/// The row of the surface normals in a weakly compressible profile with surface tension: after
-/// `density`, before `forces`.
-pub const SURFACE_NORMALS_ROW: usize = 5;
+/// The rows of a profile whose forces and integration are one pass: the fused pass is timed as
+/// `forces_integrate`, and what remains of the integration pass (one thread updating the step's
+/// status words) as `bookkeeping`.
+pub const FUSED_STAGE_NAMES: [&str; 7] = ["bin_count", "prefix_sum", "bin_scatter", "reorder", "density", "forces_integrate", "bookkeeping"];
 
 /// A profiled stage: an index into the timestamps (the first seven those of
 /// [`PROFILED_STAGES`]).
@@ -51,6 +52,33 @@ pub enum ProfiledStage {
 }
 
 impl ProfiledStage {
+    /// The weakly compressible step's stages, in the order of [`PROFILED_STAGES`].
+    pub const WCSPH: [ProfiledStage; 7] = [
+        ProfiledStage::BinCount,
+        ProfiledStage::PrefixSum,
+        ProfiledStage::BinScatter,
+        ProfiledStage::Reorder,
+        ProfiledStage::Density,
+        ProfiledStage::Forces,
+        ProfiledStage::Integrate,
+    ];
+
+    /// The stage's row name in a profile; `fused`: the forces and the integration ran as one
+    /// pass ([`FUSED_STAGE_NAMES`]).
+    pub fn name(self, fused: bool) -> &'static str {
+        match self {
+            ProfiledStage::DfsphFactors => "dfsph_factors",
+            ProfiledStage::DivergenceSolve => "divergence_solve",
+            ProfiledStage::DfsphPredict => "dfsph_predict",
+            ProfiledStage::PressureSolve => "pressure_solve",
+            ProfiledStage::DfsphIntegrate => "dfsph_integrate",
+            ProfiledStage::SurfaceNormals => "surface_normals",
+            // The shared first four and the weakly compressible step's own three.
+            wcsph if fused => FUSED_STAGE_NAMES[wcsph as usize],
+            wcsph => PROFILED_STAGES[wcsph as usize],
+        }
+    }
+
     /// The stages of a DFSPH step, in the order of [`DFSPH_PROFILED_STAGES`].
     pub const DFSPH: [ProfiledStage; 9] = [
         ProfiledStage::BinCount,
@@ -716,17 +744,31 @@ impl GpuSolver {
         self.ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY)
     }
 
+    /// The rows of this solver's profile, in dispatch order: [`PROFILED_STAGES`] with surface
+    /// tension the normals between `density` and `forces` (DFSPH: [`DFSPH_PROFILED_STAGES`],
+    /// which time the normals with the prediction).
+    pub fn profiled_rows(&self) -> Vec<ProfiledStage> {
+        if self.dfsph.is_some() {
+            return ProfiledStage::DFSPH.to_vec();
+        }
+        let mut rows = ProfiledStage::WCSPH.to_vec();
+        if self.params.surface_tension > 0.0 {
+            let forces = rows.iter().position(|&s| s == ProfiledStage::Forces).expect("a forces row");
+            rows.insert(forces, ProfiledStage::SurfaceNormals);
+        }
+        rows
+    }
+
     /// Runs `steps` steps in the order of [`GpuSolver::schedule`], each stage in its own timed
-    /// pass, and returns the total GPU time of each stage of [`PROFILED_STAGES`], with surface
-    /// tension the normals' inserted at [`SURFACE_NORMALS_ROW`] (DFSPH:
-    /// [`DFSPH_PROFILED_STAGES`]) in nanoseconds (a stage that did not run, like the binning
-    /// between neighbour rebuilds, adds 0). `None` when the device has no timestamp queries.
+    /// pass, and returns the total GPU time of each row of [`GpuSolver::profiled_rows`] in
+    /// nanoseconds (a stage that did not run, like the binning between neighbour rebuilds, adds
+    /// 0). `None` when the device has no timestamp queries.
     /// Each step is submitted and read back on its own: slower than `advance`, but the GPU time
     /// of the stages holds no host round trip. A DFSPH solve's loop ends as the solver's does
     /// (the recorder submits and waits at each block's end, the solve timed in segments); across
     /// ranks, whose exchanges it does not time, the recorder does not wait, and what needs a
     /// wait there is refused.
-    pub fn profile_stages(&mut self, steps: u64) -> anyhow::Result<Option<Vec<f64>>> {
+    pub fn profile_stages(&mut self, steps: u64) -> anyhow::Result<Option<Vec<(ProfiledStage, f64)>>> {
         if !self.has_timestamps() {
             return Ok(None);
         }
@@ -759,15 +801,7 @@ impl GpuSolver {
                 }
             }
         }
-        Ok(Some(if self.dfsph.is_some() {
-            ProfiledStage::DFSPH.iter().map(|&s| totals[s as usize]).collect()
-        } else {
-            let mut rows = totals[..PROFILED_STAGES.len()].to_vec();
-            if self.params.surface_tension > 0.0 {
-                rows.insert(SURFACE_NORMALS_ROW, totals[ProfiledStage::SurfaceNormals as usize]);
-            }
-            rows
-        }))
+        Ok(Some(self.profiled_rows().into_iter().map(|s| (s, totals[s as usize])).collect()))
     }
 }
 
