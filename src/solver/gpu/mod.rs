@@ -7,6 +7,7 @@ pub mod dfsph;
 pub mod dfsph_ranks;
 pub mod memory;
 pub mod params;
+pub mod pipelines;
 pub mod prefix_sum;
 pub mod probes;
 pub mod ranks;

@@ -7,7 +7,8 @@ use std::cell::Cell;
 
 use super::shaders::Stage;
 use crate::model::params::Params;
-use crate::solver::cpu::neighbour_skin::SkinCheck;
+use super::buffers::storage;
+use crate::solver::cpu::neighbour_skin::{skin_reach, SkinCheck};
 
 /// The check's words (wgsl/sim/neighbour_skin.wgsl): the flag, then three keys of the smallest
 /// displacement (negated) and three of the largest, in a buffer of 32 bytes.
@@ -76,6 +77,36 @@ pub(super) struct NeighbourSkin {
     pub rebuild_due: Cell<bool>,
     /// Rebuilds so far.
     pub rebuilds: Cell<u64>,
+}
+
+impl NeighbourSkin {
+    /// The skin of `fraction` h for `n` fluid particles: the positions of the last rebuild, the
+    /// check's words, and the `check` stage's bind group on each phase of the state store
+    /// (`phases`: the buffer of each array name in that phase). The first step rebuilds.
+    pub fn new(device: &wgpu::Device, uniform: &wgpu::Buffer, fraction: f64, h: f64, n: u64, check: Stage, phases: &[impl Fn(&str) -> wgpu::Buffer]) -> NeighbourSkin {
+        let rebuild_positions = storage(device, "rebuild positions", n * 16);
+        let left = storage(device, "skin check", CHECK_BYTES);
+        let groups = phases
+            .iter()
+            .map(|buffers| {
+                check.bind_group(device, "check_skin", uniform, &|name: &str| match name {
+                    "rebuild_positions" => rebuild_positions.clone(),
+                    "skin_left" => left.clone(),
+                    other => buffers(other),
+                })
+            })
+            .collect();
+        NeighbourSkin {
+            fraction,
+            reach: skin_reach(fraction, h),
+            rebuild_positions,
+            left,
+            check,
+            groups,
+            rebuild_due: Cell::new(true),
+            rebuilds: Cell::new(0),
+        }
+    }
 }
 
 #[cfg(test)]

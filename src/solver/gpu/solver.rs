@@ -3,21 +3,19 @@
 //! which a step dispatches the stages is recorded in one place, `schedule.rs`; nothing is read
 //! back, waited for or created while steps are recorded.
 
-use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, NeighbourLists, ParticleBuffers, StateLayout, StateStore, WallCellIndex, STREAM_CHUNK};
-use super::device::{GpuContext, GpuError, TILE_LANES};
+use super::buffers::{ids_of, storage, storage_init, unpermute, vec4s, widen, NeighbourLists, ParticleBuffers, StateLayout, StateStore, STREAM_CHUNK};
+use super::device::{GpuContext, GpuError};
 use super::memory::{MemoryPlan, StepArrays};
+use super::pipelines::{array_places, sized, Pipelines, StepShape, WcsphStages, IN_PLACE};
 use super::params::{status, GpuParams};
 use super::prefix_sum::Scan;
 use super::probes::{DfsphSums, GpuProbes};
 use super::readback::{read_buffers, visit_array, visit_pairs, visit_rows, Element, RowArrays};
-use super::shaders::{constants, stage_with_aliases, storage_bindings, Alias, ArrayLengths, Stage};
+use super::shaders::{stage_with_aliases, Alias, ArrayLengths, Stage};
 use super::dfsph::{solve_threads, DfsphBuffers, DfsphGpu, DfsphStages, GhostVelocities, RankSolves, SharedBuffers};
 use super::workgroups::{GpuOptions, SolverLoop};
 use crate::model::initial::InitialState;
-use crate::model::kernels::sort_by_cell;
 use crate::model::params::Params;
-use crate::model::scene::BoundaryPressure;
-use crate::model::real::V3;
 use crate::model::probes::ProbeSample;
 use crate::model::state::{BackendState, DtStats, Health, Snapshot, StepFields};
 use crate::solver::backend::{Backend, SnapshotRow, StateArray, StatePiece};
@@ -25,34 +23,6 @@ use wgpu::util::DeviceExt;
 
 /// Steps per command buffer: enough to amortise submission, few enough to check health often.
 pub const STEPS_PER_SUBMIT: u64 = 32;
-
-/// The integration with the state in place: it writes each particle's new state into the slot
-/// it read it from.
-const IN_PLACE: &[(&str, Alias)] = &[("positions_out", Alias::Same("positions")), ("velocities_out", Alias::Same("velocities"))];
-
-/// Where the arrays the stages declare live when they have no buffer of their own
-/// (docs/performance.md, "GPU memory layout"): the binning's cell keys, ranks and unordered slots
-/// in lanes of `bins`, a buffer free while the binning runs (the spare, or the other state's
-/// velocities); a summed density, and the binning's destinations before it, in the w of the
-/// velocities; the weakly compressible step's pressure computed from the density where it is
-/// read; the wall cell starts from the index of the cells that hold walls.
-fn array_places(arrays: &StepArrays) -> Vec<(&'static str, Alias)> {
-    let bins = |lane| Alias::Lane { target: "bins", ty: "vec4<u32>", lane };
-    let mut places = vec![("keys", bins(0)), ("ranks", bins(1)), ("unordered", bins(2))];
-    if !arrays.densities {
-        let w = Alias::Lane { target: "velocities", ty: "vec4<f32>", lane: 3 };
-        places.extend([("densities", w), ("dest", w)]);
-    }
-    if !arrays.pressures {
-        places.push(("pressures", Alias::Derived { expr: "eos_pressure(densities_at(i))", arrays: &[] }));
-    }
-    // The wall cell starts from the index of the cells that hold walls (`WallCellIndex`): the
-    // start of the first such cell from cell i on (blocks of 32 cells: `i >> 5u`, `i & 31u`).
-    const _: () = assert!(super::buffers::WALL_CELL_BLOCK == 32);
-    let wall_starts = "wall_cell_firsts_at(wall_cell_blocks_at(i >> 5u).y + countOneBits(wall_cell_blocks_at(i >> 5u).x & ((1u << (i & 31u)) - 1u)))";
-    places.push(("wall_starts", Alias::Derived { expr: wall_starts, arrays: &[("wall_cell_blocks", "vec2<u32>"), ("wall_cell_firsts", "u32")] }));
-    places
-}
 
 /// Bind groups of one phase of the state (see [`StateStore`]): reading its buffers, and writing
 /// those of the phase after it where a stage writes another state.
@@ -82,42 +52,6 @@ pub(super) struct WcsphBindGroups {
     pub advance: wgpu::BindGroup,
 }
 
-pub(super) struct Pipelines {
-    pub bin_count: Stage,
-    pub bin_scatter: Stage,
-    pub reorder_rank: Stage,
-    pub reorder: Stage,
-    /// The weakly compressible step's stages (`None` with DFSPH, whose are in `GpuSolver::dfsph`).
-    pub wcsph: Option<WcsphStages>,
-    pub finish_step: Stage,
-    /// Forces and integration in one pass (fixed dt only; see `GpuOptions`): no accelerations
-    /// array.
-    pub fused: bool,
-    /// The neighbour stages walk a subgroup's stencils together (see [`subgroup_tiles`]).
-    pub subgroup_tiles: bool,
-}
-
-/// Whether the density (summation or continuity), the two-pass forces and DFSPH's solve
-/// iterations walk the stencils of a subgroup together (wgsl/shared/tiles.wgsl): by default where
-/// the device has subgroups of exactly [`TILE_LANES`] invocations, the density and forces
-/// workgroups (DFSPH's solves run at the forces' size) are whole subgroups, and the stencil is
-/// walked as runs; asked for where it cannot, an error that says why.
-fn subgroup_tiles(ctx: &GpuContext, options: &GpuOptions) -> Result<bool, GpuError> {
-    let ws = options.workgroup_sizes;
-    let why = ctx.subgroup_tiles_unavailable().or_else(|| {
-        [("density", ws.density), ("forces", ws.forces)]
-            .iter()
-            .find(|(_, size)| size % TILE_LANES != 0)
-            .map(|(stage, size)| format!("the {stage} stage's workgroups of {size} are not whole subgroups of {TILE_LANES}"))
-    });
-    match (options.subgroup_tiles, why) {
-        (Some(false), _) => Ok(false),
-        (None, why) => Ok(why.is_none() && !options.single_cells),
-        (Some(true), None) => Ok(true),
-        (Some(true), Some(why)) => Err(GpuError::NoSubgroupTiles { adapter: ctx.info.name.clone(), backend: format!("{:?}", ctx.info.backend), why }),
-    }
-}
-
 /// How full the neighbour lists are (see [`GpuSolver::neighbour_list_usage`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ListUsage {
@@ -127,50 +61,6 @@ pub struct ListUsage {
     pub longest: u32,
     /// The particles whose lists overflowed.
     pub full: u64,
-}
-
-/// The capacity of each fluid particle's neighbour list where the step keeps lists
-/// (wgsl/shared/neighbour_lists.wgsl), else `None`: where `walks_tiles` (subgroup tiles, the
-/// weakly compressible forces in a pass of their own, one device) and the options do not turn
-/// them off. The capacity is 0.75 times the neighbours a particle has at rest density, 4/3 pi h^3 rho0 / m
-/// (fluid and walls together, the walls' spacing being the fluid's), in whole rows of eight, or
-/// the options'. A slot holds a chunk of up to eight neighbours: measured on the dam break and
-/// the resting block, the longest list used 0.37-0.52 times that many slots (17, 34 and 42
-/// with supports of 2, 2.5 and 3 spacings), so this leaves room for compression; a longer list
-/// overflows, and its subgroup walks the tiles.
-fn neighbour_lists(ctx: &GpuContext, params: &Params, walks_tiles: bool, options: &GpuOptions, fluid: u64, walls: u64) -> Option<u32> {
-    let used = walks_tiles && options.neighbour_lists != Some(false);
-    // With a skin the lists reach h (1 + skin).
-    let reach = params.h * (1.0 + options.neighbour_skin.unwrap_or(0.0));
-    let at_rest = 4.0 / 3.0 * std::f64::consts::PI * reach.powi(3) * params.rest_density / params.fluid_mass;
-    // The counts are kept in 16 bits.
-    let capacity = options.neighbour_list_capacity.unwrap_or(((0.75 * at_rest / 8.0).ceil() * 8.0).clamp(8.0, 4096.0) as u32).clamp(1, 0xffff);
-    // Slots are indexed with 32 bits, and an entry holds a chunk's first fluid or wall
-    // candidate in 24; the lists are one buffer, which a scene too big for it runs without.
-    let slots = fluid.saturating_mul(capacity as u64);
-    let fits = slots <= u32::MAX as u64 && fluid.max(walls) < 1 << 24 && slots * 4 <= ctx.device.limits().max_buffer_size;
-    (used && fits).then_some(capacity)
-}
-
-/// The weakly compressible step's own stages.
-pub(super) struct WcsphStages {
-    pub density: Stage,
-    /// With a neighbour skin and lists: the tiled density stage built with RECORD_LISTS false,
-    /// which walks the lists of the last rebuild on the steps between rebuilds.
-    pub density_listed: Option<Stage>,
-    /// With `boundary_pressure = "adami"`: the wall particles' pressure (wall_pressure.wgsl),
-    /// after the density stage, one invocation per wall particle.
-    pub wall_pressure: Option<Stage>,
-    /// With `surface_tension` above zero: each fluid particle's normal (surface_normals.wgsl),
-    /// before the forces, one invocation per fluid particle.
-    pub surface_normals: Option<Stage>,
-    /// The forces alone: every step with adaptive dt; otherwise only when the accelerations are
-    /// asked for (`step_fields`).
-    pub forces: Stage,
-    /// `integrate` (two passes) or `forces_and_integrate` (fused, see `Pipelines::fused`).
-    pub advance: Stage,
-    /// Adaptive dt only: the reduction of |v|max and |a|max, and the choice of dt.
-    pub adaptive: Option<(Stage, Stage)>,
 }
 
 /// The fused step's accelerations array, made on request, with the forces' bind groups of each
@@ -283,46 +173,6 @@ pub(super) struct OutputFields {
     pub groups: Vec<wgpu::BindGroup>,
 }
 
-/// The element count of each array the stages declare, by name: every particle array holds
-/// the fluid particles, the cell starts (and the counts scanned into them) one value per cell
-/// and one more, the walls theirs. `status` is bound whole.
-struct ArrayCounts {
-    fluid: u64,
-    cells_plus_one: u64,
-    walls: u64,
-    /// The wall cell index's blocks and starts (see `WallCellIndex`), 0 without walls.
-    wall_cell_blocks: u64,
-    wall_cell_firsts: u64,
-    /// The wall particles with the Adami wall pressure, else 0 (the array is then not bound).
-    wall_fields: u64,
-    /// The neighbour lists' slots (fluid particles times the capacity), else 0.
-    list_slots: u64,
-    /// The fluid particles with surface tension, else 0 (the normals are then not bound).
-    normals: u64,
-}
-
-impl ArrayCounts {
-    fn len(&self, name: &str) -> u64 {
-        match name {
-            "starts" | "counts" => self.cells_plus_one,
-            "wall_positions" => self.walls,
-            "wall_cell_blocks" => self.wall_cell_blocks,
-            "wall_cell_firsts" => self.wall_cell_firsts,
-            "wall_fields" => self.wall_fields,
-            "normals" => self.normals,
-            "neighbours" => self.list_slots,
-            "neighbour_counts" => if self.list_slots > 0 { self.fluid } else { 0 },
-            "status" | "solve_dispatch" => 0,
-            _ => self.fluid,
-        }
-    }
-    /// [`ArrayCounts::len`] for a stage that does not bind `accelerations` (the fused step
-    /// keeps them in registers, as does the one-thread finish_step).
-    fn len_without_accelerations(&self, name: &str) -> u64 {
-        if name == "accelerations" { 0 } else { self.len(name) }
-    }
-}
-
 impl GpuSolver {
     /// Uploads a scene's particles and builds every pipeline and bind group. Programs build a
     /// solver through [`crate::solver::open`], which checks the memory plan first.
@@ -345,173 +195,20 @@ impl GpuSolver {
             }
             None => params,
         };
-        let n = initial.fluid_positions.len() as u64;
-        let cells = params.grid.cell_count() as u64;
-        let viscosity = params.viscosity_at_step(0);
-        let gpu_params = GpuParams::new(params, n as u32, initial.wall_positions.len() as u32, viscosity);
-        // Every buffer is checked against the device's limits before the first is created.
-        let w = initial.wall_positions.len() as u64;
-        // Without walls the shaders never read the wall arrays (WALLS = false): no per-cell array.
-        let has_walls = w > 0;
-        let adami = params.boundary_pressure == BoundaryPressure::Adami && has_walls && params.dfsph.is_none();
-        let surface_tension = params.surface_tension > 0.0;
-        // Walls never move: sorted by cell once, on the host, with the same counting sort, and
-        // their cell starts kept for the cells that hold walls. Across ranks the walls near a
-        // slab change as it moves (`load_walls`): room for as many wall cells as wall particles.
-        let grid = params.grid.cast::<f32>();
-        let wall_f32: Vec<V3<f32>> = initial.wall_positions.iter().map(|&p| V3::from64(p)).collect();
-        let (wall_order, wall_starts) = sort_by_cell(&grid, &wall_f32);
-        let wall_index = if has_walls { WallCellIndex::new(&wall_starts) } else { WallCellIndex::default() };
-        let wall_cell_room = if ranks.is_some() { (w + 1).min(cells + 1) } else { wall_index.firsts.len() as u64 };
-        let ws = options.workgroup_sizes;
-        ws.check(&ctx)?;
-        let tiles = subgroup_tiles(&ctx, &options)?;
-        let mut counts = ArrayCounts {
-            fluid: n,
-            cells_plus_one: cells + 1,
-            walls: w,
-            wall_cell_blocks: wall_index.blocks.len() as u64,
-            wall_cell_firsts: if has_walls { wall_cell_room } else { 0 },
-            wall_fields: if adami { w } else { 0 },
-            list_slots: 0,
-            normals: if surface_tension { n } else { 0 },
-        };
-        // Forces and integration can be fused with fixed dt, unless the fused stage's bindings
-        // exceed the adapter's (arrays in many segments): then they run as two passes.
-        let dfsph = params.dfsph.is_some();
-        let most = ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
-        let can_fuse = params.adaptive.is_none()
-            && !dfsph
-            && storage_bindings(&ctx, "forces_integrate", &|name: &str| counts.len_without_accelerations(name)) <= most;
-        // The two-pass step with its state in place is the default: 48 bytes of state per
-        // particle instead of the fused step's 64 (docs/performance.md).
-        let fused = can_fuse && options.fuse_forces_and_integration.unwrap_or(false);
-        let mut list_capacity = neighbour_lists(&ctx, params, tiles && !fused && ranks.is_none(), &options, n, w);
-        counts.list_slots = n * list_capacity.unwrap_or(0) as u64;
-        // The lists' bindings (one per segment) must fit the stages that declare them; a scene
-        // whose arrays take too many segments runs without.
-        let list_stages: &[&str] = match (params.dfsph.is_some(), params.continuity_density) {
-            (true, _) => &["dfsph_factors_tiled", "dfsph_divergence_tiled", "dfsph_pressure_tiled"],
-            (false, true) => &["continuity_tiled", "forces_tiled"],
-            (false, false) => &["density_tiled", "forces_tiled"],
-        };
-        if list_capacity.is_some() && list_stages.iter().any(|stage| storage_bindings(&ctx, stage, &|name: &str| counts.len(name)) > most) {
-            list_capacity = None;
-            counts.list_slots = 0;
-        }
-        // The fused stage binds a placeholder for the accelerations it declares but never uses,
-        // as does the one-thread finish_step.
-        let without_accelerations = |name: &str| counts.len_without_accelerations(name);
-        let len = |name: &str| counts.len(name);
-        let uniform_bytes = gpu_params.bytes().len() as u64;
-        // The fused step writes a second state; DFSPH keeps accelerations with adaptive dt only
-        // (fixed dt: in registers).
-        let arrays = StepArrays::new(dfsph, params.continuity_density, params.adaptive.is_some(), fused);
+        let shape = StepShape::new(&ctx, params, initial, &options, ranks.is_some())?;
+        let k = shape.constants(params, &options, ranks.is_some());
+        let pipelines = Pipelines::new(&ctx, params, &shape, &options, &k)?;
+        let StepShape { fluid: n, walls: w, cells, viscosity, gpu_params, has_walls, adami, surface_tension, dfsph, wall_order, wall_index, fused, list_capacity, counts, arrays, plan, aliases, .. } = shape;
         let layout = arrays.layout;
-        let plan = MemoryPlan::new(n, Some(w), cells, uniform_bytes, arrays).with_wall_cell_starts(counts.wall_cell_firsts);
-        let plan = if dfsph { plan.with_dfsph(n) } else { plan.with_wall_fields(counts.wall_fields) }.with_neighbour_lists(n, list_capacity.unwrap_or(0));
-        let plan = plan.with_neighbour_skin(n, options.neighbour_skin.is_some()).with_surface_normals(n, surface_tension);
-        plan.check(&ctx)?;
-        let aliases = array_places(&arrays);
-        let in_place: Vec<(&str, Alias)> = aliases.iter().copied().chain(if layout == StateLayout::InPlace { IN_PLACE.to_vec() } else { Vec::new() }).collect();
+        let ws = options.workgroup_sizes;
+        let len = |name: &str| counts.len(name);
         let stage = |name: &str, entry: &str, lens: ArrayLengths, constants: &[(&str, f64)]| stage_with_aliases(&ctx, name, entry, lens, constants, &aliases);
-        let stage_in_place = |name: &str, entry: &str, lens: ArrayLengths, constants: &[(&str, f64)]| stage_with_aliases(&ctx, name, entry, lens, constants, &in_place);
-
-        // The pipelines come first: they check that the stages' bindings (one per segment of
-        // each array) fit the adapter before any buffer exists.
-        let mut k = constants(params);
-        k.push(("WALLS", if has_walls { 1.0 } else { 0.0 }));
-        k.push(("STENCIL_RUNS", if options.single_cells { 0.0 } else { 1.0 }));
-        k.push(("GHOSTS", if ranks.is_some() { 1.0 } else { 0.0 }));
-        k.push(("NEIGHBOUR_LISTS", if list_capacity.is_some() { 1.0 } else { 0.0 }));
-        k.push(("LIST_CAPACITY", list_capacity.unwrap_or(0) as f64));
-        if let Some(skin) = options.neighbour_skin {
-            k.push(("LIST_RADIUS2", (1.0 + skin) * (1.0 + skin)));
-        }
-        // The constants of a stage with `size` threads per workgroup.
-        let sized = |size: u32| {
-            let mut c = k.clone();
-            c.push(("WORKGROUP_SIZE", size as f64));
-            c
-        };
-        // A neighbour stage: stage file NAME's `entry`, or with subgroup tiles NAME_tiled's.
-        let neighbour_stage = |name: &str, entry: &str, size: u32| {
-            if tiles {
-                let tiled = format!("{name}_tiled");
-                stage(&tiled, &tiled, &len, &sized(size))
-            } else {
-                stage(name, entry, &len, &sized(size))
-            }
-        };
-        let pipelines = Pipelines {
-            bin_count: stage("bin_count", "bin_count", &len, &sized(ws.bin_count))?,
-            bin_scatter: stage("bin_scatter", "bin_scatter", &len, &sized(ws.bin_scatter))?,
-            // The rank binds no state array, the gather no cell keys or slots (see reorder.wgsl).
-            reorder_rank: stage("reorder", "reorder_rank", &|name: &str| if name.starts_with("gathered") { 0 } else { len(name) }, &sized(ws.reorder))?,
-            reorder: stage_with_aliases(
-                &ctx,
-                "reorder",
-                "reorder",
-                &|name: &str| if matches!(name, "keys" | "unordered") { 0 } else { len(name) },
-                &sized(ws.reorder),
-                &aliases.iter().filter(|(name, _)| !matches!(*name, "keys" | "unordered")).copied().collect::<Vec<_>>(),
-            )?,
-            wcsph: if dfsph {
-                None
-            } else {
-                Some(WcsphStages {
-                    // The density stage: summation, or with continuity density the carried density.
-                    density: if params.continuity_density {
-                        neighbour_stage("continuity", "continuity_density", ws.density)?
-                    } else {
-                        neighbour_stage("density", "density", ws.density)?
-                    },
-                    density_listed: match (options.neighbour_skin, list_capacity) {
-                        (Some(_), Some(_)) => {
-                            let mut c = sized(ws.density);
-                            c.push(("RECORD_LISTS", 0.0));
-                            Some(if params.continuity_density {
-                                stage("continuity_tiled", "continuity_tiled", &len, &c)?
-                            } else {
-                                stage("density_tiled", "density_tiled", &len, &c)?
-                            })
-                        }
-                        _ => None,
-                    },
-                    // One invocation per wall particle, at the density stage's workgroup size.
-                    wall_pressure: if adami { Some(stage("wall_pressure", "wall_pressure", &len, &sized(ws.density))?) } else { None },
-                    // One invocation per fluid particle, at the forces' workgroup size; with tiles
-                    // a subgroup's stencils walked together.
-                    surface_normals: if surface_tension { Some(neighbour_stage("surface_normals", "surface_normals", ws.forces)?) } else { None },
-                    forces: neighbour_stage("forces", "forces", ws.forces)?,
-                    advance: if fused {
-                        stage("forces_integrate", "forces_and_integrate", &without_accelerations, &sized(ws.forces))?
-                    } else if tiles {
-                        // Its largest speed over a subgroup, without the workgroup's barriers.
-                        stage_in_place("integrate_tiled", "integrate_tiled", &len, &sized(ws.integrate))?
-                    } else {
-                        stage_in_place("integrate", "integrate", &len, &sized(ws.integrate))?
-                    },
-                    adaptive: match params.adaptive {
-                        Some(_) => Some((
-                            stage_in_place("integrate", "reduce_maxima", &len, &sized(ws.integrate))?,
-                            stage_in_place("integrate", "choose_dt", &len, &k)?,
-                        )),
-                        None => None,
-                    },
-                })
-            },
-            // One thread on the status words.
-            finish_step: stage_in_place("integrate", "finish_step", &without_accelerations, &k)?,
-            fused,
-            subgroup_tiles: tiles,
-        };
         // DFSPH's accelerations exist with adaptive dt only; elsewhere its stages bind a
         // placeholder (until `step_fields` asks for them).
         let dfsph_len = |name: &str| if name == "accelerations" && params.adaptive.is_none() { 0 } else { counts.len(name) };
         // In place DFSPH's integration writes the positions it reads.
         let dfsph_places: Vec<(&str, Alias)> = aliases.iter().copied().chain((layout == StateLayout::InPlace).then_some(IN_PLACE[0])).collect();
-        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places, tiles)?) } else { None };
+        let dfsph_stages = if dfsph { Some(DfsphStages::new(&ctx, params, &k, &ws, &dfsph_len, &dfsph_places, pipelines.subgroup_tiles)?) } else { None };
 
         let device = &ctx.device;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -637,36 +334,11 @@ impl GpuSolver {
         // The skin's check, after each step, on the phase the step leaves its state in.
         let skin = match options.neighbour_skin {
             Some(fraction) => {
-                let rebuild_positions = storage(device, "rebuild positions", n * 16);
-                let left = storage(device, "skin check", super::skin::CHECK_BYTES);
-                let skin_len = |name: &str| match name {
-                    "skin_left" => 0,
-                    other => len(other),
-                };
-                let mut c = sized(ws.integrate);
+                let mut c = sized(&k, ws.integrate);
                 c.push(("SKIN", crate::solver::cpu::neighbour_skin::checked_skin(fraction)));
-                let check = stage("neighbour_skin", "check_skin", &skin_len, &c)?;
-                let groups = (0..store.phases())
-                    .map(|c| {
-                        let b = buffers(c);
-                        let (rebuild_positions, left) = (&rebuild_positions, &left);
-                        check.bind_group(device, "check_skin", u, &move |name: &str| match name {
-                            "rebuild_positions" => rebuild_positions.clone(),
-                            "skin_left" => left.clone(),
-                            other => b(other),
-                        })
-                    })
-                    .collect();
-                Some(super::skin::NeighbourSkin {
-                    fraction,
-                    reach: crate::solver::cpu::neighbour_skin::skin_reach(fraction, params.h),
-                    rebuild_positions,
-                    left,
-                    check,
-                    groups,
-                    rebuild_due: std::cell::Cell::new(true),
-                    rebuilds: std::cell::Cell::new(0),
-                })
+                let check = stage("neighbour_skin", "check_skin", &|name: &str| if name == "skin_left" { 0 } else { len(name) }, &c)?;
+                let phases: Vec<_> = (0..store.phases()).map(buffers).collect();
+                Some(super::skin::NeighbourSkin::new(device, u, fraction, params.h, n, check, &phases))
             }
             None => None,
         };
