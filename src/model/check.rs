@@ -1,6 +1,7 @@
 //! Scene validation: every field checked against what is allowed before any work, with an
 //! error that names the file, the field, the value and the allowed range.
 
+use super::lattice::lattice_size;
 use super::numbers::{short, short3};
 use super::params::{MAX_PLANES, MAX_SOLID_BOXES};
 use super::scene::{err, Boundary, BoundaryPressure, BoundaryVolume, DensityMethod, EquationOfState, InitialPressure, PressureSolver, Scene, SceneError, SceneOrigin};
@@ -283,7 +284,7 @@ impl Scene {
         self.validate_overlaps(origin)?;
         self.validate_probes(origin)?;
         let grid = self.grid();
-        let cells: u64 = grid.dims.iter().map(|&d| d as u64).product();
+        let cells = lattice_size(grid.dims.iter().map(|&d| d as u64));
         if cells > MAX_CELLS {
             return Err(err(origin, "domain", format!(
                 "needs {cells} grid cells of size h = {}; at most {MAX_CELLS} are allowed (shrink the domain or grow h)",
@@ -291,7 +292,10 @@ impl Scene {
         }
         let count = self.estimated_particle_count();
         if count > MAX_PARTICLES {
-            return Err(err(origin, "fluid", format!("would create {count} particles; at most {MAX_PARTICLES} are allowed")));
+            // The fluid's count, or else the walls' (their spacing, layers or size).
+            let field = if self.fluid_particle_count() > MAX_PARTICLES { "fluid" } else { "boundary" };
+            let count = if count == u64::MAX { "more than 1.8e19".to_string() } else { count.to_string() };
+            return Err(err(origin, field, format!("would create {count} particles; at most {MAX_PARTICLES} are allowed")));
         }
         if let Some(message) = host_memory_shortfall(count, cells, SCENE_BYTES_PER_PARTICLE, "") {
             return Err(err(origin, "fluid", message));

@@ -32,6 +32,12 @@ impl AxisLattice {
     }
 }
 
+/// The points of a lattice with `counts` points along each axis, saturating at `u64::MAX`
+/// (a spacing of 1e-100 asks for more than any count holds: the limits then refuse it).
+pub fn lattice_size(counts: impl IntoIterator<Item = u64>) -> u64 {
+    counts.into_iter().fold(1u64, |size, count| size.saturating_mul(count))
+}
+
 /// Spacings in `length` when it is a whole number of them (to one part in a million).
 pub fn whole_spacings(length: f64, s: f64) -> Option<u64> {
     let q = length / s;

@@ -5,7 +5,7 @@
 //! Validation is in [`super::check`], the resolved constants in [`super::params`], the particles
 //! at t = 0 in [`super::initial`].
 
-use super::lattice::wall_axis;
+use super::lattice::{lattice_size, wall_axis};
 use super::mesh::{MeshSurface, Placement, Triangle};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -967,7 +967,7 @@ impl Scene {
                 short(s),
                 sides(filled),
                 change.join(", "),
-                axes.iter().map(|x| x.count).product::<u64>()
+                lattice_size(axes.iter().map(|x| x.count))
             ));
         }
         out
@@ -975,7 +975,7 @@ impl Scene {
 
     /// Fluid particles of the scene, counted from the lattice sizes without creating them.
     pub fn fluid_particle_count(&self) -> u64 {
-        (0..self.fluid.len()).map(|i| self.fluid_block_count(i)).sum()
+        (0..self.fluid.len()).fold(0u64, |n, i| n.saturating_add(self.fluid_block_count(i)))
     }
 
     /// Fluid particles of block `i`: the box's lattice, or the part of it inside its shape,
@@ -986,6 +986,13 @@ impl Scene {
         let axes = self.fluid_lattice(i);
         let b = &self.fluid[i];
         let cut = self.mesh_cut(i);
+        let box_size = lattice_size(axes.iter().map(|a| a.count));
+        // Far above the particle limit (2^31, `check::MAX_PARTICLES`) the box's lattice is the
+        // count (an upper bound): asking each of its points, or each row, would take as long
+        // as creating them.
+        if box_size > 1 << 33 {
+            return box_size;
+        }
         if !cut.is_empty() {
             // Beside a mesh each point is asked (in rows of z, in parallel).
             use rayon::prelude::*;
@@ -1005,7 +1012,7 @@ impl Scene {
                 .sum();
         }
         if b.shape == FluidShape::Box {
-            return axes.iter().map(|a| a.count).product();
+            return box_size;
         }
         let x = axes[0];
         if x.count == 0 {
@@ -1039,16 +1046,16 @@ impl Scene {
                     let ws = walls.spacing.unwrap_or(s);
                     let l = self.wall_layers(walls) as f64 * ws;
                     let (lo, hi) = ([min[0] - l, min[1] - l, min[2] - l], [max[0] + l, max[1] + l, max[2] + l]);
-                    let outer = (0..3).map(|a| wall_axis(lo[a], hi[a], ws).count).product::<u64>();
-                    let inner = (0..3).map(|a| wall_axis(min[a], max[a], ws).count.saturating_sub(2)).product::<u64>();
-                    n += outer.saturating_sub(inner);
+                    let outer = [0, 1, 2].map(|a| wall_axis(lo[a], hi[a], ws).count);
+                    let inner = [0, 1, 2].map(|a| wall_axis(min[a], max[a], ws).count.saturating_sub(2));
+                    n = n.saturating_add(shell_size(outer, inner));
                 }
                 // The surface's area times the walls' depth, in lattice cells (an estimate:
                 // a curved or slanted surface takes a little more).
                 Boundary::Mesh(m) => {
                     let ws = m.walls.spacing.unwrap_or(s);
                     let area: f64 = m.placed_triangles().iter().map(super::mesh::area).sum();
-                    n += (area * self.wall_thickness(&m.walls) / ws.powi(3)).ceil() as u64;
+                    n = n.saturating_add((area * self.wall_thickness(&m.walls) / ws.powi(3)).ceil() as u64);
                 }
                 Boundary::Plane { .. } => {}
             }
@@ -1239,4 +1246,15 @@ pub(crate) fn readable_parse_error(message: &str) -> String {
         }
         None => message.to_string(),
     }
+}
+
+/// The points of a lattice shell: an outer box of `outer` points along each axis less an inner
+/// one of `inner`. A shell holds at least every point of its outer edges, so one axis of more
+/// than 2^32 points saturates at `u64::MAX`; below that the two sizes fit in 128 bits.
+fn shell_size(outer: [u64; 3], inner: [u64; 3]) -> u64 {
+    if outer.iter().any(|&count| count > u32::MAX as u64) {
+        return u64::MAX;
+    }
+    let size = |counts: [u64; 3]| counts.iter().map(|&count| count as u128).product::<u128>();
+    u64::try_from(size(outer).saturating_sub(size(inner))).unwrap_or(u64::MAX)
 }

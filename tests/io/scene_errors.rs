@@ -114,6 +114,22 @@ fn a_particle_count_that_does_not_fit_is_refused() {
     assert!(e.contains("particles") && (e.contains("at most") || e.contains("memory")), "{e}");
 }
 
+/// Spacings far below any count (1e-100, 1e-300, the smallest double) are refused by the
+/// particle limit, naming the walls where the walls are what overflows; before, their lattice
+/// sizes wrapped around and the program ran out of memory creating them.
+#[test]
+fn spacings_too_small_for_any_count_are_refused_not_allocated() {
+    let tank = GOOD.to_string() + "[[boundary]]\ntype = \"container\"\nmin = [0.1, 0.1, 0.1]\nmax = [0.6, 0.6, 0.6]\n";
+    for spacing in ["1e-7", "1e-100", "1e-300", "5e-324"] {
+        let e = error_of(&tank.replace("max = [0.6, 0.6, 0.6]", &format!("max = [0.6, 0.6, 0.6]\nspacing = {spacing}")));
+        assert!(e.contains("boundary: would create more than 1.8e19 particles; at most"), "{spacing}: {e}");
+        let e = error_of(&GOOD.replace("particle_spacing = 0.05", &format!("particle_spacing = {spacing}")));
+        assert!(e.contains("fluid: would create") && e.contains("at most"), "{spacing}: {e}");
+    }
+    let e = error_of(&tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nspacing = 1e-4"));
+    assert!(e.contains("boundary: would create") && !e.contains("1.8e19"), "{e}");
+}
+
 fn wgsph(args: &[&str], dir: &std::path::Path) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir).output().unwrap()
 }
