@@ -180,6 +180,24 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
     }
     let names = list(path).map_err(|e| bad(format!("cannot read the directory: {e}")))?;
     let earlier_run = names.iter().any(|n| n == MARKER);
+    // A run writes into its subdirectories, and replaces what an earlier run wrote there: one
+    // that is a link would send both into a directory that is not the run's.
+    for sub in RUN_SUBDIRS {
+        let d = path.join(sub);
+        match std::fs::symlink_metadata(&d) {
+            Ok(m) if m.file_type().is_symlink() => {
+                return Err(bad(format!(
+                    "{} is a link{}; a run writes its {sub}/ only into a directory of its own: remove the link, or choose another directory",
+                    d.display(),
+                    std::fs::read_link(&d).map(|t| format!(" to {}", t.display())).unwrap_or_default()
+                )));
+            }
+            Ok(m) if !m.is_dir() => {
+                return Err(bad(format!("{} is a file, where a run writes its {sub}/ directory; move it, or choose another directory", d.display())));
+            }
+            _ => {}
+        }
+    }
     let mut kept = Vec::new();
     if !names.is_empty() {
         let shown = shown_names(&names);
@@ -217,7 +235,7 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
             .iter()
             .filter(|n| {
                 let p = path.join(n);
-                let run_dir = (RUN_SUBDIRS.contains(&n.as_str()) || n.starts_with(REPLACED_PREFIX)) && p.is_dir();
+                let run_dir = (RUN_SUBDIRS.contains(&n.as_str()) || n.starts_with(REPLACED_PREFIX)) && is_real_dir(&p);
                 !run_dir && !(is_run_output(None, n) && p.is_file())
             })
             .cloned()
@@ -225,6 +243,11 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
     }
     probe_writable(path).map_err(|e| bad(format!("cannot write there: {e}")))?;
     Ok((earlier_run, kept))
+}
+
+/// Whether `path` is a directory itself, not a link to one.
+fn is_real_dir(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok_and(|m| m.is_dir())
 }
 
 /// The names in a directory, sorted.
@@ -261,10 +284,10 @@ fn run_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for name in list(dir)? {
         let path = dir.join(&name);
-        if name.starts_with(REPLACED_PREFIX) && path.is_dir() {
+        if name.starts_with(REPLACED_PREFIX) && is_real_dir(&path) {
             // Left by a start that was killed: an earlier run's files, already set aside.
             out.push(path);
-        } else if RUN_SUBDIRS.contains(&name.as_str()) && path.is_dir() {
+        } else if RUN_SUBDIRS.contains(&name.as_str()) && is_real_dir(&path) {
             for inner in list(&path)? {
                 if is_run_output(Some(&name), &inner) && path.join(&inner).is_file() {
                     out.push(path.join(inner));

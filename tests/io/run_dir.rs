@@ -108,6 +108,39 @@ fn overwrite_refuses_a_directory_that_no_run_wrote() {
     assert_eq!(tree(&docs), before);
 }
 
+/// A run directory whose snapshots/ (or surface/, probes/) is a link to a folder of the user's
+/// is refused, with or without --overwrite: replacing the earlier run's snapshots there once
+/// deleted and replaced the user's files.
+#[test]
+fn overwrite_refuses_a_run_directory_whose_subdirectory_is_a_link() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = wgsph(&["run", "hydrostatic", "--steps", "1", "--backend", "cpu", "--out", "r1"], dir.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let mine = dir.path().join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    std::fs::write(mine.join("step_000000.csv"), "my data").unwrap();
+    std::fs::write(mine.join("step_000009.csv"), "more of mine").unwrap();
+    let before = tree(&mine);
+    for sub in ["snapshots", "surface", "probes"] {
+        let link = dir.path().join("r1").join(sub);
+        let _ = std::fs::remove_dir_all(&link);
+        std::os::unix::fs::symlink("../mine", &link).unwrap();
+        for extra in [&[][..], &["--overwrite"][..]] {
+            let o = wgsph(&[&["run", "hydrostatic", "--steps", "1", "--backend", "cpu", "--out", "r1"], extra].concat(), dir.path());
+            let err = stderr(&o);
+            assert_eq!(o.status.code(), Some(2), "{sub} {extra:?}: {err}");
+            assert!(err.contains(&format!("r1/{sub} is a link to ../mine")) && err.contains("remove the link"), "{err}");
+            assert_eq!(tree(&mine), before, "{sub} {extra:?}: the linked folder was changed");
+        }
+        std::fs::remove_file(&link).unwrap();
+    }
+    // A file where the run writes a directory is named too.
+    std::fs::write(dir.path().join("r1/surface"), "not a directory").unwrap();
+    let o = wgsph(&["run", "hydrostatic", "--steps", "1", "--backend", "cpu", "--out", "r1", "--overwrite"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("r1/surface is a file, where a run writes its surface/ directory"), "{}", stderr(&o));
+}
+
 /// `--overwrite` replaces the files an earlier run wrote, and nothing else: not a file the user
 /// put beside them, and not the scene being run.
 #[test]
