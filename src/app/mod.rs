@@ -123,6 +123,9 @@ fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
         return Err(InputError("--style mesh is for `wgsph run --frames` (the surface is reconstructed on the host, too slowly for a window); `wgsph view` takes --style particles or surface".into()).into());
     }
     let scene = args::load_scene(&args.scene, &args.overrides, args.particles, false)?;
+    if let Some(path) = &args.screenshot {
+        check_screenshot_path(path)?;
+    }
     let dt = scene.time.dt;
     let steps_per_frame = args.steps_per_frame.unwrap_or_else(|| ((1.0 / 60.0 / dt).ceil() as u64).clamp(1, 64));
     crate::viz::view::view(
@@ -134,6 +137,24 @@ fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
             quit_after: args.quit_after,
         },
     )
+}
+
+/// The screenshot's path, checked before the window opens: a new file (a PNG carries no mark
+/// of who wrote it, so an existing file is never replaced) in an existing directory.
+#[cfg(feature = "view")]
+fn check_screenshot_path(path: &std::path::Path) -> Result<(), InputError> {
+    let bad = |why: &str| InputError(format!("--screenshot {}: {why}; allowed: the path of a new file in an existing directory", path.display()));
+    if path.is_dir() {
+        return Err(bad("is a directory"));
+    }
+    if std::fs::symlink_metadata(path).is_ok() {
+        return Err(bad("exists, and wgsph replaces only its own output: remove it, or choose another name"));
+    }
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    if !parent.is_dir() {
+        return Err(bad(&format!("{} is not a directory", parent.display())));
+    }
+    Ok(())
 }
 
 #[cfg(not(feature = "view"))]

@@ -495,7 +495,7 @@ pub fn cmd_tradeoff(args: &TradeoffArgs) -> anyhow::Result<i32> {
         return Err(InputError(format!("--time is {}; must be a finite number > 0", args.time)).into());
     }
     let base = super::args::load_scene(&args.scene, &args.overrides, Some(args.particles), false)?;
-    std::fs::create_dir_all(&args.out)?;
+    crate::io::rundir::prepare_report_dir("--out", &args.out)?;
     let started = Instant::now();
     println!("tradeoff {}: {} fluid particles, {} s simulated, {} samples", base.name, base.fluid_particle_count(), args.time, args.samples);
     let rows = study(&base, args.time, args.samples, |line| println!("  {line}"))?;

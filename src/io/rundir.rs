@@ -245,6 +245,37 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
     Ok((earlier_run, kept))
 }
 
+/// The file that marks a directory as one a report command (`wgsph tradeoff`, `wgsph
+/// validate`) wrote.
+pub const REPORT_MARKER: &str = ".wgsph-report";
+
+/// Makes `dir` ready for a report command's files (given as `flag`): a new or empty directory,
+/// or one such a command wrote before (it has [`REPORT_MARKER`]), whose files of the same name
+/// the command replaces; anything else is refused before any work (exit 2), never written into.
+pub fn prepare_report_dir(flag: &str, dir: &Path) -> Result<(), RunDirError> {
+    let bad = |why: String| RunDirError(format!("{flag} {}: {why}", dir.display()));
+    match std::fs::symlink_metadata(dir) {
+        Ok(m) if m.is_dir() => {
+            let names = list(dir).map_err(|e| bad(format!("cannot read the directory: {e}")))?;
+            if !names.is_empty() && !names.iter().any(|n| n == REPORT_MARKER) {
+                return Err(bad(format!(
+                    "the directory is not empty (it holds {}) and no wgsph report was written there (it has no {REPORT_MARKER}); choose a new or empty directory",
+                    shown_names(&names)
+                )));
+            }
+        }
+        Ok(_) if dir.is_dir() => return Err(bad("is a link to a directory; give the directory itself".into())),
+        Ok(_) => return Err(bad("is a file, not a directory".into())),
+        Err(_) => {
+            let mut created = Vec::new();
+            create_missing_parents(&dir.join("x"), &mut created).map_err(|e| bad(format!("cannot be created: {e:#}")))?;
+        }
+    }
+    probe_writable(dir).map_err(|e| bad(format!("cannot write there: {e}")))?;
+    let text = format!("wgsph {}\nwritten {}\n", env!("CARGO_PKG_VERSION"), utc_now());
+    write_atomic(&dir.join(REPORT_MARKER), |w| w.write_all(text.as_bytes())).map_err(|e| bad(format!("cannot write there: {e:#}")))
+}
+
 /// Whether `path` is a directory itself, not a link to one.
 fn is_real_dir(path: &Path) -> bool {
     std::fs::symlink_metadata(path).is_ok_and(|m| m.is_dir())

@@ -130,4 +130,20 @@ fn an_unusable_out_file_is_refused_before_the_work() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let rows: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(rows[0]["path"], "cpu-f32");
+    // Its own earlier output is replaced; a user's file of the same name is refused, untouched.
+    let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["bench", "--n", "2", "--steps", "1", "--paths", "cpu-f64", "--out", json.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(rows[0]["path"], "cpu-f64");
+    let theirs = dir.path().join("results.json");
+    for (command, text) in [("bench", "{\"mine\": 1}"), ("profile", "[{\"path\": \"x\"}]"), ("bench", "not json")] {
+        std::fs::write(&theirs, text).unwrap();
+        let extra: &[&str] = if command == "bench" { &["--n", "2", "--steps", "1", "--paths", "cpu-f32"] } else { &["--particles", "500", "--steps", "1"] };
+        let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).arg(command).args(extra).args(["--out", theirs.to_str().unwrap()]).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{command}: {err}");
+        assert!(err.contains("exists and is not a") && err.contains("that wgsph wrote"), "{command}: {err}");
+        assert!(o.stdout.is_empty(), "{command}: worked before refusing");
+        assert_eq!(std::fs::read_to_string(&theirs).unwrap(), text, "{command}");
+    }
 }

@@ -64,6 +64,9 @@ fn a_small_study_writes_the_table_and_the_plot() {
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // Marked as a report's directory, which the next study may write into again.
+    assert!(dir.path().join("study/.wgsph-report").is_file());
+    wgsph::io::rundir::prepare_report_dir("--out", &dir.path().join("study")).unwrap();
     let md = std::fs::read_to_string(dir.path().join("study/tradeoff.md")).unwrap();
     let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| configuration")).collect();
     // The reference and one row per configuration, each with its knob.
@@ -111,4 +114,29 @@ fn a_small_study_writes_the_table_and_the_plot() {
     let out = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["tradeoff", "--time=0"]).current_dir(dir.path()).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--time"));
+}
+
+/// `tradeoff` and `validate` write only into a new or empty directory, or one such a command
+/// wrote (its `.wgsph-report`): a folder of the user's, even one holding a `tradeoff.md`, is
+/// refused before any work and left as it was.
+#[test]
+fn report_commands_refuse_a_folder_of_the_users() {
+    let dir = tempfile::tempdir().unwrap();
+    let mine = dir.path().join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    std::fs::write(mine.join("tradeoff.md"), "my notes").unwrap();
+    std::fs::write(mine.join("validation.md"), "my notes").unwrap();
+    let plain = dir.path().join("file");
+    std::fs::write(&plain, "mine").unwrap();
+    for args in [&["tradeoff", "hydrostatic", "--time", "0.001", "--samples", "1"][..], &["validate", "hydrostatic", "--resolution", "coarse"][..]] {
+        for (out, says) in [("mine", "the directory is not empty (it holds tradeoff.md, validation.md (2 entries)) and no wgsph report was written there"), ("file", "is a file, not a directory")] {
+            let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).args(["--out", out]).current_dir(dir.path()).output().unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{args:?} {out}: {err}");
+            assert!(err.contains(&format!("--out {out}: {says}")), "{args:?}: {err}");
+        }
+    }
+    assert_eq!(std::fs::read_to_string(mine.join("tradeoff.md")).unwrap(), "my notes");
+    assert_eq!(std::fs::read_dir(&mine).unwrap().count(), 2);
+    assert_eq!(std::fs::read_to_string(&plain).unwrap(), "mine");
 }

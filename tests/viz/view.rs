@@ -164,3 +164,22 @@ fn without_a_display_the_viewer_says_how_to_get_one() {
     assert!(err.contains("cannot open a window: no display") && err.contains("Xvfb"), "{err}");
     assert!(!err.contains(".rs:"), "{err}");
 }
+
+/// The screenshot's path is checked before any window opens: an existing file (a PNG carries
+/// no mark of who wrote it) or a directory is refused with exit 2 and left alone, and a missing
+/// directory is not created.
+#[test]
+fn a_screenshot_never_replaces_an_existing_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("photo.png");
+    std::fs::write(&photo, "my picture").unwrap();
+    let missing = dir.path().join("no_such_dir/shot.png");
+    for (path, says) in [(photo.as_path(), "exists, and wgsph replaces only its own output"), (dir.path(), "is a directory"), (missing.as_path(), "is not a directory")] {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["view", "hydrostatic", "--quit-after", "1", "--screenshot"]).arg(path).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{}: {err}", path.display());
+        assert!(err.contains(&format!("--screenshot {}: ", path.display())) && err.contains(says), "{err}");
+    }
+    assert_eq!(std::fs::read_to_string(&photo).unwrap(), "my picture");
+    assert!(!dir.path().join("no_such_dir").exists());
+}

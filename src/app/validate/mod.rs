@@ -72,6 +72,7 @@ pub fn cmd_validate(args: &ValidateArgs) -> anyhow::Result<i32> {
             }
         }
     };
+    crate::io::rundir::prepare_report_dir("--out", &args.out)?;
     // `auto` is resolved once, and said once, for every case.
     let device = match args.backend.device() {
         Device::Auto => {
