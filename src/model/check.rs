@@ -42,6 +42,12 @@ pub const ARTIFICIAL_VISCOSITY_RANGE: (f64, f64) = (0.0, 1.0);
 pub const SURFACE_TENSION_RANGE: (f64, f64) = (0.0, 100.0);
 /// The largest kinematic viscosity and the largest |gravity| (see [`REST_DENSITY_RANGE`]).
 pub const MAX_VISCOSITY: f64 = 1e9;
+/// The most wall layers a boundary may ask for: the kernel's support is a few spacings deep.
+pub const MAX_WALL_LAYERS: u32 = 16;
+/// How far a given particle mass may be from rest_density x particle_spacing^3, as a factor.
+pub const PARTICLE_MASS_FACTOR: f64 = 1e3;
+/// The largest boundary friction: a scale of the viscosity between fluid and walls (1 no-slip).
+pub const MAX_BOUNDARY_FRICTION: f64 = 100.0;
 pub const MAX_GRAVITY: f64 = 1e9;
 
 /// Whether two boxes share a volume (more than `tolerance` deep on every axis).
@@ -92,6 +98,18 @@ impl Scene {
             positive("physics.particle_mass", m)?;
         }
         in_range("physics.rest_density", p.rest_density, REST_DENSITY_RANGE, "kg/m^3 in SI")?;
+        if let Some(m) = p.particle_mass {
+            // Against the mass that fills a lattice cell at rest density: a factor of a thousand
+            // either way is no fluid at rest, and further the GPU's f32 densities over- or
+            // underflow.
+            let lattice = p.rest_density * p.particle_spacing.powi(3);
+            let (lo, hi) = (lattice / PARTICLE_MASS_FACTOR, lattice * PARTICLE_MASS_FACTOR);
+            if !(lo..=hi).contains(&m) {
+                return Err(err(origin, "physics.particle_mass", format!(
+                    "is {}; must be between {} and {} (within a factor of {} of rest_density x particle_spacing^3 = {}, the mass that fills the particle's lattice cell; leave it out to use that)",
+                    short(m), short(lo), short(hi), short(PARTICLE_MASS_FACTOR), short(lattice))));
+            }
+        }
         if p.smoothing_length < p.particle_spacing {
             return Err(err(origin, "physics.smoothing_length", format!(
                 "is {}, below the particle spacing {}: a particle would have no neighbour within h; must be at least the spacing (twice it is usual)",
@@ -140,8 +158,9 @@ impl Scene {
             in_range(&format!("{f}.viscosity"), c.viscosity, (0.0, MAX_VISCOSITY), "m^2/s in SI")?;
             last = c.time;
         }
-        if !(p.boundary_friction.is_finite() && p.boundary_friction >= 0.0) {
-            return Err(err(origin, "physics.boundary_friction", format!("is {}; must be finite and >= 0", short(p.boundary_friction))));
+        if !(p.boundary_friction.is_finite() && (0.0..=MAX_BOUNDARY_FRICTION).contains(&p.boundary_friction)) {
+            return Err(err(origin, "physics.boundary_friction", format!(
+                "is {}; must be from 0 to {} (1 no-slip, 0 free slip)", short(p.boundary_friction), short(MAX_BOUNDARY_FRICTION))));
         }
         self.validate_pressure_options(origin)?;
         finite3("physics.gravity", p.gravity)?;
@@ -203,6 +222,11 @@ impl Scene {
                 return Err(err(origin, format!("{f}.jitter"), format!("is {}; must be in [0, 0.5)", short(b.jitter))));
             }
             finite3(&format!("{f}.velocity"), b.velocity)?;
+            let (_, fastest) = SPEED_OF_SOUND_RANGE;
+            if b.velocity.iter().any(|c| c.abs() > fastest) {
+                return Err(err(origin, format!("{f}.velocity"), format!(
+                    "is {}; each component must be at most {} in size (the fastest speed of sound allowed)", short3(b.velocity), short(fastest))));
+            }
         }
         for (i, b) in self.boundary.iter().enumerate() {
             let f = format!("boundary[{i}]");
@@ -238,13 +262,15 @@ impl Scene {
                     positive(&format!("{f}.spacing"), s)?;
                     if let Some(rd) = walls.rest_density {
                         positive(&format!("{f}.rest_density"), rd)?;
+                        in_range(&format!("{f}.rest_density"), rd, REST_DENSITY_RANGE, "kg/m^3 in SI")?;
                         if p.boundary_volume == BoundaryVolume::Akinci {
                             return Err(err(origin, format!("{f}.rest_density"), format!(
                                 "is {rd}; with physics.boundary_volume = \"akinci\" a wall particle's mass is rho0 / sum W over its wall neighbours, so a wall rest density is not used: remove it")));
                         }
                     }
-                    if walls.layers == Some(0) {
-                        return Err(err(origin, format!("{f}.layers"), "is 0; must be at least 1"));
+                    if let Some(layers) = walls.layers.filter(|l| !(1..=MAX_WALL_LAYERS).contains(l)) {
+                        return Err(err(origin, format!("{f}.layers"), format!(
+                            "is {layers}; must be from 1 to {MAX_WALL_LAYERS} (the walls need only reach the kernel's support, h / spacing layers)")));
                     }
                     let (lo, hi) = self.wall_span(b).expect("a particle boundary");
                     if !inside(lo) || !inside(hi) {

@@ -22,6 +22,8 @@ pub const MAX_FORCE_PROBES: usize = 4;
 pub const MAX_FRONT_PROBES: usize = 4;
 /// Most probes of all types.
 pub const MAX_PROBES: usize = 64;
+/// How far from the domain a force probe's `moment_about` may lie, in domain sizes.
+pub const MOMENT_ARM_DOMAINS: f64 = 1000.0;
 /// Fluid fraction at which a gauge finds the surface.
 pub const GAUGE_FRACTION: f64 = 0.5;
 /// A gauge's levels are this fraction of the particle spacing apart.
@@ -379,6 +381,17 @@ impl Scene {
                     finite3("min", &p.min)?;
                     finite3("max", &p.max)?;
                     finite3("moment_about", &p.moment_about)?;
+                    // The moment's arm: a point a thousand domains away turns every force into
+                    // a moment beyond the GPU's f32.
+                    if let Some(c) = p.moment_about {
+                        let size = (0..3).map(|k| self.domain.max[k] - self.domain.min[k]).fold(0.0f64, f64::max);
+                        let reach = MOMENT_ARM_DOMAINS * size;
+                        if (0..3).any(|k| c[k] < self.domain.min[k] - reach || c[k] > self.domain.max[k] + reach) {
+                            return Err(err(origin, field("moment_about"), format!(
+                                "is {}; must lie within {} domain sizes ({}) of the domain {}..{}",
+                                short3(c), short(MOMENT_ARM_DOMAINS), short(reach), short3(self.domain.min), short3(self.domain.max))));
+                        }
+                    }
                     if let (Some(a), Some(b)) = (p.min, p.max) {
                         if (0..3).any(|k| b[k] < a[k]) {
                             return Err(err(origin, field("min"), format!("{} must not be above max {} on any axis", short3(a), short3(b))));

@@ -130,6 +130,49 @@ fn spacings_too_small_for_any_count_are_refused_not_allocated() {
     assert!(e.contains("boundary: would create") && !e.contains("1.8e19"), "{e}");
 }
 
+/// Values beyond any fluid (a particle mass a thousand times off its lattice cell's, a wall
+/// friction or density of 1e300, a block thrown faster than any speed of sound, a force probe's
+/// moment taken about a point 1e300 away, a thousand wall layers) are refused at load, naming
+/// the field and the range; before, they ran into NaN, a misleading diagnosis or a hang.
+#[test]
+fn values_beyond_any_fluid_are_refused_with_their_range() {
+    let tank = GOOD.to_string() + "[[boundary]]\ntype = \"container\"\nmin = [0.1, 0.1, 0.1]\nmax = [0.6, 0.6, 0.6]\n";
+    let probe = "[[probe]]\nname = \"load\"\ntype = \"force\"\nboundary = 0\n";
+    for (change, says) in [
+        (GOOD.replace("particle_spacing = 0.05", "particle_spacing = 0.05\nparticle_mass = 1e-300"), "physics.particle_mass: is 1e-300; must be between 0.000125 and 125 (within a factor of 1000"),
+        (GOOD.replace("particle_spacing = 0.05", "particle_spacing = 0.05\nparticle_mass = 1e30"), "physics.particle_mass: is 1e30; must be between"),
+        (GOOD.replace("particle_spacing = 0.05", "particle_spacing = 0.05\nboundary_friction = 1e300"), "physics.boundary_friction: is 1e300; must be from 0 to 100"),
+        (GOOD.replace("max = [0.4, 0.4, 0.4]", "max = [0.4, 0.4, 0.4]\nvelocity = [1e300, 0, 0]"), "fluid[0].velocity: is [1e300, 0, 0]; each component must be at most 1e8"),
+        (tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nrest_density = 1e300"), "boundary[0].rest_density: is 1e300; must be between"),
+        (tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nlayers = 1000"), "boundary[0].layers: is 1000; must be from 1 to 16"),
+        (tank.clone() + probe + "moment_about = [1e300, 0, 0]\n", "probe[0] ('load').moment_about: is [1e300, 0, 0]; must lie within 1000 domain sizes (1000) of the domain"),
+    ] {
+        let e = error_of(&change);
+        assert!(e.contains(says), "{says}: {e}");
+    }
+    // Within the ranges: accepted.
+    let origin = SceneOrigin::File("tank.toml".into());
+    for fine in [
+        GOOD.replace("particle_spacing = 0.05", "particle_spacing = 0.05\nparticle_mass = 0.2"),
+        tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nlayers = 16").replace("[domain]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]", "[domain]\nmin = [-1.0, -1.0, -1.0]\nmax = [2.0, 2.0, 2.0]"),
+        tank.clone() + probe + "moment_about = [500, 0, 0]\n",
+    ] {
+        Scene::from_toml_str(&fine, &origin).unwrap_or_else(|e| panic!("{e}\n{fine}"));
+    }
+}
+
+/// A scene path that names an endless file (`/dev/zero`) is refused once past the most read,
+/// not read until memory runs out.
+#[cfg(unix)]
+#[test]
+fn an_endless_scene_file_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.toml")).unwrap();
+    let out = wgsph(&["run", "zero.toml", "--backend", "cpu", "--steps", "1"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("zero.toml: scene: cannot read the file: it is longer than 64 MiB"), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
 fn wgsph(args: &[&str], dir: &std::path::Path) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_wgsph")).args(args).current_dir(dir).output().unwrap()
 }

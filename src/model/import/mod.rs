@@ -36,7 +36,8 @@ impl Scene {
             let names: Vec<_> = BUILTIN_SCENES.iter().map(|s| s.0).collect();
             return Err(err(&origin, "scene", format!("no such file, and not a built-in scene (built-in: {})", names.join(", "))));
         }
-        let text = std::fs::read_to_string(path).map_err(|e| err(&origin, "scene", format!("cannot read the file: {e}")))?;
+        let bytes = read_at_most(path, MAX_SCENE_FILE_BYTES).map_err(|e| err(&origin, "scene", format!("cannot read the file: {e}")))?;
+        let text = String::from_utf8(bytes).map_err(|_| err(&origin, "scene", "is not UTF-8 text; a scene is a TOML (or SPlisHSPlasH JSON) text file"))?;
         let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
         if let Some((_, import)) = IMPORTERS.iter().find(|(ext, _)| *ext == extension) {
             let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -44,6 +45,23 @@ impl Scene {
         }
         Ok((Scene::from_toml_str(&text, &origin)?, Vec::new()))
     }
+}
+
+/// The largest scene file read: far beyond any scene's text, and a bound on what a path to an
+/// endless file (`/dev/zero`) costs.
+pub const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
+/// The largest mesh file read (a binary STL of about 20 million triangles).
+pub const MAX_MESH_FILE_BYTES: u64 = 1 << 30;
+
+/// The bytes of the file at `path`, refused past `limit`.
+fn read_at_most(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?.take(limit + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > limit {
+        return Err(std::io::Error::other(format!("it is longer than {} MiB, the most read", limit >> 20)));
+    }
+    Ok(bytes)
 }
 
 impl Scene {
@@ -65,7 +83,7 @@ impl Scene {
             let field = format!("boundary[{i}].file");
             let given = Path::new(&m.file);
             let path = if given.is_absolute() { given.to_path_buf() } else { folder.join(given) };
-            let bytes = std::fs::read(&path).map_err(|e| err(origin, &field, format!("'{}': cannot read the mesh file: {e}", path.display())))?;
+            let bytes = read_at_most(&path, MAX_MESH_FILE_BYTES).map_err(|e| err(origin, &field, format!("'{}': cannot read the mesh file: {e}", path.display())))?;
             let crc = format!("{:08x}", crc32fast::hash(&bytes));
             if let Some(recorded) = &m.crc32 {
                 if !recorded.eq_ignore_ascii_case(&crc) {

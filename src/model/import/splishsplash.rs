@@ -319,7 +319,15 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
     let config_read_at: HashMap<String, String> = entries.iter().map(|(key, _, field)| (key.to_string(), field.clone())).collect();
     for (key, v, field) in entries {
         match key {
-            "particleRadius" => radius = number(v, &field, &mut p).unwrap_or(radius),
+            "particleRadius" => {
+                // Checked here: once doubled into the spacing (and h four times it) a message
+                // would name a value the file does not hold.
+                match number(v, &field, &mut p) {
+                    Some(r) if r > 0.0 => radius = r,
+                    Some(r) => p.add(&field, format!("is {}; must be a finite number > 0", crate::model::numbers::short(r))),
+                    None => {}
+                }
+            }
             "timeStepSize" => dt = number(v, &field, &mut p).unwrap_or(dt),
             "gravitation" => gravity = vec3(v, &field, &mut p).unwrap_or(gravity),
             "stopAt" => stop_at = number(v, &field, &mut p),
