@@ -25,7 +25,7 @@ use super::cpu::CpuSolver;
 use super::gpu::{GpuContext, GpuOptions, GpuSolver, ParticleBuffers};
 use super::backend::Backend;
 use super::communicator::Ranks;
-use crate::model::check::{host_memory_shortfall, CPU_BYTES_PER_PARTICLE};
+use crate::model::check::{cpu_list_bytes_per_fluid_particle, host_memory_shortfall_with, CPU_BYTES_PER_PARTICLE};
 use crate::model::initial::InitialState;
 use crate::model::params::Params;
 use crate::model::real::Real;
@@ -283,7 +283,9 @@ fn open_part_on_gpu(scene: &Scene, params: &Params, initial: Option<InitialState
 fn check_host_memory(scene: &Scene, share: f64) -> Result<(), SceneError> {
     let count = (scene.estimated_particle_count() as f64 * share.min(1.0)).ceil() as u64;
     let cells = scene.grid().cell_count() as u64;
-    match host_memory_shortfall(count, cells, CPU_BYTES_PER_PARTICLE, " on the cpu backend") {
+    let fluid = (scene.fluid_particle_count() as f64 * share.min(1.0)).ceil() as u64;
+    let lists = fluid.saturating_mul(cpu_list_bytes_per_fluid_particle(scene.physics.smoothing_length, scene.physics.particle_spacing));
+    match host_memory_shortfall_with(count, cells, CPU_BYTES_PER_PARTICLE, lists, " on the cpu backend (with its neighbour lists)") {
         Some(message) => Err(SceneError { origin: scene.name.clone(), field: "fluid".into(), message }),
         None => Ok(()),
     }

@@ -189,6 +189,35 @@ fn the_host_memory_a_scene_needs_is_checked_before_any_particle_exists() {
     assert!(e.contains("big.toml") && e.contains("fluid") && e.contains("of host memory") && e.contains("MiB are available"), "{e}");
 }
 
+/// The CPU path's neighbour lists grow as (h / spacing)^3: a scene of 216,000 fluid particles
+/// with h = 40 spacings (268,000 neighbours each, about 1 MB of lists per particle) fits the
+/// host at the per-particle figure alone, and is refused when the CPU backend opens, naming
+/// the lists, instead of being killed for memory mid-step.
+#[test]
+fn the_cpu_paths_neighbour_lists_are_counted_in_its_memory() {
+    use wgsph::model::check::{available_memory_bytes, cpu_list_bytes_per_fluid_particle, CPU_BYTES_PER_PARTICLE};
+    use wgsph::solver::{open, BackendChoice, Precision};
+    let Some(available) = available_memory_bytes() else {
+        eprintln!("this platform gives no figure of available memory: nothing to check");
+        return;
+    };
+    let wide = Scene::from_toml_str(
+        "[domain]\nmin = [0.0, 0.0, 0.0]\nmax = [2.0, 2.0, 2.0]\n[physics]\nsmoothing_length = 0.4\nparticle_spacing = 0.01\nspeed_of_sound = 10.0\n[time]\ndt = 0.0001\nend_time = 0.01\n[[fluid]]\nmin = [0.5, 0.5, 0.5]\nmax = [1.1, 1.1, 1.1]\n",
+        &SceneOrigin::Text,
+    )
+    .unwrap();
+    let fluid = wide.fluid_particle_count();
+    assert_eq!(fluid, 216_000);
+    let lists = fluid * cpu_list_bytes_per_fluid_particle(0.4, 0.01);
+    if lists < available {
+        eprintln!("this host holds {} MiB: the lists of {fluid} particles fit", available >> 20);
+        return;
+    }
+    assert!(fluid * CPU_BYTES_PER_PARTICLE < available);
+    let e = format!("{:#}", open(&wide, &BackendChoice::cpu(Precision::F32)).err().expect("the CPU backend refuses it"));
+    assert!(e.contains("of host memory on the cpu backend (with its neighbour lists)") && e.contains("MiB are available"), "{e}");
+}
+
 /// A kernel and smoothing length whose sum over the particle lattice is off by more than 2 %
 /// start the fluid away from its rest density: the scene loads with a warning that says so and
 /// what would start it at rest (Wendland's function needs about 3 spacings, the cubic spline 2).
