@@ -160,6 +160,10 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
     let (flag, path) = (l.flag, &l.path);
     let bad = |why: String| -> anyhow::Error { RunDirError(format!("{flag} {}: {why}", path.display())).into() };
     if !path.exists() {
+        // A name longer than file systems hold (255 bytes) would fail only when created.
+        if let Some(long) = path.components().map(|c| c.as_os_str()).find(|c| c.len() > 255) {
+            return Err(bad(format!("cannot be created: the name {}... is {} bytes long; a file system holds at most 255", &long.to_string_lossy().chars().take(20).collect::<String>(), long.len())));
+        }
         // It will be created: its nearest existing ancestor must be a writable directory.
         let mut ancestor = path.parent();
         while let Some(a) = ancestor {

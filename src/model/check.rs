@@ -42,6 +42,10 @@ pub const ARTIFICIAL_VISCOSITY_RANGE: (f64, f64) = (0.0, 1.0);
 pub const SURFACE_TENSION_RANGE: (f64, f64) = (0.0, 100.0);
 /// The largest kinematic viscosity and the largest |gravity| (see [`REST_DENSITY_RANGE`]).
 pub const MAX_VISCOSITY: f64 = 1e9;
+/// The smallest time step, fixed or adaptive (`dt_min`): f32's normal numbers end at 1.2e-38,
+/// and the margin keeps what the GPU computes from the step (products with speeds and
+/// accelerations) normal too.
+pub const MIN_DT: f64 = 1e-30;
 /// The most wall layers a boundary may ask for: the kernel's support is a few spacings deep.
 pub const MAX_WALL_LAYERS: u32 = 16;
 /// How far a given particle mass may be from rest_density x particle_spacing^3, as a factor.
@@ -203,6 +207,10 @@ impl Scene {
             }
         }
         positive("time.dt", self.time.dt)?;
+        if self.time.dt < MIN_DT {
+            return Err(err(origin, "time.dt", format!(
+                "is {}; must be at least {} (the GPU steps time in f32, which holds no smaller step)", short(self.time.dt), short(MIN_DT))));
+        }
         positive("time.end_time", self.time.end_time)?;
         self.validate_time_options(origin)?;
         ordered("domain", self.domain.min, self.domain.max)?;
@@ -379,6 +387,14 @@ impl Scene {
             let (lo, hi) = (t.dt_min.unwrap_or(t.dt * 1e-3), t.dt_max.unwrap_or(t.dt));
             if lo > hi {
                 return Err(err(origin, "time.dt_min", format!("is {}, above dt_max {}; must be <= dt_max", short(lo), short(hi))));
+            }
+            // The GPU chooses the step in f32: a bound below its normal numbers is a step of 0,
+            // and the run would never reach its end.
+            if lo < MIN_DT {
+                let field = if t.dt_min.is_some() { "time.dt_min" } else { "time.dt" };
+                return Err(err(origin, field, format!(
+                    "gives a smallest adaptive step of {}; must be at least {} (the GPU computes the step in f32, which holds no smaller step; dt_min defaults to dt / 1000)",
+                    short(lo), short(MIN_DT))));
             }
             if !self.physics.viscosity_schedule.is_empty() {
                 return Err(err(

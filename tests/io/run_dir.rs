@@ -214,6 +214,14 @@ fn unusable_output_locations_are_refused_before_anything_changes() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--frames file/frames"), "{}", stderr(&o));
     assert_eq!(tree(&dir.path().join("o")), before, "the earlier run was changed");
+    // A name no file system holds: bad input too, before any work.
+    let long = "n".repeat(300);
+    for flag in ["--out", "--frames"] {
+        let o = wgsph(&[&args[..], &[flag, &format!("x/{long}")]].concat(), dir.path());
+        assert_eq!(o.status.code(), Some(2), "{flag}: {}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("{flag} x/{long}: cannot be created: the name nnnnnnnnnnnnnnnnnnnn... is 300 bytes long")), "{}", stderr(&o));
+        assert!(!dir.path().join("x").exists());
+    }
     let Some(o) = with_read_only(&ro, &[&args[..], &["--out", "o", "--overwrite", "--frames", "ro/frames"]].concat(), dir.path()) else {
         return;
     };

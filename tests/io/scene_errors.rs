@@ -132,8 +132,9 @@ fn spacings_too_small_for_any_count_are_refused_not_allocated() {
 
 /// Values beyond any fluid (a particle mass a thousand times off its lattice cell's, a wall
 /// friction or density of 1e300, a block thrown faster than any speed of sound, a force probe's
-/// moment taken about a point 1e300 away, a thousand wall layers) are refused at load, naming
-/// the field and the range; before, they ran into NaN, a misleading diagnosis or a hang.
+/// moment taken about a point 1e300 away, a thousand wall layers, a step f32 cannot hold) are
+/// refused at load, naming the field and the range; before, they ran into NaN, a misleading
+/// diagnosis or a hang.
 #[test]
 fn values_beyond_any_fluid_are_refused_with_their_range() {
     let tank = GOOD.to_string() + "[[boundary]]\ntype = \"container\"\nmin = [0.1, 0.1, 0.1]\nmax = [0.6, 0.6, 0.6]\n";
@@ -145,6 +146,9 @@ fn values_beyond_any_fluid_are_refused_with_their_range() {
         (GOOD.replace("max = [0.4, 0.4, 0.4]", "max = [0.4, 0.4, 0.4]\nvelocity = [1e300, 0, 0]"), "fluid[0].velocity: is [1e300, 0, 0]; each component must be at most 1e8"),
         (tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nrest_density = 1e300"), "boundary[0].rest_density: is 1e300; must be between"),
         (tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nlayers = 1000"), "boundary[0].layers: is 1000; must be from 1 to 16"),
+        (GOOD.replace("dt = 0.001", "dt = 1e-46"), "time.dt: is 1e-46; must be at least 1e-30"),
+        (GOOD.replace("dt = 0.001", "dt = 1e-28\nadaptive = true"), "time.dt: gives a smallest adaptive step of 1e-31; must be at least 1e-30"),
+        (GOOD.replace("dt = 0.001", "dt = 0.001\nadaptive = true\ndt_min = 1e-40"), "time.dt_min: gives a smallest adaptive step of 1e-40"),
         (tank.clone() + probe + "moment_about = [1e300, 0, 0]\n", "probe[0] ('load').moment_about: is [1e300, 0, 0]; must lie within 1000 domain sizes (1000) of the domain"),
     ] {
         let e = error_of(&change);
