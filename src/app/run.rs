@@ -362,7 +362,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         (_, Some(e), _) => (RunStatus::Error, Some(format!("{e:#}"))),
         (_, None, Some(f)) => (RunStatus::Failed, Some(f)),
         (Some(signal), None, None) => {
-            (RunStatus::Interrupted, Some(format!("interrupted by {} at step {} (t = {:.6})", signal.name(), backend.steps_done(), backend.time())))
+            (RunStatus::Interrupted, Some(format!("interrupted by {} at step {} (t = {})", signal.name(), backend.steps_done(), crate::model::numbers::short_time(backend.time()))))
         }
         (None, None, None) => (RunStatus::Completed, None),
     };

@@ -246,7 +246,7 @@ impl Scene {
                 finite3(&format!("{f}.translate"), m.translate)?;
                 finite3(&format!("{f}.rotation_axis"), m.rotation_axis)?;
                 if !m.rotation_degrees.is_finite() {
-                    return Err(err(origin, format!("{f}.rotation_degrees"), format!("is {}; must be a finite number", m.rotation_degrees)));
+                    return Err(err(origin, format!("{f}.rotation_degrees"), format!("is {}; must be a finite number", short(m.rotation_degrees))));
                 }
                 if m.rotation_degrees != 0.0 && m.rotation_axis == [0.0; 3] {
                     return Err(err(origin, format!("{f}.rotation_axis"), "is zero; a rotation needs a non-zero axis"));
@@ -299,8 +299,12 @@ impl Scene {
                 Boundary::Plane { point, normal, restitution } => {
                     finite3(&format!("{f}.point"), *point)?;
                     finite3(&format!("{f}.normal"), *normal)?;
-                    if normal.iter().map(|c| c * c).sum::<f64>() < 1e-12 {
-                        return Err(err(origin, format!("{f}.normal"), "is zero; must be a non-zero vector"));
+                    // Normalised on load (`params`): its length must be a finite number away
+                    // from 0, or the unit normal would be 0 or NaN.
+                    let length = normal.iter().map(|c| c * c).sum::<f64>().sqrt();
+                    if !(1e-6..=1e150).contains(&length) {
+                        return Err(err(origin, format!("{f}.normal"), format!(
+                            "is {}, of length {}; must be a direction of length from 1e-6 to 1e150 (it is normalised)", short3(*normal), short(length))));
                     }
                     if !(restitution.is_finite() && (0.0..=1.0).contains(restitution)) {
                         return Err(err(origin, format!("{f}.restitution"), format!("is {}; must be in [0, 1]", short(*restitution))));
@@ -348,7 +352,7 @@ impl Scene {
         }
         for (field, v) in [("physics.dfsph.density_error", d.density_error), ("physics.dfsph.divergence_error", d.divergence_error)] {
             if !(v.is_finite() && v > 0.0 && v < 1.0) {
-                return Err(err(origin, field, format!("is {v}; must be in (0, 1) (a fraction: 0.0001 is 0.01 %)")));
+                return Err(err(origin, field, format!("is {}; must be in (0, 1) (a fraction: 0.0001 is 0.01 %)", short(v))));
             }
         }
         for (what, min, max) in [("", d.min_iterations, d.max_iterations), ("divergence_", d.min_divergence_iterations, d.max_divergence_iterations)] {

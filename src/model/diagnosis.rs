@@ -4,7 +4,7 @@
 //! those figures, and only a condition that they break is named as the cause; when none is
 //! broken the message says the cause is unknown, with the figures.
 
-use super::numbers::{short, short3};
+use super::numbers::{short, short3, short_time};
 use super::initial::SolidRegion;
 use super::kernels::KernelCoefficients;
 use super::params::Params;
@@ -261,7 +261,7 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
             short(limits.max_mach)
         ));
     }
-    let mut msg = format!("step {step} (t = {:.6}): {}.", m.time, what.join(", and "));
+    let mut msg = format!("step {step} (t = {}): {}.", short_time(m.time), what.join(", and "));
 
     // The conditions, each from the failing step's own figures.
     let dt = m.dt;

@@ -21,3 +21,13 @@ pub fn short(v: f64) -> String {
 pub fn short3(v: [f64; 3]) -> String {
     format!("[{}, {}, {}]", short(v[0]), short(v[1]), short(v[2]))
 }
+
+/// A simulated time for a message: six decimals, or [`short`] where that would print more than
+/// a dozen digits (a step of 1e300 s).
+pub fn short_time(t: f64) -> String {
+    if t.is_finite() && t.abs() < 1e7 {
+        format!("{t:.6}")
+    } else {
+        short(t)
+    }
+}

@@ -809,8 +809,15 @@ impl Scene {
             let field = e
                 .span()
                 .map(|s| {
-                    let line = text[..s.start.min(text.len())].lines().count().max(1);
-                    format!("line {line}")
+                    let start = s.start.min(text.len());
+                    let line = text[..start].lines().count().max(1);
+                    // The key whose value the error is about, where its line starts with one.
+                    let line_text = text[text[..start].rfind('\n').map_or(0, |i| i + 1)..].lines().next().unwrap_or("");
+                    let key = line_text.split_once('=').map(|(k, _)| k.trim()).filter(|k| !k.is_empty() && k.chars().all(|c| c.is_ascii_alphanumeric() || "_.-".contains(c)));
+                    match key {
+                        Some(key) => format!("line {line} ({key})"),
+                        None => format!("line {line}"),
+                    }
                 })
                 .unwrap_or_else(|| "toml".into());
             err(origin, field, readable_parse_error(e.message()))

@@ -62,7 +62,10 @@ fn a_missing_field_is_named() {
 #[test]
 fn a_wrong_type_or_unknown_field_is_named() {
     let e = error_of(&GOOD.replace("smoothing_length = 0.1", "smoothing_length = \"big\""));
-    assert!(e.contains("tank.toml") && e.contains("line"), "{e}");
+    assert!(e.contains("tank.toml: line 6 (smoothing_length):"), "{e}");
+    // Inside a table of an array (a probe): the key too, not the line alone.
+    let e = error_of(&(GOOD.to_string() + "[[probe]]\nname = \"p\"\ntype = \"point\"\nposition = [0.3, 0.3, 0.3]\nevery_steps = -1\n"));
+    assert!(e.contains("(every_steps): invalid value: integer `-1`"), "{e}");
     let e = error_of(&GOOD.replace("smoothing_length = 0.1", "smoothing_lenght = 0.1"));
     assert!(e.contains("smoothing_lenght"), "{e}");
     let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nequation_of_state = \"cubic\""));
@@ -146,6 +149,8 @@ fn values_beyond_any_fluid_are_refused_with_their_range() {
         (GOOD.replace("max = [0.4, 0.4, 0.4]", "max = [0.4, 0.4, 0.4]\nvelocity = [1e300, 0, 0]"), "fluid[0].velocity: is [1e300, 0, 0]; each component must be at most 1e8"),
         (tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nrest_density = 1e300"), "boundary[0].rest_density: is 1e300; must be between"),
         (tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nlayers = 1000"), "boundary[0].layers: is 1000; must be from 1 to 16"),
+        (GOOD.to_string() + "[[boundary]]\ntype = \"plane\"\npoint = [0, 0, 0]\nnormal = [1e300, 1e300, 0]\n", "boundary[0].normal: is [1e300, 1e300, 0], of length inf; must be a direction of length from 1e-6 to 1e150"),
+        (GOOD.to_string() + "[[boundary]]\ntype = \"plane\"\npoint = [0, 0, 0]\nnormal = [1e-300, 0, 0]\n", "boundary[0].normal: is [1e-300, 0, 0], of length 1e-300; must be"),
         (GOOD.replace("dt = 0.001", "dt = 1e-46"), "time.dt: is 1e-46; must be at least 1e-30"),
         (GOOD.replace("dt = 0.001", "dt = 1e-28\nadaptive = true"), "time.dt: gives a smallest adaptive step of 1e-31; must be at least 1e-30"),
         (GOOD.replace("dt = 0.001", "dt = 0.001\nadaptive = true\ndt_min = 1e-40"), "time.dt_min: gives a smallest adaptive step of 1e-40"),

@@ -66,7 +66,8 @@ pub fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 
 /// Parses `MIN:MAX` for a fixed colour range.
 pub fn parse_range(s: &str) -> Result<(f32, f32), String> {
-    let err = || format!("'{s}' is not a colour range; write MIN:MAX with finite MIN < MAX, e.g. 0:2.5");
+    // The picture colours in f32: a bound beyond its range (3.4e38) is no finite colour.
+    let err = || format!("'{s}' is not a colour range; write MIN:MAX with MIN < MAX, each within +-3.4e38 (f32), e.g. 0:2.5");
     let (a, b) = s.split_once(':').ok_or_else(err)?;
     let a: f32 = a.trim().parse().map_err(|_| err())?;
     let b: f32 = b.trim().parse().map_err(|_| err())?;
