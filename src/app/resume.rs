@@ -5,7 +5,7 @@ use super::errors::InputError;
 use super::run::{exit_code_of, report_run, run, steps_for_time, ResumedRun, RunOptions};
 use super::signals;
 use crate::io::checkpoint::{read, read_where, Checkpoint, CheckpointFile, CHECKPOINT_FILE};
-use crate::io::rundir::{remove_partial_files, SCENE_COPY};
+use crate::io::rundir::{remove_partial_files, SCENE_COPY, SNAPSHOTS_DIR};
 use crate::io::summary::Summary;
 use crate::model::scene::{Scene, SceneOrigin};
 use crate::solver::{open, Backend, BackendChoice, Precision, Ranks};
@@ -107,6 +107,16 @@ pub fn resume_with(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u
     continue_run(backend, dir, c, end, progress, writes_files)
 }
 
+/// The checkpoint's last snapshot `recorded` as a file of the run directory `dir`: a run's
+/// snapshots live in its snapshots/, and a directory copied or moved since the checkpoint was
+/// written names its own, not the one it came from.
+fn own_snapshot(dir: &Path, recorded: &str) -> PathBuf {
+    match Path::new(recorded).file_name() {
+        Some(name) => dir.join(SNAPSHOTS_DIR).join(name),
+        None => PathBuf::from(recorded),
+    }
+}
+
 /// Runs a backend that holds the state of `c` on to step `end` (see [`resume_with`]).
 fn continue_run(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u64, progress: bool, writes_files: bool) -> anyhow::Result<Summary> {
     let step = c.state.step;
@@ -120,7 +130,7 @@ fn continue_run(backend: &mut dyn Backend, dir: &Path, c: &Checkpoint, end: u64,
         progress,
         formats: c.run.formats.clone(),
         checkpoint_every: c.run.checkpoint_every,
-        resumed: Some(ResumedRun { last_snapshot: c.run.last_snapshot.as_ref().map(PathBuf::from), max_speed: c.run.max_speed }),
+        resumed: Some(ResumedRun { last_snapshot: c.run.last_snapshot.as_deref().map(|p| own_snapshot(dir, p)), max_speed: c.run.max_speed }),
         frames: None,
         end_time: c.run.end_time,
         surface_mesh_every: c.run.surface_mesh_every,
@@ -140,4 +150,16 @@ pub fn choice_of_kind(kind: &str) -> anyhow::Result<BackendChoice> {
         "cpu f32" => BackendChoice::cpu(Precision::F32),
         other => anyhow::bail!("the checkpoint names an unknown backend '{other}'"),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::own_snapshot;
+    use std::path::Path;
+
+    #[test]
+    fn a_copied_run_directory_names_its_own_last_snapshot() {
+        assert_eq!(own_snapshot(Path::new("copy"), "runs/original/snapshots/step_000010.csv"), Path::new("copy/snapshots/step_000010.csv"));
+        assert_eq!(own_snapshot(Path::new("/data/run"), "/data/run/snapshots/step_000002.vtk"), Path::new("/data/run/snapshots/step_000002.vtk"));
+    }
 }

@@ -33,7 +33,7 @@ pub const MARKER: &str = ".wgsph-run";
 /// a new run (removed once the new run took its first step, moved back if it did not).
 const REPLACED_PREFIX: &str = ".wgsph-replaced-";
 /// The subdirectories a run writes, and the files it writes in them.
-const SNAPSHOTS_DIR: &str = "snapshots";
+pub const SNAPSHOTS_DIR: &str = "snapshots";
 const SURFACE_DIR: &str = "surface";
 /// The probes' time series and plots (`probes/NAME.csv`, `probes/NAME.png`).
 pub const PROBES_DIR: &str = "probes";
