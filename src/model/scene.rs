@@ -806,20 +806,7 @@ impl Scene {
     /// Parses and validates a scene.
     pub fn from_toml_str(text: &str, origin: &SceneOrigin) -> Result<Scene, SceneError> {
         let mut scene: Scene = toml::from_str(text).map_err(|e| {
-            let field = e
-                .span()
-                .map(|s| {
-                    let start = s.start.min(text.len());
-                    let line = text[..start].lines().count().max(1);
-                    // The key whose value the error is about, where its line starts with one.
-                    let line_text = text[text[..start].rfind('\n').map_or(0, |i| i + 1)..].lines().next().unwrap_or("");
-                    let key = line_text.split_once('=').map(|(k, _)| k.trim()).filter(|k| !k.is_empty() && k.chars().all(|c| c.is_ascii_alphanumeric() || "_.-".contains(c)));
-                    match key {
-                        Some(key) => format!("line {line} ({key})"),
-                        None => format!("line {line}"),
-                    }
-                })
-                .unwrap_or_else(|| "toml".into());
+            let field = e.span().map(|span| parse_error_place(text, span, e.message())).unwrap_or_else(|| "toml".into());
             err(origin, field, readable_parse_error(e.message()))
         })?;
         scene.read_meshes(origin)?;
@@ -1245,6 +1232,52 @@ impl ProbeSpec {
 /// A reader's message in the scene file's words: the reader names the type it expected
 /// (`expected struct DfsphSettings`), which a scene's author never sees; a table is what the
 /// file gives there.
+/// Where in `text` a parse error lies: its line, with the key whose value it is about. The
+/// reader's span is the value itself for a plain field, and the whole table for one of a
+/// `[[boundary]]` or `[[probe]]` array (read through its `type`): there the key is the one
+/// line of the table that holds the value the message quotes (`string "x"`, ``integer `-1` ``).
+fn parse_error_place(text: &str, span: std::ops::Range<usize>, message: &str) -> String {
+    let start = span.start.min(text.len());
+    let line_of = |at: usize| text[..at].lines().count().max(1) + usize::from(at > 0 && text.as_bytes()[at - 1] == b'\n');
+    let key_of = |line: &str| -> Option<String> {
+        let key = line.split_once('=')?.0.trim();
+        (!key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || "_.-".contains(c))).then(|| key.to_string())
+    };
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let first_line = text[line_start..].lines().next().unwrap_or("");
+    if let Some(key) = key_of(first_line) {
+        return format!("line {} ({key})", line_of(line_start));
+    }
+    // The value the message quotes, searched among the lines that follow.
+    let quoted = ["string ", "integer `", "floating point `", "boolean `"].iter().find_map(|kind| {
+        let rest = &message[message.find(kind)? + kind.len()..];
+        if kind.ends_with('`') {
+            rest.split('`').next().map(str::to_string)
+        } else {
+            rest.strip_prefix('"').and_then(|r| r.split('"').next()).map(|v| format!("\"{v}\""))
+        }
+    });
+    if let Some(value) = quoted {
+        // From the span's line on (the reader's span may end before the table does): a value
+        // that does not fit is rarely written twice.
+        let mut offset = line_start;
+        let mut found = Vec::new();
+        for line in text[line_start..].split_inclusive('\n') {
+            if let Some((key, v)) = line.split_once('=') {
+                let v = v.split('#').next().unwrap_or("").trim();
+                if v == value && key_of(line).is_some() {
+                    found.push((line_of(offset), key.trim().to_string()));
+                }
+            }
+            offset += line.len();
+        }
+        if let [(line, key)] = found.as_slice() {
+            return format!("line {line} ({key})");
+        }
+    }
+    format!("line {}", line_of(line_start))
+}
+
 pub(crate) fn readable_parse_error(message: &str) -> String {
     match message.split_once("expected struct ") {
         Some((before, after)) => {

@@ -66,6 +66,13 @@ fn a_wrong_type_or_unknown_field_is_named() {
     // Inside a table of an array (a probe): the key too, not the line alone.
     let e = error_of(&(GOOD.to_string() + "[[probe]]\nname = \"p\"\ntype = \"point\"\nposition = [0.3, 0.3, 0.3]\nevery_steps = -1\n"));
     assert!(e.contains("(every_steps): invalid value: integer `-1`"), "{e}");
+    // In a [[boundary]] table, read through its type, the reader points at the whole table: the
+    // key is the one line that holds the value the message quotes.
+    let tank = GOOD.to_string() + "[[boundary]]\ntype = \"box\"\nmin = [0.5, 0.5, 0.5]\nmax = \"x\"\n";
+    let e = error_of(&tank);
+    assert!(e.contains("tank.toml: line 18 (max): invalid type: string \"x\""), "{e}");
+    let e = error_of(&tank.replace("max = \"x\"", "max = [0.6, 0.6, 0.6]\nlayers = -2"));
+    assert!(e.contains("line 19 (layers): invalid value: integer `-2`"), "{e}");
     let e = error_of(&GOOD.replace("smoothing_length = 0.1", "smoothing_lenght = 0.1"));
     assert!(e.contains("smoothing_lenght"), "{e}");
     let e = error_of(&GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nequation_of_state = \"cubic\""));
