@@ -31,6 +31,17 @@ pub fn main() -> i32 {
 pub fn main_joining_ranks(join: Option<ranks::Join>) -> i32 {
     quiet_wayland_probe();
     let cli = Cli::parse();
+    // Output into a closed pipe (`wgsph run | head -1`) ends the process as it ends any Unix
+    // tool, by SIGPIPE, instead of a panic in the next print; the files a run writes are
+    // atomic, so none is left half-written. Not for the viewer, whose display connection is a
+    // socket that may close under it.
+    #[cfg(unix)]
+    if !matches!(cli.command, Some(Command::View(_))) {
+        // SAFETY: sets the disposition of one signal to its default before any thread starts.
+        unsafe {
+            libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+        }
+    }
     let quiet = matches!(&cli.command, Some(Command::Run(a)) if a.quiet);
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(if quiet { "error" } else { "warn" })).init();
     let result = match cli.command {

@@ -15,6 +15,16 @@ use std::path::{Path, PathBuf};
 /// Continues the run in `dir` from its checkpoint, to the end it was heading to, or for
 /// `--steps N` / `--time T` more.
 pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
+    // The checkpoint records the run, not how its GPU step was tuned: a flag given here would
+    // be silently unused (and a neighbour skin changes the sums' order).
+    let tuning = args.tuning.given();
+    if !tuning.is_empty() {
+        return Err(InputError(format!(
+            "--resume continues a run with the checkpoint's settings and the GPU step's defaults; {} cannot be given with it (a run with a neighbour skin resumes without one)",
+            tuning.join(", ")
+        ))
+        .into());
+    }
     let writes_files = super::ranks::writes_files(ranks);
     let path = dir.join(CHECKPOINT_FILE);
     if !path.exists() {

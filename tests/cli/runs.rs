@@ -213,6 +213,47 @@ fn resume_removes_the_partial_files_a_killed_run_left() {
     assert!(mine.exists(), "a file the writer did not name was removed");
 }
 
+/// `--resume` takes no GPU tuning flag (the checkpoint does not record them; a neighbour skin
+/// given there was silently unused), and a VTK series index that is not the run's is bad
+/// input, left as it is.
+#[test]
+fn resume_refuses_tuning_flags_and_a_foreign_series_index() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "4", "--backend", "cpu", "--format", "csv,vtk", "--checkpoint-every", "4", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    for flag in [&["--neighbour-skin", "0.1"][..], &["--fused"][..]] {
+        let o = wgsph(&[&["run", "--resume", "o", "--steps", "2"][..], flag].concat(), dir.path());
+        assert_eq!(o.status.code(), Some(2), "{flag:?}: {}", text(&o.stderr));
+        assert!(text(&o.stderr).contains(&format!("{} cannot be given with it", flag[0])), "{}", text(&o.stderr));
+    }
+    let series = dir.path().join("o/snapshots/particles.vtk.series");
+    std::fs::write(&series, "garbage\n").unwrap();
+    let o = wgsph(&["run", "--resume", "o", "--steps", "2"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("is not the run's file series"), "{}", text(&o.stderr));
+    assert_eq!(std::fs::read_to_string(&series).unwrap(), "garbage\n");
+}
+
+/// Output into a closed pipe (`wgsph run | head -1`) ends the process by SIGPIPE, as any Unix
+/// tool, not with a panic (exit 101) in its next print.
+#[cfg(unix)]
+#[test]
+fn a_closed_output_pipe_ends_the_process_without_a_panic() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .args(["run", "hydrostatic", "--particles", "300", "--steps", "3", "--backend", "cpu", "--out", "o"])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{:?}: {}", out.status, text(&out.stderr));
+    assert!(!text(&out.stderr).contains("panicked"), "{}", text(&out.stderr));
+}
+
 /// What `--resume` finds changed in the run's directory: an edited `scene.toml` is said to be
 /// unused (the checkpoint's scene runs on), a probe's missing series is said to restart, and a
 /// file where a probe's series was that is not one is refused (exit 2) and left as it was.

@@ -51,9 +51,12 @@ fn choose_and_record_dt(cfl_dt: f32, accel: f32) {
     let sum = bitcast<f32>(atomicLoad(&status[STATUS_TIME]));
     let compensation = bitcast<f32>(atomicLoad(&status[STATUS_TIME_COMPENSATION]));
     let y = dt - compensation;
-    let t = sum + y;
+    atomicStore(&status[STATUS_TIME], bitcast<u32>(sum + y));
+    // The rounded sum read back from memory: written as (sum + y - sum) - y, a compiler that
+    // reassociates floating point (Mesa's, measured: 5000 steps of 2e-4 s lost 5.9e-5 s) folds
+    // the compensation to 0.
+    let t = bitcast<f32>(atomicLoad(&status[STATUS_TIME]));
     atomicStore(&status[STATUS_TIME_COMPENSATION], bitcast<u32>((t - sum) - y));
-    atomicStore(&status[STATUS_TIME], bitcast<u32>(t));
     atomicStore(&status[STATUS_DT_MIN], bitcast<u32>(min(bitcast<f32>(atomicLoad(&status[STATUS_DT_MIN])), dt)));
     atomicStore(&status[STATUS_DT_MAX], bitcast<u32>(max(bitcast<f32>(atomicLoad(&status[STATUS_DT_MAX])), dt)));
 }
