@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     // The checkpoint records the run, not how its GPU step was tuned: a flag given here would
     // be silently unused (and a neighbour skin changes the sums' order).
-    let tuning = args.tuning.given();
+    let tuning = args.gpu.given();
     if !tuning.is_empty() {
         return Err(InputError(format!(
             "--resume continues a run with the checkpoint's settings and the GPU step's defaults; {} cannot be given with it (a run with a neighbour skin resumes without one)",

@@ -36,7 +36,8 @@ fn take_speed_and_acceleration() -> vec2<f32> {
 
 // dt = clamp(min(cfl_dt, C_f sqrt(h / |a|max), C_visc h^2 / nu), dt_min, dt_max) (Monaghan
 // 1992; Morris et al. 1997), a condition whose quantity is zero left out; then the dt, the
-// simulated time (a Kahan-compensated sum, so that 10^5 steps of f32 lose no time) and the dt
+// simulated time (a Kahan-compensated sum; a compiler that reassociates floating point, as
+// Mesa's lavapipe does, drops the compensation: docs/scenes.md) and the dt
 // range go to the status words (one thread).
 fn choose_and_record_dt(cfl_dt: f32, accel: f32) {
     var dt = cfl_dt;
@@ -51,12 +52,9 @@ fn choose_and_record_dt(cfl_dt: f32, accel: f32) {
     let sum = bitcast<f32>(atomicLoad(&status[STATUS_TIME]));
     let compensation = bitcast<f32>(atomicLoad(&status[STATUS_TIME_COMPENSATION]));
     let y = dt - compensation;
-    atomicStore(&status[STATUS_TIME], bitcast<u32>(sum + y));
-    // The rounded sum read back from memory: written as (sum + y - sum) - y, a compiler that
-    // reassociates floating point (Mesa's, measured: 5000 steps of 2e-4 s lost 5.9e-5 s) folds
-    // the compensation to 0.
-    let t = bitcast<f32>(atomicLoad(&status[STATUS_TIME]));
+    let t = sum + y;
     atomicStore(&status[STATUS_TIME_COMPENSATION], bitcast<u32>((t - sum) - y));
+    atomicStore(&status[STATUS_TIME], bitcast<u32>(t));
     atomicStore(&status[STATUS_DT_MIN], bitcast<u32>(min(bitcast<f32>(atomicLoad(&status[STATUS_DT_MIN])), dt)));
     atomicStore(&status[STATUS_DT_MAX], bitcast<u32>(max(bitcast<f32>(atomicLoad(&status[STATUS_DT_MAX])), dt)));
 }
