@@ -535,7 +535,7 @@ pub fn host_memory_shortfall_with(particles: u64, cells: u64, per_particle: u64,
 
 /// Bytes the CPU path's neighbour lists hold per fluid particle beyond [`CPU_BYTES_PER_PARTICLE`]
 /// (which covers a support of two spacings): an index of 4 bytes per neighbour at rest, 4/3 pi
-/// (h / s)^3 of them. Measured peak resident memory of 2-step runs fell 10-35 % below this model
+/// (h / s)^3 of them. Measured peak resident memory of 2-step runs fell 12-25 % below this model
 /// from h / s = 8 to 16 (1,000 to 64,000 fluid particles among 28,000 to 690,000 wall particles);
 /// at h / s = 16 the lists take about 65 KB per fluid particle.
 pub fn cpu_list_bytes_per_fluid_particle(h: f64, spacing: f64) -> u64 {

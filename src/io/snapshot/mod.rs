@@ -56,7 +56,9 @@ impl SnapshotWriter {
         let mut w = SnapshotWriter::new(out, formats);
         let index = w.series_path();
         if w.formats.contains(&SnapshotFormat::Vtk) && index.exists() {
-            w.series = FileSeries::read_up_to(&index, last_step)?;
+            // Not the run's own index: what is in the directory is in the way (bad input), and
+            // is left as it is.
+            w.series = FileSeries::read_up_to(&index, last_step).map_err(|e| crate::io::rundir::RunDirError(format!("{e:#}")))?;
         }
         w.index = SnapshotIndex::read_up_to(&w.index_path(), &w.formats, last_step)?;
         Ok(w)

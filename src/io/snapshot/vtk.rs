@@ -81,11 +81,8 @@ impl FileSeries {
     /// later ones).
     pub fn read_up_to(path: &Path, last_step: u64) -> anyhow::Result<FileSeries> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        // Not the run's own index: what is in the directory is in the way (bad input), and is
-        // left as it is.
-        let mut series: FileSeries = serde_json::from_str(&text).map_err(|e| {
-            crate::io::rundir::RunDirError(format!("{} is not the run's file series ({e}); move it out of the way to resume", path.display()))
-        })?;
+        let mut series: FileSeries =
+            serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{} is not the run's file series ({e}); move it out of the way to resume", path.display()))?;
         series.files.retain(|e| super::format::step_of_name(&e.name).is_some_and(|s| s <= last_step));
         Ok(series)
     }
