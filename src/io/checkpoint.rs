@@ -27,7 +27,7 @@ use std::path::Path;
 pub const CHECKPOINT_FILE: &str = "checkpoint.wgsph";
 const MAGIC: &[u8; 8] = b"WGSPHCKP";
 /// Bumped whenever the payload's layout or meaning changes.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// The wgsph version written into (and required of) checkpoints.
 pub const WGSPH_VERSION: &str = env!("CARGO_PKG_VERSION");
 

@@ -163,6 +163,81 @@ impl<R: Real> Grid<R> {
     }
 }
 
+/// The simulated time of the GPU's adaptive step, summed exactly: significand 2^exponent, the
+/// significand a 64-bit integer held at most 2^62. Each dt, an f32 m 2^e with a 24-bit m, adds
+/// as m shifted by e - exponent (rounded to nearest only when e < exponent); the exponent grows
+/// when the significand passes 2^62 or a dt would shift past it. So the sum is exact while each
+/// dt's last bit lies above time / 2^62, on any device: integer arithmetic, unlike a Kahan sum's
+/// compensation, cannot be reassociated away by a shader compiler. The twin of `add_to_time` in
+/// wgsl/shared/adaptive_dt.wgsl, whose status words hold it (src/solver/gpu/params.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TimeSum {
+    pub significand: u64,
+    pub exponent: i32,
+}
+
+impl TimeSum {
+    /// Zero, at the exponent of the smallest f32 (2^-149), where every f32 adds exactly.
+    pub const ZERO: TimeSum = TimeSum { significand: 0, exponent: -149 };
+    /// The largest significand held (2^62: a sum of two then fits in 64 bits).
+    const SIGNIFICAND_LIMIT: u64 = 1 << 62;
+    /// How far a 24-bit m may be shifted up and stay below 2^62.
+    const SHIFT_ROOM: i32 = 38;
+
+    /// The time, rounded to f64.
+    pub fn seconds(&self) -> f64 {
+        self.significand as f64 * 2f64.powi(self.exponent)
+    }
+
+    /// A time given in seconds (finite, >= 0): exact, as an f64's 53-bit significand fits.
+    pub fn from_seconds(t: f64) -> TimeSum {
+        if !(t.is_finite() && t > 0.0) {
+            return TimeSum::ZERO;
+        }
+        let bits = t.to_bits();
+        let biased = ((bits >> 52) & 0x7ff) as i32;
+        let fraction = bits & ((1 << 52) - 1);
+        let (significand, exponent) = if biased == 0 { (fraction, -1074) } else { (fraction | 1 << 52, biased - 1075) };
+        TimeSum { significand, exponent }
+    }
+
+    /// Adds a step's dt (> 0, finite): the same operations as the shader's.
+    pub fn add(&mut self, dt: f32) {
+        let bits = dt.to_bits();
+        let biased = ((bits >> 23) & 0xff) as i32;
+        let m = (bits & 0x7f_ffff) as u64 | if biased == 0 { 0 } else { 0x80_0000 };
+        let e = biased.max(1) - 150;
+        if e - self.exponent > Self::SHIFT_ROOM {
+            self.significand = shift_right_rounded(self.significand, (e - Self::SHIFT_ROOM - self.exponent) as u32);
+            self.exponent = e - Self::SHIFT_ROOM;
+        }
+        self.significand += if e >= self.exponent { m << (e - self.exponent) } else { shift_right_rounded(m, (self.exponent - e) as u32) };
+        if self.significand > Self::SIGNIFICAND_LIMIT {
+            self.significand = shift_right_rounded(self.significand, 1);
+            self.exponent += 1;
+        }
+    }
+
+    /// The three status words: the significand's low and high word, the exponent's bits.
+    pub fn words(&self) -> [u32; 3] {
+        [self.significand as u32, (self.significand >> 32) as u32, self.exponent as u32]
+    }
+
+    pub fn from_words(w: [u32; 3]) -> TimeSum {
+        TimeSum { significand: (w[1] as u64) << 32 | w[0] as u64, exponent: w[2] as i32 }
+    }
+}
+
+/// v / 2^k rounded to nearest, ties up (v < 2^63, so adding 2^(k - 1) cannot overflow, and
+/// v / 2^64 rounds to 0).
+fn shift_right_rounded(v: u64, k: u32) -> u64 {
+    match k {
+        0 => v,
+        1..=63 => (v + (1 << (k - 1))) >> k,
+        _ => 0,
+    }
+}
+
 /// Adaptive time stepping, resolved: dt = clamp(min(C_cfl h / (c0 + |v|max),
 /// C_f sqrt(h / |a|max), C_visc h^2 / nu), dt_min, dt_max) (Monaghan 1992; Morris et al. 1997
 /// for the viscous condition).
@@ -338,3 +413,90 @@ pub const MAX_PLANES: usize = 8;
 /// Most solid boxes a scene may have (their faces live in the GPU's parameter block too).
 pub const MAX_SOLID_BOXES: usize = 8;
 
+
+#[cfg(test)]
+mod tests {
+    use super::TimeSum;
+
+    /// The sum in units of 2^-60 s, exact in a u128 for dts of at least 2^-20 s.
+    fn exact_in_units(dts: &[f32]) -> u128 {
+        dts.iter()
+            .map(|&dt| {
+                let bits = dt.to_bits();
+                let m = ((bits & 0x7f_ffff) | 0x80_0000) as u128;
+                let e = ((bits >> 23) & 0xff) as i32 - 150;
+                assert!(e >= -60, "{dt} is below the reference's unit");
+                m << (e + 60)
+            })
+            .sum()
+    }
+
+    fn in_units(t: TimeSum) -> u128 {
+        assert!(t.exponent >= -60, "{t:?}");
+        (t.significand as u128) << (t.exponent + 60)
+    }
+
+    #[test]
+    fn a_time_sum_is_exact_where_a_float_sum_is_not() {
+        let mut t = TimeSum::ZERO;
+        let mut f32_sum = 0.0f32;
+        for _ in 0..5000 {
+            t.add(2e-4);
+            f32_sum += 2e-4;
+        }
+        assert_eq!(t.seconds(), 2e-4f32 as f64 * 5000.0);
+        assert_ne!(f32_sum as f64, t.seconds());
+        // 200,000 dts from 1e-6 to 1e-3 s (up to 100 s): the sum is the exact one, bit for bit.
+        let mut state = 12345u64;
+        let dts: Vec<f32> = (0..200_000)
+            .map(|_| {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                10f32.powf(-6.0 + 3.0 * (state >> 40) as f32 / (1u64 << 24) as f32)
+            })
+            .collect();
+        let mut t = TimeSum::ZERO;
+        for &dt in &dts {
+            t.add(dt);
+        }
+        assert_eq!(in_units(t), exact_in_units(&dts));
+        assert!(t.significand <= 1 << 62);
+    }
+
+    #[test]
+    fn a_time_sum_makes_room_for_a_large_dt_and_rounds_a_negligible_one() {
+        // A dt far above the sum so far: the sum's low bits are rounded away, the dt kept whole.
+        let mut t = TimeSum::ZERO;
+        t.add(1e-30);
+        t.add(1.0);
+        assert_eq!(t.seconds(), 1.0);
+        t.add(3.0);
+        assert_eq!(t.seconds(), 4.0);
+        // A dt far below time / 2^62 rounds to nothing.
+        let mut t = TimeSum::from_seconds(1.0);
+        for _ in 0..20 {
+            t.add(1.0);
+        }
+        assert_eq!(t.seconds(), 21.0);
+        let before = t;
+        t.add(2f32.powi(-80));
+        assert_eq!(t, before, "far below the last bit");
+        // Subnormal and huge dts are still sums of their values.
+        let mut t = TimeSum::ZERO;
+        t.add(f32::from_bits(1));
+        t.add(f32::from_bits(1));
+        assert_eq!(t.seconds(), 2.0 * f32::from_bits(1) as f64);
+        t.add(f32::MAX);
+        assert_eq!(t.seconds(), f32::MAX as f64);
+    }
+
+    #[test]
+    fn a_time_in_seconds_converts_exactly_both_ways() {
+        for s in [0.0, 5e-324, 1e-300, 0.1 + 0.2, 1.5, 12345.678, 1e10, f64::MAX] {
+            assert_eq!(TimeSum::from_seconds(s).seconds(), s, "{s}");
+            let t = TimeSum::from_seconds(s);
+            assert_eq!(TimeSum::from_words(t.words()), t);
+        }
+        assert_eq!(TimeSum::from_seconds(f64::NAN), TimeSum::ZERO);
+        assert_eq!(TimeSum::from_seconds(-1.0), TimeSum::ZERO);
+    }
+}

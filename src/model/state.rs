@@ -230,8 +230,8 @@ pub struct BackendState {
     /// time differ from step x dt).
     pub time: f64,
     pub dt_min_max_last: [f64; 3],
-    /// The GPU's whole status buffer (health counters, and the adaptive step's dt, time and
-    /// its compensation), restored word for word.
+    /// The GPU's whole status buffer (health counters, and the adaptive step's dt and exact
+    /// time), restored word for word.
     pub gpu_status: Vec<u32>,
     /// DFSPH: each particle's stiffness sums of the last step (constant-density solve,
     /// divergence solve), by original id, where the next step's solves start; empty for WCSPH.

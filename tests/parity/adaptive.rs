@@ -10,6 +10,7 @@ use wgsph::solver::compare::ONE_STEP;
 use wgsph::app::run::run;
 use wgsph::app::run::RunOptions;
 use wgsph::model::params::AdaptiveDt;
+use wgsph::model::params::TimeSum;
 use wgsph::solver::Backend;
 
 /// The GPU against the CPU after one step (to the one-step bounds), then after 99 more (to the
@@ -209,5 +210,46 @@ fn continuity_density_with_adaptive_dt_agrees_between_gpu_and_the_f64_cpu_path()
         one_step_then_a_hundred_agree(&mut gpu, &mut cpu, &who);
         let (sg, sc) = (gpu.dt_stats().unwrap(), cpu.dt_stats());
         assert!((sg.mean - sc.mean).abs() < 1e-3 * sc.mean && sc.min < sc.max, "{who}: {sg:?} against {sc:?}");
+    }
+}
+
+/// The GPU sums the adaptive steps' dt exactly (a 64-bit integer significand, wgsl/shared/
+/// adaptive_dt.wgsl): 1,000 steps held at dt_max give 1,000 times dt_max as f32 holds it, to the
+/// last bit of an f64, on every adapter. A plain f32 sum is off after a few steps, and a Kahan
+/// sum's compensation is optimised away by compilers that reassociate (lavapipe: 5,000 steps
+/// gave 0.999941 s for 0.99999997 s).
+#[test]
+fn the_gpu_sums_adaptive_time_exactly() {
+    let dt = 2e-4;
+    let s = TestScene::small_tank().dt(dt).adaptive().build();
+    let exact = (dt as f32) as f64 * 1000.0;
+    for ctx in common::contexts() {
+        let mut gpu = common::gpu(ctx, &s);
+        gpu.step(1000).unwrap();
+        let health = gpu.health().unwrap();
+        assert!(health.is_ok(), "{}: {health:?}", gpu.adapter());
+        assert_eq!(gpu.time(), exact, "{}", gpu.adapter());
+        assert_eq!(gpu.dt_stats().unwrap().mean, exact / 1000.0, "{}", gpu.adapter());
+    }
+}
+
+/// A varying dt (dt_max far above the CFL step): the GPU's time words are its twin's sum
+/// (TimeSum) of the dts it chose, step by step, on every adapter.
+#[test]
+fn the_gpu_time_is_its_twins_sum_of_the_dts_it_chose() {
+    let s = TestScene::small_tank().adaptive().dt_max(0.002).build();
+    for ctx in common::contexts() {
+        let mut gpu = common::gpu(ctx, &s);
+        let mut twin = TimeSum::ZERO;
+        let mut seen = Vec::new();
+        for _ in 0..60 {
+            gpu.step(1).unwrap();
+            let dt = gpu.dt_stats().unwrap().last as f32;
+            twin.add(dt);
+            seen.push(dt);
+            assert_eq!(gpu.time(), twin.seconds(), "{} after {} steps", gpu.adapter(), seen.len());
+        }
+        seen.dedup();
+        assert!(seen.len() > 10, "{}: the step hardly changed: {seen:?}", gpu.adapter());
     }
 }

@@ -135,8 +135,8 @@ const STATUS_MAX_DENSITY: u32 = 4u;           // positive floats order like thei
 const STATUS_MAX_SPEED: u32 = 5u;             // adaptive dt: this step's largest |v|
 const STATUS_MAX_ACCELERATION: u32 = 6u;      // adaptive dt: this step's largest |a|
 const STATUS_DT: u32 = 7u;                    // adaptive dt: this step's dt
-const STATUS_TIME: u32 = 8u;                  // adaptive dt: time = TIME - TIME_COMPENSATION
-const STATUS_TIME_COMPENSATION: u32 = 9u;     // (a Kahan sum)
+const STATUS_TIME_LO: u32 = 8u;               // adaptive dt: time = (HI 2^32 + LO) 2^EXPONENT
+const STATUS_TIME_HI: u32 = 9u;               // (shared/adaptive_dt.wgsl add_to_time)
 const STATUS_DT_MIN: u32 = 10u;
 const STATUS_DT_MAX: u32 = 11u;
 const STATUS_STEP_MAX_DENSITY: u32 = 12u;     // this step's largest density (reset by finish_step)
@@ -165,6 +165,7 @@ const STATUS_DIVERGENCE_ITERATIONS_MAX: u32 = 32u;
 const STATUS_DIVERGENCE_ITERATIONS_LAST: u32 = 33u;
 const STATUS_DIVERGENCE_ERROR: u32 = 34u;
 const STATUS_DIVERGENCE_UNCONVERGED: u32 = 35u;
+const STATUS_TIME_EXPONENT: u32 = 36u;        // adaptive dt: the time's power of two (an i32)
 const STATUS_NO_BAD_STEP: u32 = 0xffffffffu;
 const CAUSE_NON_FINITE: u32 = 1u;
 const CAUSE_ESCAPED: u32 = 2u;

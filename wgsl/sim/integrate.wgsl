@@ -141,8 +141,7 @@ fn finish_step() {
         atomicStore(&status[STATUS_BAD_MAX_SPEED], speed);
         atomicStore(&status[STATUS_BAD_DT], bitcast<u32>(step_dt()));
         if (ADAPTIVE_DT) {
-            let time = bitcast<f32>(atomicLoad(&status[STATUS_TIME])) - bitcast<f32>(atomicLoad(&status[STATUS_TIME_COMPENSATION]));
-            atomicStore(&status[STATUS_BAD_TIME], bitcast<u32>(time));
+            atomicStore(&status[STATUS_BAD_TIME], bitcast<u32>(simulated_time()));
         }
     }
 }

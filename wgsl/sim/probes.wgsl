@@ -36,6 +36,8 @@
 const PROBE_WORKGROUP: u32 = 128u;
 const FORCE_SLOTS: u32 = 6u;
 const FRONT_SLOTS: u32 = 2u;
+// Words before a row's values: the step, the time (three words, shared/adaptive_dt.wgsl), dt.
+const PROBE_ROW_HEAD: u32 = 5u;
 // 4 force probes of 6 slots and 4 front probes of 2 (src/model/probes.rs MAX_*_PROBES).
 const MAX_SLOTS: u32 = 32u;
 const PROBE_POINT: u32 = 0u;
@@ -148,19 +150,20 @@ fn gauge_surface(x: f32, z: f32, bottom: f32, top: f32, step: f32) -> f32 {
 // Where row `r` of the sample buffer starts: the rows follow the values and the partials.
 fn row_start(r: u32) -> u32 {
     let sizes = table_layout();
-    return 1u + sizes.z + r * (4u + sizes.x);
+    return 1u + sizes.z + r * (PROBE_ROW_HEAD + sizes.x);
 }
 
-// The head of the row this sample fills: the step, the time (a compensated pair) and the last
+// The head of the row this sample fills: the step, the time (its three words) and the last
 // step's dt, as the status words hold them when the sample starts. Written here, before the
 // step's work, since a DFSPH step chooses its dt (and advances the time words) between its
 // point probes and the rest of its sample.
 fn write_row_head() {
     let row = row_start(probe_data_at(0u));
     probe_data_set(row, atomicLoad(&status[STATUS_STEPS]));
-    probe_data_set(row + 1u, atomicLoad(&status[STATUS_TIME]));
-    probe_data_set(row + 2u, atomicLoad(&status[STATUS_TIME_COMPENSATION]));
-    probe_data_set(row + 3u, atomicLoad(&status[STATUS_DT]));
+    probe_data_set(row + 1u, atomicLoad(&status[STATUS_TIME_LO]));
+    probe_data_set(row + 2u, atomicLoad(&status[STATUS_TIME_HI]));
+    probe_data_set(row + 3u, atomicLoad(&status[STATUS_TIME_EXPONENT]));
+    probe_data_set(row + 4u, atomicLoad(&status[STATUS_DT]));
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -414,7 +417,7 @@ fn probe_finish() {
     let values = sizes.x;
     let row = row_start(written);
     for (var v = 0u; v < values; v++) {
-        probe_data_set(row + 4u + v, probe_data_at(1u + v));
+        probe_data_set(row + PROBE_ROW_HEAD + v, probe_data_at(1u + v));
     }
     probe_data_set(0u, written + 1u);
 }

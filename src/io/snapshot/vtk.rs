@@ -174,3 +174,31 @@ impl VtkLayout {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::FileSeries;
+
+    /// A resumed run reads the index back and rewrites it: every time must come back to the
+    /// last bit (JSON numbers parsed with correct rounding), or the resumed run's index would
+    /// differ from the uninterrupted run's.
+    #[test]
+    fn a_series_index_keeps_its_times_to_the_last_bit() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("particles.vtk.series");
+        let times = [0.0, 0.010000000474974513, 0.011999999999999999, 0.1 + 0.2, 1e-300, 123456.78901234567];
+        let mut series = FileSeries::default();
+        for (k, &t) in times.iter().enumerate() {
+            series.add_and_write(&path, format!("step_{:06}.vtk", 10 * k), t).unwrap();
+        }
+        let back = FileSeries::read_up_to(&path, u64::MAX).unwrap();
+        assert_eq!(back, series);
+        let before = std::fs::read(&path).unwrap();
+        let mut again = FileSeries::read_up_to(&path, 30).unwrap();
+        assert_eq!(again.files.len(), 4);
+        for (k, &t) in times.iter().enumerate().skip(4) {
+            again.add_and_write(&path, format!("step_{:06}.vtk", 10 * k), t).unwrap();
+        }
+        assert_eq!(std::fs::read(&path).unwrap(), before);
+    }
+}

@@ -233,6 +233,8 @@ macro_rules! status_words {
 /// time, read and written by the shaders (wgsl/sim/density.wgsl, integrate.wgsl) and read back
 /// by the host a few bytes at a time. Floats are stored as their bits.
 pub mod status {
+    use crate::model::params::TimeSum;
+
     status_words! {
         /// Steps done.
         STEPS = 0 => "STATUS_STEPS",
@@ -250,10 +252,10 @@ pub mod status {
         MAX_ACCELERATION = 6 => "STATUS_MAX_ACCELERATION",
         /// Adaptive dt: this step's dt.
         DT = 7 => "STATUS_DT",
-        /// Adaptive dt: the simulated time, a Kahan sum (time = TIME - TIME_COMPENSATION).
-        TIME = 8 => "STATUS_TIME",
-        /// Adaptive dt: the compensation of that sum.
-        TIME_COMPENSATION = 9 => "STATUS_TIME_COMPENSATION",
+        /// Adaptive dt: the simulated time, summed exactly: (TIME_HI 2^32 + TIME_LO) 2^TIME_EXPONENT
+        /// ([`TimeSum`](crate::model::params::TimeSum)).
+        TIME_LO = 8 => "STATUS_TIME_LO",
+        TIME_HI = 9 => "STATUS_TIME_HI",
         /// Adaptive dt: the smallest dt so far.
         DT_MIN = 10 => "STATUS_DT_MIN",
         /// Adaptive dt: the largest dt so far.
@@ -295,9 +297,11 @@ pub mod status {
         DIVERGENCE_ITERATIONS_LAST = 33 => "STATUS_DIVERGENCE_ITERATIONS_LAST",
         DIVERGENCE_ERROR = 34 => "STATUS_DIVERGENCE_ERROR",
         DIVERGENCE_UNCONVERGED = 35 => "STATUS_DIVERGENCE_UNCONVERGED",
+        /// Adaptive dt: the simulated time's power of two (an i32; with TIME_LO, TIME_HI).
+        TIME_EXPONENT = 36 => "STATUS_TIME_EXPONENT",
     }
     /// Words of the status buffer.
-    pub const WORDS: usize = 36;
+    pub const WORDS: usize = 37;
     /// Bytes of the status buffer.
     pub const BYTES: u64 = WORDS as u64 * 4;
     /// FIRST_BAD_STEP while no step went wrong (`STATUS_NO_BAD_STEP` in WGSL).
@@ -316,7 +320,18 @@ pub mod status {
         let mut s = [0u32; WORDS];
         s[FIRST_BAD_STEP] = NO_BAD_STEP;
         s[DT_MIN] = f32::INFINITY.to_bits();
+        set_time(&mut s, TimeSum::ZERO);
         s
+    }
+
+    /// The simulated time the words hold (adaptive dt).
+    pub fn time(s: &[u32]) -> TimeSum {
+        TimeSum::from_words([s[TIME_LO], s[TIME_HI], s[TIME_EXPONENT]])
+    }
+
+    /// Sets the simulated time words.
+    pub fn set_time(s: &mut [u32], t: TimeSum) {
+        [s[TIME_LO], s[TIME_HI], s[TIME_EXPONENT]] = t.words();
     }
 
     /// The status words of a state saved without them (by GPU ranks, whose hosts keep the
@@ -328,7 +343,7 @@ pub mod status {
         s[STEPS] = state.step as u32;
         s[MAX_DENSITY] = f(state.max_density);
         s[TOP_SPEED] = f(state.max_speed);
-        s[TIME] = f(state.time);
+        set_time(&mut s, TimeSum::from_seconds(state.time));
         let [min, max, last] = state.dt_min_max_last;
         if state.step > 0 {
             (s[DT_MIN], s[DT_MAX], s[DT]) = (f(min), f(max), f(last));
@@ -446,7 +461,7 @@ mod tests {
             max_speed: 2.0,
             first_bad_step: Some(7),
             bad_step: Some(bad),
-            time: 0.125,
+            time: 0.1 + 0.2,
             dt_min_max_last: [0.001, 0.004, 0.0025],
             iterations: IterationStats { pressure: solve(1), divergence: solve(2) },
             ..BackendState::default()
@@ -458,7 +473,9 @@ mod tests {
         assert_eq!(h.bad_step, Some(bad));
         assert_eq!(status::iterations(&words), state.iterations);
         let f = |i: usize| status::float(&words, i);
-        assert_eq!((f(status::TIME), f(status::DT_MIN), f(status::DT_MAX), f(status::DT)), (0.125, 0.001f32 as f64, 0.004f32 as f64, 0.0025f32 as f64));
+        // The time to the last bit of the f64 (ranks resume to the same time as one GPU).
+        assert_eq!(status::time(&words).seconds(), 0.1 + 0.2);
+        assert_eq!((f(status::DT_MIN), f(status::DT_MAX), f(status::DT)), (0.001f32 as f64, 0.004f32 as f64, 0.0025f32 as f64));
         // Before the first step the dt range is empty, as one GPU starts it.
         let start = status::from_header(&BackendState { step: 0, ..state });
         assert_eq!((start[status::DT_MIN], start[status::DT]), (f32::INFINITY.to_bits(), 0));

@@ -10,15 +10,16 @@ use super::device::GpuContext;
 use super::params::status;
 use super::readback::read_ranges;
 use super::shaders::{dispatch_size, stage_with_aliases, Alias, ArrayBuffers, ArrayLengths, Stage};
-use crate::model::params::Params;
+use crate::model::params::{Params, TimeSum};
 use crate::model::probes::{ProbeGeometry, ProbeSample};
 
 /// Rows the sample buffer holds before the host reads them back.
 pub const ROW_CAPACITY: u64 = 1024;
 /// Particles per workgroup of `probe_particles` (PROBE_WORKGROUP in probes.wgsl).
 pub const PROBE_WORKGROUP: u32 = 128;
-/// Words before each row's values: the step, the time and its compensation, the step's dt.
-const ROW_HEAD: u64 = 4;
+/// Words before each row's values: the step, the time's three words (status::TIME_LO, TIME_HI,
+/// TIME_EXPONENT), the step's dt (PROBE_ROW_HEAD in probes.wgsl).
+const ROW_HEAD: u64 = 5;
 /// Slots of the partials: 6 per force probe, 2 per front probe.
 const FORCE_SLOTS: u64 = 6;
 const FRONT_SLOTS: u64 = 2;
@@ -263,8 +264,8 @@ impl GpuProbes {
             anyhow::ensure!(row[0] as u64 == step % (1 << 32), "a probe row holds step {}; step {step} was recorded", row[0]);
             let (time, previous_time) = match params.adaptive {
                 Some(_) => {
-                    let t = status::float(row, 1) - status::float(row, 2);
-                    (t, if step == 0 { 0.0 } else { t - status::float(row, 3) })
+                    let t = TimeSum::from_words([row[1], row[2], row[3]]).seconds();
+                    (t, if step == 0 { 0.0 } else { t - status::float(row, 4) })
                 }
                 None => (step as f64 * params.dt, step.saturating_sub(1) as f64 * params.dt),
             };
@@ -281,5 +282,17 @@ impl GpuProbes {
         self.pending.clear();
         self.samples.clear();
         ctx.queue.write_buffer(&self.data, 0, &0u32.to_le_bytes());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The sizes the host lays the data buffer out by are those the shader writes it by.
+    #[test]
+    fn the_row_layout_is_the_same_on_both_sides() {
+        let wgsl = super::super::shaders::source("sim/probes.wgsl").expect("the probe stage");
+        for (name, value) in [("PROBE_WORKGROUP", super::PROBE_WORKGROUP as u64), ("FORCE_SLOTS", super::FORCE_SLOTS), ("FRONT_SLOTS", super::FRONT_SLOTS), ("PROBE_ROW_HEAD", super::ROW_HEAD)] {
+            assert!(wgsl.contains(&format!("const {name}: u32 = {value}u;")), "{name} is not {value} in probes.wgsl");
+        }
     }
 }

@@ -229,8 +229,8 @@ impl DeviceStages<f32> for GpuRankStages {
     fn take_probe_rows(&mut self) -> anyhow::Result<Vec<(u64, Vec<f64>)>> {
         let Some(solver) = self.solver.as_mut() else { return Ok(Vec::new()) };
         let samples = crate::solver::backend::Backend::take_probe_samples(solver)?;
-        // Each row: its head (step, time and its compensation, dt) and its values, in words.
-        self.bus_bytes += samples.iter().map(|s| 4 * (4 + s.values.len() as u64)).sum::<u64>();
+        // Each row: its head (step, the time's three words, dt) and its values, in words.
+        self.bus_bytes += samples.iter().map(|s| 4 * (5 + s.values.len() as u64)).sum::<u64>();
         Ok(samples.into_iter().map(|s| (s.step, s.values)).collect())
     }
 

@@ -856,9 +856,9 @@ impl Backend for GpuSolver {
         if self.params.adaptive.is_none() {
             return self.steps as f64 * self.params.dt;
         }
-        // A few bytes: the compensated sum of the steps' dt (wgsl/sim/integrate.wgsl choose_dt).
+        // A few bytes: the exact sum of the steps' dt (wgsl/shared/adaptive_dt.wgsl add_to_time).
         match self.read_status() {
-            Ok(w) => status::float(&w, status::TIME) - status::float(&w, status::TIME_COMPENSATION),
+            Ok(w) => status::time(&w).seconds(),
             Err(e) => {
                 log::error!("reading the simulated time failed: {e:#}");
                 f64::NAN
@@ -871,7 +871,7 @@ impl Backend for GpuSolver {
         };
         let s = self.read_status()?;
         let f = |i: usize| status::float(&s, i);
-        let time = f(status::TIME) - f(status::TIME_COMPENSATION);
+        let time = status::time(&s).seconds();
         Ok(if self.steps == 0 {
             DtStats::default()
         } else {
@@ -947,7 +947,7 @@ impl Backend for GpuSolver {
         let (time, dt_min_max_last) = match self.params.adaptive {
             None => (self.steps as f64 * self.params.dt, [self.params.dt; 3]),
             Some(_) if self.steps == 0 => (0.0, [0.0; 3]),
-            Some(_) => (f(status::TIME) - f(status::TIME_COMPENSATION), [f(status::DT_MIN), f(status::DT_MAX), f(status::DT)]),
+            Some(_) => (status::time(&words).seconds(), [f(status::DT_MIN), f(status::DT_MAX), f(status::DT)]),
         };
         Ok(BackendState {
             kind: "gpu".into(),
