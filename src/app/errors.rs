@@ -44,7 +44,7 @@ pub fn output_file(flag: &str, path: &std::path::Path, what: &str, ours: &dyn Fn
 /// Refuses an existing `path` that is not a file wgsph wrote (`ours` judges its text, read up to
 /// 64 MiB; a file that is not text, or is longer, is not one): what a command replaces must be
 /// its own earlier output.
-pub fn check_replaceable(flag: &str, path: &std::path::Path, what: &str, ours: &dyn Fn(&str) -> bool) -> Result<(), InputError> {
+fn check_replaceable(flag: &str, path: &std::path::Path, what: &str, ours: &dyn Fn(&str) -> bool) -> Result<(), InputError> {
     use std::io::Read;
     let Ok(meta) = std::fs::symlink_metadata(path) else { return Ok(()) };
     let mut text = String::new();

@@ -6,7 +6,7 @@ use super::errors::InputError;
 use super::signals::{self, StopSignal};
 use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
 use crate::io::probes::ProbeWriter;
-use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, StartGuard};
+use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, StartGuard, SNAPSHOTS_DIR};
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::snapshot::SnapshotWriter;
 use crate::io::summary::{write_summary, DfsphSummary, RanksSummary, RunStatus, Summary, SUMMARY_FILE};
@@ -72,6 +72,8 @@ pub struct RunOptions {
 pub struct ResumedRun {
     pub last_snapshot: Option<PathBuf>,
     pub max_speed: f64,
+    /// The series files' lines the resumed run should find (`RunRecord::series_lines`).
+    pub series_lines: Vec<(String, u64)>,
 }
 
 impl Default for RunOptions {
@@ -114,7 +116,7 @@ pub fn default_snapshot_every(steps: u64) -> u64 {
 /// with a checkpoint when checkpoints are on). An error before the first step is returned as
 /// an error, without a summary (the caller undoes the start).
 pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyhow::Result<Summary> {
-    let snapshots_dir = opts.out.join("snapshots");
+    let snapshots_dir = opts.out.join(SNAPSHOTS_DIR);
     if opts.writes_files {
         std::fs::create_dir_all(&snapshots_dir).with_context(|| format!("cannot create {}", snapshots_dir.display()))?;
     }
@@ -143,17 +145,22 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut writer = snapshot_writer(opts, start)?;
     // The probes' time series: a resumed run keeps the lines before its first step.
     // Across ranks every rank holds the same samples and the first alone writes them.
+    let mut missing_series = Vec::new();
     let mut probe_writer = match (params.probes.is_empty() || !opts.writes_files, opts.resumed.is_some()) {
         (true, _) => None,
         (false, false) => Some(ProbeWriter::new(&opts.out, &params.probes)),
         (false, true) => {
             let (w, missing) = ProbeWriter::resume(&opts.out, &params.probes, start)?;
-            for path in missing {
+            for path in &missing {
                 eprintln!("warning: {} is missing: its series restarts at step {start}, without the samples before", path.display());
             }
+            missing_series = missing;
             Some(w)
         }
     };
+    if let (Some(r), true) = (&opts.resumed, opts.writes_files) {
+        warn_cut_series(&r.series_lines, &series_lines(&writer, probe_writer.as_ref(), start), &missing_series, start);
+    }
     let has_probes = !params.probes.is_empty();
     // The samples the backend took since the last call, added to the series and written.
     let write_probes = |backend: &mut dyn Backend, w: &mut Option<ProbeWriter>| -> anyhow::Result<()> {
@@ -169,7 +176,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         w.add(&samples);
         w.write().with_context(|| format!("step {step}: writing the probes' time series"))
     };
-    let mut write_snap = |backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
+    let mut write_snap = |writer: &mut SnapshotWriter, backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
         let step = backend.steps_done();
         let s = (|| -> anyhow::Result<Option<Snapshot>> {
             // Across ranks in pieces, every rank writing its own; streamed where the backend
@@ -206,7 +213,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         Ok(())
     };
     if opts.resumed.is_none() {
-        let s = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+        let s = write_snap(&mut writer, backend, &mut last_snapshot, &mut max_speed)?;
         if opts.surface_mesh_every > 0 {
             write_surface(backend, s)?;
         }
@@ -305,7 +312,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         };
         let mut snapshot = None;
         if step == end || time_due || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
-            snapshot = write_snap(backend, &mut last_snapshot, &mut max_speed)?;
+            snapshot = write_snap(&mut writer, backend, &mut last_snapshot, &mut max_speed)?;
             if let Some(interval) = opts.snapshot_interval {
                 next_snapshot_time = Some(next_multiple(interval, time));
             }
@@ -319,7 +326,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             }
         }
         if opts.checkpoint_every > 0 && step % opts.checkpoint_every == 0 {
-            write_checkpoint(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
+            write_checkpoint(backend, scene, opts, end, last_snapshot.as_deref(), max_speed, series_lines(&writer, probe_writer.as_ref(), step))?;
             last_checkpoint = Some(checkpoint_path.clone());
         }
     }
@@ -328,7 +335,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     }
     if stopped_by.is_some() && opts.checkpoint_every > 0 && step % opts.checkpoint_every != 0 {
         // Stopped between checkpoints: one more, so that nothing computed is lost.
-        write_checkpoint(backend, scene, opts, end, last_snapshot.as_deref(), max_speed)?;
+        write_checkpoint(backend, scene, opts, end, last_snapshot.as_deref(), max_speed, series_lines(&writer, probe_writer.as_ref(), step))?;
         last_checkpoint = Some(checkpoint_path.clone());
     }
     Ok(())
@@ -415,7 +422,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
 }
 
 /// Writes the run's checkpoint (`DIR/checkpoint.wgsph`) at the backend's step.
-fn write_checkpoint(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions, end: u64, last_snapshot: Option<&Path>, max_speed: f64) -> anyhow::Result<()> {
+fn write_checkpoint(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions, end: u64, last_snapshot: Option<&Path>, max_speed: f64, series_lines: Vec<(String, u64)>) -> anyhow::Result<()> {
     if !opts.writes_files {
         // Across ranks the state streams to the rank that writes it, piece by piece: the
         // other ranks make the same requests and write nothing.
@@ -424,7 +431,7 @@ fn write_checkpoint(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions,
     }
     let path = opts.out.join(CHECKPOINT_FILE);
     let step = backend.steps_done();
-    let record = run_record(backend, opts, end, last_snapshot, max_speed);
+    let record = run_record(backend, opts, end, last_snapshot, max_speed, series_lines);
     checkpoint::save(backend, &scene.to_toml(), &record, &path).with_context(|| format!("step {step}: writing the checkpoint"))?;
     log::info!("wrote {} at step {step}", path.display());
     Ok(())
@@ -691,7 +698,7 @@ fn snapshot_writer(opts: &RunOptions, start_step: u64) -> anyhow::Result<Snapsho
 }
 
 /// The settings of the run, as a checkpoint records them.
-pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_snapshot: Option<&Path>, max_speed: f64) -> RunRecord {
+pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_snapshot: Option<&Path>, max_speed: f64, series_lines: Vec<(String, u64)>) -> RunRecord {
     RunRecord {
         end_step,
         snapshot_every: opts.snapshot_every,
@@ -705,5 +712,30 @@ pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_
         end_time: opts.end_time,
         surface_mesh_every: opts.surface_mesh_every,
         surface_mesh_format: opts.surface_mesh_format,
+        series_lines,
+    }
+}
+
+/// The lines of the snapshot index and of the probes' series that a run resumed at `step`
+/// keeps (a checkpoint's record of them).
+fn series_lines(snapshots: &SnapshotWriter, probes: Option<&ProbeWriter>, step: u64) -> Vec<(String, u64)> {
+    let mut lines = vec![snapshots.lines_up_to(step)];
+    lines.extend(probes.map(|p| p.lines_before(step)).unwrap_or_default());
+    lines
+}
+
+/// Warns of each series file that holds fewer lines than the checkpoint recorded (cut or
+/// replaced since): the resumed run goes on from what is there, so the series has a gap.
+/// `missing` files were named already.
+fn warn_cut_series(recorded: &[(String, u64)], found: &[(String, u64)], missing: &[PathBuf], start: u64) {
+    for (name, had) in recorded {
+        let Some((_, has)) = found.iter().find(|(n, _)| n == name) else { continue };
+        if has >= had || missing.iter().any(|m| m.ends_with(name)) {
+            continue;
+        }
+        let what = if name.starts_with(SNAPSHOTS_DIR) { "snapshots up to" } else { "samples before" };
+        eprintln!(
+            "warning: {name} holds {has} {what} step {start}, where the run had written {had} when it saved its checkpoint: the file was cut or replaced since, and the resumed run does not write the missing lines again"
+        );
     }
 }

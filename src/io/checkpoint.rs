@@ -27,7 +27,7 @@ use std::path::Path;
 pub const CHECKPOINT_FILE: &str = "checkpoint.wgsph";
 const MAGIC: &[u8; 8] = b"WGSPHCKP";
 /// Bumped whenever the payload's layout or meaning changes.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 /// The wgsph version written into (and required of) checkpoints.
 pub const WGSPH_VERSION: &str = env!("CARGO_PKG_VERSION");
 
@@ -61,6 +61,10 @@ pub struct RunRecord {
     pub end_time: Option<f64>,
     pub surface_mesh_every: u64,
     pub surface_mesh_format: MeshFormat,
+    /// The lines of the run's series files (`snapshots/index.csv`, `probes/NAME.csv`) that a run
+    /// resumed from this checkpoint keeps, by path in the run directory: a resume that finds
+    /// fewer says the file was cut since.
+    pub series_lines: Vec<(String, u64)>,
 }
 
 /// A checkpoint that cannot be used.

@@ -103,6 +103,12 @@ impl ProbeWriter {
         Ok((w, missing))
     }
 
+    /// Each series' lines (samples) before `step`, named by the file's path in the run
+    /// directory: what a run resumed at `step` keeps of them.
+    pub fn lines_before(&self, step: u64) -> Vec<(String, u64)> {
+        self.probes.iter().zip(&self.files).map(|(p, f)| (format!("{PROBES_DIR}/{}.csv", p.name), f.rows.iter().filter(|r| r.0 < step).count() as u64)).collect()
+    }
+
     /// Adds the samples to the series of the probes due at each (a sample holds every probe;
     /// a probe keeps only those at its own interval).
     pub fn add(&mut self, samples: &[ProbeSample]) {

@@ -133,7 +133,7 @@ impl RunOutputs {
                 guard.replaced.borrow_mut().push(stash);
             }
             guard.dirs.push((l.path.clone(), subdirs_before));
-            write_marker(&l.path)?;
+            write_marker(&l.path.join(MARKER), "started")?;
         }
         Ok(guard)
     }
@@ -276,8 +276,7 @@ pub fn prepare_report_dir(flag: &str, dir: &Path) -> Result<(), RunDirError> {
         }
     }
     probe_writable(dir).map_err(|e| bad(format!("cannot write there: {e}")))?;
-    let text = format!("wgsph {}\nwritten {}\n", env!("CARGO_PKG_VERSION"), utc_now());
-    write_atomic(&dir.join(REPORT_MARKER), |w| w.write_all(text.as_bytes())).map_err(|e| bad(format!("cannot write there: {e:#}")))
+    write_marker(&dir.join(REPORT_MARKER), "written").map_err(|e| bad(format!("cannot write there: {e:#}")))
 }
 
 /// Whether `path` is a directory itself, not a link to one.
@@ -469,10 +468,10 @@ impl Drop for StartGuard {
     }
 }
 
-/// Writes the marker that makes `dir` a run directory.
-fn write_marker(dir: &Path) -> anyhow::Result<()> {
-    let text = format!("wgsph {}\nstarted {}\n", env!("CARGO_PKG_VERSION"), utc_now());
-    write_atomic(&dir.join(MARKER), |w| w.write_all(text.as_bytes()))
+/// Writes a marker file that says wgsph made its directory: a run directory's, a report's.
+fn write_marker(path: &Path, what: &str) -> anyhow::Result<()> {
+    let text = format!("wgsph {}\n{what} {}\n", env!("CARGO_PKG_VERSION"), utc_now());
+    write_atomic(path, |w| w.write_all(text.as_bytes()))
 }
 
 /// The time now as `YYYY-MM-DDTHH:MM:SSZ`.

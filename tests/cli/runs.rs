@@ -183,6 +183,38 @@ fn ctrl_c_and_sigterm_stop_a_run_with_its_summary_and_say_where_to_resume() {
     }
 }
 
+/// A series file cut (or replaced) after the checkpoint was written: the resume goes on, and
+/// says which file holds fewer lines than the checkpoint recorded (the series then has a gap).
+#[test]
+fn resume_names_a_series_file_cut_since_the_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/hydrostatic.toml")).unwrap()
+        + "\n[[probe]]\nname = \"mid\"\ntype = \"point\"\nposition = [0.2, 0.05, 0.05]\nevery_steps = 2\n\n[[probe]]\nname = \"low\"\ntype = \"point\"\nposition = [0.2, 0.02, 0.05]\nevery_steps = 5\n";
+    std::fs::write(dir.path().join("probed.toml"), scene).unwrap();
+    let o = wgsph(&["run", "probed.toml", "--particles", "300", "--steps", "10", "--backend", "cpu", "--snapshot-every", "2", "--checkpoint-every", "10", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // Untouched: no warning.
+    let o = wgsph(&["run", "--resume", "o", "--steps", "10"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(!text(&o.stderr).contains("warning"), "{}", text(&o.stderr));
+    // The checkpoint is now at step 20. Cut the index to its header and first line, and the
+    // probe's series to its header and its first two samples.
+    let o_dir = dir.path().join("o");
+    let cut = |name: &str, keep: usize| {
+        let path = o_dir.join(name);
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(&path, text.lines().take(keep).map(|l| format!("{l}\n")).collect::<String>()).unwrap();
+    };
+    cut("snapshots/index.csv", 2);
+    cut("probes/mid.csv", 3);
+    let o = wgsph(&["run", "--resume", "o", "--steps", "2"], dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stderr = text(&o.stderr);
+    assert!(stderr.contains("warning: snapshots/index.csv holds 1 snapshots up to step 20, where the run had written 11"), "{stderr}");
+    assert!(stderr.contains("warning: probes/mid.csv holds 2 samples before step 20, where the run had written 10"), "{stderr}");
+    assert!(!stderr.contains("probes/low.csv"), "{stderr}");
+}
+
 /// A run killed while writing leaves the atomic writer's partial files; `--resume` removes
 /// them, and only them.
 #[test]
@@ -369,6 +401,13 @@ fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
         let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "gpu", "--neighbour-skin", "0.1", "--set", "time.neighbour_rebuild_every=2", "--out", "refused"], dir.path());
         assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
         assert!(text(&o.stderr).contains("--neighbour-skin 0.1 cannot be used") && text(&o.stderr).contains("time.neighbour_rebuild_every = 2"), "{}", text(&o.stderr));
+        // Nor are the forces and the integration fused where dt is chosen between them, or
+        // where DFSPH has no forces pass: refused, not quietly run as two passes.
+        for (set, why) in [(&["--set", "time.adaptive=true"][..], "time.adaptive = true"), (&["--set", "physics.solver=dfsph", "--unset", "physics.speed_of_sound"], "physics.solver = \"dfsph\"")] {
+            let o = wgsph(&[&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "gpu", "--fused", "--out", "refused"][..], set].concat(), dir.path());
+            assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+            assert!(text(&o.stderr).contains("--fused cannot be used") && text(&o.stderr).contains(why), "{}", text(&o.stderr));
+        }
     }
     assert!(!dir.path().join("refused").exists());
     // With a skin each step is submitted alone: --steps-per-submit would change nothing.

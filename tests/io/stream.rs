@@ -241,7 +241,7 @@ fn a_checkpoint_read_in_part_keeps_exactly_the_particles_asked_for() {
         let dir = tempfile::tempdir().unwrap();
         let opts = RunOptions { steps: 10, out: dir.path().to_path_buf(), checkpoint_every: 5, ..Default::default() };
         let path = dir.path().join("c.wgsph");
-        let record = run_record(&cpu, &opts, 10, None, 0.5);
+        let record = run_record(&cpu, &opts, 10, None, 0.5, Vec::new());
         wgsph::io::checkpoint::save(&mut cpu, &scene.to_toml(), &record, &path).unwrap();
         let whole = read(&path).unwrap();
         // DFSPH's warm starts, by id in the file, come in the kept particles' order.
@@ -286,7 +286,7 @@ fn gpu_checkpoints_streamed_in_pieces_equal_the_whole_state_ones_and_resume_bitw
             solver.step(6).unwrap();
             let dir = tempfile::tempdir().unwrap();
             let opts = RunOptions { steps: 10, out: dir.path().to_path_buf(), checkpoint_every: 6, ..Default::default() };
-            let record = run_record(&solver, &opts, 10, None, 0.5);
+            let record = run_record(&solver, &opts, 10, None, 0.5, Vec::new());
             let whole = capture(&mut solver, &scene.to_toml(), record.clone()).unwrap();
             let whole_path = dir.path().join("whole.wgsph");
             write(&whole_path, &whole).unwrap();

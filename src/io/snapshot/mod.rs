@@ -73,6 +73,12 @@ impl SnapshotWriter {
         self.out.join("snapshots").join(INDEX_NAME)
     }
 
+    /// The index's lines (snapshots) up to `step`, named by the index's path in the run
+    /// directory: what a run resumed at `step` keeps of it.
+    pub fn lines_up_to(&self, step: u64) -> (String, u64) {
+        (format!("snapshots/{INDEX_NAME}"), self.index.rows().iter().filter(|r| r.0 <= step).count() as u64)
+    }
+
     fn add_to_index(&mut self, step: u64, time: f64) -> anyhow::Result<()> {
         let files = self.formats.iter().map(|&f| snapshot_file(&self.out, step, f).file_name().expect("a file name").to_string_lossy().into_owned()).collect();
         let path = self.index_path();

@@ -44,6 +44,9 @@ pub enum GpuError {
     /// A neighbour skin asked for where it cannot run (`skin::refusal`).
     #[error("{0}")]
     NoNeighbourSkin(String),
+    /// The fused forces and integration asked for where they cannot run (`StepShape::new`).
+    #[error("{0}")]
+    NoFusion(String),
 }
 
 pub fn backends() -> wgpu::Backends {

@@ -229,16 +229,25 @@ impl StepShape {
             list_slots: 0,
             normals: if surface_tension { n } else { 0 },
         };
-        // Forces and integration can be fused with fixed dt, unless the fused stage's bindings
-        // exceed the adapter's (arrays in many segments): then they run as two passes.
+        // Forces and integration can be fused with fixed dt in the weakly compressible step,
+        // unless the fused stage's bindings exceed the adapter's (arrays in many segments).
         let dfsph = params.dfsph.is_some();
         let most = ctx.device.limits().max_storage_buffers_per_shader_stage as u64;
-        let can_fuse = params.adaptive.is_none()
-            && !dfsph
-            && storage_bindings(ctx, "forces_integrate", &|name: &str| counts.len_without_accelerations(name)) <= most;
+        let cannot_fuse = if params.adaptive.is_some() {
+            Some("the scene chooses dt adaptively (time.adaptive = true), from every particle's acceleration, before any particle is integrated".to_string())
+        } else if dfsph {
+            Some("the scene uses DFSPH (physics.solver = \"dfsph\"), whose step has no forces pass of its own".to_string())
+        } else {
+            let bindings = storage_bindings(ctx, "forces_integrate", &|name: &str| counts.len_without_accelerations(name));
+            (bindings > most).then(|| format!("the fused stage would bind {bindings} storage arrays (the scene's arrays take several segments each), more than the adapter's {most}"))
+        };
+        // Asked for where it cannot run: refused (exit 2), not quietly run as two passes.
+        if let (Some(true), Some(why)) = (options.fuse_forces_and_integration, &cannot_fuse) {
+            return Err(GpuError::NoFusion(format!("--fused cannot be used: {why}; run without it (the forces and the integration then run as two passes)")).into());
+        }
         // The two-pass step with its state in place is the default: 48 bytes of state per
         // particle instead of the fused step's 64 (docs/performance.md).
-        let fused = can_fuse && options.fuse_forces_and_integration.unwrap_or(false);
+        let fused = cannot_fuse.is_none() && options.fuse_forces_and_integration.unwrap_or(false);
         let mut list_capacity = neighbour_lists(ctx, params, tiles && !fused && !across_ranks, options, n, w);
         counts.list_slots = n * list_capacity.unwrap_or(0) as u64;
         // The lists' bindings (one per segment) must fit the stages that declare them; a scene

@@ -676,9 +676,7 @@ impl GpuSolver {
 
     /// The stages' specialisation constants with `size` threads per workgroup.
     pub(super) fn constants_sized(&self, size: u32) -> Vec<(&'static str, f64)> {
-        let mut c = self.constants.clone();
-        c.push(("WORKGROUP_SIZE", size as f64));
-        c
+        super::pipelines::sized(&self.constants, size)
     }
 
     /// The pressure the stages compute from a density (the equation of state in f32, as
