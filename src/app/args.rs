@@ -3,7 +3,8 @@
 
 use super::errors::InputError;
 use crate::io::snapshot::format::SnapshotFormat;
-use crate::model::scene::Scene;
+use crate::model::numbers::short3;
+use crate::model::scene::{Scene, SceneOrigin};
 use crate::io::surface::MeshFormat;
 use crate::model::overrides::Override;
 use crate::solver::gpu::skin::out_of_range;
@@ -231,31 +232,49 @@ pub struct RunArgs {
 /// How pictures look (`run --frames` and `view`).
 #[derive(Args, Debug, Clone)]
 pub struct PictureArgs {
-    /// Picture size WIDTHxHEIGHT.
-    #[arg(long, default_value = "1280x720", value_parser = render::parse_resolution)]
-    pub resolution: (u32, u32),
-    #[arg(long, value_enum, default_value_t = render::Style::Particles)]
-    pub style: render::Style,
-    /// The field that colours the particles (viridis colour map).
-    #[arg(long, value_enum, default_value_t = render::ColorBy::Speed)]
-    pub color_by: render::ColorBy,
+    /// Picture size WIDTHxHEIGHT (default: 1280x720).
+    #[arg(long, value_name = "WxH", value_parser = render::parse_resolution)]
+    pub resolution: Option<(u32, u32)>,
+    /// How the fluid is drawn (default: particles).
+    #[arg(long, value_enum)]
+    pub style: Option<render::Style>,
+    /// The field that colours the particles, viridis colour map (default: speed).
+    #[arg(long, value_enum)]
+    pub color_by: Option<render::ColorBy>,
     /// A fixed colour range MIN:MAX (default: each picture's smallest to largest value).
     #[arg(long, value_name = "MIN:MAX", value_parser = render::parse_range)]
     pub color_range: Option<(f32, f32)>,
-    #[arg(long, value_enum, default_value_t = render::Walls::Faint)]
-    pub walls: render::Walls,
+    /// How the walls are drawn (default: faint).
+    #[arg(long, value_enum)]
+    pub walls: Option<render::Walls>,
 }
 
 impl PictureArgs {
     pub fn options(&self) -> render::RenderOptions {
+        let d = render::RenderOptions::default();
+        let (width, height) = self.resolution.unwrap_or((d.width, d.height));
         render::RenderOptions {
-            width: self.resolution.0,
-            height: self.resolution.1,
-            style: self.style,
-            color_by: self.color_by,
+            width,
+            height,
+            style: self.style.unwrap_or(d.style),
+            color_by: self.color_by.unwrap_or(d.color_by),
             range: self.color_range,
-            walls: self.walls,
+            walls: self.walls.unwrap_or(d.walls),
         }
+    }
+
+    /// The picture flags given (for `run`, where they need `--frames`).
+    pub fn given(&self) -> Vec<&'static str> {
+        [
+            (self.resolution.is_some(), "--resolution"),
+            (self.style.is_some(), "--style"),
+            (self.color_by.is_some(), "--color-by"),
+            (self.color_range.is_some(), "--color-range"),
+            (self.walls.is_some(), "--walls"),
+        ]
+        .into_iter()
+        .filter_map(|(given, flag)| given.then_some(flag))
+        .collect()
     }
 }
 
@@ -530,11 +549,47 @@ pub fn load_scene(name: &str, overrides: &SceneOverrides, particles: Option<u64>
 /// setting taken as the nearest wgsph has), then the lattice's ([`lattice_warnings`]).
 pub fn load_scene_warning(name: &str, overrides: &SceneOverrides, particles: Option<u64>) -> anyhow::Result<(Scene, Vec<String>)> {
     let (mut scene, mut warnings) = overrides.scene(name)?;
+    let origin = match Scene::builtin(name) {
+        Some(_) => SceneOrigin::BuiltIn(name.to_string()),
+        None => SceneOrigin::File(name.into()),
+    };
     if let Some(n) = particles {
-        scene = at_particles(&scene, n)?;
+        scene = at_particles(&scene, n, &origin)?;
     }
+    check_force_probe_boxes(&scene, &origin)?;
     warnings.extend(lattice_warnings(&scene));
     Ok((scene, warnings))
+}
+
+/// A force probe whose box (`min`, `max`) holds none of its boundary's wall particles would
+/// read zero for the whole run: refused, naming the box and where the walls lie. (The walls
+/// are made here only for a scene that has such a box.)
+fn check_force_probe_boxes(scene: &Scene, origin: &SceneOrigin) -> Result<(), InputError> {
+    if !scene.probe.iter().any(|p| p.min.is_some() || p.max.is_some()) {
+        return Ok(());
+    }
+    let params = scene.params();
+    let initial = scene.initial_state();
+    for (k, p) in params.probes.probes.iter().enumerate() {
+        let crate::model::probes::ProbeGeometry::Force { boundary, min, max, .. } = &p.geometry else { continue };
+        let walls: Vec<[f64; 3]> = initial.wall_positions.iter().zip(&initial.wall_boundaries).filter(|(_, &b)| b as usize == *boundary).map(|(x, _)| *x).collect();
+        if walls.is_empty() || walls.iter().any(|&x| p.takes_wall(*boundary, x)) {
+            continue;
+        }
+        let (lo, hi) = walls.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), x| {
+            (std::array::from_fn(|a| lo[a].min(x[a])), std::array::from_fn(|a| hi[a].max(x[a])))
+        });
+        let i = scene.probe.iter().position(|s| s.name == p.name).unwrap_or(k);
+        return Err(InputError(format!(
+            "{origin}: probe[{i}] ('{}'): the box min = {} .. max = {} holds none of boundary[{boundary}]'s wall particles, which lie within {} .. {}; the probe would read no force: make the box enclose part of the walls",
+            p.name,
+            short3(*min),
+            short3(*max),
+            short3(lo),
+            short3(hi)
+        )));
+    }
+    Ok(())
 }
 
 /// Each warning on its own line of stderr.
@@ -546,9 +601,9 @@ pub fn print_warnings(warnings: &[String]) {
 
 /// `scene` at about `n` fluid particles (`--particles N`): refused, naming the fewest the scene
 /// allows, where that is too coarse.
-pub fn at_particles(scene: &Scene, n: u64) -> anyhow::Result<Scene> {
+pub fn at_particles(scene: &Scene, n: u64, origin: &SceneOrigin) -> anyhow::Result<Scene> {
     let scene = scene.at_fluid_particles(n).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
-    scene.validate(&crate::model::scene::SceneOrigin::Text).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
+    scene.validate(origin).map_err(|e| InputError(format!("--particles {n}: {e}")))?;
     Ok(scene)
 }
 

@@ -201,6 +201,9 @@ pub fn table(rows: &[BenchRow]) -> String {
 /// Flags that tune paths `--paths` does not ask for change nothing: refused by name.
 fn check_flags_have_paths(args: &BenchArgs) -> Result<(), InputError> {
     let paths = args.paths.iter().map(|p| p.name()).collect::<Vec<_>>().join(",");
+    if let Some(twice) = args.paths.iter().enumerate().find(|(i, p)| args.paths[..*i].contains(p)).map(|(_, p)| p) {
+        return Err(InputError(format!("--paths {paths} names {} twice; name each path once", twice.name())));
+    }
     let has = |wanted: &[BenchPath]| args.paths.iter().any(|p| wanted.contains(p));
     let checks: [(bool, &str, &[BenchPath]); 6] = [
         (args.threads.is_some(), "--threads sets the CPU paths' threads", &[BenchPath::CpuF32, BenchPath::CpuF64, BenchPath::DfsphCpuF32, BenchPath::DfsphCpuF64]),

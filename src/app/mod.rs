@@ -130,7 +130,7 @@ fn run_command(command: Command, join: Option<ranks::Join>) -> anyhow::Result<i3
 
 #[cfg(feature = "view")]
 fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
-    if args.picture.style == crate::viz::render::Style::Mesh {
+    if args.picture.style == Some(crate::viz::render::Style::Mesh) {
         return Err(InputError("--style mesh is for `wgsph run --frames` (the surface is reconstructed on the host, too slowly for a window); `wgsph view` takes --style particles or surface".into()).into());
     }
     let scene = args::load_scene(&args.scene, &args.overrides, args.particles, false)?;

@@ -5,7 +5,7 @@ use super::errors::InputError;
 use super::run::{exit_code_of, report_run, run, steps_for_time, ResumedRun, RunOptions};
 use super::signals;
 use crate::io::checkpoint::{read, read_where, Checkpoint, CheckpointFile, CHECKPOINT_FILE};
-use crate::io::rundir::{remove_partial_files, SCENE_COPY, SNAPSHOTS_DIR};
+use crate::io::rundir::{check_resumable, remove_partial_files, SCENE_COPY, SNAPSHOTS_DIR};
 use crate::io::summary::Summary;
 use crate::model::scene::{Scene, SceneOrigin};
 use crate::solver::{open, Backend, BackendChoice, Precision, Ranks};
@@ -25,7 +25,16 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
         ))
         .into());
     }
+    if let Some(t) = args.time {
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
+        }
+    }
     let writes_files = super::ranks::writes_files(ranks);
+    // Its subdirectories and files must be the run's own, before the checkpoint is read.
+    if writes_files {
+        check_resumable(dir)?;
+    }
     let path = dir.join(CHECKPOINT_FILE);
     if !path.exists() {
         return Err(InputError(format!(
@@ -51,8 +60,8 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
     let params = scene.params();
     let step = c.state.step;
     let end = match (args.steps, args.time) {
-        (Some(n), _) => step + n,
-        (None, Some(t)) => step + steps_for_time(&params, Some(t)),
+        (Some(n), _) => step.saturating_add(n),
+        (None, Some(t)) => step.saturating_add(steps_for_time(&params, Some(t))),
         (None, None) => c.run.end_step,
     };
     if end <= step {

@@ -6,7 +6,7 @@ use super::errors::InputError;
 use super::signals::{self, StopSignal};
 use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
 use crate::io::probes::ProbeWriter;
-use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, StartGuard, SNAPSHOTS_DIR};
+use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, RunWrites, StartGuard, PROBES_DIR, SNAPSHOTS_DIR};
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::snapshot::SnapshotWriter;
 use crate::io::summary::{write_summary, DfsphSummary, RanksSummary, RunStatus, Summary, SUMMARY_FILE};
@@ -159,7 +159,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         }
     };
     if let (Some(r), true) = (&opts.resumed, opts.writes_files) {
-        warn_cut_series(&r.series_lines, &series_lines(&writer, probe_writer.as_ref(), start), &missing_series, start);
+        warn_cut_series(&opts.out, &r.series_lines, &series_lines(&writer, probe_writer.as_ref(), start), &missing_series, start);
     }
     let has_probes = !params.probes.is_empty();
     // The samples the backend took since the last call, added to the series and written.
@@ -247,7 +247,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             }
         }
         // The next step at which anything is due (an interval of 0 is never due).
-        let next = |every: u64| if every > 0 { (step / every + 1) * every } else { end };
+        // (Saturating: a time beyond any step count must not wrap the batch around.)
+        let next = |every: u64| if every > 0 { (step / every + 1).saturating_mul(every) } else { end };
         let mut target = [opts.snapshot_every, opts.check_every.max(1), opts.checkpoint_every, opts.surface_mesh_every, frames.as_ref().map_or(0, |f| f.every)]
             .into_iter()
             .map(next)
@@ -271,10 +272,10 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             }
         };
         if let Some(t_end) = opts.end_time {
-            target = target.min(step + steps_to(t_end, true));
+            target = target.min(step.saturating_add(steps_to(t_end, true)));
         }
         if let Some(t) = next_snapshot_time {
-            target = target.min(step + steps_to(t, params.adaptive.is_some()));
+            target = target.min(step.saturating_add(steps_to(t, params.adaptive.is_some())));
         }
         backend.step(target - step)?;
         step = backend.steps_done();
@@ -506,6 +507,11 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
         ))
         .into());
     }
+    // Pictures are drawn only into --frames: their look without it would change nothing.
+    let picture_flags = args.picture.given();
+    if args.frames.is_none() && !picture_flags.is_empty() {
+        return Err(InputError(format!("{} set how the pictures look, and this run draws none: add --frames DIR, or leave {} out", picture_flags.join(", "), if picture_flags.len() == 1 { "it" } else { "them" })).into());
+    }
     // The GPU computes in f32 whatever the CPU path's float type.
     if let (BackendArg::Gpu, Some(PrecisionArg::F64)) = (args.backend, args.precision) {
         return Err(InputError("--precision f64 sets the CPU path's float type, and --backend gpu computes in f32: leave it out, or run with --backend cpu".into()).into());
@@ -544,7 +550,12 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     let scene_file = Scene::builtin(&args.scene).is_none().then(|| PathBuf::from(&args.scene));
     let inputs: Vec<&Path> = scene_file.iter().map(PathBuf::as_path).collect();
     // Across ranks rank 0 alone checks and prepares the outputs.
-    let outputs = if writes_files { Some(RunOutputs::check(&out, args.frames.as_deref(), args.overwrite, args.out.is_none(), &inputs)?) } else { None };
+    let writes = RunWrites {
+        snapshot_formats: args.formats.iter().map(|f| f.extension().to_string()).collect(),
+        surface_format: (args.surface_mesh_every > 0).then(|| args.surface_mesh_format.extension().to_string()),
+        probes: params.probes.probes.iter().map(|p| p.name.clone()).collect(),
+    };
+    let outputs = if writes_files { Some(RunOutputs::check(&out, args.frames.as_deref(), args.overwrite, args.out.is_none(), &inputs, writes)?) } else { None };
     for (dir, names) in outputs.iter().flat_map(|o| o.kept()) {
         eprintln!("note: --overwrite keeps {} in {}: no wgsph run wrote it", names.join(", "), dir.display());
     }
@@ -637,7 +648,15 @@ pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[
         println!("  checkpoint.wgsph  the state to continue from with `wgsph run --resume {}`", out.display());
     }
     if !s.probes.is_empty() {
-        println!("  probes/        {} probe time series (NAME.csv) and their plots (NAME.png): {}", s.probes.len(), s.probes.join(", "));
+        // What is there: a series needs a sample, a plot two.
+        let count = |ext: &str| s.probes.iter().filter(|p| out.join(PROBES_DIR).join(format!("{p}.{ext}")).is_file()).count();
+        let (series, plots) = (count("csv"), count("png"));
+        let plots = match plots {
+            0 => "no plots (a plot needs two samples)".to_string(),
+            n if n == series => "their plots (NAME.png)".to_string(),
+            n => format!("{n} plots (NAME.png; a plot needs two samples)"),
+        };
+        println!("  probes/        {series} probe time series (NAME.csv) and {plots}: {}", s.probes.join(", "));
     }
     println!("  summary.json   what the run did and how it ended");
     println!("  scene.toml     the scene as run (`wgsph run {}` runs it again)", out.join("scene.toml").display());
@@ -719,7 +738,7 @@ pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_
 /// The lines of the snapshot index and of the probes' series that a run resumed at `step`
 /// keeps (a checkpoint's record of them).
 fn series_lines(snapshots: &SnapshotWriter, probes: Option<&ProbeWriter>, step: u64) -> Vec<(String, u64)> {
-    let mut lines = vec![snapshots.lines_up_to(step)];
+    let mut lines = snapshots.lines_up_to(step);
     lines.extend(probes.map(|p| p.lines_before(step)).unwrap_or_default());
     lines
 }
@@ -727,7 +746,7 @@ fn series_lines(snapshots: &SnapshotWriter, probes: Option<&ProbeWriter>, step: 
 /// Warns of each series file that holds fewer lines than the checkpoint recorded (cut or
 /// replaced since): the resumed run goes on from what is there, so the series has a gap.
 /// `missing` files were named already.
-fn warn_cut_series(recorded: &[(String, u64)], found: &[(String, u64)], missing: &[PathBuf], start: u64) {
+fn warn_cut_series(out: &Path, recorded: &[(String, u64)], found: &[(String, u64)], missing: &[PathBuf], start: u64) {
     for (name, had) in recorded {
         let Some((_, has)) = found.iter().find(|(n, _)| n == name) else { continue };
         if has >= had || missing.iter().any(|m| m.ends_with(name)) {
@@ -735,7 +754,8 @@ fn warn_cut_series(recorded: &[(String, u64)], found: &[(String, u64)], missing:
         }
         let what = if name.starts_with(SNAPSHOTS_DIR) { "snapshots up to" } else { "samples before" };
         eprintln!(
-            "warning: {name} holds {has} {what} step {start}, where the run had written {had} when it saved its checkpoint: the file was cut or replaced since, and the resumed run does not write the missing lines again"
+            "warning: {} holds {has} {what} step {start}, where the run had written {had} when it saved its checkpoint: the file was cut or replaced since, and the resumed run does not write the missing lines again",
+            out.join(name).display()
         );
     }
 }

@@ -22,6 +22,7 @@ use super::args::TradeoffArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
 use crate::model::scene::{Boundary, BoundaryPressure, DensityMethod, DfsphSettings, EquationOfState, InitialPressure, Kernel, PressureSolver, Scene};
+use crate::model::numbers::short;
 use crate::model::state::Snapshot;
 use crate::solver::compare::{diff as distance, rms};
 use crate::solver::{open, Backend, BackendChoice, Device, Precision};
@@ -495,17 +496,26 @@ pub fn cmd_tradeoff(args: &TradeoffArgs) -> anyhow::Result<i32> {
         return Err(InputError(format!("--time is {}; must be a finite number > 0", args.time)).into());
     }
     let base = super::args::load_scene(&args.scene, &args.overrides, Some(args.particles), false)?;
+    // The coarsest configuration steps at 2 dt: a shorter time leaves it nothing to measure.
+    if args.time < 2.0 * base.time.dt {
+        return Err(InputError(format!(
+            "--time is {} s; must be at least two of the scene's time steps (2 x time.dt = {} s), so that every configuration takes a step",
+            short(args.time),
+            short(2.0 * base.time.dt)
+        ))
+        .into());
+    }
     crate::io::rundir::prepare_report_dir("--out", &args.out)?;
     let started = Instant::now();
-    println!("tradeoff {}: {} fluid particles, {} s simulated, {} samples", base.name, base.fluid_particle_count(), args.time, args.samples);
+    println!("tradeoff {}: {} fluid particles, {} s simulated, {} samples", base.name, base.fluid_particle_count(), short(args.time), args.samples);
     let rows = study(&base, args.time, args.samples, |line| println!("  {line}"))?;
-    let title = format!("{}: error against cost ({} fluid particles, {} s)", base.name, base.fluid_particle_count(), args.time);
+    let title = format!("{}: error against cost ({} fluid particles, {} s)", base.name, base.fluid_particle_count(), short(args.time));
     let md = format!(
         "# Speed against accuracy: {}\n\n{} fluid particles at the base resolution, {} s simulated, compared at {} times with the reference \
          (CPU f64, dt / 4). Study run in {:.0} s. The errors and costs are defined in `src/app/tradeoff.rs` and docs/performance.md.\n\n{}",
         base.name,
         base.fluid_particle_count(),
-        args.time,
+        short(args.time),
         args.samples,
         started.elapsed().as_secs_f64(),
         table(&rows)

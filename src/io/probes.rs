@@ -77,7 +77,7 @@ impl ProbeWriter {
                     continue;
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::InvalidData => return Err(refuse(&f.path, "is not UTF-8 text".into())),
-                Err(e) => return Err(e).with_context(|| format!("cannot read {}", f.path.display())),
+                Err(e) => return Err(refuse(&f.path, format!("cannot be read as the probe's series ({e})"))),
             };
             // Whole lines only: what follows the last newline was being appended when the run stopped.
             let whole = &text[..text.rfind('\n').map_or(0, |i| i + 1)];

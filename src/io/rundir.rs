@@ -45,9 +45,54 @@ pub fn frame_file_name(index: u64) -> String {
     format!("frame_{index:05}.png")
 }
 
+/// What a run writes into its subdirectories, recorded in its marker: `--overwrite` replaces
+/// there only the files of the kinds the earlier run wrote, and a failed start removes only
+/// those of its own.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunWrites {
+    /// The snapshots' file extensions (`csv`, `vtk`, `ply`).
+    pub snapshot_formats: Vec<String>,
+    /// The surface meshes' extension, when the run writes them.
+    pub surface_format: Option<String>,
+    /// The probes' names (`probes/NAME.csv`, `NAME.png`).
+    pub probes: Vec<String>,
+}
+
+impl RunWrites {
+    /// The marker's lines after its first two: `snapshots EXT...`, `surface EXT`, `probes NAME...`.
+    fn marker_lines(&self) -> String {
+        let mut text = format!("snapshots {}\n", self.snapshot_formats.join(" "));
+        if let Some(f) = &self.surface_format {
+            text += &format!("surface {f}\n");
+        }
+        text + &format!("probes {}\n", self.probes.join(" "))
+    }
+
+    /// The record in the marker of run directory `dir`; `None` where the marker holds none (a
+    /// marker of an earlier version, which records no kinds: every file named as a run's is).
+    fn of_marker(dir: &Path) -> Option<RunWrites> {
+        let text = std::fs::read_to_string(dir.join(MARKER)).ok()?;
+        let mut writes = RunWrites::default();
+        let mut recorded = false;
+        for line in text.lines() {
+            let mut words = line.split(' ');
+            match words.next() {
+                Some("snapshots") => {
+                    writes.snapshot_formats = words.filter(|w| !w.is_empty()).map(str::to_string).collect();
+                    recorded = true;
+                }
+                Some("surface") => writes.surface_format = words.next().map(str::to_string),
+                Some("probes") => writes.probes = words.filter(|w| !w.is_empty()).map(str::to_string).collect(),
+                _ => {}
+            }
+        }
+        recorded.then_some(writes)
+    }
+}
+
 /// Whether `name`, in the directory `sub` of a run directory (`None`: the top), is a file a
-/// wgsph run writes there.
-fn is_run_output(sub: Option<&str>, name: &str) -> bool {
+/// wgsph run writes there: one that `writes` records, or with `None` any run's.
+fn is_run_output(sub: Option<&str>, name: &str, writes: Option<&RunWrites>) -> bool {
     let numbered = |prefix: &str, extensions: &[&str]| {
         name.strip_prefix(prefix).and_then(|rest| rest.split_once('.')).is_some_and(|(digits, ext)| {
             !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()) && extensions.contains(&ext)
@@ -56,15 +101,21 @@ fn is_run_output(sub: Option<&str>, name: &str) -> bool {
     if is_temporary(name) {
         return true;
     }
-    match sub {
-        None => [MARKER, SUMMARY_FILE, SCENE_COPY, CHECKPOINT_FILE].contains(&name) || numbered("frame_", &["png"]),
-        Some(SNAPSHOTS_DIR) => numbered("step_", &["csv", "vtk", "ply"]) || name == VTK_SERIES_NAME || name == INDEX_NAME,
-        Some(SURFACE_DIR) => numbered("step_", &["obj", "ply"]),
+    match (sub, writes) {
+        (None, _) => [MARKER, SUMMARY_FILE, SCENE_COPY, CHECKPOINT_FILE].contains(&name) || numbered("frame_", &["png"]),
+        (Some(SNAPSHOTS_DIR), None) => numbered("step_", &["csv", "vtk", "ply"]) || name == VTK_SERIES_NAME || name == INDEX_NAME,
+        (Some(SNAPSHOTS_DIR), Some(w)) => {
+            let formats: Vec<&str> = w.snapshot_formats.iter().map(String::as_str).collect();
+            numbered("step_", &formats) || (name == VTK_SERIES_NAME && formats.contains(&"vtk")) || name == INDEX_NAME
+        }
+        (Some(SURFACE_DIR), None) => numbered("step_", &["obj", "ply"]),
+        (Some(SURFACE_DIR), Some(w)) => w.surface_format.as_deref().is_some_and(|f| numbered("step_", &[f])),
         // A probe's name is letters, digits, '_' and '-' (checked at load).
-        Some(PROBES_DIR) => name.rsplit_once('.').is_some_and(|(stem, ext)| {
+        (Some(PROBES_DIR), None) => name.rsplit_once('.').is_some_and(|(stem, ext)| {
             !stem.is_empty() && stem.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-') && (ext == "csv" || ext == "png")
         }),
-        Some(_) => false,
+        (Some(PROBES_DIR), Some(w)) => name.rsplit_once('.').is_some_and(|(stem, ext)| w.probes.iter().any(|p| p == stem) && (ext == "csv" || ext == "png")),
+        (Some(_), _) => false,
     }
 }
 
@@ -73,6 +124,7 @@ fn is_run_output(sub: Option<&str>, name: &str) -> bool {
 pub struct RunOutputs {
     locations: Vec<Location>,
     overwrite: bool,
+    writes: RunWrites,
     /// The default numbered directory: it must still be free when the run starts.
     numbered: bool,
 }
@@ -92,17 +144,21 @@ impl RunOutputs {
     /// Checks the output locations of a new run before anything is written or removed: `out`,
     /// and `frames` when pictures are written. `inputs` are files the run reads (its scene),
     /// which it must never replace. `numbered`: `out` is the default numbered directory.
-    pub fn check(out: &Path, frames: Option<&Path>, overwrite: bool, numbered: bool, inputs: &[&Path]) -> anyhow::Result<RunOutputs> {
-        let mut locations = vec![Location { flag: "--out", path: out.to_path_buf(), earlier_run: false, kept: Vec::new() }];
+    /// `writes`: what the run will write into its subdirectories.
+    pub fn check(out: &Path, frames: Option<&Path>, overwrite: bool, numbered: bool, inputs: &[&Path], writes: RunWrites) -> anyhow::Result<RunOutputs> {
+        // The default directory is named after the scene: a message about it names the scene's
+        // name, not a flag the user did not give.
+        let flag = if numbered { "the run directory named after the scene's name (no --out given)" } else { "--out" };
+        let mut locations = vec![Location { flag, path: out.to_path_buf(), earlier_run: false, kept: Vec::new() }];
         if let Some(f) = frames {
             if !same_place(f, out) {
                 locations.push(Location { flag: "--frames", path: f.to_path_buf(), earlier_run: false, kept: Vec::new() });
             }
         }
         for l in &mut locations {
-            (l.earlier_run, l.kept) = check_location(l, overwrite, inputs)?;
+            (l.earlier_run, l.kept) = check_location(l, overwrite, inputs, &writes)?;
         }
-        Ok(RunOutputs { locations, overwrite, numbered })
+        Ok(RunOutputs { locations, overwrite, writes, numbered })
     }
 
     /// Makes the locations ready for the run: an earlier run's files (with `--overwrite`) are
@@ -133,7 +189,7 @@ impl RunOutputs {
                 guard.replaced.borrow_mut().push(stash);
             }
             guard.dirs.push((l.path.clone(), subdirs_before));
-            write_marker(&l.path.join(MARKER), "started")?;
+            write_marker(&l.path.join(MARKER), "started", &self.writes.marker_lines())?;
         }
         Ok(guard)
     }
@@ -156,7 +212,7 @@ fn same_place(a: &Path, b: &Path) -> bool {
 
 /// Checks one output location; returns whether it holds an earlier run, and what of it
 /// `--overwrite` keeps (the names at its top that no run wrote).
-fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Result<(bool, Vec<String>)> {
+fn check_location(l: &Location, overwrite: bool, inputs: &[&Path], writes: &RunWrites) -> anyhow::Result<(bool, Vec<String>)> {
     let (flag, path) = (l.flag, &l.path);
     let bad = |why: String| -> anyhow::Error { RunDirError(format!("{flag} {}: {why}", path.display())).into() };
     if !path.exists() {
@@ -184,24 +240,7 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
     }
     let names = list(path).map_err(|e| bad(format!("cannot read the directory: {e}")))?;
     let earlier_run = names.iter().any(|n| n == MARKER);
-    // A run writes into its subdirectories, and replaces what an earlier run wrote there: one
-    // that is a link would send both into a directory that is not the run's.
-    for sub in RUN_SUBDIRS {
-        let d = path.join(sub);
-        match std::fs::symlink_metadata(&d) {
-            Ok(m) if m.file_type().is_symlink() => {
-                return Err(bad(format!(
-                    "{} is a link{}; a run writes its {sub}/ only into a directory of its own: remove the link, or choose another directory",
-                    d.display(),
-                    std::fs::read_link(&d).map(|t| format!(" to {}", t.display())).unwrap_or_default()
-                )));
-            }
-            Ok(m) if !m.is_dir() => {
-                return Err(bad(format!("{} is a file, where a run writes its {sub}/ directory; move it, or choose another directory", d.display())));
-            }
-            _ => {}
-        }
-    }
+    check_subdirs(path).map_err(bad)?;
     let mut kept = Vec::new();
     if !names.is_empty() {
         let shown = shown_names(&names);
@@ -229,10 +268,22 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
                 }
             }
         }
+        // A file named as this run's output that the earlier run did not write (a user's, of
+        // another kind) would be replaced by this run, or removed by a failed start: it is in
+        // the way.
+        let earlier = RunWrites::of_marker(path);
         for sub in RUN_SUBDIRS {
             let d = path.join(sub);
-            if d.is_dir() {
-                probe_writable(&d).map_err(|e| bad(format!("cannot replace the earlier run's files: cannot write in {}: {e}", d.display())))?;
+            if !d.is_dir() {
+                continue;
+            }
+            probe_writable(&d).map_err(|e| bad(format!("cannot replace the earlier run's files: cannot write in {}: {e}", d.display())))?;
+            let names = list(&d).map_err(|e| bad(format!("cannot read {}: {e}", d.display())))?;
+            if let Some(n) = names.iter().find(|n| is_run_output(Some(sub), n, Some(writes)) && !is_run_output(Some(sub), n, earlier.as_ref())) {
+                return Err(bad(format!(
+                    "{} is in the way: this run writes a file of that name, and the earlier run did not write it; move it, or choose another directory",
+                    d.join(n).display()
+                )));
             }
         }
         kept = names
@@ -240,13 +291,54 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path]) -> anyhow::Re
             .filter(|n| {
                 let p = path.join(n);
                 let run_dir = (RUN_SUBDIRS.contains(&n.as_str()) || n.starts_with(REPLACED_PREFIX)) && is_real_dir(&p);
-                !run_dir && !(is_run_output(None, n) && p.is_file())
+                !run_dir && !(is_run_output(None, n, None) && p.is_file())
             })
             .cloned()
             .collect();
+        for sub in RUN_SUBDIRS.iter().filter(|sub| is_real_dir(&path.join(sub))) {
+            let names = list(&path.join(sub)).map_err(|e| bad(format!("cannot read {}: {e}", path.join(sub).display())))?;
+            kept.extend(names.into_iter().filter(|n| !is_run_output(Some(sub), n, earlier.as_ref())).map(|n| format!("{sub}/{n}")));
+        }
     }
     probe_writable(path).map_err(|e| bad(format!("cannot write there: {e}")))?;
     Ok((earlier_run, kept))
+}
+
+/// A run writes into its subdirectories, and replaces (or, resumed, removes the partial files
+/// of) what an earlier run wrote there: one that is a link would send both into a directory
+/// that is not the run's. Each must be a directory of its own, or absent.
+fn check_subdirs(path: &Path) -> Result<(), String> {
+    for sub in RUN_SUBDIRS {
+        let d = path.join(sub);
+        match std::fs::symlink_metadata(&d) {
+            Ok(m) if m.file_type().is_symlink() => {
+                return Err(format!(
+                    "{} is a link{}; a run writes its {sub}/ only into a directory of its own: remove the link, or choose another directory",
+                    d.display(),
+                    std::fs::read_link(&d).map(|t| format!(" to {}", t.display())).unwrap_or_default()
+                ));
+            }
+            Ok(m) if !m.is_dir() => {
+                return Err(format!("{} is a file, where a run writes its {sub}/ directory; move it, or choose another directory", d.display()));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// Checks a run directory that `--resume` continues, before anything is read or removed: its
+/// subdirectories are its own (not links), and the files it rewrites whole (the summary, the
+/// indexes) are files, not directories, so that the run does not fail after all its steps.
+pub fn check_resumable(dir: &Path) -> Result<(), RunDirError> {
+    let bad = |why: String| RunDirError(format!("--resume {}: {why}", dir.display()));
+    check_subdirs(dir).map_err(bad)?;
+    for file in [dir.join(SUMMARY_FILE), dir.join(SNAPSHOTS_DIR).join(INDEX_NAME), dir.join(SNAPSHOTS_DIR).join(VTK_SERIES_NAME)] {
+        if std::fs::symlink_metadata(&file).is_ok_and(|m| m.is_dir()) {
+            return Err(bad(format!("{} is a directory, where the run writes a file; move it away", file.display())));
+        }
+    }
+    Ok(())
 }
 
 /// The file that marks a directory as one a report command (`wgsph tradeoff`, `wgsph
@@ -276,7 +368,7 @@ pub fn prepare_report_dir(flag: &str, dir: &Path) -> Result<(), RunDirError> {
         }
     }
     probe_writable(dir).map_err(|e| bad(format!("cannot write there: {e}")))?;
-    write_marker(&dir.join(REPORT_MARKER), "written").map_err(|e| bad(format!("cannot write there: {e:#}")))
+    write_marker(&dir.join(REPORT_MARKER), "written", "").map_err(|e| bad(format!("cannot write there: {e:#}")))
 }
 
 /// Whether `path` is a directory itself, not a link to one.
@@ -315,6 +407,7 @@ fn probe_writable(dir: &Path) -> std::io::Result<()> {
 
 /// The files of `dir` (a run directory) that a run writes, in it and its subdirectories.
 fn run_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let writes = RunWrites::of_marker(dir);
     let mut out = Vec::new();
     for name in list(dir)? {
         let path = dir.join(&name);
@@ -323,11 +416,11 @@ fn run_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
             out.push(path);
         } else if RUN_SUBDIRS.contains(&name.as_str()) && is_real_dir(&path) {
             for inner in list(&path)? {
-                if is_run_output(Some(&name), &inner) && path.join(&inner).is_file() {
+                if is_run_output(Some(&name), &inner, writes.as_ref()) && path.join(&inner).is_file() {
                     out.push(path.join(inner));
                 }
             }
-        } else if is_run_output(None, &name) && path.is_file() {
+        } else if is_run_output(None, &name, None) && path.is_file() {
             out.push(path);
         }
     }
@@ -469,8 +562,8 @@ impl Drop for StartGuard {
 }
 
 /// Writes a marker file that says wgsph made its directory: a run directory's, a report's.
-fn write_marker(path: &Path, what: &str) -> anyhow::Result<()> {
-    let text = format!("wgsph {}\n{what} {}\n", env!("CARGO_PKG_VERSION"), utc_now());
+fn write_marker(path: &Path, what: &str, more: &str) -> anyhow::Result<()> {
+    let text = format!("wgsph {}\n{what} {}\n{more}", env!("CARGO_PKG_VERSION"), utc_now());
     write_atomic(path, |w| w.write_all(text.as_bytes()))
 }
 

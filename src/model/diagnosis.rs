@@ -388,7 +388,15 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
                 raise_sound(scene, c0, None)
             ));
         }
-        if too_fast {
+        if too_fast && mach <= 0.3 {
+            // The scene's own limit, below where weak compressibility fails, stopped the run.
+            causes.push(format!(
+                "the scene's limits.max_mach = {} is below the Mach 0.3 up to which the fluid stays nearly incompressible, and the flow reached Mach {}                  (a largest speed of {}): the limit stopped the run, not the flow; raise limits.max_mach if this speed is expected",
+                short(params.limits.max_mach),
+                short(mach),
+                short(m.max_speed)
+            ));
+        } else if too_fast {
             causes.push(format!(
                 "the flow reached Mach {} (a largest speed of {}): beyond about 0.3 the fluid is no longer nearly incompressible; {}",
                 short(mach),

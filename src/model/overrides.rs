@@ -43,7 +43,15 @@ impl std::str::FromStr for Override {
         let (key, value) = text.split_once('=').ok_or_else(|| format!("'{text}' is not KEY=VALUE (e.g. time.dt=1e-4)"))?;
         let key = checked_key(key, text)?;
         let value = value.trim();
+        // One value: a line break would let the rest of the text set other keys, or be dropped.
+        if value.contains(['\n', '\r']) {
+            return Err(format!("'{text}': the value holds a line break; give one value per --set"));
+        }
         let parsed = toml::from_str::<toml::Table>(&format!("v = {value}")).ok().and_then(|mut t| t.remove("v"));
+        // A number beyond f64 is not a string to be refused as one.
+        if parsed.is_none() && value.parse::<f64>().is_ok_and(f64::is_infinite) && !value.to_ascii_lowercase().contains("inf") {
+            return Err(format!("'{text}': {value} is beyond the largest number a scene holds (about 1.8e308)"));
+        }
         let value = parsed.unwrap_or_else(|| toml::Value::String(value.to_string()));
         Ok(Override { key: key.to_string(), value: Some(value), text: format!("--set {text}") })
     }

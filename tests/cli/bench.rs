@@ -97,6 +97,7 @@ fn flags_for_paths_not_asked_for_are_refused_by_name() {
         (&["--paths", "gpu", "--threads", "2"][..], "--threads sets the CPU paths' threads"),
         (&["--paths", "gpu,cpu-f32", "--solver-loop", "indirect"][..], "(dfsph-gpu)"),
         (&["--paths", "cpu-f32,dfsph-gpu", "--neighbour-skin", "0.1"][..], "--neighbour-skin tunes the weakly compressible GPU path"),
+        (&["--paths", "cpu-f32,gpu,cpu-f32"][..], "--paths cpu-f32,gpu,cpu-f32 names cpu-f32 twice"),
     ] {
         let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["bench", "--n", "2", "--steps", "1"]).args(args).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);

@@ -206,6 +206,12 @@ fn bad_picture_options_are_refused_with_what_is_allowed() {
         assert!(err.contains(expect) && err.contains(flag), "{flag} {value}: {err}");
     }
     assert!(!dir.path().join("f").exists());
+    // Without --frames a run draws nothing, so how its pictures look is refused, not ignored.
+    let out = wgsph(&["run", "hydrostatic", "--steps", "1", "--color-range", "0:1", "--style", "surface", "--out", "o"], dir.path());
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--style, --color-range set how the pictures look, and this run draws none: add --frames DIR"), "{err}");
+    assert!(!dir.path().join("o").exists());
 }
 
 /// `wgsph compare` of the scene file `toml` over `steps` steps: its standard output, after

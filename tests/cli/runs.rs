@@ -191,7 +191,7 @@ fn resume_names_a_series_file_cut_since_the_checkpoint() {
     let scene = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/hydrostatic.toml")).unwrap()
         + "\n[[probe]]\nname = \"mid\"\ntype = \"point\"\nposition = [0.2, 0.05, 0.05]\nevery_steps = 2\n\n[[probe]]\nname = \"low\"\ntype = \"point\"\nposition = [0.2, 0.02, 0.05]\nevery_steps = 5\n";
     std::fs::write(dir.path().join("probed.toml"), scene).unwrap();
-    let o = wgsph(&["run", "probed.toml", "--particles", "300", "--steps", "10", "--backend", "cpu", "--snapshot-every", "2", "--checkpoint-every", "10", "--out", "o"], dir.path());
+    let o = wgsph(&["run", "probed.toml", "--particles", "300", "--steps", "10", "--backend", "cpu", "--snapshot-every", "2", "--checkpoint-every", "10", "--format", "csv,vtk", "--out", "o"], dir.path());
     assert!(o.status.success(), "{}", text(&o.stderr));
     // Untouched: no warning.
     let o = wgsph(&["run", "--resume", "o", "--steps", "10"], dir.path());
@@ -207,11 +207,16 @@ fn resume_names_a_series_file_cut_since_the_checkpoint() {
     };
     cut("snapshots/index.csv", 2);
     cut("probes/mid.csv", 3);
+    let series = o_dir.join("snapshots/particles.vtk.series");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&series).unwrap()).unwrap();
+    json["files"].as_array_mut().unwrap().truncate(3);
+    std::fs::write(&series, json.to_string()).unwrap();
     let o = wgsph(&["run", "--resume", "o", "--steps", "2"], dir.path());
     assert!(o.status.success(), "{}", text(&o.stderr));
     let stderr = text(&o.stderr);
-    assert!(stderr.contains("warning: snapshots/index.csv holds 1 snapshots up to step 20, where the run had written 11"), "{stderr}");
-    assert!(stderr.contains("warning: probes/mid.csv holds 2 samples before step 20, where the run had written 10"), "{stderr}");
+    assert!(stderr.contains("warning: o/snapshots/index.csv holds 1 snapshots up to step 20, where the run had written 11"), "{stderr}");
+    assert!(stderr.contains("warning: o/probes/mid.csv holds 2 samples before step 20, where the run had written 10"), "{stderr}");
+    assert!(stderr.contains("warning: o/snapshots/particles.vtk.series holds 3 snapshots up to step 20, where the run had written 11"), "{stderr}");
     assert!(!stderr.contains("probes/low.csv"), "{stderr}");
 }
 

@@ -114,6 +114,12 @@ fn a_small_study_writes_the_table_and_the_plot() {
     let out = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["tradeoff", "--time=0"]).current_dir(dir.path()).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--time"));
+    // A time shorter than the coarsest configuration's step leaves nothing to measure.
+    let out = Command::new(env!("CARGO_BIN_EXE_wgsph")).args(["tradeoff", "hydrostatic", "--time", "1e-300", "--out", "short"]).current_dir(dir.path()).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("--time is 1e-300 s; must be at least two of the scene's time steps (2 x time.dt = 0.0006 s)"), "{err}");
+    assert!(!dir.path().join("short").exists());
 }
 
 /// `tradeoff` and `validate` write only into a new or empty directory, or one such a command

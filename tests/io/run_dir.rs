@@ -172,6 +172,46 @@ fn overwrite_replaces_only_what_a_run_wrote_and_never_the_scene_being_run() {
     assert_eq!(summary["steps"], 1);
 }
 
+/// `--overwrite` replaces in snapshots/, surface/ and probes/ only files of the kinds the
+/// earlier run wrote (its marker records its formats, surface meshes and probes): a user's file
+/// there named like another run's output stays, and one this run would write over is in the
+/// way (exit 2, nothing changed).
+#[test]
+fn overwrite_replaces_only_the_kinds_of_file_the_earlier_run_wrote() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = dir.path().join("o");
+    let run = |extra: &[&str]| wgsph(&[&["run", "hydrostatic", "--particles", "300", "--steps", "3", "--backend", "cpu", "--out", "o"][..], extra].concat(), dir.path());
+    assert!(run(&[]).status.success());
+    // The earlier run wrote CSV snapshots, no surface meshes and no probes.
+    let mine = ["probes/data.csv", "probes/data.png", "snapshots/step_000050.vtk", "surface/step_000000.obj"];
+    for f in mine {
+        std::fs::create_dir_all(o.join(f).parent().unwrap()).unwrap();
+        std::fs::write(o.join(f), "mine").unwrap();
+    }
+    let r = run(&["--overwrite"]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    for f in mine {
+        assert_eq!(std::fs::read_to_string(o.join(f)).unwrap(), "mine", "{f}");
+    }
+    assert!(stderr(&r).contains("keeps") && stderr(&r).contains("snapshots/step_000050.vtk"), "{}", stderr(&r));
+    // A run writing VTK would replace the user's step_000050.vtk's kind: refused, nothing changed.
+    let before = tree(&o);
+    let r = run(&["--overwrite", "--format", "vtk"]);
+    assert_eq!(r.status.code(), Some(2), "{}", stderr(&r));
+    assert!(stderr(&r).contains("step_000050.vtk is in the way"), "{}", stderr(&r));
+    assert_eq!(tree(&o), before);
+    // Once moved, the VTK run replaces the CSV run, and a later CSV run replaces its VTK files.
+    std::fs::remove_file(o.join("snapshots/step_000050.vtk")).unwrap();
+    assert!(run(&["--overwrite", "--format", "vtk"]).status.success());
+    assert!(o.join("snapshots/step_000003.vtk").is_file() && !o.join("snapshots/step_000003.csv").exists());
+    assert!(run(&["--overwrite"]).status.success());
+    assert!(o.join("snapshots/step_000003.csv").is_file() && !o.join("snapshots/step_000003.vtk").exists());
+    assert!(!o.join("snapshots/particles.vtk.series").exists());
+    for f in ["probes/data.csv", "probes/data.png", "surface/step_000000.obj"] {
+        assert_eq!(std::fs::read_to_string(o.join(f)).unwrap(), "mine", "{f}");
+    }
+}
+
 /// Runs wgsph with `dir` made read-only: in a user namespace where `dir` is a read-only bind
 /// mount (root ignores file permissions), else by its permissions. `None` where neither works.
 #[cfg(unix)]
@@ -357,4 +397,16 @@ fn outputs_get_the_permissions_of_new_files() {
             assert_eq!(got, mode, "{file} with umask {umask}: {got:o}");
         }
     }
+}
+
+/// Without --out the run directory is named after the scene: a name too long for a file system
+/// is named as the scene's, not as a flag the user never gave.
+#[test]
+fn a_scene_name_too_long_for_its_run_directory_is_named_as_the_cause() {
+    let dir = tempfile::tempdir().unwrap();
+    let name = format!("name={}", "n".repeat(300));
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "1", "--backend", "cpu", "--set", &name], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("the run directory named after the scene's name (no --out given)") && stderr(&o).contains("at most 255"), "{}", stderr(&o));
+    assert!(!dir.path().join("out").exists());
 }

@@ -285,6 +285,8 @@ fn set_changes_a_scene_field_checked_like_the_file_and_recorded() {
         ("probe.0.name=p", "the scene has no probe list, so it has no entry 0 to set"),
         ("time.dt.x=1", "is a value"),
         ("nonsense", "KEY=VALUE"),
+        ("physics.viscosity=0.1\nstiffness=3", "the value holds a line break"),
+        ("physics.viscosity=1e400", "1e400 is beyond the largest number a scene holds"),
     ] {
         let o = wgsph_in(dir.path(), &["run", "hydrostatic", "--steps", "1", "--set", set]);
         assert_eq!(o.status.code(), Some(2), "{set}");
@@ -409,4 +411,23 @@ fn the_cfl_number_defaults_by_method_and_a_given_one_is_kept() {
     assert_eq!(cfl(&adaptive(dfsph_scene("", ""), "cfl_number = 0.6")), 0.6);
     let e = Scene::from_toml_str(&adaptive(dfsph_scene("", ""), "cfl_number = 1.5"), &SceneOrigin::Text).unwrap_err().to_string();
     assert!(e.contains("time.cfl_number") && e.contains("1.5"), "{e}");
+}
+
+/// A force probe whose box holds none of its boundary's wall particles would read zero for the
+/// whole run: refused at load (exit 2) with the box and where the walls lie; a box around part
+/// of the walls runs.
+#[test]
+fn a_force_probe_box_that_misses_the_walls_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let tank = Scene::builtin("hydrostatic").unwrap().to_toml();
+    let force = |min: &str, max: &str| format!("{tank}\n[[probe]]\nname = \"floor\"\ntype = \"force\"\nboundary = 0\nmin = {min}\nmax = {max}\n");
+    std::fs::write(dir.path().join("missed.toml"), force("[0.05, 0.05, 0.05]", "[0.06, 0.06, 0.06]")).unwrap();
+    std::fs::write(dir.path().join("floor.toml"), force("[-0.1, -0.1, -0.1]", "[0.5, 0.0, 0.2]")).unwrap();
+    let o = wgsph_in(dir.path(), &["run", "missed.toml", "--particles", "300", "--steps", "1", "--backend", "cpu"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("missed.toml: probe[0] ('floor'): the box min = [0.05, 0.05, 0.05] .. max = [0.06, 0.06, 0.06] holds none of boundary[0]'s wall particles"), "{err}");
+    assert!(!dir.path().join("out").exists());
+    let o = wgsph_in(dir.path(), &["run", "floor.toml", "--particles", "300", "--steps", "1", "--backend", "cpu"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }

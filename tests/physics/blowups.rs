@@ -135,6 +135,18 @@ fn a_50_m_per_s_impact_stops_on_its_mach_number() {
     assert!(f.contains("raise physics.stiffness (k = 1600000 gives c0 = 40; c0 = 50") && f.contains("10 times the largest speed, needs k = 2.5"), "{f}");
 }
 
+/// A Mach limit the scene set far below 0.3 stops a calm flow: the diagnosis says the limit
+/// stopped the run, and does not ask for a higher speed of sound the flow does not need.
+#[test]
+fn a_strict_mach_limit_is_named_as_the_cause_not_the_speed_of_sound() {
+    let scene = TestScene::small_tank().stop_levels(2.0, 0.001).build();
+    let mut b = common::cpu::<f64>(&scene);
+    let f = failure(&mut b, &scene, 20, 5);
+    assert!(f.contains("over limits.max_mach = 0.001"), "{f}");
+    assert!(f.contains("the scene's limits.max_mach = 0.001 is below the Mach 0.3") && f.contains("the limit stopped the run, not the flow"), "{f}");
+    assert!(!f.contains("raise physics.speed_of_sound"), "{f}");
+}
+
 #[test]
 fn the_limits_are_the_scenes_and_inf_turns_them_off() {
     // The same impact with the Mach limit off: it runs on, over the density limit, which the

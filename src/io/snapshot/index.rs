@@ -34,7 +34,10 @@ impl SnapshotIndex {
     }
 
     /// The index of an earlier run up to `last_step` (a resumed run goes on from there). A
-    /// missing file gives an empty index; one with other formats is started afresh.
+    /// missing file gives an empty index; what follows its last line break (a line being
+    /// written when the run stopped) is dropped. A file that does not start with this run's
+    /// header, or holds a line that is not a snapshot's, is not the run's index: an error (the
+    /// caller refuses to resume, and leaves it as it is).
     pub fn read_up_to(path: &Path, formats: &[SnapshotFormat], last_step: u64) -> anyhow::Result<Self> {
         let mut index = SnapshotIndex::new(formats);
         let text = match std::fs::read_to_string(path) {
@@ -42,12 +45,20 @@ impl SnapshotIndex {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(index),
             Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
         };
-        let mut lines = text.lines();
-        if lines.next() != Some(index.header().as_str()) {
-            return Ok(index);
+        let whole = &text[..text.rfind('\n').map_or(0, |i| i + 1)];
+        let mut lines = whole.lines();
+        let header = index.header();
+        match lines.next() {
+            None => return Ok(index),
+            Some(first) if first == header => {}
+            Some(first) => anyhow::bail!(
+                "{}: its first line is '{}', where this run's index starts '{header}': it is not the run's index, and resuming would replace it; move it away (the index then restarts at the checkpoint)",
+                path.display(),
+                first.chars().take(80).collect::<String>()
+            ),
         }
         for (n, line) in lines.enumerate() {
-            let bad = || anyhow::anyhow!("{}: line {} is not step,time,files: '{line}'", path.display(), n + 2);
+            let bad = || anyhow::anyhow!("{}: line {} is not step,time,files: '{}'; move the file away to resume (the index then restarts at the checkpoint)", path.display(), n + 2, line.chars().take(80).collect::<String>());
             let mut fields = line.split(',');
             let step: u64 = fields.next().and_then(|s| s.parse().ok()).ok_or_else(bad)?;
             let time: f64 = fields.next().and_then(|s| s.parse().ok()).ok_or_else(bad)?;

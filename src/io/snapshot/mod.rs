@@ -60,7 +60,7 @@ impl SnapshotWriter {
             // is left as it is.
             w.series = FileSeries::read_up_to(&index, last_step).map_err(|e| crate::io::rundir::RunDirError(format!("{e:#}")))?;
         }
-        w.index = SnapshotIndex::read_up_to(&w.index_path(), &w.formats, last_step)?;
+        w.index = SnapshotIndex::read_up_to(&w.index_path(), &w.formats, last_step).map_err(|e| crate::io::rundir::RunDirError(format!("{e:#}")))?;
         Ok(w)
     }
 
@@ -73,10 +73,15 @@ impl SnapshotWriter {
         self.out.join("snapshots").join(INDEX_NAME)
     }
 
-    /// The index's lines (snapshots) up to `step`, named by the index's path in the run
-    /// directory: what a run resumed at `step` keeps of it.
-    pub fn lines_up_to(&self, step: u64) -> (String, u64) {
-        (format!("snapshots/{INDEX_NAME}"), self.index.rows().iter().filter(|r| r.0 <= step).count() as u64)
+    /// The snapshots up to `step` in the index and in the VTK series, named by the file's path
+    /// in the run directory: what a run resumed at `step` keeps of them.
+    pub fn lines_up_to(&self, step: u64) -> Vec<(String, u64)> {
+        let mut lines = vec![(format!("snapshots/{INDEX_NAME}"), self.index.rows().iter().filter(|r| r.0 <= step).count() as u64)];
+        if self.formats.contains(&SnapshotFormat::Vtk) {
+            let kept = self.series.files.iter().filter(|e| format::step_of_name(&e.name).is_some_and(|s| s <= step)).count();
+            lines.push((format!("snapshots/{VTK_SERIES_NAME}"), kept as u64));
+        }
+        lines
     }
 
     fn add_to_index(&mut self, step: u64, time: f64) -> anyhow::Result<()> {

@@ -105,9 +105,14 @@ impl FromStr for WorkgroupSizes {
             return Ok(WorkgroupSizes::all(size(text, "the size")?));
         }
         let mut out = WorkgroupSizes::default();
+        let mut seen: Vec<&str> = Vec::new();
         for part in text.split(',') {
             let (stage, value) = part.split_once('=').ok_or_else(|| format!("'{part}' is not STAGE=SIZE"))?;
             let stage = stage.trim();
+            if seen.contains(&stage) {
+                return Err(format!("stage '{stage}' is given twice; give each stage one size"));
+            }
+            seen.push(stage);
             let n = size(value, &format!("the size of stage '{stage}'"))?;
             *out.slot(stage).ok_or_else(|| format!("'{stage}' is not a stage with a workgroup size; allowed: {}", TUNABLE_STAGES.join(", ")))? = n;
         }
@@ -240,7 +245,7 @@ mod tests {
         let s: WorkgroupSizes = "density=32, forces=256".parse().unwrap();
         assert_eq!((s.density, s.forces, s.reorder), (32, 256, super::super::shaders::WORKGROUP_SIZE));
         assert_eq!(s.to_string().parse::<WorkgroupSizes>().unwrap(), s);
-        for (bad, names) in [("0", "'0'"), ("density=abc", "'density'"), ("pressure=64", "'pressure'"), ("forces", "'forces'"), ("2048", "1024")] {
+        for (bad, names) in [("0", "'0'"), ("density=abc", "'density'"), ("pressure=64", "'pressure'"), ("forces", "'forces'"), ("2048", "1024"), ("density=64,density=128", "'density' is given twice")] {
             let e = bad.parse::<WorkgroupSizes>().unwrap_err();
             assert!(e.contains(names), "{bad}: {e}");
         }
