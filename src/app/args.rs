@@ -404,6 +404,17 @@ impl GpuTuning {
             full_exchange: false,
         }
     }
+
+    /// The flags that cannot apply to a scene with `params`: `--solver-loop` steers DFSPH's
+    /// solves, which a weakly compressible scene does not have.
+    pub fn check_scene(&self, params: &crate::model::params::Params) -> Result<(), InputError> {
+        if let (Some(mode), None) = (self.solver_loop, &params.dfsph) {
+            return Err(InputError(format!(
+                "--solver-loop {mode} steers the GPU's DFSPH solves, and the scene uses the weakly compressible solver (physics.solver = \"wcsph\"): leave it out"
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// `wgsph profile`.

@@ -372,6 +372,7 @@ impl Profile {
 
 pub fn cmd_profile(args: &ProfileArgs) -> anyhow::Result<i32> {
     let scene = super::args::load_scene(&args.scene, &args.overrides, args.particles, false)?;
+    args.tuning.check_scene(&scene.params())?;
     let ours = |text: &str| serde_json::from_str::<Profile>(text).is_ok();
     let file = args.out.as_deref().map(|p| super::errors::output_file("--out", p, "a profile", &ours)).transpose()?;
     let options = GpuOptions { single_cells: args.single_cells, ..args.tuning.options() };

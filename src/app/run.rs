@@ -537,6 +537,7 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
         super::args::print_warnings(&warnings);
     }
     let params = scene.params();
+    args.gpu.check_scene(&params)?;
     let steps = args.steps.unwrap_or_else(|| steps_for_time(&params, args.time));
     if args.checkpoint_every > 0 && params.rebuild_every > 1 {
         return Err(InputError(format!(

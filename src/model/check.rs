@@ -12,6 +12,8 @@ pub const MAX_PARTICLES: u64 = 1 << 31;
 pub const MAX_CELLS: u64 = 1 << 30;
 /// Most iterations a DFSPH solve may take per step (the GPU records that many per step).
 pub const MAX_SOLVER_ITERATIONS: u32 = 1000;
+/// The largest turn of a mesh boundary, in degrees (about 2,800 revolutions).
+pub const MAX_ROTATION_DEGREES: f64 = 1e6;
 /// Host bytes per particle the CPU path needs at most (f64 state, sort buffers, snapshot copy,
 /// and the neighbour lists of the lane path: about 550 bytes per fluid particle in all on the
 /// block workload, measured by `wgsph bench`).
@@ -245,8 +247,10 @@ impl Scene {
                 }
                 finite3(&format!("{f}.translate"), m.translate)?;
                 finite3(&format!("{f}.rotation_axis"), m.rotation_axis)?;
-                if !m.rotation_degrees.is_finite() {
-                    return Err(err(origin, format!("{f}.rotation_degrees"), format!("is {}; must be a finite number", short(m.rotation_degrees))));
+                // A turn of thousands of revolutions is a typo, and past some 1e15 degrees the
+                // angle keeps no precision.
+                if !(m.rotation_degrees.is_finite() && m.rotation_degrees.abs() <= MAX_ROTATION_DEGREES) {
+                    return Err(err(origin, format!("{f}.rotation_degrees"), format!("is {}; must be a finite angle of at most {} degrees in size", short(m.rotation_degrees), short(MAX_ROTATION_DEGREES))));
                 }
                 if m.rotation_degrees != 0.0 && m.rotation_axis == [0.0; 3] {
                     return Err(err(origin, format!("{f}.rotation_axis"), "is zero; a rotation needs a non-zero axis"));

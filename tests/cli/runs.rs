@@ -397,6 +397,11 @@ fn gpu_tuning_flags_on_the_cpu_path_are_refused_or_noted() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--full-exchange") && text(&o.stderr).contains("one process has nothing to exchange"), "{}", text(&o.stderr));
     assert!(!dir.path().join("refused").exists());
+    // DFSPH's solve loop means nothing to a weakly compressible scene.
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--solver-loop", "indirect", "--out", "refused"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--solver-loop indirect steers the GPU's DFSPH solves"), "{}", text(&o.stderr));
+    assert!(!dir.path().join("refused").exists());
     // A neighbour skin outside its range, or with a grid rebuilt every 2nd step (the skin
     // chooses when): refused by name before anything is written.
     let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "2", "--neighbour-skin", "1.5", "--out", "refused"], dir.path());

@@ -135,6 +135,10 @@ fn a_mesh_file_is_found_recorded_and_checked() {
     let e = load(&copy).unwrap_err();
     assert!(e.contains("boundary[1].file") && e.contains("has changed") && e.contains("boundary[1].crc32"), "{e}");
     assert!(load(&path).is_ok());
+    // A recorded CRC that is not one is named as such, not as a changed file.
+    let bad_crc = write(dir.path(), "elsewhere/bad_crc.toml", &scene.to_toml().replace(m.crc32.as_deref().unwrap(), "abc"));
+    let e = load(&bad_crc).unwrap_err();
+    assert!(e.contains("boundary[1].crc32: is 'abc'; must be the file's CRC-32 as 8 hexadecimal digits"), "{e}");
 
     let refused = |mesh: &str, file_text: Option<&str>| {
         if let Some(t) = file_text {

@@ -296,4 +296,13 @@ fn a_rigid_body_of_another_mesh_becomes_a_mesh_boundary() {
     std::fs::write(&path, text.replace("cube.obj", "bunny.obj")).unwrap();
     let e = Scene::load(path.to_str().unwrap()).unwrap_err().to_string();
     assert!(e.contains("RigidBodies[1].geometryFile") && e.contains("bunny.obj") && e.contains("cannot read"), "{e}");
+    // A turn that cannot place walls, named by its own field.
+    for (from, to, says) in [
+        (r#""rotationAngle": 0.5"#, r#""rotationAngle": 1e308"#, "RigidBodies[1].rotationAngle: is 1e308; must be a finite angle in radians"),
+        (r#""rotationAxis": [0, 1, 0]"#, r#""rotationAxis": [0, 0, 0]"#, "RigidBodies[1].rotationAxis: is [0, 0, 0]; a rotation needs a finite, non-zero axis"),
+    ] {
+        std::fs::write(&path, text.replace(from, to)).unwrap();
+        let e = Scene::load(path.to_str().unwrap()).unwrap_err().to_string();
+        assert!(e.contains(says), "{e}");
+    }
 }

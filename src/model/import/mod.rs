@@ -86,6 +86,9 @@ impl Scene {
             let bytes = read_at_most(&path, MAX_MESH_FILE_BYTES).map_err(|e| err(origin, &field, format!("'{}': cannot read the mesh file: {e}", path.display())))?;
             let crc = format!("{:08x}", crc32fast::hash(&bytes));
             if let Some(recorded) = &m.crc32 {
+                if !(recorded.len() == 8 && recorded.chars().all(|c| c.is_ascii_hexdigit())) {
+                    return Err(err(origin, &format!("boundary[{i}].crc32"), format!("is '{recorded}'; must be the file's CRC-32 as 8 hexadecimal digits (or left out)")));
+                }
                 if !recorded.eq_ignore_ascii_case(&crc) {
                     return Err(err(origin, &field, format!(
                         "'{}' has changed since this scene recorded it (CRC-32 {crc}, recorded {recorded}); the walls would not be the ones it was run with: restore the file, or remove boundary[{i}].crc32 to use it as it is",

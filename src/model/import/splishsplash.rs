@@ -81,6 +81,9 @@ const METHOD_BLOCKS: &[&str] = &[
 ];
 /// The end of a scene that runs until stopped (no `stopAt`), in seconds.
 const END_WITHOUT_STOP_AT: f64 = 5.0;
+/// The largest rotationAngle taken (radians): a turn of many thousand revolutions is a typo,
+/// and beyond some 1e15 the angle keeps no precision at all.
+const MAX_ROTATION_RADIANS: f64 = 1e4;
 const SKIPPED_FLUID: &[&str] = &[
     "colorField",
     "colorMapType",
@@ -553,6 +556,17 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
                 k if SKIPPED_RIGID.contains(&k) => {}
                 _ => p.add(&field, "is not a rigid body parameter that wgsph can import"),
             }
+        }
+        // A turn the walls can be placed by: a finite angle about a non-zero axis.
+        if !(angle.is_finite() && angle.abs() <= MAX_ROTATION_RADIANS) {
+            use crate::model::numbers::short;
+            p.add(format!("{section}.rotationAngle"), format!("is {}; must be a finite angle in radians, at most {} in size", short(angle), short(MAX_ROTATION_RADIANS)));
+            continue;
+        }
+        if angle != 0.0 && !(axis.iter().all(|c| c.is_finite()) && axis.iter().any(|&c| c != 0.0)) {
+            use crate::model::numbers::short3;
+            p.add(format!("{section}.rotationAxis"), format!("is {}; a rotation needs a finite, non-zero axis", short3(axis)));
+            continue;
         }
         let unit_box = |g: &str| g.replace('\\', "/").rsplit('/').next().is_some_and(|f| f.eq_ignore_ascii_case("UnitBox.obj"));
         match geometry {
