@@ -163,10 +163,10 @@ pub struct RunArgs {
     #[command(flatten)]
     pub overrides: SceneOverrides,
     /// Number of steps to run (default: up to the scene's end time).
-    #[arg(long, conflicts_with = "time")]
+    #[arg(long, conflicts_with = "time", value_parser = whole_number)]
     pub steps: Option<u64>,
-    /// Simulated time to run, in the scene's time unit.
-    #[arg(long)]
+    /// Simulated time to run, in seconds (`0.5` or `0.5s`).
+    #[arg(long, value_parser = seconds)]
     pub time: Option<f64>,
     #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
     pub backend: BackendArg,
@@ -206,7 +206,7 @@ pub struct RunArgs {
     #[arg(long, requires = "out")]
     pub overwrite: bool,
     /// Write the full state to DIR/checkpoint.wgsph every K steps (0: never).
-    #[arg(long, default_value_t = 0, value_name = "K")]
+    #[arg(long, default_value_t = 0, value_name = "K", value_parser = whole_number)]
     pub checkpoint_every: u64,
     /// Continue the run in DIR from its checkpoint, to the end it was heading to (or for
     /// --steps N / --time T more); scene and settings come from the checkpoint.
@@ -214,7 +214,7 @@ pub struct RunArgs {
     pub resume: Option<PathBuf>,
     /// Reconstruct the fluid surface (marching cubes over an SPH density field, splashsurf)
     /// every K steps into DIR/surface/step_NNNNNN.obj (0: never).
-    #[arg(long, default_value_t = 0, value_name = "K")]
+    #[arg(long, default_value_t = 0, value_name = "K", value_parser = whole_number)]
     pub surface_mesh_every: u64,
     /// File format of the surface meshes.
     #[arg(long, value_enum, default_value_t = MeshFormat::Obj)]
@@ -458,7 +458,7 @@ pub struct TradeoffArgs {
     pub particles: u64,
     /// Simulated time of every run (default 0.3 s: the dam-break surge before it reaches the
     /// far wall, after which the splash makes single trajectories chaotic).
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, default_value_t = 0.3, value_parser = seconds)]
     pub time: f64,
     /// Times at which the runs are compared.
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..=1000))]
@@ -619,9 +619,23 @@ pub fn at_particles(scene: &Scene, n: u64, origin: &SceneOrigin) -> anyhow::Resu
 }
 
 /// A warning for each fluid block of `scene` that its particle lattice does not fill exactly,
-/// and one when the lattice does not start at its rest density.
+/// one when the lattice does not start at its rest density, and one for each setting the scene
+/// leaves unused ([`Scene::unused_settings`]).
 pub fn lattice_warnings(scene: &Scene) -> Vec<String> {
-    scene.lattice_changes().into_iter().chain(scene.rest_density_warning()).collect()
+    scene.lattice_changes().into_iter().chain(scene.rest_density_warning()).chain(scene.unused_settings()).collect()
+}
+
+/// A count of 0 or more (steps, intervals where 0 is never): Rust's own parse error ("invalid
+/// digit found in string") says nothing of what is allowed.
+fn whole_number(text: &str) -> Result<u64, String> {
+    text.trim().parse::<u64>().map_err(|_| format!("'{text}' is not a whole number of 0 or more"))
+}
+
+/// A simulated time in seconds, written as a number or with the unit (`0.5`, `0.5s`), as
+/// `--snapshot-every` takes its interval; its range is checked where it is used.
+fn seconds(text: &str) -> Result<f64, String> {
+    let t = text.trim();
+    t.strip_suffix('s').unwrap_or(t).trim().parse::<f64>().map_err(|_| format!("'{text}' is not a time in seconds (a number, with or without s: 0.5 or 0.5s)"))
 }
 
 /// A count of at least 1 (steps, particles, intervals): clap's own range check names the type's

@@ -5,7 +5,7 @@ use super::errors::InputError;
 use super::run::{exit_code_of, report_run, run, steps_for_time, ResumedRun, RunOptions};
 use super::signals;
 use crate::io::checkpoint::{read, read_where, Checkpoint, CheckpointFile, CHECKPOINT_FILE};
-use crate::io::rundir::{check_resumable, remove_partial_files, SCENE_COPY, SNAPSHOTS_DIR};
+use crate::io::rundir::{check_resumable, remove_partial_files, restore_marker, run_id, RunWrites, MARKER, SCENE_COPY, SNAPSHOTS_DIR};
 use crate::io::summary::Summary;
 use crate::model::scene::{Scene, SceneOrigin};
 use crate::solver::{open, Backend, BackendChoice, Precision, Ranks};
@@ -20,8 +20,22 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
     let tuning = args.gpu.given();
     if !tuning.is_empty() {
         return Err(InputError(format!(
-            "--resume continues a run with the checkpoint's settings and the GPU step's defaults; {} cannot be given with it (a run with a neighbour skin resumes without one)",
-            tuning.join(", ")
+            "--resume continues a run with the checkpoint's settings and the GPU step's defaults; {} cannot be given with it{}",
+            tuning.join(", "),
+            if tuning.contains(&"--neighbour-skin") { " (a run with a neighbour skin resumes without one)" } else { "" }
+        ))
+        .into());
+    }
+    // A checkpoint does not record pictures: a resumed run draws none, so how they would look
+    // would change nothing.
+    let mut pictures = args.picture.given();
+    if args.frame_every.is_some() {
+        pictures.insert(0, "--frame-every");
+    }
+    if !pictures.is_empty() {
+        return Err(InputError(format!(
+            "--resume continues a run without pictures (a checkpoint does not record them); {} cannot be given with it: draw a run's pictures with wgsph run DIR/scene.toml --frames FRAMES_DIR",
+            pictures.join(", ")
         ))
         .into());
     }
@@ -29,6 +43,10 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
         if !(t.is_finite() && t >= 0.0) {
             return Err(InputError(format!("--time is {t}; must be a finite number >= 0")).into());
         }
+    }
+    if !dir.is_dir() {
+        let what = if dir.exists() { "is a file, not a run directory" } else { "does not exist" };
+        return Err(InputError(format!("--resume {}: {what}; give the --out directory of a run written with --checkpoint-every K", dir.display())).into());
     }
     let writes_files = super::ranks::writes_files(ranks);
     // Its subdirectories and files must be the run's own, before the checkpoint is read.
@@ -51,6 +69,18 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
         Some(_) => read_where(&path, &mut |_, _| false).map(|(c, _)| c),
     }
     .map_err(|e| InputError(format!("--resume: {e}")))?;
+    // A checkpoint copied in from another run would mix that run's steps into this one's files.
+    if let (true, Some(theirs), Some(ours)) = (writes_files, c.run.run_id.as_deref(), run_id(dir)) {
+        if theirs != ours {
+            return Err(InputError(format!(
+                "--resume {}: {} was written by another run (run {theirs}) than the one this directory holds (run {ours}, in its {MARKER}): \
+                 resuming it here would mix the two runs' snapshots and series; resume the directory the checkpoint came from",
+                dir.display(),
+                path.display()
+            ))
+            .into());
+        }
+    }
     let scene = Scene::from_toml_str(&c.scene_toml, &SceneOrigin::File(path.clone()))?;
     if writes_files {
         if let Some(why) = scene_copy_differs(dir, &scene) {
@@ -65,17 +95,24 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
         (None, None) => c.run.end_step,
     };
     if end <= step {
-        return Err(InputError(format!(
-            "--resume {}: the run already reached step {step} (its end); give --steps N or --time T to continue further",
-            dir.display()
-        ))
-        .into());
+        let why = match (args.steps, args.time) {
+            (Some(_), _) => "--steps 0 adds no step beyond the checkpoint's: give at least 1".to_string(),
+            (None, Some(t)) => format!("--time {} adds no step of dt = {}: give a longer time", crate::model::numbers::short(t), crate::model::numbers::short(params.dt)),
+            (None, None) => "the run already reached its end there; give --steps N or --time T to continue further".to_string(),
+        };
+        return Err(InputError(format!("--resume {}: the checkpoint is at step {step}; {why}", dir.display())).into());
     }
     // A run killed while writing left partial files of the atomic writer: they go first.
     let removed = if writes_files { remove_partial_files(dir)? } else { Vec::new() };
     if !removed.is_empty() && !args.quiet {
         let names: Vec<String> = removed.iter().map(|p| p.display().to_string()).collect();
         println!("removed {} partial file(s) the interrupted run left: {}", removed.len(), names.join(", "));
+    }
+    if writes_files {
+        let writes = RunWrites::of_run(&c.run.formats, (c.run.surface_mesh_every > 0).then_some(c.run.surface_mesh_format), &params.probes);
+        if restore_marker(dir, &writes, c.run.run_id.as_deref())? {
+            eprintln!("note: {} had no {MARKER} (it was deleted): written again, so that --overwrite knows the run's files", dir.display());
+        }
     }
     signals::install();
     let mut choice = choice_of_kind(&c.state.kind)?;

@@ -6,14 +6,15 @@ use super::errors::InputError;
 use super::signals::{self, StopSignal};
 use crate::io::checkpoint::{self, RunRecord, CHECKPOINT_FILE};
 use crate::io::probes::ProbeWriter;
-use crate::io::rundir::{numbered_run_dir, write_scene_copy, RunOutputs, RunWrites, StartGuard, PROBES_DIR, SNAPSHOTS_DIR};
+use crate::io::rundir::{numbered_run_dir, run_id, write_scene_copy, RunOutputs, RunWrites, StartGuard, PROBES_DIR, SNAPSHOTS_DIR};
 use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::snapshot::SnapshotWriter;
 use crate::io::summary::{write_summary, DfsphSummary, RanksSummary, RunStatus, Summary, SUMMARY_FILE};
 use crate::io::surface::{write_snapshot_surface, MeshFormat, SurfaceParameters};
 use crate::model::params::Params;
 use crate::model::scene::Scene;
-use crate::model::state::Snapshot;
+use crate::model::diagnosis::diagnose_non_positive_density;
+use crate::model::state::{Snapshot, SnapshotExtremes};
 use crate::model::diagnosis::regime_warnings;
 use crate::solver::backend::diagnose_failure;
 use crate::solver::{open, Backend, Ranks};
@@ -140,6 +141,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     let mut max_speed = resumed.max_speed;
     let mut failure = None;
     let mut snapshots_written = 0u64;
+    // Why the last snapshot written is not a good state, where it is not (named with a failure).
+    let mut unsound_snapshot: Option<String> = None;
     let checkpoint_path = opts.out.join(CHECKPOINT_FILE);
     let mut last_checkpoint = (opts.resumed.is_some() && checkpoint_path.exists()).then(|| checkpoint_path.clone());
     let mut writer = snapshot_writer(opts, start)?;
@@ -152,7 +155,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         (false, true) => {
             let (w, missing) = ProbeWriter::resume(&opts.out, &params.probes, start)?;
             for path in &missing {
-                eprintln!("warning: {} is missing: its series restarts at step {start}, without the samples before", path.display());
+                let what = if path.exists() { "is empty" } else { "is missing" };
+                eprintln!("warning: {} {what}: its series restarts at step {start}, without the samples before", path.display());
             }
             missing_series = missing;
             Some(w)
@@ -162,8 +166,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         warn_cut_series(&opts.out, &r.series_lines, &series_lines(&writer, probe_writer.as_ref(), start), &missing_series, start);
     }
     let has_probes = !params.probes.is_empty();
-    // The samples the backend took since the last call, added to the series and written.
-    let write_probes = |backend: &mut dyn Backend, w: &mut Option<ProbeWriter>| -> anyhow::Result<()> {
+    // The samples the backend took since the last call, added to the series and written; none
+    // of a step at or after `bad_step` (the first that went bad: its state is not the flow's).
+    let write_probes = |backend: &mut dyn Backend, w: &mut Option<ProbeWriter>, bad_step: Option<u64>| -> anyhow::Result<()> {
         let step = backend.steps_done();
         let Some(w) = w else {
             // A rank that writes nothing still lets go of its copy.
@@ -172,33 +177,41 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             }
             return Ok(());
         };
-        let samples = backend.take_probe_samples().with_context(|| format!("step {step}: reading the probes"))?;
+        let mut samples = backend.take_probe_samples().with_context(|| format!("step {step}: reading the probes"))?;
+        samples.retain(|s| bad_step.is_none_or(|bad| s.step < bad));
         w.add(&samples);
         w.write().with_context(|| format!("step {step}: writing the probes' time series"))
     };
-    let mut write_snap = |writer: &mut SnapshotWriter, backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<Option<Snapshot>> {
+    // A snapshot is named the last good state only where it is one: a step's density check
+    // reads the state it starts from, so the snapshot before a step stopped for its density
+    // already shows that density (and a continuity density driven below zero passes no check).
+    let stop = params.stop_levels();
+    let mut write_snap = |writer: &mut SnapshotWriter, backend: &mut dyn Backend, last: &mut Option<PathBuf>, max_speed: &mut f64| -> anyhow::Result<WrittenSnapshot> {
         let step = backend.steps_done();
-        let s = (|| -> anyhow::Result<Option<Snapshot>> {
+        let (snapshot, path, extremes) = (|| -> anyhow::Result<(Option<Snapshot>, Option<PathBuf>, SnapshotExtremes)> {
             // Across ranks in pieces, every rank writing its own; streamed where the backend
             // can (the GPU): no host copy of every array either way.
             if let Some(written) = writer.write_pieces(backend) {
-                (*last, *max_speed) = written.map(|(path, speed)| (Some(path), speed))?;
-                return Ok(None);
+                let (path, extremes) = written?;
+                return Ok((None, Some(path), extremes));
             }
             if let Some(written) = writer.write_streamed(backend) {
-                (*last, *max_speed) = written.map(|(path, speed)| (Some(path), speed))?;
-                return Ok(None);
+                let (path, extremes) = written?;
+                return Ok((None, Some(path), extremes));
             }
             let s = backend.snapshot()?;
-            *max_speed = s.max_speed();
-            if opts.writes_files {
-                *last = Some(writer.write(&s)?);
-            }
-            Ok(Some(s))
+            let extremes = s.extremes();
+            let path = if opts.writes_files { Some(writer.write(&s)?) } else { None };
+            Ok((Some(s), path, extremes))
         })()
         .with_context(|| format!("step {step}: writing the snapshot"))?;
         snapshots_written += 1;
-        Ok(s)
+        *max_speed = extremes.max_speed;
+        let why_bad = extremes.why_bad(stop, params.rest_density).map(|why| format!("the snapshot of step {step} is not a good state: {why}"));
+        if why_bad.is_none() && path.is_some() {
+            *last = path;
+        }
+        Ok(WrittenSnapshot { snapshot, extremes, why_bad })
     };
     let surface = SurfaceParameters::for_scene(&params, scene.physics.particle_spacing);
     let write_surface = |backend: &mut dyn Backend, snapshot: Option<Snapshot>| -> anyhow::Result<()> {
@@ -214,8 +227,9 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
     };
     if opts.resumed.is_none() {
         let s = write_snap(&mut writer, backend, &mut last_snapshot, &mut max_speed)?;
+        unsound_snapshot = s.why_bad;
         if opts.surface_mesh_every > 0 {
-            write_surface(backend, s)?;
+            write_surface(backend, s.snapshot)?;
         }
     }
     let mut frames = match &opts.frames {
@@ -279,7 +293,6 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         }
         backend.step(target - step)?;
         step = backend.steps_done();
-        write_probes(backend, &mut probe_writer)?;
         if !started {
             started = true;
             if let Some(guard) = &opts.start {
@@ -294,6 +307,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             end = step;
         }
         let health = backend.health()?;
+        write_probes(backend, &mut probe_writer, health.first_bad_step)?;
         warn_unconverged(&health, &params, &mut warned_unconverged);
         if let Some(b) = &bar {
             match opts.end_time {
@@ -303,7 +317,11 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
             b.set_message(format!("t = {time:.3}"));
         }
         if !health.is_ok() {
-            failure = Some(diagnose_failure(backend, scene)?);
+            let diagnosis = diagnose_failure(backend, scene)?;
+            failure = Some(match &unsound_snapshot {
+                Some(why) => format!("{diagnosis} ({why})"),
+                None => diagnosis,
+            });
             break;
         }
         last_good_health = health;
@@ -313,10 +331,17 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         };
         let mut snapshot = None;
         if step == end || time_due || (opts.snapshot_every > 0 && step % opts.snapshot_every == 0) {
-            snapshot = write_snap(&mut writer, backend, &mut last_snapshot, &mut max_speed)?;
+            let written = write_snap(&mut writer, backend, &mut last_snapshot, &mut max_speed)?;
+            unsound_snapshot = written.why_bad;
             if let Some(interval) = opts.snapshot_interval {
                 next_snapshot_time = Some(next_multiple(interval, time));
             }
+            // No step's check sees a density below zero: the snapshot that shows one ends the run.
+            if written.extremes.non_positive_density > 0 {
+                failure = Some(diagnose_non_positive_density(scene, step, time, &written.extremes));
+                break;
+            }
+            snapshot = written.snapshot;
         }
         if opts.surface_mesh_every > 0 && step % opts.surface_mesh_every == 0 {
             write_surface(backend, snapshot)?;
@@ -551,11 +576,7 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     let scene_file = Scene::builtin(&args.scene).is_none().then(|| PathBuf::from(&args.scene));
     let inputs: Vec<&Path> = scene_file.iter().map(PathBuf::as_path).collect();
     // Across ranks rank 0 alone checks and prepares the outputs.
-    let writes = RunWrites {
-        snapshot_formats: args.formats.iter().map(|f| f.extension().to_string()).collect(),
-        surface_format: (args.surface_mesh_every > 0).then(|| args.surface_mesh_format.extension().to_string()),
-        probes: params.probes.probes.iter().map(|p| p.name.clone()).collect(),
-    };
+    let writes = RunWrites::of_run(&args.formats, (args.surface_mesh_every > 0).then_some(args.surface_mesh_format), &params.probes);
     let outputs = if writes_files { Some(RunOutputs::check(&out, args.frames.as_deref(), args.overwrite, args.out.is_none(), &inputs, writes)?) } else { None };
     for (dir, names) in outputs.iter().flat_map(|o| o.kept()) {
         eprintln!("note: --overwrite keeps {} in {}: no wgsph run wrote it", names.join(", "), dir.display());
@@ -708,6 +729,14 @@ pub fn report_run(summary: &Summary, out: &std::path::Path, quiet: bool) -> anyh
     }
 }
 
+/// A snapshot the run wrote: the state (where the backend read it whole), what it shows of
+/// the state's health, and why it is not a good state to name as the last one (None: it is).
+struct WrittenSnapshot {
+    snapshot: Option<Snapshot>,
+    extremes: SnapshotExtremes,
+    why_bad: Option<String>,
+}
+
 /// The snapshot writer of a run; a resumed run keeps the series index up to its first step.
 fn snapshot_writer(opts: &RunOptions, start_step: u64) -> anyhow::Result<SnapshotWriter> {
     if opts.resumed.is_some() {
@@ -733,6 +762,7 @@ pub fn run_record(backend: &dyn Backend, opts: &RunOptions, end_step: u64, last_
         surface_mesh_every: opts.surface_mesh_every,
         surface_mesh_format: opts.surface_mesh_format,
         series_lines,
+        run_id: opts.writes_files.then(|| run_id(&opts.out)).flatten(),
     }
 }
 

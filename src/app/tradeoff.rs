@@ -21,7 +21,7 @@
 use super::args::TradeoffArgs;
 use super::errors::InputError;
 use crate::io::atomic::write_atomic;
-use crate::model::scene::{Boundary, BoundaryPressure, DensityMethod, DfsphSettings, EquationOfState, InitialPressure, Kernel, PressureSolver, Scene};
+use crate::model::scene::{Boundary, BoundaryPressure, DensityMethod, DfsphSettings, EquationOfState, InitialPressure, Kernel, PressureSolver, Scene, SceneOrigin};
 use crate::model::numbers::short;
 use crate::model::state::Snapshot;
 use crate::solver::compare::{diff as distance, rms};
@@ -209,9 +209,16 @@ pub fn configs(base: &Scene) -> Vec<Config> {
     for tolerance in DFSPH_TOLERANCES {
         all.push(c(&format!("dfsph {}%", 100.0 * tolerance), "dfsph tolerance", with_dfsph(base, tolerance), Engine::Gpu));
     }
+    // The wall pressure models act on wall particles: without them they would run the
+    // baseline (or another row) again under another name.
+    if base.boundary.iter().all(|b| matches!(b, Boundary::Plane { .. })) {
+        all.retain(|c| c.knob != "boundary pressure");
+    }
     // A knob the scene does not use (no planes to drop, a DFSPH tolerance that is already the
-    // scene's) would run the baseline again under another name: left out.
+    // scene's) would run the baseline again under another name: left out. So is one the
+    // scene cannot take (adaptive dt beside a viscosity schedule).
     all.retain(|c| matches!(c.knob, "reference" | "baseline" | "precision") || c.engine != Engine::Gpu || c.scene != *base);
+    all.retain(|c| c.scene.validate(&SceneOrigin::Text).is_ok());
     all
 }
 
@@ -505,9 +512,16 @@ pub fn cmd_tradeoff(args: &TradeoffArgs) -> anyhow::Result<i32> {
         ))
         .into());
     }
+    // The GPU is opened before anything is written or run: an adapter that cannot run the
+    // scene stops the study before the reference's long run, not after it.
+    if let Some(gpu) = configs(&base).iter().find(|c| c.engine == Engine::Gpu) {
+        engine_backend(gpu)?;
+    }
     crate::io::rundir::prepare_report_dir("--out", &args.out)?;
     let started = Instant::now();
-    println!("tradeoff {}: {} fluid particles, {} s simulated, {} samples", base.name, base.fluid_particle_count(), short(args.time), args.samples);
+    // Samples fall on whole pairs of steps: a short time holds fewer than asked.
+    let samples = sample_times(base.time.dt, args.time, args.samples).len();
+    println!("tradeoff {}: {} fluid particles, {} s simulated, {samples} samples", base.name, base.fluid_particle_count(), short(args.time));
     let rows = study(&base, args.time, args.samples, |line| println!("  {line}"))?;
     let title = format!("{}: error against cost ({} fluid particles, {} s)", base.name, base.fluid_particle_count(), short(args.time));
     let md = format!(
@@ -516,7 +530,7 @@ pub fn cmd_tradeoff(args: &TradeoffArgs) -> anyhow::Result<i32> {
         base.name,
         base.fluid_particle_count(),
         short(args.time),
-        args.samples,
+        samples,
         started.elapsed().as_secs_f64(),
         table(&rows)
     );

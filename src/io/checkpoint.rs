@@ -27,7 +27,7 @@ use std::path::Path;
 pub const CHECKPOINT_FILE: &str = "checkpoint.wgsph";
 const MAGIC: &[u8; 8] = b"WGSPHCKP";
 /// Bumped whenever the payload's layout or meaning changes.
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 /// The wgsph version written into (and required of) checkpoints.
 pub const WGSPH_VERSION: &str = env!("CARGO_PKG_VERSION");
 
@@ -65,6 +65,9 @@ pub struct RunRecord {
     /// resumed from this checkpoint keeps, by path in the run directory: a resume that finds
     /// fewer says the file was cut since.
     pub series_lines: Vec<(String, u64)>,
+    /// The run directory's run id (its marker's), where it had one: a resume refuses a
+    /// checkpoint of another run put into a run directory.
+    pub run_id: Option<String>,
 }
 
 /// A checkpoint that cannot be used.
@@ -156,7 +159,29 @@ impl std::io::Write for Payload<'_> {
 /// and checksum, a second decodes it, so the host never holds the file's bytes besides the
 /// state decoded from them.
 pub fn read(path: &Path) -> Result<Checkpoint, CheckpointError> {
-    read_with(path, |de| Checkpoint::deserialize(de))
+    let c = read_with(path, |de| Checkpoint::deserialize(de))?;
+    check_finite(path, &c)?;
+    Ok(c)
+}
+
+/// A state whose checksum holds but whose values are not finite was written so by something
+/// else than a run (a run never saves a NaN state: it stops before): it is corrupt, and would
+/// only go bad at once, of a cause no diagnosis could name.
+fn check_finite(path: &Path, c: &Checkpoint) -> Result<(), CheckpointError> {
+    let s = &c.state;
+    let bad = |what: String| Err(CheckpointError::Corrupt { path: path.display().to_string(), why: format!("{what} is not finite") });
+    if !s.time.is_finite() {
+        return bad(format!("the time {}", s.time));
+    }
+    for (i, (x, v)) in s.positions.iter().zip(&s.velocities).enumerate() {
+        if !x.iter().chain(v).all(|c| c.is_finite()) {
+            return bad(format!("particle {i}'s position or velocity"));
+        }
+    }
+    if let Some(i) = s.densities.iter().position(|d| !d.is_finite()) {
+        return bad(format!("particle {i}'s density"));
+    }
+    Ok(())
 }
 
 /// [`read`] with the payload decoded by `decode`.
@@ -177,8 +202,12 @@ fn read_with<T>(path: &Path, decode: impl for<'de> FnOnce(&mut PayloadDeserializ
             Err(e) => Err(io(e)),
         }
     };
-    if take(8)?.as_deref() != Some(MAGIC.as_slice()) {
-        return Err(CheckpointError::NotACheckpoint(p));
+    match take(8)? {
+        Some(m) if m == MAGIC => {}
+        // Fewer bytes than the magic, all of them its first ones: a checkpoint cut short.
+        None if file_len > 0 && std::fs::read(path).is_ok_and(|b| MAGIC.starts_with(&b)) => return Err(corrupt("the file is truncated")),
+        None if file_len == 0 => return Err(corrupt("the file is empty")),
+        _ => return Err(CheckpointError::NotACheckpoint(p)),
     }
     let truncated = || corrupt("the file is truncated");
     let format = u32::from_le_bytes(take(4)?.ok_or_else(truncated)?.try_into().expect("4 bytes"));
@@ -339,6 +368,7 @@ impl Serialize for StateArrayInPieces<'_, '_> {
 pub fn read_where(path: &Path, keep: &mut dyn FnMut(usize, [f64; 3]) -> bool) -> Result<(Checkpoint, Vec<u64>), CheckpointError> {
     let mut kept = Vec::new();
     let c = read_with(path, |de| serde::de::DeserializeSeed::deserialize(CheckpointSeed { keep, kept: &mut kept }, de))?;
+    check_finite(path, &c)?;
     Ok((c, kept))
 }
 

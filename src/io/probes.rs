@@ -89,9 +89,11 @@ impl ProbeWriter {
             for (n, line) in lines.enumerate() {
                 let bad = || refuse(&f.path, format!("line {} is not a sample of the probe: '{}'", n + 2, clip(line)));
                 let fields: Vec<&str> = line.split(',').collect();
-                let time: f64 = fields.first().and_then(|s| s.parse().ok()).ok_or_else(bad)?;
+                // A run writes finite numbers only: a NaN or infinity is not its line.
+                let number = |s: &&str| s.parse::<f64>().ok().filter(|v| v.is_finite());
+                let time: f64 = fields.first().and_then(number).ok_or_else(bad)?;
                 let step: u64 = fields.get(1).and_then(|s| s.parse().ok()).ok_or_else(bad)?;
-                let values: Vec<f64> = fields[2..].iter().map(|s| s.parse().map_err(|_| bad())).collect::<anyhow::Result<_>>()?;
+                let values: Vec<f64> = fields[2..].iter().map(|s| number(s).ok_or_else(bad)).collect::<anyhow::Result<_>>()?;
                 if values.len() != f.header.split(',').count() - 2 {
                     return Err(bad());
                 }
@@ -316,7 +318,8 @@ mod tests {
 
         let kept = std::fs::read_to_string(&every).unwrap();
         let header = kept.lines().next().unwrap().to_string();
-        for foreign in ["my notes\n".to_string(), format!("{header}\n0,0,1,2\n"), format!("{header}\n0.1,x,1,2,3,4,5,6\n")] {
+        let not_finite = [format!("{header}\nNaN,1,1,2,3,4,5,6\n"), format!("{header}\n0.1,1,1,inf,3,4,5,6\n")];
+        for foreign in ["my notes\n".to_string(), format!("{header}\n0,0,1,2\n"), format!("{header}\n0.1,x,1,2,3,4,5,6\n")].into_iter().chain(not_finite) {
             std::fs::write(&every, &foreign).unwrap();
             let e = ProbeWriter::resume(dir.path(), &probes, 6).err().expect("a foreign file is refused");
             assert!(e.downcast_ref::<RunDirError>().is_some(), "{e:#}");

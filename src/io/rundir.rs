@@ -13,7 +13,10 @@ use crate::io::atomic::{is_temporary, write_atomic, TEMP_PREFIX};
 use crate::io::checkpoint::CHECKPOINT_FILE;
 use crate::io::snapshot::index::INDEX_NAME;
 use crate::io::snapshot::vtk::VTK_SERIES_NAME;
+use crate::io::snapshot::format::SnapshotFormat;
 use crate::io::summary::SUMMARY_FILE;
+use crate::io::surface::MeshFormat;
+use crate::model::probes::Probes;
 use crate::model::scene::Scene;
 use anyhow::Context;
 use std::cell::RefCell;
@@ -33,7 +36,7 @@ pub const MARKER: &str = ".wgsph-run";
 /// a new run (removed once the new run took its first step, moved back if it did not).
 const REPLACED_PREFIX: &str = ".wgsph-replaced-";
 /// The subdirectories a run writes, and the files it writes in them.
-pub const SNAPSHOTS_DIR: &str = "snapshots";
+pub use crate::io::snapshot::format::SNAPSHOTS_DIR;
 const SURFACE_DIR: &str = "surface";
 /// The probes' time series and plots (`probes/NAME.csv`, `probes/NAME.png`).
 pub const PROBES_DIR: &str = "probes";
@@ -59,6 +62,16 @@ pub struct RunWrites {
 }
 
 impl RunWrites {
+    /// What a run writes: snapshots in `formats`, surface meshes in `surface` (None: none), and
+    /// the series of `probes`.
+    pub fn of_run(formats: &[SnapshotFormat], surface: Option<MeshFormat>, probes: &Probes) -> RunWrites {
+        RunWrites {
+            snapshot_formats: formats.iter().map(|f| f.extension().to_string()).collect(),
+            surface_format: surface.map(|f| f.extension().to_string()),
+            probes: probes.probes.iter().map(|p| p.name.clone()).collect(),
+        }
+    }
+
     /// The marker's lines after its first two: `snapshots EXT...`, `surface EXT`, `probes NAME...`.
     fn marker_lines(&self) -> String {
         let mut text = format!("snapshots {}\n", self.snapshot_formats.join(" "));
@@ -88,6 +101,17 @@ impl RunWrites {
         }
         recorded.then_some(writes)
     }
+}
+
+/// What a marked directory holds (its marker's `holds` line): a run's directory (`--out`, its
+/// pictures too where `--frames` names the same place), or only a run's pictures (`--frames`).
+const HOLDS_RUN: &str = "run";
+const HOLDS_FRAMES: &str = "frames";
+
+/// Whether the marked directory `dir` holds only a run's pictures; false for a run's directory
+/// and for a marker of an earlier version, which does not say.
+fn holds_frames_only(dir: &Path) -> bool {
+    std::fs::read_to_string(dir.join(MARKER)).is_ok_and(|t| t.lines().any(|l| l == format!("holds {HOLDS_FRAMES}")))
 }
 
 /// Whether `name`, in the directory `sub` of a run directory (`None`: the top), is a file a
@@ -127,6 +151,8 @@ pub struct RunOutputs {
     writes: RunWrites,
     /// The default numbered directory: it must still be free when the run starts.
     numbered: bool,
+    /// The id of the run, in its markers and checkpoints ([`run_id`]).
+    run_id: String,
 }
 
 #[derive(Debug, Clone)]
@@ -158,7 +184,10 @@ impl RunOutputs {
         for l in &mut locations {
             (l.earlier_run, l.kept) = check_location(l, overwrite, inputs, &writes)?;
         }
-        Ok(RunOutputs { locations, overwrite, writes, numbered })
+        // Unique enough to tell two runs apart: the time to the nanosecond and the process.
+        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+        let run_id = format!("{nanos:x}-{:x}", std::process::id());
+        Ok(RunOutputs { locations, overwrite, writes, numbered, run_id })
     }
 
     /// Makes the locations ready for the run: an earlier run's files (with `--overwrite`) are
@@ -189,7 +218,8 @@ impl RunOutputs {
                 guard.replaced.borrow_mut().push(stash);
             }
             guard.dirs.push((l.path.clone(), subdirs_before));
-            write_marker(&l.path.join(MARKER), "started", &self.writes.marker_lines())?;
+            let holds = if i == 0 { HOLDS_RUN } else { HOLDS_FRAMES };
+            write_marker(&l.path.join(MARKER), "started", &format!("{}holds {holds}\nrun {}\n", self.writes.marker_lines(), self.run_id))?;
         }
         Ok(guard)
     }
@@ -256,6 +286,15 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path], writes: &RunW
                 if flag == "--out" { "continue it with --resume (when it has a checkpoint), " } else { "" }
             )));
         }
+        // Pictures do not replace a run: --overwrite at --frames would remove an earlier run's
+        // snapshots, summary and checkpoint for a few PNG files.
+        if flag == "--frames" && !holds_frames_only(path) {
+            return Err(bad(format!(
+                "is an earlier run's directory (it holds {}), not a directory of pictures: --overwrite there would remove that run to write this run's pictures; \
+                 give --frames another directory (or this run's --out)",
+                shown
+            )));
+        }
         // Only the files a run writes are replaced; the run's inputs must not be among them.
         let outputs = run_outputs(path).map_err(|e| bad(format!("cannot read the directory: {e}")))?;
         for input in inputs {
@@ -268,6 +307,8 @@ fn check_location(l: &Location, overwrite: bool, inputs: &[&Path], writes: &RunW
                 }
             }
         }
+        // A directory where this run writes a file would stop it part way.
+        check_output_entries(path, Some(writes)).map_err(bad)?;
         // A file named as this run's output that the earlier run did not write (a user's, of
         // another kind) would be replaced by this run, or removed by a failed start: it is in
         // the way.
@@ -327,18 +368,62 @@ fn check_subdirs(path: &Path) -> Result<(), String> {
     Ok(())
 }
 
+/// A directory where a run writes one of its files (`snapshots/step_000010.csv/`, a probe's
+/// `NAME.png/`): the run would fail when it got there, after its steps. `writes`: what the run
+/// writes into its subdirectories (`None`: any run's files).
+fn check_output_entries(path: &Path, writes: Option<&RunWrites>) -> Result<(), String> {
+    let is_dir = |p: &Path| std::fs::symlink_metadata(p).is_ok_and(|m| m.is_dir());
+    let in_the_way = |p: PathBuf| format!("{} is a directory, where the run writes a file; move it away, or choose another directory", p.display());
+    for name in list(path).map_err(|e| format!("cannot read the directory: {e}"))? {
+        if !is_temporary(&name) && is_run_output(None, &name, None) && is_dir(&path.join(&name)) {
+            return Err(in_the_way(path.join(name)));
+        }
+    }
+    for sub in RUN_SUBDIRS.iter().filter(|s| is_real_dir(&path.join(s))) {
+        let d = path.join(sub);
+        for name in list(&d).map_err(|e| format!("cannot read {}: {e}", d.display()))? {
+            if !is_temporary(&name) && is_run_output(Some(sub), &name, writes) && is_dir(&d.join(&name)) {
+                return Err(in_the_way(d.join(name)));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Checks a run directory that `--resume` continues, before anything is read or removed: its
 /// subdirectories are its own (not links), and the files it rewrites whole (the summary, the
 /// indexes) are files, not directories, so that the run does not fail after all its steps.
 pub fn check_resumable(dir: &Path) -> Result<(), RunDirError> {
     let bad = |why: String| RunDirError(format!("--resume {}: {why}", dir.display()));
     check_subdirs(dir).map_err(bad)?;
+    check_output_entries(dir, RunWrites::of_marker(dir).as_ref()).map_err(bad)?;
     for file in [dir.join(SUMMARY_FILE), dir.join(SNAPSHOTS_DIR).join(INDEX_NAME), dir.join(SNAPSHOTS_DIR).join(VTK_SERIES_NAME)] {
         if std::fs::symlink_metadata(&file).is_ok_and(|m| m.is_dir()) {
             return Err(bad(format!("{} is a directory, where the run writes a file; move it away", file.display())));
         }
     }
     Ok(())
+}
+
+/// The id of the run in run directory `dir` (its marker's `run` line), where it has one: a
+/// checkpoint records it, so that a checkpoint put into another run's directory is refused.
+pub fn run_id(dir: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(dir.join(MARKER)).ok()?;
+    text.lines().find_map(|l| l.strip_prefix("run ").map(str::to_string))
+}
+
+/// Writes the marker of run directory `dir` again where it is missing (deleted since the run
+/// started), from what the resumed run writes and its checkpoint's `run_id`: without it a later
+/// `--overwrite` would take the run's files for a user's and refuse them. True when it was
+/// written.
+pub fn restore_marker(dir: &Path, writes: &RunWrites, run_id: Option<&str>) -> anyhow::Result<bool> {
+    let path = dir.join(MARKER);
+    if std::fs::symlink_metadata(&path).is_ok() {
+        return Ok(false);
+    }
+    let id = run_id.map(|id| format!("run {id}\n")).unwrap_or_default();
+    write_marker(&path, "resumed", &format!("{}holds {HOLDS_RUN}\n{id}", writes.marker_lines()))?;
+    Ok(true)
 }
 
 /// The file that marks a directory as one a report command (`wgsph tradeoff`, `wgsph
@@ -599,7 +684,9 @@ pub fn numbered_run_dir(parent: &Path, scene_name: &str) -> PathBuf {
                 .unwrap_or(0)
         })
         .unwrap_or(0);
-    parent.join(format!("{name}-{:03}", highest + 1))
+    // One past the highest, or where that number does not exist, the first free one.
+    let next = highest.checked_add(1).unwrap_or_else(|| (1..).find(|n| !parent.join(format!("{name}-{n:03}")).exists()).unwrap_or(1));
+    parent.join(format!("{name}-{next:03}"))
 }
 
 /// Writes the resolved scene (after `--set`, `--particles` and imports) as `DIR/scene.toml`,

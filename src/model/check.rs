@@ -4,7 +4,7 @@
 use super::lattice::lattice_size;
 use super::numbers::{short, short3};
 use super::params::{MAX_PLANES, MAX_SOLID_BOXES};
-use super::scene::{err, Boundary, BoundaryPressure, BoundaryVolume, DensityMethod, EquationOfState, InitialPressure, PressureSolver, Scene, SceneError, SceneOrigin};
+use super::scene::{err, Boundary, BoundaryPressure, BoundaryVolume, DensityMethod, DfsphSettings, EquationOfState, InitialPressure, Limits, Physics, PressureSolver, Scene, SceneError, SceneOrigin, Time};
 
 /// Most particles a scene may hold: indices are u32 on the GPU and the CPU.
 pub const MAX_PARTICLES: u64 = 1 << 31;
@@ -155,7 +155,8 @@ impl Scene {
         let mut last = 0.0;
         for (i, c) in p.viscosity_schedule.iter().enumerate() {
             let f = format!("physics.viscosity_schedule[{i}]");
-            if !(c.time.is_finite() && c.time >= last) {
+            // Two changes at one time would leave one of them unused.
+            if !(c.time.is_finite() && c.time >= last) || (i > 0 && c.time == last) {
                 return Err(err(origin, format!("{f}.time"), format!("is {}; times must be finite, >= 0 and increasing", short(c.time))));
             }
             if !(c.viscosity.is_finite() && c.viscosity >= 0.0) {
@@ -322,6 +323,14 @@ impl Scene {
         let boxes = self.boundary.iter().filter(|b| matches!(b, Boundary::Box { .. })).count();
         if boxes > MAX_SOLID_BOXES {
             return Err(err(origin, "boundary", format!("has {boxes} boxes; at most {MAX_SOLID_BOXES} are allowed (each is backed by its faces in the GPU's parameter block)")));
+        }
+        // A boundary given twice puts two walls in one place: its wall particles would count
+        // twice in every density beside it (the fluid would start near 1.5 rho0 and be blown
+        // apart, as if the speed of sound were too low).
+        for (k, b) in self.boundary.iter().enumerate() {
+            if let Some(j) = self.boundary[..k].iter().position(|a| a == b) {
+                return Err(err(origin, format!("boundary[{k}]"), format!("repeats boundary[{j}]: the same wall twice would count its particles twice in every density beside it; remove one")));
+            }
         }
         self.validate_overlaps(origin)?;
         self.validate_probes(origin)?;
@@ -628,5 +637,55 @@ impl Scene {
             if ratio > 1.0 { "apart" } else { "together" },
             self.rest_density_fix()
         ))
+    }
+
+    /// A warning for each setting given a value other than its default that the scene's other
+    /// settings leave unused (a weakly compressible setting under DFSPH, an adaptive step's
+    /// number with a fixed dt, a wall particle setting without wall particles, a divergence
+    /// solve setting with that solve off): the run goes on, and says it does not use them.
+    pub fn unused_settings(&self) -> Vec<String> {
+        let p = &self.physics;
+        let d = Physics::new(p.smoothing_length, p.particle_spacing);
+        let mut unused = Vec::new();
+        let mut not_used = |given: bool, field: &str, value: String, because: &str| {
+            if given {
+                unused.push(format!("{field} = {value} is not used: {because}; it changes nothing in this run"));
+            }
+        };
+        // An enum's value as a scene file writes it ("tait").
+        fn json<T: serde::Serialize>(v: &T) -> String {
+            serde_json::to_string(v).unwrap_or_default()
+        }
+        if p.solver == PressureSolver::Dfsph {
+            let why = "solver = \"dfsph\" has no equation of state (its pressure comes from its incompressibility solve, which keeps it >= 0)";
+            not_used(p.equation_of_state != d.equation_of_state, "physics.equation_of_state", json(&p.equation_of_state), why);
+            not_used(p.clamp_negative_pressure != d.clamp_negative_pressure, "physics.clamp_negative_pressure", p.clamp_negative_pressure.to_string(), why);
+            not_used(p.boundary_pressure != d.boundary_pressure, "physics.boundary_pressure", json(&p.boundary_pressure), "DFSPH's solve takes the walls' pressure as the fluid particle's own");
+            let l = Limits::default();
+            let mach = "solver = \"dfsph\" has no speed of sound to measure a Mach number against";
+            not_used(self.limits.max_mach != l.max_mach, "limits.max_mach", short(self.limits.max_mach), mach);
+            not_used(self.limits.warn_mach != l.warn_mach, "limits.warn_mach", short(self.limits.warn_mach), mach);
+            let (s, ds) = (&p.dfsph, DfsphSettings::default());
+            if !s.divergence_solve {
+                let off = "physics.dfsph.divergence_solve = false";
+                not_used(s.divergence_error != ds.divergence_error, "physics.dfsph.divergence_error", short(s.divergence_error), off);
+                not_used(s.min_divergence_iterations != ds.min_divergence_iterations, "physics.dfsph.min_divergence_iterations", s.min_divergence_iterations.to_string(), off);
+                not_used(s.max_divergence_iterations != ds.max_divergence_iterations, "physics.dfsph.max_divergence_iterations", s.max_divergence_iterations.to_string(), off);
+            }
+        }
+        if !self.time.adaptive {
+            let t = Time::fixed(self.time.dt, self.time.end_time);
+            let fixed = "time.adaptive = false runs at the fixed time.dt";
+            not_used(self.time.cfl_number.is_some(), "time.cfl_number", short(self.time.cfl_number.unwrap_or_default()), fixed);
+            not_used(self.time.force_number != t.force_number, "time.force_number", short(self.time.force_number), fixed);
+            not_used(self.time.viscous_number != t.viscous_number, "time.viscous_number", short(self.time.viscous_number), fixed);
+        }
+        if self.boundary.iter().all(|b| matches!(b, Boundary::Plane { .. })) {
+            let planes = "the scene has no wall particles (its boundaries are planes)";
+            not_used(p.boundary_pressure != d.boundary_pressure && p.solver != PressureSolver::Dfsph, "physics.boundary_pressure", json(&p.boundary_pressure), planes);
+            not_used(p.boundary_volume != d.boundary_volume, "physics.boundary_volume", json(&p.boundary_volume), planes);
+            not_used(p.boundary_friction != d.boundary_friction, "physics.boundary_friction", short(p.boundary_friction), planes);
+        }
+        unused
     }
 }

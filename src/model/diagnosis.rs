@@ -9,7 +9,7 @@ use super::initial::SolidRegion;
 use super::kernels::KernelCoefficients;
 use super::params::Params;
 use super::scene::{Boundary, Scene};
-use super::state::{BadStep, Health};
+use super::state::{BadStep, Health, SnapshotExtremes};
 
 /// The CFL number dt (c0 + |v|max) / h above which explicit weakly compressible SPH goes
 /// unstable (h the support radius; Monaghan 1992 gives 0.25 on h/2 ... h, the built-in scenes
@@ -31,6 +31,72 @@ pub const FORCE_NUMBER: f64 = 0.25;
 /// values, it names them.
 pub const SURFACE_TENSION_USUAL: f64 = 1.0;
 pub const WALL_ADHESION_USUAL: f64 = 5.0;
+
+/// The diffusion number delta c0 dt / h of delta-SPH's density diffusion (coefficient
+/// delta h c0, h the support radius) above which the explicit step amplifies density noise
+/// instead of damping it, like an explicit heat equation past dt D / h^2 of order 0.1-0.5.
+/// Measured with delta = 1 on a block falling in a tank (docs/pressure.md): at h = 2 spacings
+/// it held at 0.165 and went bad at 0.18 with 0.01 m spacings, at 0.21 with 0.02 m.
+pub const DIFFUSION_NUMBER: f64 = 0.16;
+
+/// The cause of a run stopped because a snapshot showed a density of zero or below, which no
+/// step's check sees: a continuity density (the only kind that can fall so) driven below zero.
+pub fn diagnose_non_positive_density(scene: &Scene, step: u64, time: f64, e: &SnapshotExtremes) -> String {
+    let params = scene.params();
+    let mut msg = format!(
+        "step {step} (t = {}): the density of {} particles fell to zero or below (down to {} kg/m^3, rest density {}), which no fluid can hold.",
+        short_time(time),
+        e.non_positive_density,
+        short(e.min_density),
+        short(params.rest_density)
+    );
+    let diffusion = diffusion_number(&params, params.dt);
+    if diffusion > DIFFUSION_NUMBER {
+        msg += &format!(" Cause: {}.", diffusion_cause(&params, params.dt, diffusion));
+    } else {
+        msg += &format!(
+            " Cause: the continuity equation (physics.density = \"continuity\") integrates each density from the flow's divergence, and a step too long for how fast \
+             that changes drove it below zero: lower time.dt (now {}){}.",
+            short(params.dt),
+            if params.density_diffusion > 0.0 { format!(", or physics.density_diffusion (delta = {})", short(params.density_diffusion)) } else { String::new() }
+        );
+    }
+    msg
+}
+
+/// How to bring the step `dt` down below `limit` (`to_limit` says it: "below 1e-4"): time.dt,
+/// or with adaptive dt its CFL number, unless the adaptive step was held at time.dt_min, which
+/// is then what has to go lower.
+fn lower_dt(params: &Params, dt: f64, to_limit: &str, limit: f64) -> String {
+    let to_limit = if to_limit.is_empty() { String::new() } else { format!(" {to_limit}") };
+    match &params.adaptive {
+        Some(a) if dt <= a.dt_min * (1.0 + 1e-6) => {
+            format!("time.dt_min = {} held the adaptive step there, above what the flow allows: lower time.dt_min below {}", short(a.dt_min), short(limit))
+        }
+        Some(_) => format!("lower time.dt{to_limit} or time.cfl_number"),
+        None => format!("lower time.dt{to_limit}, or set time.adaptive = true"),
+    }
+}
+
+/// delta c0 dt / h of a scene's density diffusion at step `dt` (0 without diffusion).
+fn diffusion_number(params: &Params, dt: f64) -> f64 {
+    params.density_diffusion * params.speed_of_sound() * dt / params.h
+}
+
+/// The density diffusion named as the cause, at diffusion number `number` > [`DIFFUSION_NUMBER`].
+fn diffusion_cause(params: &Params, dt: f64, number: f64) -> String {
+    format!(
+        "the density diffusion: delta c0 dt / h = {} is over {DIFFUSION_NUMBER} (delta = physics.density_diffusion = {}, c0 = {}, dt = {}, h = {}), \
+         where the diffusive term amplifies density noise instead of damping it: lower physics.density_diffusion below {} or time.dt below {} (raising c0 makes it worse)",
+        short(number),
+        short(params.density_diffusion),
+        short(params.speed_of_sound()),
+        short(dt),
+        short(params.h),
+        short(DIFFUSION_NUMBER * params.h / (params.speed_of_sound() * dt)),
+        short(DIFFUSION_NUMBER * params.h / (params.density_diffusion * params.speed_of_sound()))
+    )
+}
 
 /// Fluid particles found inside each solid of a scene (past the first layer of its wall
 /// particles), counted from positions handed over one at a time.
@@ -278,23 +344,35 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
     let dfsph = params.dfsph.is_some();
     if acoustic_cfl > CFL_LIMIT {
         causes.push(format!(
-            "the CFL condition: dt c0 / h = {} is over {CFL_LIMIT} before the flow adds its speed (dt = {} is too large for the speed of sound c0 = {}; h = {}): lower time.dt to 0.25 h / c0 = {} or less{}",
+            "the CFL condition: dt c0 / h = {} is over {CFL_LIMIT} before the flow adds its speed (dt = {} is too large for the speed of sound c0 = {}; h = {}): {}",
             short(acoustic_cfl),
             short(dt),
             short(c0),
             short(h),
-            short(0.25 * h / c0),
-            if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
+            lower_dt(&params, dt, &format!("to 0.25 h / c0 = {} or less", short(0.25 * h / c0)), 0.25 * h / c0)
         ));
     }
     if dt > viscous_limit {
+        // The viscosity in force: the scene's, or a later one of its schedule.
+        let source = match scene.physics.viscosity_schedule.iter().enumerate().rev().find(|(_, c)| c.time <= m.time && c.viscosity == nu) {
+            Some((i, _)) => format!("physics.viscosity_schedule[{i}].viscosity"),
+            None => "physics.viscosity".to_string(),
+        };
         causes.push(format!(
-            "the viscous condition: dt = {} is over {VISCOUS_NUMBER} h^2 / nu = {} (nu = {}, h = {}): lower time.dt or physics.viscosity",
+            "the viscous condition: dt = {} is over {VISCOUS_NUMBER} h^2 / nu = {} (nu = {}, h = {}): {}",
             short(dt),
             short(viscous_limit),
             short(nu),
-            short(h)
+            short(h),
+            match lower_dt(&params, dt, "", viscous_limit) {
+                held if held.starts_with("time.dt_min") => format!("{held}, or lower {source}"),
+                _ => format!("lower time.dt or {source}"),
+            }
         ));
+    }
+    let diffusion = diffusion_number(&params, dt);
+    if diffusion > DIFFUSION_NUMBER {
+        causes.push(diffusion_cause(&params, dt, diffusion));
     }
     if force > FORCE_NUMBER {
         causes.push(format!(
@@ -324,13 +402,12 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
         }
         if dfsph && cfl > DFSPH_CFL_LIMIT {
             causes.push(format!(
-                "the CFL condition: the flow's speed |v|max = {} made dt |v|max / h = {} go over {DFSPH_CFL_LIMIT}, which DFSPH needs (dt = {}, h = {}): lower time.dt below {}{}",
+                "the CFL condition: the flow's speed |v|max = {} made dt |v|max / h = {} go over {DFSPH_CFL_LIMIT}, which DFSPH needs (dt = {}, h = {}): {}",
                 short(m.max_speed),
                 short(cfl),
                 short(dt),
                 short(h),
-                short(DFSPH_CFL_LIMIT * h / m.max_speed),
-                if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
+                lower_dt(&params, dt, &format!("below {}", short(DFSPH_CFL_LIMIT * h / m.max_speed)), DFSPH_CFL_LIMIT * h / m.max_speed)
             ));
         }
         if let Some(it) = health.iterations.filter(|it| it.pressure.unconverged + it.divergence.unconverged > 0) {
@@ -342,14 +419,13 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
         }
         if !dfsph && cfl > CFL_LIMIT {
             causes.push(format!(
-                "the CFL condition: the flow's speed |v|max = {} made dt (c0 + |v|max) / h = {} go over {CFL_LIMIT} (dt = {}, c0 = {}, h = {}): lower time.dt below {}{}",
+                "the CFL condition: the flow's speed |v|max = {} made dt (c0 + |v|max) / h = {} go over {CFL_LIMIT} (dt = {}, c0 = {}, h = {}): {}",
                 short(m.max_speed),
                 short(cfl),
                 short(dt),
                 short(c0),
                 short(h),
-                short(CFL_LIMIT * h / (c0 + m.max_speed)),
-                if params.adaptive.is_some() { " or time.cfl_number" } else { ", or set time.adaptive = true" }
+                lower_dt(&params, dt, &format!("below {}", short(CFL_LIMIT * h / (c0 + m.max_speed))), CFL_LIMIT * h / (c0 + m.max_speed))
             ));
         }
         if let Some(torn) = scan.map(|s| &s.torn).filter(|t| t.count > 0 && !dfsph && !params.clamp_negative_pressure) {

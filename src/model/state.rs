@@ -45,8 +45,68 @@ impl Snapshot {
     pub fn max_speed(&self) -> f64 {
         self.velocities.iter().map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max)
     }
+    /// The largest speed and the density range over the particles whose values are finite.
+    pub fn extremes(&self) -> SnapshotExtremes {
+        let mut e = SnapshotExtremes::NONE;
+        for (v, &rho) in self.velocities.iter().zip(&self.densities) {
+            if v.iter().all(|x| x.is_finite()) && rho.is_finite() {
+                e.add(*v, rho);
+            }
+        }
+        e
+    }
     pub fn kinetic_energy(&self, mass: f64) -> f64 {
         self.velocities.iter().map(|v| 0.5 * mass * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])).sum()
+    }
+}
+
+/// What a snapshot shows of the state's health, over its finite particles: whether it is a
+/// good state to name as the last one (a step's density check reads the state it starts from,
+/// so a snapshot can show a density the next step stops at), and its speed for a later
+/// diagnosis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SnapshotExtremes {
+    pub max_speed: f64,
+    pub min_density: f64,
+    pub max_density: f64,
+    /// The particles whose density is zero or below (a continuity density driven negative).
+    pub non_positive_density: u64,
+}
+
+impl SnapshotExtremes {
+    /// Of no particle.
+    pub const NONE: SnapshotExtremes = SnapshotExtremes { max_speed: 0.0, min_density: f64::INFINITY, max_density: f64::NEG_INFINITY, non_positive_density: 0 };
+
+    /// Adds a particle of velocity `v` and density `rho` (finite).
+    pub fn add(&mut self, v: [f64; 3], rho: f64) {
+        self.max_speed = self.max_speed.max((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt());
+        self.min_density = self.min_density.min(rho);
+        self.max_density = self.max_density.max(rho);
+        self.non_positive_density += (rho <= 0.0) as u64;
+    }
+
+    /// Of the particles of both.
+    pub fn merge(self, o: SnapshotExtremes) -> SnapshotExtremes {
+        SnapshotExtremes {
+            max_speed: self.max_speed.max(o.max_speed),
+            min_density: self.min_density.min(o.min_density),
+            max_density: self.max_density.max(o.max_density),
+            non_positive_density: self.non_positive_density + o.non_positive_density,
+        }
+    }
+
+    /// Why the state is not a good one, against the run's stop levels; None where it is.
+    pub fn why_bad(&self, stop: StopLevels, rest_density: f64) -> Option<String> {
+        if self.non_positive_density > 0 {
+            return Some(format!("the density of {} particles is zero or below (down to {} kg/m^3)", self.non_positive_density, crate::model::numbers::short(self.min_density)));
+        }
+        if self.max_density > stop.density {
+            return Some(format!("its density reaches {} rho0, over the stop level", crate::model::numbers::short(self.max_density / rest_density)));
+        }
+        if self.max_speed > stop.speed {
+            return Some(format!("its speed reaches {}, over the stop level", crate::model::numbers::short(self.max_speed)));
+        }
+        None
     }
 }
 

@@ -69,13 +69,26 @@ impl Comparison {
         s
     }
     /// Raises each field's tolerance to `factor` times the error `floor` (another path's
-    /// comparison with the same reference, over the same steps) is judged by for that field.
-    pub fn widen_to(&mut self, floor: &Comparison, factor: f64) {
-        for (name, _, tol) in &mut self.fields {
-            if let Some((_, e, _)) = floor.fields.iter().find(|f| f.0 == *name) {
-                *tol = tol.max(factor * floor.judged(name, e));
+    /// comparison with the same reference, over the same steps) is judged by for that field
+    /// (where `beyond_only`, only the tolerances that `floor`'s error itself is over); the
+    /// fields whose tolerance it raised.
+    pub fn widen_to(&mut self, floor: &Comparison, factor: f64, beyond_only: bool) -> Vec<&'static str> {
+        let mut widened = Vec::new();
+        for i in 0..self.fields.len() {
+            let name = self.fields[i].0;
+            if let Some((_, e, _)) = floor.fields.iter().find(|f| f.0 == name) {
+                let own = floor.judged(name, e);
+                if beyond_only && own <= self.fields[i].2 {
+                    continue;
+                }
+                let wider = factor * own;
+                if wider > self.fields[i].2 {
+                    self.fields[i].2 = wider;
+                    widened.push(name);
+                }
             }
         }
+        widened
     }
     pub fn field(&self, name: &str) -> FieldError {
         self.fields.iter().find(|f| f.0 == name).map(|f| f.1).unwrap_or_else(|| panic!("no field {name}"))

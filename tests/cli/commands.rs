@@ -316,3 +316,21 @@ fn every_command_that_takes_a_scene_takes_its_overrides() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success() && text.contains("iterations per step over 5 steps:") && text.ends_with("compare: passed\n"), "{text}\n{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// A strong surface tension's cohesion sums terms far larger than their sum, which f32
+/// rounding cannot keep to the usual one-step tolerance on any path: compare judges the GPU
+/// against the CPU's own f32 path's error there, and says which tolerance it raised.
+#[test]
+fn compare_judges_a_strong_surface_tension_against_f32_rounding() {
+    if common::contexts().is_empty() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let o = wgsph(&["compare", "hydrostatic", "--steps", "1", "--set", "physics.surface_tension=0.5"], dir.path());
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && text.ends_with("compare: passed\n"), "{text}\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.contains("(tolerance of acceleration") && text.contains("raised to 3 times the cpu f32 path's own error"), "{text}");
+    let o = wgsph(&["compare", "hydrostatic", "--steps", "1"], dir.path());
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && !text.contains("raised"), "{text}");
+}

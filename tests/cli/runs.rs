@@ -269,6 +269,15 @@ fn resume_refuses_tuning_flags_and_a_foreign_series_index() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("is not the run's file series"), "{}", text(&o.stderr));
     assert_eq!(std::fs::read_to_string(&series).unwrap(), "garbage\n");
+    std::fs::remove_file(&series).unwrap();
+    // A time that is not a number is not a line the run wrote.
+    let index = dir.path().join("o/snapshots/index.csv");
+    let nan = std::fs::read_to_string(&index).unwrap().replacen("\n0,0,", "\n0,NaN,", 1);
+    std::fs::write(&index, &nan).unwrap();
+    let o = wgsph(&["run", "--resume", "o", "--steps", "2"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("line 2 is not step,time,files: '0,NaN,"), "{}", text(&o.stderr));
+    assert_eq!(std::fs::read_to_string(&index).unwrap(), nan);
 }
 
 /// Output into a closed pipe (`wgsph run | head -1`) ends the process by SIGPIPE, as any Unix
@@ -316,6 +325,13 @@ fn resume_says_what_it_does_not_use_and_refuses_to_replace_a_foreign_probe_file(
     assert!(stderr.contains("p.csv is missing: its series restarts at step 10"), "{stderr}");
     assert_eq!(std::fs::read_to_string(&scene).unwrap(), edited, "the edited copy was changed");
     assert_eq!(std::fs::read_to_string(&series).unwrap().lines().nth(1).unwrap().split(',').nth(1), Some("10"));
+
+    std::fs::write(&series, "").unwrap();
+    std::fs::remove_file(dir.path().join("o/.wgsph-run")).unwrap();
+    let o = resume();
+    assert!(text(&o.stderr).contains(".wgsph-run (it was deleted): written again"), "{}", text(&o.stderr));
+    assert!(std::fs::read_to_string(dir.path().join("o/.wgsph-run")).unwrap().contains("probes p\n"));
+    assert!(o.status.success() && text(&o.stderr).contains("p.csv is empty: its series restarts at step 10"), "{}", text(&o.stderr));
 
     std::fs::write(&series, "my own notes\n").unwrap();
     let o = resume();
@@ -509,5 +525,73 @@ fn a_failed_run_reports_its_maxima_up_to_its_first_bad_step() {
         for w in s.warnings.iter().filter(|w| w.contains("the density reached ")) {
             assert!(figure_after(w, "the density reached ") <= bad_ratio.max(1.1) * (1.0 + 1e-3), "{label}: a warning from past the failure: {w}");
         }
+    }
+}
+
+/// A block falling in a tank with the continuity density and delta = 1 at dt = 3e-4: delta c0
+/// dt / h = 0.225, past where the diffusive term damps noise. The density it drives below zero
+/// passes no step's check; the snapshot that shows it ends the run, and the diffusion is named.
+/// Without a snapshot every step the run stops later, for its density, and the snapshot written
+/// just before (already over the stop level) is not named the last good one.
+#[test]
+fn a_density_driven_below_zero_or_over_its_limit_is_never_named_the_last_good_snapshot() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "name = \"fall\"\n[domain]\nmin = [-0.1, -0.1, -0.1]\nmax = [0.3, 0.4, 0.2]\n\
+        [physics]\nsmoothing_length = 0.04\nparticle_spacing = 0.02\nequation_of_state = \"tait\"\nspeed_of_sound = 30.0\n\
+        clamp_negative_pressure = true\nviscosity = 0.01\ndensity = \"continuity\"\ndensity_diffusion = 1.0\n\
+        [time]\ndt = 0.0003\nend_time = 0.1\n[[fluid]]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.1, 0.1]\njitter = 0.0\n\
+        [[boundary]]\ntype = \"container\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.2, 0.3, 0.1]\n";
+    std::fs::write(dir.path().join("fall.toml"), scene).unwrap();
+    let summary = |o: &str| -> Summary { serde_json::from_str(&std::fs::read_to_string(dir.path().join(o).join("summary.json")).unwrap()).unwrap() };
+    let densities = |o: &str, file: &str| -> Vec<f64> {
+        let text = std::fs::read_to_string(dir.path().join(o).join("snapshots").join(file)).unwrap();
+        text.lines().skip(1).map(|l| l.split(',').nth(6).unwrap().parse().unwrap()).collect()
+    };
+
+    let o = wgsph(&["run", "fall.toml", "--backend", "cpu", "--snapshot-every", "1", "--out", "every", "--quiet"], dir.path());
+    let stderr = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("particles fell to zero or below") && stderr.contains("Cause: the density diffusion: delta c0 dt / h = 0.225 is over 0.16"), "{stderr}");
+    let s = summary("every");
+    let last = s.last_snapshot.expect("a last good snapshot");
+    let name = Path::new(&last).file_name().unwrap().to_string_lossy().into_owned();
+    assert!(densities("every", &name).iter().all(|&d| d > 0.0 && d <= 1500.0), "{name}");
+    let bad = format!("step_{:06}.csv", s.steps);
+    assert!(densities("every", &bad).iter().any(|&d| d <= 0.0), "{bad} shows no density at or below zero");
+
+    let o = wgsph(&["run", "fall.toml", "--backend", "cpu", "--snapshot-every", "10", "--out", "tens", "--quiet"], dir.path());
+    let stderr = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("Cause: the density diffusion"), "{stderr}");
+    let s = summary("tens");
+    let last = s.last_snapshot.expect("a last good snapshot");
+    let name = Path::new(&last).file_name().unwrap().to_string_lossy().into_owned();
+    assert!(densities("tens", &name).iter().all(|&d| d > 0.0 && d <= 1500.0), "{name}");
+}
+
+/// A blow-up names the setting that caused it: an adaptive step held at `time.dt_min` (not
+/// time.dt or the CFL number, which cannot lower it), a viscosity from the schedule (not
+/// `physics.viscosity`).
+#[test]
+fn a_blow_up_names_the_setting_in_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "name = \"fall\"\n[domain]\nmin = [-0.1, -0.1, -0.1]\nmax = [0.3, 0.4, 0.2]\n\
+        [physics]\nsmoothing_length = 0.04\nparticle_spacing = 0.02\nequation_of_state = \"tait\"\nspeed_of_sound = 30.0\n\
+        clamp_negative_pressure = true\nviscosity = 0.01\n\
+        [time]\ndt = 0.0003\nend_time = 0.05\n[[fluid]]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.1, 0.1]\njitter = 0.0\n\
+        [[boundary]]\ntype = \"container\"\nmin = [0.0, 0.0, 0.0]\nmax = [0.2, 0.3, 0.1]\n";
+    std::fs::write(dir.path().join("fall.toml"), scene).unwrap();
+    for (sets, says, not) in [
+        (&["time.adaptive=true", "time.dt=0.01", "time.dt_min=0.01"][..], "time.dt_min = 0.01 held the adaptive step there", "lower time.dt to"),
+        (&["physics.viscosity_schedule=[{time=0.01,viscosity=1e9}]"][..], "lower time.dt or physics.viscosity_schedule[0].viscosity", "or physics.viscosity,"),
+    ] {
+        let mut args = vec!["run", "fall.toml", "--backend", "cpu", "--out", "o", "--overwrite", "--quiet"];
+        for s in sets {
+            args.extend(["--set", s]);
+        }
+        let o = wgsph(&args, dir.path());
+        let stderr = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{sets:?}: {stderr}");
+        assert!(stderr.contains(says) && !stderr.contains(not), "{sets:?}: {stderr}");
     }
 }

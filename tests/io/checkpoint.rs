@@ -204,7 +204,21 @@ fn resume_from_the_command_line_continues_the_run() {
     // The run reached its end: resuming needs more steps.
     let o = wgsph(&["run", "--resume", "b"], dir.path());
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("already reached step 20"), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("the checkpoint is at step 20; the run already reached its end there"), "{}", String::from_utf8_lossy(&o.stderr));
+    for (extra, says) in [
+        (&["--steps", "0"][..], "--steps 0 adds no step beyond the checkpoint's"),
+        (&["--time", "0"][..], "--time 0 adds no step"),
+        (&["--steps", "1", "--resolution", "32x32"][..], "--resolution cannot be given with it"),
+        (&["--steps", "1", "--fused"][..], "--fused cannot be given with it"),
+    ] {
+        let o = wgsph(&[&["run", "--resume", "b"][..], extra].concat(), dir.path());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(says) && !err.contains("neighbour skin"), "{extra:?}: {err}");
+    }
+    std::fs::write(dir.path().join("afile"), "x").unwrap();
+    let o = wgsph(&["run", "--resume", "afile"], dir.path());
+    assert!(o.status.code() == Some(2) && String::from_utf8_lossy(&o.stderr).contains("afile: is a file, not a run directory"), "{}", String::from_utf8_lossy(&o.stderr));
     let o = wgsph(&["run", "--resume", "b", "--steps", "10"], dir.path());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stdout).contains("10 steps"));
@@ -232,11 +246,19 @@ fn bad_checkpoints_are_refused_with_a_clear_message() {
     let mut flipped = good.clone();
     let last = flipped.len() - 9;
     flipped[last] ^= 0x40;
-    let cases: [(&str, Vec<u8>, &[&str]); 4] = [
+    // A NaN written with a good checksum (by something else than a run).
+    let mut c = read(&path).unwrap();
+    c.state.positions[3][1] = f64::NAN;
+    wgsph::io::checkpoint::write(&path, &c).unwrap();
+    let not_finite = std::fs::read(&path).unwrap();
+    let cases: [(&str, Vec<u8>, &[&str]); 7] = [
         ("other version", other_version, &["written by wgsph 9.9", "only resumes its own"]),
         ("flipped bit", flipped, &["corrupt", "checksum"]),
         ("truncated", good[..good.len() - 100].to_vec(), &["corrupt", "payload has"]),
         ("not a checkpoint", b"hello".to_vec(), &["not a wgsph checkpoint"]),
+        ("cut in its magic", good[..5].to_vec(), &["corrupt", "truncated"]),
+        ("empty", Vec::new(), &["corrupt", "empty"]),
+        ("not finite", not_finite, &["corrupt", "particle 3's position or velocity is not finite"]),
     ];
     for (what, bytes, words) in cases {
         std::fs::write(&path, bytes).unwrap();

@@ -2,6 +2,7 @@
 //! locations checked before anything changes, a failed start undone, a full disk, --quiet and
 //! RUST_LOG.
 
+use crate::common;
 use std::path::Path;
 use std::process::{Command, Output};
 use wgsph::model::scene::SceneOrigin;
@@ -409,4 +410,76 @@ fn a_scene_name_too_long_for_its_run_directory_is_named_as_the_cause() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("the run directory named after the scene's name (no --out given)") && stderr(&o).contains("at most 255"), "{}", stderr(&o));
     assert!(!dir.path().join("out").exists());
+}
+
+/// `--frames` at an earlier run's directory is refused even with `--overwrite`: the run's
+/// snapshots, summary and checkpoint are not replaced by pictures. A directory that held only
+/// pictures is replaced as before.
+#[test]
+fn overwrite_does_not_replace_a_run_with_the_pictures_of_another() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["run", "hydrostatic", "--particles", "300", "--steps", "2", "--backend", "cpu"];
+    assert!(wgsph(&[&args[..], &["--out", "a", "--checkpoint-every", "1"]].concat(), dir.path()).status.success());
+    let before = tree(&dir.path().join("a"));
+    let o = wgsph(&[&args[..], &["--out", "b", "--frames", "a", "--overwrite", "--resolution", "32x32"]].concat(), dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--frames") && stderr(&o).contains("is an earlier run's directory"), "{}", stderr(&o));
+    assert_eq!(tree(&dir.path().join("a")), before);
+    assert!(!dir.path().join("b").exists());
+    if common::contexts().is_empty() {
+        return;
+    }
+    let pictures = |out: &str| wgsph(&[&args[..], &["--out", out, "--frames", "f", "--overwrite", "--resolution", "32x32"]].concat(), dir.path());
+    let o = pictures("c");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = pictures("d");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read_to_string(dir.path().join("f/.wgsph-run")).unwrap().contains("holds frames\n"));
+}
+
+/// A checkpoint copied from another run into a run directory is refused by `--resume`, which
+/// would mix that run's steps into this one's files; a copy of a whole run directory resumes.
+#[test]
+fn resume_refuses_a_checkpoint_of_another_run() {
+    let dir = tempfile::tempdir().unwrap();
+    for (scene, out) in [("hydrostatic", "h"), ("dam_break", "d")] {
+        let o = wgsph(&["run", scene, "--particles", "300", "--steps", "10", "--checkpoint-every", "5", "--backend", "cpu", "--out", out], dir.path());
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let copy = |from: &Path, to: &Path| assert!(Command::new("cp").arg("-r").arg(from).arg(to).status().unwrap().success());
+    copy(&dir.path().join("d"), &dir.path().join("d2"));
+    std::fs::copy(dir.path().join("h/checkpoint.wgsph"), dir.path().join("d/checkpoint.wgsph")).unwrap();
+    let before = tree(&dir.path().join("d"));
+    let o = wgsph(&["run", "--resume", "d", "--steps", "3"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("was written by another run") && stderr(&o).contains("resume the directory the checkpoint came from"), "{}", stderr(&o));
+    assert_eq!(tree(&dir.path().join("d")), before);
+    let o = wgsph(&["run", "--resume", "d2", "--steps", "3", "--quiet"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// A directory where the run writes one of its files (a snapshot, the summary) would stop the
+/// run part way, after its steps: `--overwrite` and `--resume` refuse it before any work.
+#[test]
+fn a_directory_where_the_run_writes_a_file_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["run", "hydrostatic", "--particles", "300", "--steps", "20", "--backend", "cpu", "--snapshot-every", "10"];
+    assert!(wgsph(&[&args[..], &["--out", "o", "--checkpoint-every", "10"]].concat(), dir.path()).status.success());
+    let snapshot = dir.path().join("o/snapshots/step_000010.csv");
+    std::fs::remove_file(&snapshot).unwrap();
+    std::fs::create_dir(&snapshot).unwrap();
+    let before = tree(&dir.path().join("o"));
+    for extra in [&["--out", "o", "--overwrite"][..]] {
+        let o = wgsph(&[&args[..], extra].concat(), dir.path());
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains("step_000010.csv is a directory, where the run writes a file"), "{}", stderr(&o));
+    }
+    let o = wgsph(&["run", "--resume", "o", "--steps", "5"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("step_000010.csv is a directory"), "{}", stderr(&o));
+    assert_eq!(tree(&dir.path().join("o")), before);
+    // In the numbered directories, one past the largest number there is, never a wrap.
+    std::fs::create_dir_all(dir.path().join(format!("out/hydrostatic-{}", u64::MAX))).unwrap();
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "1", "--backend", "cpu", "--quiet"], dir.path());
+    assert!(o.status.success() && dir.path().join("out/hydrostatic-001/summary.json").exists(), "{}", stderr(&o));
 }

@@ -209,14 +209,23 @@ fn the_command_line_exits_with_2_on_bad_input_before_any_work() {
     let out = wgsph(&["run", "--steps", "-3"], dir.path());
     assert_eq!(out.status.code(), Some(2));
     // A count of zero or not a count: said without the type's largest value as a bound.
-    for (command, flag, value, says) in [("compare", "--steps", "0", "0 is not allowed: give a whole number of at least 1"), ("run", "--particles", "1.5", "'1.5' is not a whole number of at least 1")] {
-        let out = wgsph(&[command, flag, value], dir.path());
+    for (command, flag, value, says) in [
+        ("compare", "--steps", "0", "0 is not allowed: give a whole number of at least 1"),
+        ("run", "--particles", "1.5", "'1.5' is not a whole number of at least 1"),
+        ("run", "--steps", "abc", "'abc' is not a whole number of 0 or more"),
+        ("run", "--checkpoint-every", "-1", "'-1' is not a whole number of 0 or more"),
+        ("run", "--time", "0.01 ms", "'0.01 ms' is not a time in seconds"),
+    ] {
+        let out = wgsph(&[command, &format!("{flag}={value}")], dir.path());
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.code() == Some(2) && err.contains(says) && !err.contains("18446744073709551615"), "{command} {flag} {value}: {err}");
     }
     let out = wgsph(&["run", "--backend", "tpu"], dir.path());
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cpu"));
+    // A time with its unit, as --snapshot-every takes one.
+    let out = wgsph(&["run", "hydrostatic", "--particles", "300", "--time", "0.001s", "--backend", "cpu", "--out", "t", "--quiet"], dir.path());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
 #[test]
@@ -430,4 +439,36 @@ fn a_force_probe_box_that_misses_the_walls_is_refused() {
     assert!(!dir.path().join("out").exists());
     let o = wgsph_in(dir.path(), &["run", "floor.toml", "--particles", "300", "--steps", "1", "--backend", "cpu"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn a_boundary_given_twice_is_refused() {
+    let wall = "[[boundary]]\ntype = \"container\"\nmin = [0.1, 0.1, 0.1]\nmax = [0.9, 0.9, 0.9]\n";
+    let e = error_of(&format!("{GOOD}{wall}{wall}"));
+    assert!(e.contains("boundary[1]") && e.contains("repeats boundary[0]"), "{e}");
+}
+
+/// A setting that the scene's other settings leave unused is said to be, by name, so that it
+/// is never silently ignored; a scene that uses what it sets gets no such warning.
+#[test]
+fn settings_the_scene_does_not_use_are_named() {
+    let scene = |text: &str| Scene::from_toml_str(text, &SceneOrigin::Text).unwrap();
+    assert!(scene(GOOD).unused_settings().is_empty());
+    let dfsph = GOOD.replace("stiffness = 1000.0", "solver = \"dfsph\"\nequation_of_state = \"tait\"\nclamp_negative_pressure = true\n[physics.dfsph]\ndivergence_solve = false\ndivergence_error = 0.5\n[limits]\nmax_mach = 2.0");
+    let unused = scene(&dfsph).unused_settings();
+    for field in ["physics.equation_of_state = \"tait\"", "physics.clamp_negative_pressure = true", "physics.dfsph.divergence_error = 0.5", "limits.max_mach = 2"] {
+        assert!(unused.iter().any(|w| w.starts_with(field) && w.contains("is not used")), "{field}: {unused:?}");
+    }
+    let fixed = GOOD.replace("dt = 0.001", "dt = 0.001\ncfl_number = 0.3");
+    assert!(scene(&fixed).unused_settings().iter().any(|w| w.starts_with("time.cfl_number = 0.3") && w.contains("time.adaptive = false")));
+    let planes = GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nboundary_volume = \"akinci\"\nboundary_friction = 0.5")
+        + "[[boundary]]\ntype = \"plane\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 1.0, 0.0]\n";
+    let unused = scene(&planes).unused_settings();
+    assert!(unused.len() == 2 && unused.iter().all(|w| w.contains("no wall particles")), "{unused:?}");
+    let walls = planes + "[[boundary]]\ntype = \"container\"\nmin = [0.1, 0.1, 0.1]\nmax = [0.9, 0.9, 0.9]\n";
+    assert!(scene(&walls).unused_settings().is_empty());
+    // Two viscosity changes at one time: one of them would never act.
+    let twice = GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nviscosity_schedule = [{ time = 0.01, viscosity = 0.1 }, { time = 0.01, viscosity = 0.2 }]");
+    let e = error_of(&twice);
+    assert!(e.contains("physics.viscosity_schedule[1].time") && e.contains("increasing"), "{e}");
 }

@@ -75,7 +75,7 @@ fn snapshots_written_in_uneven_pieces_equal_the_whole_array_files() {
             out.write_rows((k * piece) as u64, part).unwrap();
         }
         let written = out.finish().unwrap();
-        assert_eq!((written.step, written.particles, written.max_speed), (s.step, s.len() as u64, s.max_speed()));
+        assert_eq!((written.step, written.particles, written.extremes), (s.step, s.len() as u64, s.extremes()));
         for ((_, path), want) in files(dir.path(), &stem).iter().zip(&expected) {
             assert!(&std::fs::read(path).unwrap() == want, "{} differs from the whole-array file", path.display());
         }
@@ -149,7 +149,7 @@ fn snapshots_written_in_pieces_by_several_ranks_equal_the_whole_array_files() {
         let fs = files(dir.path(), "step_000003");
         for written in written_in_pieces(&fs, &rows, ranks, s.step, s.time) {
             let written = written.unwrap();
-            assert_eq!((written.step, written.particles, written.max_speed), (s.step, s.len() as u64, s.max_speed()), "every rank reports the whole snapshot");
+            assert_eq!((written.step, written.particles, written.extremes), (s.step, s.len() as u64, s.extremes()), "every rank reports the whole snapshot");
         }
         for ((f, path), want) in fs.iter().zip(&expected) {
             assert!(&std::fs::read(path).unwrap() == want, "{f:?}: {particles} particles by {ranks} ranks differ from the whole-array file");
@@ -215,7 +215,7 @@ fn gpu_snapshots_streamed_in_pieces_and_passes_equal_the_whole_array_files_on_ev
                 assert!(&std::fs::read(path).unwrap() == want, "{f:?}, chunk {chunk} on {}", ctx.describe());
             }
             assert_eq!((s.step, s.particles, s.time), (5, snapshot.len() as u64, snapshot.time));
-            assert_eq!(s.max_speed, snapshot.max_speed());
+            assert_eq!(s.extremes, snapshot.extremes());
         }
         // A velocity that is not finite: refused in every format, and no file is written.
         let mut state = solver.save_state().unwrap();

@@ -244,7 +244,7 @@ fn streamed_csv_snapshots_equal_the_whole_array_ones_byte_for_byte() {
             let s = wgsph::io::snapshot::write_rows(&files, n, step, time, |v| solver.visit_rows_in_pieces(chunk, v)).unwrap();
             assert_eq!(std::fs::read(&path).unwrap(), expected, "chunk {chunk} on {}", ctx.describe());
             assert_eq!((s.step, s.particles), (5, snapshot.len() as u64));
-            assert_eq!(s.max_speed, snapshot.max_speed());
+            assert_eq!(s.extremes, snapshot.extremes());
         }
     }
 }

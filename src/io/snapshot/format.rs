@@ -26,9 +26,12 @@ impl SnapshotFormat {
     }
 }
 
+/// The subdirectory of a run directory that holds its snapshots, their index and VTK series.
+pub const SNAPSHOTS_DIR: &str = "snapshots";
+
 /// The file of a step's snapshot in a format: `DIR/snapshots/step_000123.vtk`.
 pub fn snapshot_file(out: &Path, step: u64, format: SnapshotFormat) -> PathBuf {
-    out.join("snapshots").join(format!("step_{step:06}.{}", format.extension()))
+    out.join(SNAPSHOTS_DIR).join(format!("step_{step:06}.{}", format.extension()))
 }
 
 /// The step of a snapshot file name `step_000123.ext`.

@@ -61,7 +61,7 @@ impl SnapshotIndex {
             let bad = || anyhow::anyhow!("{}: line {} is not step,time,files: '{}'; move the file away to resume (the index then restarts at the checkpoint)", path.display(), n + 2, line.chars().take(80).collect::<String>());
             let mut fields = line.split(',');
             let step: u64 = fields.next().and_then(|s| s.parse().ok()).ok_or_else(bad)?;
-            let time: f64 = fields.next().and_then(|s| s.parse().ok()).ok_or_else(bad)?;
+            let time: f64 = fields.next().and_then(|s| s.parse().ok()).filter(|t: &f64| t.is_finite()).ok_or_else(bad)?;
             let files: Vec<String> = fields.map(str::to_string).collect();
             if files.len() != formats.len() {
                 return Err(bad());

@@ -11,9 +11,9 @@ pub mod ply;
 pub mod stream;
 pub mod vtk;
 
-use crate::model::state::Snapshot;
+use crate::model::state::{Snapshot, SnapshotExtremes};
 use crate::solver::{Backend, SnapshotRow};
-use format::{snapshot_file, SnapshotFormat};
+use format::{snapshot_file, SnapshotFormat, SNAPSHOTS_DIR};
 use index::{SnapshotIndex, INDEX_NAME};
 use std::path::{Path, PathBuf};
 use stream::SnapshotStream;
@@ -65,21 +65,21 @@ impl SnapshotWriter {
     }
 
     pub fn series_path(&self) -> PathBuf {
-        self.out.join("snapshots").join(VTK_SERIES_NAME)
+        self.out.join(SNAPSHOTS_DIR).join(VTK_SERIES_NAME)
     }
 
     /// `DIR/snapshots/index.csv`: each snapshot's step, time and files.
     pub fn index_path(&self) -> PathBuf {
-        self.out.join("snapshots").join(INDEX_NAME)
+        self.out.join(SNAPSHOTS_DIR).join(INDEX_NAME)
     }
 
     /// The snapshots up to `step` in the index and in the VTK series, named by the file's path
     /// in the run directory: what a run resumed at `step` keeps of them.
     pub fn lines_up_to(&self, step: u64) -> Vec<(String, u64)> {
-        let mut lines = vec![(format!("snapshots/{INDEX_NAME}"), self.index.rows().iter().filter(|r| r.0 <= step).count() as u64)];
+        let mut lines = vec![(format!("{SNAPSHOTS_DIR}/{INDEX_NAME}"), self.index.rows().iter().filter(|r| r.0 <= step).count() as u64)];
         if self.formats.contains(&SnapshotFormat::Vtk) {
             let kept = self.series.files.iter().filter(|e| format::step_of_name(&e.name).is_some_and(|s| s <= step)).count();
-            lines.push((format!("snapshots/{VTK_SERIES_NAME}"), kept as u64));
+            lines.push((format!("{SNAPSHOTS_DIR}/{VTK_SERIES_NAME}"), kept as u64));
         }
         lines
     }
@@ -91,9 +91,9 @@ impl SnapshotWriter {
     }
 
     /// Writes the backend's current state in every format through its streamed path, without
-    /// one host copy of every array; returns the path of the first format's file and the
-    /// largest speed, or `None` where the backend has no streamed path.
-    pub fn write_streamed(&mut self, backend: &mut dyn Backend) -> Option<anyhow::Result<(PathBuf, f64)>> {
+    /// one host copy of every array; returns the path of the first format's file and what
+    /// the snapshot shows of the state's health, or `None` where the backend has no streamed path.
+    pub fn write_streamed(&mut self, backend: &mut dyn Backend) -> Option<anyhow::Result<(PathBuf, SnapshotExtremes)>> {
         if !backend.streams_snapshots() {
             return None;
         }
@@ -109,15 +109,15 @@ impl SnapshotWriter {
             }
             self.add_to_index(s.step, s.time)?;
             let (_, first) = files.into_iter().next().ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))?;
-            Ok((first, s.max_speed))
+            Ok((first, s.extremes))
         }))
     }
 
     /// Across ranks: every rank writes its piece of the backend's snapshot into the one file
     /// of each format ([`pieces::write_pieces`], collective); rank 0 keeps the VTK series and
-    /// the index up to date. Returns the path of the first format's file and the largest
-    /// speed, or `None` alone.
-    pub fn write_pieces(&mut self, backend: &mut dyn Backend) -> Option<anyhow::Result<(PathBuf, f64)>> {
+    /// the index up to date. Returns the path of the first format's file and what the
+    /// snapshot shows of the state's health, or `None` alone.
+    pub fn write_pieces(&mut self, backend: &mut dyn Backend) -> Option<anyhow::Result<(PathBuf, SnapshotExtremes)>> {
         let piece = backend.snapshot_piece()?;
         Some(piece.and_then(|piece| {
             let files: Vec<(SnapshotFormat, PathBuf)> = self.formats.iter().map(|&f| (f, snapshot_file(&self.out, piece.step, f))).collect();
@@ -132,7 +132,7 @@ impl SnapshotWriter {
                 self.add_to_index(s.step, s.time)?;
             }
             let (_, first) = files.into_iter().next().ok_or_else(|| anyhow::anyhow!("no snapshot format chosen"))?;
-            Ok((first, s.max_speed))
+            Ok((first, s.extremes))
         }))
     }
 

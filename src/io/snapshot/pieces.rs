@@ -19,6 +19,7 @@ use super::ply::ply_header;
 use super::stream::StreamedSnapshot;
 use super::vtk::{vtk_title, VtkLayout};
 use crate::io::atomic::{temporary_path, AtomicFile};
+use crate::model::state::SnapshotExtremes;
 use crate::solver::communicator::Communicator;
 use crate::solver::SnapshotPiece;
 use anyhow::Context;
@@ -35,9 +36,20 @@ pub fn write_pieces(files: &[(SnapshotFormat, PathBuf)], piece: &SnapshotPiece) 
     let comm = &*piece.comm;
     let first_path = files.first().map_or(PathBuf::new(), |(_, p)| p.clone());
     let non_finite = piece.rows.iter().filter(|r| !r.iter().all(|x| x.is_finite())).count();
-    let max_speed = piece.rows.iter().filter(|r| r.iter().all(|x| x.is_finite())).map(|r| (r[3] * r[3] + r[4] * r[4] + r[5] * r[5]).sqrt()).fold(0.0, f64::max);
+    let mut own = SnapshotExtremes::NONE;
+    for r in piece.rows.iter().filter(|r| r.iter().all(|x| x.is_finite())) {
+        own.add([r[3], r[4], r[5]], r[6]);
+    }
     let csv = files.iter().any(|(f, _)| *f == SnapshotFormat::Csv).then(|| csv_lines(&piece.rows)).transpose()?;
-    let counts = comm.all_gather(&[non_finite as f64, max_speed, piece.rows.len() as f64, csv.as_ref().map_or(0, Vec::len) as f64])?;
+    let counts = comm.all_gather(&[
+        non_finite as f64,
+        own.max_speed,
+        piece.rows.len() as f64,
+        csv.as_ref().map_or(0, Vec::len) as f64,
+        own.min_density,
+        own.max_density,
+        own.non_positive_density as f64,
+    ])?;
     let non_finite: f64 = counts.iter().map(|c| c[0]).sum();
     if non_finite > 0.0 {
         anyhow::bail!("refusing to write {}: {non_finite} particles hold NaN or infinity at step {}", first_path.display(), piece.step);
@@ -45,7 +57,9 @@ pub fn write_pieces(files: &[(SnapshotFormat, PathBuf)], piece: &SnapshotPiece) 
     let rows: f64 = counts.iter().map(|c| c[2]).sum();
     anyhow::ensure!(rows == piece.total as f64, "the ranks hold {rows} snapshot rows of {} particles", piece.total);
     let csv_offset: f64 = counts[..comm.rank()].iter().map(|c| c[3]).sum();
-    let max_speed = counts.iter().map(|c| c[1]).fold(0.0, f64::max);
+    let extremes = counts.iter().fold(SnapshotExtremes::NONE, |e, c| {
+        e.merge(SnapshotExtremes { max_speed: c[1], min_density: c[4], max_density: c[5], non_positive_density: c[6] as u64 })
+    });
 
     // Rank 0 creates the files; every rank learns their temporary names.
     let created = match comm.rank() {
@@ -95,7 +109,7 @@ pub fn write_pieces(files: &[(SnapshotFormat, PathBuf)], piece: &SnapshotPiece) 
     // Rank 0 renames the files into place (dropped unrenamed, they are removed).
     let mut committed = created.into_iter().try_for_each(AtomicFile::commit);
     agree(comm, &mut committed, "move into place", &first_path)?;
-    Ok(StreamedSnapshot { step: piece.step, time: piece.time, particles: piece.total, max_speed })
+    Ok(StreamedSnapshot { step: piece.step, time: piece.time, particles: piece.total, extremes })
 }
 
 /// Whether every rank succeeded: this rank's own error, or which rank failed.

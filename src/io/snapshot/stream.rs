@@ -13,6 +13,7 @@ use super::format::SnapshotFormat;
 use super::ply::{ply_header, PlyVertex};
 use super::vtk::{vtk_title, VtkLayout};
 use crate::io::atomic::AtomicFile;
+use crate::model::state::SnapshotExtremes;
 use crate::solver::SnapshotRow;
 use anyhow::Context;
 use std::io::Write;
@@ -24,7 +25,7 @@ pub struct StreamedSnapshot {
     pub step: u64,
     pub time: f64,
     pub particles: u64,
-    pub max_speed: f64,
+    pub extremes: SnapshotExtremes,
 }
 
 /// The snapshot files of one step being written piece by piece. Dropped before
@@ -37,7 +38,7 @@ pub struct SnapshotStream {
     /// The first particle of the next piece: pieces come in order.
     next: u64,
     non_finite: u64,
-    max_speed: f64,
+    extremes: SnapshotExtremes,
 }
 
 enum FormatFile {
@@ -75,7 +76,7 @@ impl SnapshotStream {
                 Ok(opened)
             })
             .collect::<anyhow::Result<_>>()?;
-        Ok(SnapshotStream { files, particles, step, time, next: 0, non_finite: 0, max_speed: 0.0 })
+        Ok(SnapshotStream { files, particles, step, time, next: 0, non_finite: 0, extremes: SnapshotExtremes::NONE })
     }
 
     /// Writes the rows of particles `first..first + rows.len()` (the next ones in original
@@ -91,7 +92,7 @@ impl SnapshotStream {
         for r in rows {
             let v = r.map(|x| x as f64);
             if v.iter().all(|x| x.is_finite()) {
-                self.max_speed = self.max_speed.max((v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt());
+                self.extremes.add([v[3], v[4], v[5]], v[6]);
             } else {
                 self.non_finite += 1;
             }
@@ -129,7 +130,7 @@ impl SnapshotStream {
                 FormatFile::Csv(f) | FormatFile::Ply(f, _) | FormatFile::Vtk(f, _) => f.commit()?,
             }
         }
-        Ok(StreamedSnapshot { step: self.step, time: self.time, particles: self.particles, max_speed: self.max_speed })
+        Ok(StreamedSnapshot { step: self.step, time: self.time, particles: self.particles, extremes: self.extremes })
     }
 }
 

@@ -400,7 +400,10 @@ pub fn scene_from_json(text: &str, name: &str, origin: &SceneOrigin) -> Result<(
             Kernel::CubicSpline
         }
     };
-    let eos = if exponent == 7.0 {
+    // DFSPH has no equation of state: the scene keeps the default, which it does not use.
+    let eos = if solver == PressureSolver::Dfsph {
+        EquationOfState::Linear
+    } else if exponent == 7.0 {
         EquationOfState::Tait
     } else if exponent == 1.0 {
         EquationOfState::Linear
