@@ -216,9 +216,9 @@ pub struct RunArgs {
     /// every K steps into DIR/surface/step_NNNNNN.obj (0: never).
     #[arg(long, default_value_t = 0, value_name = "K", value_parser = whole_number)]
     pub surface_mesh_every: u64,
-    /// File format of the surface meshes.
-    #[arg(long, value_enum, default_value_t = MeshFormat::Obj)]
-    pub surface_mesh_format: MeshFormat,
+    /// File format of the surface meshes (default obj; needs --surface-mesh-every).
+    #[arg(long, value_enum)]
+    pub surface_mesh_format: Option<MeshFormat>,
     /// Write rendered pictures DIR/frame_00000.png, ... (every --frame-every steps).
     #[arg(long, value_name = "DIR")]
     pub frames: Option<PathBuf>,

@@ -224,10 +224,11 @@ fn check_flags_have_paths(args: &BenchArgs) -> Result<(), InputError> {
 
 pub fn cmd_bench(args: &BenchArgs) -> anyhow::Result<i32> {
     check_flags_have_paths(args)?;
-    // An earlier `wgsph bench --out`: a list of rows, each naming its path and its rate.
+    // An earlier `wgsph bench --out`: a list of rows (a bench measures at least one path),
+    // each naming its path and its rate. An empty list is no one's benchmark.
     let ours = |text: &str| {
         serde_json::from_str::<Vec<serde_json::Map<String, serde_json::Value>>>(text)
-            .is_ok_and(|rows| rows.iter().all(|row| row.contains_key("path") && row.contains_key("particle_steps_per_second")))
+            .is_ok_and(|rows| !rows.is_empty() && rows.iter().all(|row| row.contains_key("path") && row.contains_key("particle_steps_per_second")))
     };
     let file = args.out.as_deref().map(|p| super::errors::output_file("--out", p, "a benchmark", &ours)).transpose()?;
     if let Some(t) = args.threads {

@@ -137,6 +137,10 @@ fn cmd_view(args: &ViewArgs) -> anyhow::Result<i32> {
     if let Some(path) = &args.screenshot {
         check_screenshot_path(path)?;
     }
+    // No display is an environment that cannot run the command, as no adapter is: exit 2.
+    if cfg!(all(unix, not(target_os = "macos"))) && ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"].iter().all(|v| std::env::var_os(v).is_none()) {
+        return Err(InputError("cannot open a window: no display (set DISPLAY or WAYLAND_DISPLAY; on a headless machine run under Xvfb, see docs/pictures.md)".into()).into());
+    }
     let dt = scene.time.dt;
     let steps_per_frame = args.steps_per_frame.unwrap_or_else(|| ((1.0 / 60.0 / dt).ceil() as u64).clamp(1, 64));
     crate::viz::view::view(

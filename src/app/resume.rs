@@ -5,7 +5,7 @@ use super::errors::InputError;
 use super::run::{exit_code_of, report_run, run, steps_for_time, ResumedRun, RunOptions};
 use super::signals;
 use crate::io::checkpoint::{read, read_where, Checkpoint, CheckpointFile, CHECKPOINT_FILE};
-use crate::io::rundir::{check_resumable, remove_partial_files, restore_marker, run_id, RunWrites, MARKER, SCENE_COPY, SNAPSHOTS_DIR};
+use crate::io::rundir::{check_resumable, remove_partial_files, remove_steps_after, restore_marker, run_id, RunWrites, MARKER, SCENE_COPY, SNAPSHOTS_DIR};
 use crate::io::summary::Summary;
 use crate::model::scene::{Scene, SceneOrigin};
 use crate::solver::{open, Backend, BackendChoice, Precision, Ranks};
@@ -114,11 +114,26 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
             eprintln!("note: {} had no {MARKER} (it was deleted): written again, so that --overwrite knows the run's files", dir.display());
         }
     }
+    // A state whose arrays disagree with each other was not written so by a run: corrupt, bad
+    // input (the backend checks it against the scene's particles when it is restored).
+    let corrupt = |e: anyhow::Error| InputError(format!("--resume {}: {}: {e:#}; the checkpoint is corrupt and cannot be resumed", dir.display(), path.display()));
+    let mut choice = choice_of_kind(&c.state.kind).map_err(corrupt)?;
+    if ranks.is_none() {
+        c.state.check_fits(&c.state.kind, c.state.positions.len()).map_err(corrupt)?;
+    }
     signals::install();
-    let mut choice = choice_of_kind(&c.state.kind)?;
     choice.ranks = ranks.cloned();
     let mut sim = open(&scene, &choice)?;
     let backend = sim.backend();
+    // The steps after the checkpoint are computed again (the backend is open, the checkpoint
+    // sound): what the run wrote for them goes.
+    if writes_files {
+        let writes = RunWrites::of_run(&c.run.formats, (c.run.surface_mesh_every > 0).then_some(c.run.surface_mesh_format), &params.probes);
+        let later = remove_steps_after(dir, step, &writes)?;
+        if !later.is_empty() && !args.quiet {
+            println!("removed {} snapshot and surface file(s) of steps after the checkpoint's step {step}, which the resumed run computes again", later.len());
+        }
+    }
     // The CPU path gives the same bits with any number of threads; a GPU may not on another adapter.
     if c.state.kind == "gpu" && backend.adapter() != c.run.adapter {
         eprintln!(

@@ -214,7 +214,8 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         Ok(WrittenSnapshot { snapshot, extremes, why_bad })
     };
     let surface = SurfaceParameters::for_scene(&params, scene.physics.particle_spacing);
-    let write_surface = |backend: &mut dyn Backend, snapshot: Option<Snapshot>| -> anyhow::Result<()> {
+    let mut surface_meshes_written = 0u64;
+    let mut write_surface = |backend: &mut dyn Backend, snapshot: Option<Snapshot>| -> anyhow::Result<()> {
         let step = backend.steps_done();
         let s = match snapshot {
             Some(s) => s,
@@ -222,6 +223,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         };
         if opts.writes_files {
             write_snapshot_surface(&opts.out, &s, &surface, opts.surface_mesh_format).with_context(|| format!("step {step}: writing the surface mesh"))?;
+            surface_meshes_written += 1;
         }
         Ok(())
     };
@@ -423,6 +425,7 @@ pub fn run(backend: &mut dyn Backend, scene: &Scene, opts: &RunOptions) -> anyho
         status,
         last_checkpoint: last_checkpoint.as_ref().map(|p| p.display().to_string()),
         snapshots: snapshots_written,
+        surface_meshes: surface_meshes_written,
         // Over the whole run (a resumed run's counts continue from its checkpoint).
         dfsph: health.iterations.map(|it| DfsphSummary::of(&it, backend.steps_done())),
         max_mach: (params.speed_of_sound() > 0.0).then(|| health.max_speed / params.speed_of_sound()),
@@ -537,6 +540,12 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     if args.frames.is_none() && !picture_flags.is_empty() {
         return Err(InputError(format!("{} set how the pictures look, and this run draws none: add --frames DIR, or leave {} out", picture_flags.join(", "), if picture_flags.len() == 1 { "it" } else { "them" })).into());
     }
+    if let Some(f) = args.formats.iter().enumerate().find(|(i, f)| args.formats[..*i].contains(f)).map(|(_, f)| f) {
+        return Err(InputError(format!("--format {} is given twice; give each snapshot format once", f.extension())).into());
+    }
+    if let (Some(f), 0) = (args.surface_mesh_format, args.surface_mesh_every) {
+        return Err(InputError(format!("--surface-mesh-format {} sets the surface meshes' format, and this run writes none: add --surface-mesh-every K, or leave it out", f.extension())).into());
+    }
     // The GPU computes in f32 whatever the CPU path's float type.
     if let (BackendArg::Gpu, Some(PrecisionArg::F64)) = (args.backend, args.precision) {
         return Err(InputError("--precision f64 sets the CPU path's float type, and --backend gpu computes in f32: leave it out, or run with --backend cpu".into()).into());
@@ -576,7 +585,7 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     let scene_file = Scene::builtin(&args.scene).is_none().then(|| PathBuf::from(&args.scene));
     let inputs: Vec<&Path> = scene_file.iter().map(PathBuf::as_path).collect();
     // Across ranks rank 0 alone checks and prepares the outputs.
-    let writes = RunWrites::of_run(&args.formats, (args.surface_mesh_every > 0).then_some(args.surface_mesh_format), &params.probes);
+    let writes = RunWrites::of_run(&args.formats, (args.surface_mesh_every > 0).then_some(args.surface_mesh_format.unwrap_or_default()), &params.probes);
     let outputs = if writes_files { Some(RunOutputs::check(&out, args.frames.as_deref(), args.overwrite, args.out.is_none(), &inputs, writes)?) } else { None };
     for (dir, names) in outputs.iter().flat_map(|o| o.kept()) {
         eprintln!("note: --overwrite keeps {} in {}: no wgsph run wrote it", names.join(", "), dir.display());
@@ -633,7 +642,7 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
         }),
         end_time,
         surface_mesh_every: args.surface_mesh_every,
-        surface_mesh_format: args.surface_mesh_format,
+        surface_mesh_format: args.surface_mesh_format.unwrap_or_default(),
         start,
         writes_files,
     };
@@ -643,13 +652,13 @@ pub fn cmd_run(args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::Result<i32> {
     }
     let code = report_run(&summary, &out, args.quiet)?;
     if !args.quiet {
-        print_outputs(&summary, &out, args.frames.as_deref(), &args.formats);
+        print_outputs(&summary, &out, args.frames.as_deref(), &args.formats, args.surface_mesh_format.unwrap_or_default());
     }
     Ok(code)
 }
 
 /// A short account of what a run wrote where.
-pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[SnapshotFormat]) {
+pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[SnapshotFormat], mesh_format: MeshFormat) {
     let names: Vec<&str> = formats.iter().map(|f| f.extension()).collect();
     println!("wrote {}:", out.display());
     let plural = if s.snapshots == 1 { "" } else { "s" };
@@ -665,6 +674,10 @@ pub fn print_outputs(s: &Summary, out: &Path, frames: Option<&Path>, formats: &[
             Err(_) => dir.display().to_string(),
         };
         println!("  {dir:<13}  {} picture{}{shown}", s.frames, if s.frames == 1 { "" } else { "s" });
+    }
+    if s.surface_meshes > 0 {
+        let plural = if s.surface_meshes == 1 { "" } else { "es" };
+        println!("  surface/       {} surface mesh{plural} (step_NNNNNN.{})", s.surface_meshes, mesh_format.extension());
     }
     if s.last_checkpoint.is_some() {
         println!("  checkpoint.wgsph  the state to continue from with `wgsph run --resume {}`", out.display());
@@ -784,6 +797,13 @@ fn warn_cut_series(out: &Path, recorded: &[(String, u64)], found: &[(String, u64
             continue;
         }
         let what = if name.starts_with(SNAPSHOTS_DIR) { "snapshots up to" } else { "samples before" };
+        if !out.join(name).exists() {
+            eprintln!(
+                "warning: {} is missing, where the run had written {had} {what} step {start} when it saved its checkpoint: the resumed run starts it anew, without them",
+                out.join(name).display()
+            );
+            continue;
+        }
         eprintln!(
             "warning: {} holds {has} {what} step {start}, where the run had written {had} when it saved its checkpoint: the file was cut or replaced since, and the resumed run does not write the missing lines again",
             out.join(name).display()

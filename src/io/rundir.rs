@@ -696,6 +696,28 @@ pub fn write_scene_copy(out: &Path, scene: &Scene) -> anyhow::Result<()> {
     write_atomic(&out.join(SCENE_COPY), |w| w.write_all(text.as_bytes()))
 }
 
+/// Removes the snapshots and surface meshes of the run in `dir` (of the kinds `writes` records)
+/// from steps after `step`: a run resumed at `step` computes its steps again, and one that
+/// ends earlier than the run went before would leave files that its index no longer lists.
+pub fn remove_steps_after(dir: &Path, step: u64, writes: &RunWrites) -> anyhow::Result<Vec<PathBuf>> {
+    let mut removed = Vec::new();
+    for sub in [SNAPSHOTS_DIR, SURFACE_DIR] {
+        let d = dir.join(sub);
+        if !is_real_dir(&d) {
+            continue;
+        }
+        for name in list(&d).with_context(|| format!("cannot read {}", d.display()))? {
+            let later = crate::io::snapshot::format::step_of_name(&name).is_some_and(|s| s > step);
+            let p = d.join(&name);
+            if later && name.starts_with("step_") && is_run_output(Some(sub), &name, Some(writes)) && p.is_file() {
+                std::fs::remove_file(&p).with_context(|| format!("cannot remove {}", p.display()))?;
+                removed.push(p);
+            }
+        }
+    }
+    Ok(removed)
+}
+
 /// Removes the partial files a killed run left in its directory (the atomic writer's
 /// temporary files, in the directory, `snapshots/` and `surface/`); returns them.
 pub fn remove_partial_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {

@@ -63,6 +63,9 @@ pub struct Summary {
     /// Snapshots written by this run (each in every format).
     #[serde(default)]
     pub snapshots: u64,
+    /// Surface meshes written by this run (`surface/step_NNNNNN.obj` or `.ply`).
+    #[serde(default)]
+    pub surface_meshes: u64,
     /// DFSPH's iterations per step (absent for WCSPH).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dfsph: Option<DfsphSummary>,

@@ -9,10 +9,11 @@ use splashsurf_lib::nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
 /// The file format of surface meshes (`--surface-mesh-format`).
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum MeshFormat {
     /// Wavefront OBJ (text): `v x y z` and `f a b c` lines.
+    #[default]
     Obj,
     /// Binary little-endian PLY: float vertices and triangle faces.
     Ply,

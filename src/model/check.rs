@@ -48,8 +48,15 @@ pub const MAX_VISCOSITY: f64 = 1e9;
 /// and the margin keeps what the GPU computes from the step (products with speeds and
 /// accelerations) normal too.
 pub const MIN_DT: f64 = 1e-30;
+/// The largest time step: the GPU's products of dt with speeds, accelerations and dt itself
+/// (dt^2 a) stay far inside f32's range (3.4e38), and no liquid in any usual units needs a
+/// step of more than about 3 years.
+pub const MAX_DT: f64 = 1e8;
 /// The most wall layers a boundary may ask for: the kernel's support is a few spacings deep.
 pub const MAX_WALL_LAYERS: u32 = 16;
+/// The most wall layers a boundary gets by default (h / spacing): beyond, a smoothing length
+/// of dozens of wall spacings is a mistake of units, and the layers' count would overflow.
+pub const MAX_DEFAULT_WALL_LAYERS: u32 = 64;
 /// How far a given particle mass may be from rest_density x particle_spacing^3, as a factor.
 pub const PARTICLE_MASS_FACTOR: f64 = 1e3;
 /// The largest boundary friction: a scale of the viscosity between fluid and walls (1 no-slip).
@@ -214,6 +221,10 @@ impl Scene {
             return Err(err(origin, "time.dt", format!(
                 "is {}; must be at least {} (the GPU steps time in f32, which holds no smaller step)", short(self.time.dt), short(MIN_DT))));
         }
+        if self.time.dt > MAX_DT {
+            return Err(err(origin, "time.dt", format!(
+                "is {}; must be at most {} s (the GPU's f32 products of dt with speeds and accelerations would overflow)", short(self.time.dt), short(MAX_DT))));
+        }
         positive("time.end_time", self.time.end_time)?;
         self.validate_time_options(origin)?;
         ordered("domain", self.domain.min, self.domain.max)?;
@@ -285,6 +296,16 @@ impl Scene {
                         return Err(err(origin, format!("{f}.layers"), format!(
                             "is {layers}; must be from 1 to {MAX_WALL_LAYERS} (the walls need only reach the kernel's support, h / spacing layers)")));
                     }
+                    // The default, h / spacing layers, has a bound too.
+                    let spacing = walls.spacing.unwrap_or(p.particle_spacing);
+                    // (A wall spacing far below the fluid's is told by the particle count instead.)
+                    let over = |s: f64| p.smoothing_length / s > MAX_DEFAULT_WALL_LAYERS as f64 + 1e-9;
+                    if walls.layers.is_none() && over(spacing) && over(p.particle_spacing) {
+                        return Err(err(origin, "physics.smoothing_length", format!(
+                            "is {}, {} wall spacings ({}) of {f}: its walls would get as many layers, and at most {MAX_DEFAULT_WALL_LAYERS} are made; \
+                             a smoothing length of 2 to 4 spacings is usual (give {f}.layers, from 1 to {MAX_WALL_LAYERS}, or a smaller h)",
+                            short(p.smoothing_length), short(p.smoothing_length / spacing), short(spacing))));
+                    }
                     let (lo, hi) = self.wall_span(b).expect("a particle boundary");
                     if !inside(lo) || !inside(hi) {
                         return Err(err(origin, &f, format!(
@@ -306,7 +327,9 @@ impl Scene {
                     finite3(&format!("{f}.normal"), *normal)?;
                     // Normalised on load (`params`): its length must be a finite number away
                     // from 0, or the unit normal would be 0 or NaN.
-                    let length = normal.iter().map(|c| c * c).sum::<f64>().sqrt();
+                    // (Scaled by the largest component, so that a tiny one does not square to 0.)
+                    let largest = normal.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+                    let length = if largest > 0.0 { largest * normal.iter().map(|c| (c / largest).powi(2)).sum::<f64>().sqrt() } else { 0.0 };
                     if !(1e-6..=1e150).contains(&length) {
                         return Err(err(origin, format!("{f}.normal"), format!(
                             "is {}, of length {}; must be a direction of length from 1e-6 to 1e150 (it is normalised)", short3(*normal), short(length))));
@@ -394,6 +417,9 @@ impl Scene {
             if let Some(v) = v {
                 if !(v.is_finite() && v > 0.0) {
                     return Err(err(origin, field, format!("is {}; must be a finite number > 0", short(v))));
+                }
+                if v > MAX_DT {
+                    return Err(err(origin, field, format!("is {}; must be at most {} s, as time.dt", short(v), short(MAX_DT))));
                 }
             }
         }

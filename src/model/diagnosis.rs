@@ -400,6 +400,19 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
                 scene.rest_density_fix()
             ));
         }
+        // A weakly compressible fluid that starts denser than rest by the kernel's sum is
+        // pushed apart by its own equation of state from the first step: where that start is
+        // what the early step's density shows, no speed of sound mends it.
+        let dense_start = scene.start_off_rest_density().filter(|&r| !dfsph && too_dense && step <= START_STEPS && r > 1.0);
+        if let Some(start) = dense_start {
+            causes.push(format!(
+                "the fluid started at {} rho0, not at rest (physics.kernel's sum over the particle lattice at physics.smoothing_length = {} spacings; \
+                 the warning at load), and its equation of state pushes it apart from the first step; {}",
+                short(start),
+                short(params.h / scene.physics.particle_spacing),
+                scene.rest_density_fix()
+            ));
+        }
         if dfsph && cfl > DFSPH_CFL_LIMIT {
             causes.push(format!(
                 "the CFL condition: the flow's speed |v|max = {} made dt |v|max / h = {} go over {DFSPH_CFL_LIMIT}, which DFSPH needs (dt = {}, h = {}): {}",
@@ -456,7 +469,7 @@ pub fn diagnose(scene: &Scene, health: &Health, scan: Option<&FailureScan>) -> S
                 "the fluid was compressed to {} rho0, which DFSPH's constant-density solve should have prevented: lower time.dt, or check what presses the fluid",
                 short(ratio)
             ));
-        } else if too_dense {
+        } else if too_dense && dense_start.is_none() {
             causes.push(format!(
                 "the fluid was compressed to {} rho0: weakly compressible SPH holds while density varies by a few per cent, which needs a speed of sound \
                  about 10 times the largest flow speed (rho/rho0 - 1 is about the square of the Mach number); {}, or check what presses the fluid",
@@ -574,6 +587,15 @@ pub fn regime_warnings(scene: &Scene, health: &Health) -> Vec<String> {
 /// sets it by. A scene that gives the stiffness k gets the k that `target` needs, since c0
 /// grows as the square root of k (k = rho0 c0^2, or rho0 c0^2 / 7 for Tait).
 fn raise_sound(scene: &Scene, c0: f64, target: Option<f64>) -> String {
+    // A speed of sound beyond what a scene may have cannot be the remedy.
+    let most = super::check::SPEED_OF_SOUND_RANGE.1;
+    if let Some(t) = target.filter(|&t| t > most) {
+        return format!(
+            "a speed of sound 10 times the largest speed would be {}, beyond the {} a scene may have: this flow is too fast for weakly compressible SPH; check what drives it (an initial velocity, gravity, a force)",
+            short(t),
+            short(most)
+        );
+    }
     match (scene.physics.stiffness, target) {
         (Some(k), Some(t)) if c0 > 0.0 => format!(
             "raise physics.stiffness (k = {} gives c0 = {}; c0 = {}, 10 times the largest speed, needs k = {}), or give physics.speed_of_sound instead",

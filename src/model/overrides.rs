@@ -170,7 +170,7 @@ fn unset_path(tree: &mut toml::Value, key: &str) -> Result<(), String> {
         }
     }
     match node {
-        toml::Value::Table(t) => t.remove(last).map(|_| ()).ok_or_else(|| "is not set in the scene (a field at its default has nothing to remove)".to_string()),
+        toml::Value::Table(t) => t.remove(last).map(|_| ()).ok_or_else(|| "is not set in the scene, so there is nothing to remove (a field at its default, or a name no scene has: see docs/scenes.md)".to_string()),
         toml::Value::Array(a) => {
             let len = a.len();
             let index = last.parse::<usize>().ok().filter(|&i| i < len).ok_or_else(|| format!("{} has {}; '{last}' is not one (they are numbered from 0)", parent.unwrap_or(""), entries(len)))?;

@@ -171,9 +171,12 @@ pub struct ProbeSample {
     pub values: Vec<f64>,
 }
 
+/// The longest probe name (a row's probes' names with their `_0`, `_1`, ... too).
+const MAX_NAME: usize = 64;
+
 /// Whether a name can be a file name on every platform: letters, digits, `_` and `-`.
 fn file_safe(name: &str) -> bool {
-    !name.is_empty() && name.len() <= 64 && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    !name.is_empty() && name.len() <= MAX_NAME && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
 }
 
 impl Scene {
@@ -262,6 +265,11 @@ impl Scene {
             return Err(err(origin, "probe", format!("declares {} probes (a row counting each of its own); at most {MAX_PROBES} are allowed", names.len())));
         }
         for (k, (name, i)) in names.iter().enumerate() {
+            // A row's probes add _0, _1, ... to its name, which must still name a file.
+            if name.len() > MAX_NAME {
+                return Err(err(origin, format!("probe[{i}].name"), format!(
+                    "gives the row's probe '{name}', {} characters; a probe's name is at most {MAX_NAME} (a row adds _0, _1, ...): shorten it", name.len())));
+            }
             if let Some((_, j)) = names[..k].iter().find(|(other, j)| other == name && j != i) {
                 return Err(err(origin, format!("probe[{i}].name"), format!(
                     "gives the probe '{name}', which probe[{j}] declares too; names must be unique (each has its own file, and a row's are NAME_0, NAME_1, ...)")));

@@ -310,8 +310,11 @@ impl BackendState {
         let n = fluid_count;
         anyhow::ensure!(
             self.positions.len() == n && self.velocities.len() == n && self.ids.len() == n && (self.densities.is_empty() || self.densities.len() == n),
-            "the state holds {} particles; the scene has {n}",
-            self.positions.len()
+            "the state holds {} positions, {} velocities, {} ids and {} carried densities; the scene has {n} particles",
+            self.positions.len(),
+            self.velocities.len(),
+            self.ids.len(),
+            self.densities.len()
         );
         let mut seen = vec![false; n];
         for &id in &self.ids {

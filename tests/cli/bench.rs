@@ -137,7 +137,7 @@ fn an_unusable_out_file_is_refused_before_the_work() {
     let rows: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(rows[0]["path"], "cpu-f64");
     let theirs = dir.path().join("results.json");
-    for (command, text) in [("bench", "{\"mine\": 1}"), ("profile", "[{\"path\": \"x\"}]"), ("bench", "not json")] {
+    for (command, text) in [("bench", "{\"mine\": 1}"), ("profile", "[{\"path\": \"x\"}]"), ("bench", "not json"), ("bench", "[]")] {
         std::fs::write(&theirs, text).unwrap();
         let extra: &[&str] = if command == "bench" { &["--n", "2", "--steps", "1", "--paths", "cpu-f32"] } else { &["--particles", "500", "--steps", "1"] };
         let o = Command::new(env!("CARGO_BIN_EXE_wgsph")).arg(command).args(extra).args(["--out", theirs.to_str().unwrap()]).output().unwrap();

@@ -334,3 +334,20 @@ fn compare_judges_a_strong_surface_tension_against_f32_rounding() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success() && !text.contains("raised"), "{text}");
 }
+
+/// A `WGPU_BACKEND` that names no backend is named as why no adapter was found, not a driver
+/// to install.
+#[test]
+fn a_wgpu_backend_that_names_no_backend_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_wgsph"))
+        .args(["run", "hydrostatic", "--particles", "300", "--steps", "1", "--backend", "gpu", "--out", "o"])
+        .current_dir(dir.path())
+        .env("WGPU_BACKEND", "foo")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("WGPU_BACKEND='foo' names no backend") && !err.contains("install a GPU driver"), "{err}");
+    assert!(!dir.path().join("o").exists());
+}

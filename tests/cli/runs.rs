@@ -278,6 +278,9 @@ fn resume_refuses_tuning_flags_and_a_foreign_series_index() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("line 2 is not step,time,files: '0,NaN,"), "{}", text(&o.stderr));
     assert_eq!(std::fs::read_to_string(&index).unwrap(), nan);
+    std::fs::remove_file(&index).unwrap();
+    let o = wgsph(&["run", "--resume", "o", "--steps", "2", "--quiet"], dir.path());
+    assert!(o.status.success() && text(&o.stderr).contains("index.csv is missing, where the run had written 5 snapshots up to step 4"), "{}", text(&o.stderr));
 }
 
 /// Output into a closed pipe (`wgsph run | head -1`) ends the process by SIGPIPE, as any Unix
@@ -571,7 +574,7 @@ fn a_density_driven_below_zero_or_over_its_limit_is_never_named_the_last_good_sn
 
 /// A blow-up names the setting that caused it: an adaptive step held at `time.dt_min` (not
 /// time.dt or the CFL number, which cannot lower it), a viscosity from the schedule (not
-/// `physics.viscosity`).
+/// `physics.viscosity`), a start off rest density (not the speed of sound).
 #[test]
 fn a_blow_up_names_the_setting_in_force() {
     let dir = tempfile::tempdir().unwrap();
@@ -584,6 +587,8 @@ fn a_blow_up_names_the_setting_in_force() {
     for (sets, says, not) in [
         (&["time.adaptive=true", "time.dt=0.01", "time.dt_min=0.01"][..], "time.dt_min = 0.01 held the adaptive step there", "lower time.dt to"),
         (&["physics.viscosity_schedule=[{time=0.01,viscosity=1e9}]"][..], "lower time.dt or physics.viscosity_schedule[0].viscosity", "or physics.viscosity,"),
+        // h = one spacing: the kernel's sum starts the fluid at 1.57 rho0, which no c0 mends.
+        (&["physics.smoothing_length=0.02", "time.dt=0.0001"][..], "Cause: the fluid started at", "raise physics.speed_of_sound"),
     ] {
         let mut args = vec!["run", "fall.toml", "--backend", "cpu", "--out", "o", "--overwrite", "--quiet"];
         for s in sets {

@@ -246,12 +246,21 @@ fn bad_checkpoints_are_refused_with_a_clear_message() {
     let mut flipped = good.clone();
     let last = flipped.len() - 9;
     flipped[last] ^= 0x40;
-    // A NaN written with a good checksum (by something else than a run).
-    let mut c = read(&path).unwrap();
-    c.state.positions[3][1] = f64::NAN;
-    wgsph::io::checkpoint::write(&path, &c).unwrap();
-    let not_finite = std::fs::read(&path).unwrap();
-    let cases: [(&str, Vec<u8>, &[&str]); 7] = [
+    // Written with a good checksum by something else than a run: a NaN, arrays that disagree,
+    // a backend no wgsph has.
+    let altered = |change: &dyn Fn(&mut wgsph::io::checkpoint::Checkpoint)| -> Vec<u8> {
+        std::fs::write(&path, &good).unwrap();
+        let mut c = read(&path).unwrap();
+        change(&mut c);
+        wgsph::io::checkpoint::write(&path, &c).unwrap();
+        std::fs::read(&path).unwrap()
+    };
+    let not_finite = altered(&|c| c.state.positions[3][1] = f64::NAN);
+    let id_short = altered(&|c| {
+        c.state.ids.pop();
+    });
+    let other_kind = altered(&|c| c.state.kind = "cpu f16".into());
+    let cases: [(&str, Vec<u8>, &[&str]); 9] = [
         ("other version", other_version, &["written by wgsph 9.9", "only resumes its own"]),
         ("flipped bit", flipped, &["corrupt", "checksum"]),
         ("truncated", good[..good.len() - 100].to_vec(), &["corrupt", "payload has"]),
@@ -259,6 +268,8 @@ fn bad_checkpoints_are_refused_with_a_clear_message() {
         ("cut in its magic", good[..5].to_vec(), &["corrupt", "truncated"]),
         ("empty", Vec::new(), &["corrupt", "empty"]),
         ("not finite", not_finite, &["corrupt", "particle 3's position or velocity is not finite"]),
+        ("an id short", id_short, &["corrupt", "ids and 0 carried densities", "checkpoint.wgsph"]),
+        ("unknown backend", other_kind, &["corrupt", "unknown backend 'cpu f16'", "checkpoint.wgsph"]),
     ];
     for (what, bytes, words) in cases {
         std::fs::write(&path, bytes).unwrap();

@@ -141,6 +141,10 @@ fn a_row_of_probes_is_probes_evenly_spaced_from_position_to_to() {
         (row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", ""), vec!["probe[0] ('r').to", "without count"]),
         (row("[0.1, 0.1, 0.05]", "", "count = 3\n"), vec!["probe[0] ('r').count", "without to"]),
         (row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", "count = 1\n"), vec!["('r').count", "is 1; a row holds 2 to 64"]),
+        (
+            row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", "count = 3\n").replace("\"r\"", &format!("\"{}\"", "r".repeat(63))),
+            vec!["probe[0].name", "65 characters; a probe's name is at most 64"],
+        ),
         (row("[0.1, 0.1, 0.05]", "to = [0.3, 3.0, 0.05]\n", "count = 3\n"), vec!["probe[0] ('r').to", "outside the domain"]),
         (row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", "count = 60\n") + &row("[0.1, 0.2, 0.05]", "to = [0.3, 0.2, 0.05]\n", "count = 5\n").replace("\"r\"", "\"s\""), vec!["declares 65 probes", "at most 64"]),
         (row("[0.1, 0.1, 0.05]", "to = [0.3, 0.1, 0.05]\n", "count = 2\n") + "\n[[probe]]\nname = \"r_1\"\ntype = \"point\"\nposition = [0.2, 0.2, 0.05]\n", vec!["probe[1].name", "the probe 'r_1', which probe[0] declares too"]),

@@ -483,3 +483,22 @@ fn a_directory_where_the_run_writes_a_file_is_refused_before_any_work() {
     let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "1", "--backend", "cpu", "--quiet"], dir.path());
     assert!(o.status.success() && dir.path().join("out/hydrostatic-001/summary.json").exists(), "{}", stderr(&o));
 }
+
+/// A run resumed from its checkpoint to an earlier end than it had reached removes its
+/// snapshots of the steps after the checkpoint (computed again, or not at all): none is left
+/// that its index does not list. A user's file there stays.
+#[test]
+fn a_resume_to_an_earlier_end_leaves_no_snapshot_its_index_does_not_list() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = wgsph(&["run", "hydrostatic", "--particles", "300", "--steps", "30", "--snapshot-every", "5", "--checkpoint-every", "20", "--backend", "cpu", "--out", "o"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::write(dir.path().join("o/snapshots/step_000030.txt"), "mine").unwrap();
+    let o = wgsph(&["run", "--resume", "o", "--steps", "3"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut files: Vec<String> = std::fs::read_dir(dir.path().join("o/snapshots")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    files.sort();
+    let listed: Vec<String> = std::fs::read_to_string(dir.path().join("o/snapshots/index.csv")).unwrap().lines().skip(1).map(|l| l.split(',').nth(2).unwrap().to_string()).collect();
+    assert_eq!(listed, ["step_000000.csv", "step_000005.csv", "step_000010.csv", "step_000015.csv", "step_000020.csv", "step_000023.csv"]);
+    let expected: Vec<String> = listed.iter().cloned().chain(["index.csv".to_string(), "step_000030.txt".to_string()]).collect::<std::collections::BTreeSet<_>>().into_iter().collect();
+    assert_eq!(files, expected);
+}

@@ -96,6 +96,9 @@ fn non_positive_h_dt_and_spacing_are_refused() {
         let e = error_of(&GOOD.replace(from, to));
         assert!(e.contains("tank.toml") && e.contains(field) && e.contains("> 0"), "{to}: {e}");
     }
+    // A step beyond what f32 products of it can hold.
+    let e = error_of(&GOOD.replace("dt = 0.001", "dt = 1e39\nend_time = 1e40").replace("end_time = 0.1", ""));
+    assert!(e.contains("time.dt") && e.contains("must be at most 1e8 s"), "{e}");
 }
 
 #[test]
@@ -156,8 +159,8 @@ fn values_beyond_any_fluid_are_refused_with_their_range() {
         (GOOD.replace("max = [0.4, 0.4, 0.4]", "max = [0.4, 0.4, 0.4]\nvelocity = [1e300, 0, 0]"), "fluid[0].velocity: is [1e300, 0, 0]; each component must be at most 1e8"),
         (tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nrest_density = 1e300"), "boundary[0].rest_density: is 1e300; must be between"),
         (tank.replace("max = [0.6, 0.6, 0.6]", "max = [0.6, 0.6, 0.6]\nlayers = 1000"), "boundary[0].layers: is 1000; must be from 1 to 16"),
-        (GOOD.to_string() + "[[boundary]]\ntype = \"plane\"\npoint = [0, 0, 0]\nnormal = [1e300, 1e300, 0]\n", "boundary[0].normal: is [1e300, 1e300, 0], of length inf; must be a direction of length from 1e-6 to 1e150"),
-        (GOOD.to_string() + "[[boundary]]\ntype = \"plane\"\npoint = [0, 0, 0]\nnormal = [1e-300, 0, 0]\n", "boundary[0].normal: is [1e-300, 0, 0], of length 0; must be a direction"),
+        (GOOD.to_string() + "[[boundary]]\ntype = \"plane\"\npoint = [0, 0, 0]\nnormal = [1e300, 1e300, 0]\n", "boundary[0].normal: is [1e300, 1e300, 0], of length 1.41421e300; must be a direction of length from 1e-6 to 1e150"),
+        (GOOD.to_string() + "[[boundary]]\ntype = \"plane\"\npoint = [0, 0, 0]\nnormal = [1e-300, 0, 0]\n", "boundary[0].normal: is [1e-300, 0, 0], of length 1e-300; must be a direction"),
         (GOOD.replace("dt = 0.001", "dt = 1e-46"), "time.dt: is 1e-46; must be at least 1e-30"),
         (GOOD.replace("dt = 0.001", "dt = 1e-28\nadaptive = true"), "time.dt: gives a smallest adaptive step of 1e-31; must be at least 1e-30"),
         (GOOD.replace("dt = 0.001", "dt = 0.001\nadaptive = true\ndt_min = 1e-40"), "time.dt_min: gives a smallest adaptive step of 1e-40"),
@@ -471,4 +474,15 @@ fn settings_the_scene_does_not_use_are_named() {
     let twice = GOOD.replace("stiffness = 1000.0", "stiffness = 1000.0\nviscosity_schedule = [{ time = 0.01, viscosity = 0.1 }, { time = 0.01, viscosity = 0.2 }]");
     let e = error_of(&twice);
     assert!(e.contains("physics.viscosity_schedule[1].time") && e.contains("increasing"), "{e}");
+}
+
+/// A wall's default layers (h / spacing) are bounded too: a smoothing length of 1e300 names
+/// itself, not a wall span of saturated numbers.
+#[test]
+fn a_smoothing_length_that_would_need_over_64_wall_layers_is_refused() {
+    let wall = "[[boundary]]\ntype = \"container\"\nmin = [0.1, 0.1, 0.1]\nmax = [0.9, 0.9, 0.9]\n";
+    for h in ["0.65", "1e300"] {
+        let e = error_of(&format!("{GOOD}{wall}").replace("smoothing_length = 0.1", &format!("smoothing_length = {h}")).replace("particle_spacing = 0.05", "particle_spacing = 0.01"));
+        assert!(e.contains("physics.smoothing_length") && e.contains("at most 64 are made"), "{h}: {e}");
+    }
 }

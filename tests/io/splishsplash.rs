@@ -218,6 +218,8 @@ fn a_scene_of_the_current_format_with_its_solver_and_method_blocks_is_imported_w
         ("\"viscosity\": 0.02", "\"viscosity\": 0.02, \"kinematic\": 1", "Materials[0].Standard viscosity.kinematic"),
         ("\"maxIterations\": 60", "\"maxIterations\": 2", "Configuration.DFSPH.minIterations, Configuration.DFSPH.maxIterations"),
         ("\"viscosity\": 0.02", "\"viscosity\": 1e300", "Materials[0].Standard viscosity.viscosity"),
+        // A key at the top and in its method's block: one value would be dropped unseen.
+        ("\"density0\": 998,", "\"density0\": 998, \"viscosity\": -0.01,", "viscosity again, as Materials[0].Standard viscosity.viscosity does; give it in one place"),
     ] {
         let text = NAMESPACED_TANK.replacen(from, to, 1);
         assert_ne!(text, NAMESPACED_TANK);

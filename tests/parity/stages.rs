@@ -144,7 +144,7 @@ fn kernels_equations_of_state_and_cells_agree_function_by_function() {
 #[test]
 fn the_scan_twin_runs_the_blocks_like_the_gpu_and_equals_a_plain_scan() {
     for len in [0usize, 1, 255, 256, 257, SCAN_BLOCK * SCAN_BLOCK - 1, SCAN_BLOCK * SCAN_BLOCK + 3, 70_001] {
-        let counts: Vec<u32> = (0..len as u32).map(|i| (i * 2654435761u32) >> 29).collect();
+        let counts: Vec<u32> = (0..len as u32).map(|i| i.wrapping_mul(2654435761u32) >> 29).collect();
         let mut twin = vec![0u32; len + 1];
         prefix_sum(&counts, &mut twin);
         let mut plain = vec![0u32; len + 1];

@@ -148,7 +148,7 @@ fn the_x_server_shows_the_window() {
 }
 
 /// Without a display the viewer says so and how to get one, in its own words: not the
-/// windowing library's, which name a source file of its crate.
+/// windowing library's, which name a source file of its crate; exit 2, as for no adapter.
 #[cfg(all(unix, not(target_os = "macos")))]
 #[test]
 fn without_a_display_the_viewer_says_how_to_get_one() {
@@ -160,7 +160,7 @@ fn without_a_display_the_viewer_says_how_to_get_one() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("cannot open a window: no display") && err.contains("Xvfb"), "{err}");
     assert!(!err.contains(".rs:"), "{err}");
 }

@@ -213,6 +213,13 @@ fn section_entries<'a>(obj: &'a Map<String, Value>, section: &str, read: &[(&str
             _ => entries.push((key.as_str(), v, field)),
         }
     }
+    // A key given at the top and in a method's block (`viscosity` and `Standard
+    // viscosity.viscosity`) holds two values of which one would be dropped unseen.
+    for (i, (key, _, field)) in entries.iter().enumerate() {
+        if let Some((_, _, first)) = entries[..i].iter().find(|(k, _, _)| k == key) {
+            p.add(field.clone(), format!("gives {key} again, as {first} does; give it in one place"));
+        }
+    }
     entries
 }
 

@@ -132,7 +132,12 @@ pub fn choose_from(all: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter, GpuError> {
             if let Some(w) = &wanted {
                 why += &format!(" matching WGPU_ADAPTER_NAME='{w}'");
             }
-            if names.is_empty() {
+            let asked = std::env::var("WGPU_BACKEND").ok().filter(|b| !b.trim().is_empty());
+            if let (true, Some(b)) = (names.is_empty() && backends().is_empty(), &asked) {
+                why += &format!(" (WGPU_BACKEND='{b}' names no backend: give vulkan, metal, dx12 or gl, or leave it unset)");
+            } else if let (true, Some(b)) = (names.is_empty(), &asked) {
+                why += &format!(" (none on the backends WGPU_BACKEND='{b}' allows: leave it unset to try every backend)");
+            } else if names.is_empty() {
                 why += " (no adapter at all: install a GPU driver, or Mesa's lavapipe/llvmpipe for a software adapter)";
             } else {
                 why += &format!(" (adapters found: {})", names.join(", "));

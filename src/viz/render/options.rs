@@ -67,11 +67,12 @@ pub fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 /// Parses `MIN:MAX` for a fixed colour range.
 pub fn parse_range(s: &str) -> Result<(f32, f32), String> {
     // The picture colours in f32: a bound beyond its range (3.4e38) is no finite colour.
-    let err = || format!("'{s}' is not a colour range; write MIN:MAX with MIN < MAX, each within +-3.4e38 (f32), e.g. 0:2.5");
+    // The shader divides by MAX - MIN: that too must be a finite f32.
+    let err = || format!("'{s}' is not a colour range; write MIN:MAX with MIN < MAX, each within +-3.4e38 (f32) and MAX - MIN below 3.4e38 too, e.g. 0:2.5");
     let (a, b) = s.split_once(':').ok_or_else(err)?;
     let a: f32 = a.trim().parse().map_err(|_| err())?;
     let b: f32 = b.trim().parse().map_err(|_| err())?;
-    if !(a.is_finite() && b.is_finite() && a < b) {
+    if !(a.is_finite() && b.is_finite() && a < b && (b - a).is_finite()) {
         return Err(err());
     }
     Ok((a, b))
