@@ -108,8 +108,9 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
         let names: Vec<String> = removed.iter().map(|p| p.display().to_string()).collect();
         println!("removed {} partial file(s) the interrupted run left: {}", removed.len(), names.join(", "));
     }
+    // What the run writes, as its checkpoint records it.
+    let writes = RunWrites::of_run(&c.run.formats, (c.run.surface_mesh_every > 0).then_some(c.run.surface_mesh_format), &params.probes);
     if writes_files {
-        let writes = RunWrites::of_run(&c.run.formats, (c.run.surface_mesh_every > 0).then_some(c.run.surface_mesh_format), &params.probes);
         if restore_marker(dir, &writes, c.run.run_id.as_deref())? {
             eprintln!("note: {} had no {MARKER} (it was deleted): written again, so that --overwrite knows the run's files", dir.display());
         }
@@ -128,7 +129,6 @@ pub fn resume_run(dir: &Path, args: &RunArgs, ranks: Option<&Ranks>) -> anyhow::
     // The steps after the checkpoint are computed again (the backend is open, the checkpoint
     // sound): what the run wrote for them goes.
     if writes_files {
-        let writes = RunWrites::of_run(&c.run.formats, (c.run.surface_mesh_every > 0).then_some(c.run.surface_mesh_format), &params.probes);
         let later = remove_steps_after(dir, step, &writes)?;
         if !later.is_empty() && !args.quiet {
             println!("removed {} snapshot and surface file(s) of steps after the checkpoint's step {step}, which the resumed run computes again", later.len());

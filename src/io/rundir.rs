@@ -396,13 +396,8 @@ fn check_output_entries(path: &Path, writes: Option<&RunWrites>) -> Result<(), S
 pub fn check_resumable(dir: &Path) -> Result<(), RunDirError> {
     let bad = |why: String| RunDirError(format!("--resume {}: {why}", dir.display()));
     check_subdirs(dir).map_err(bad)?;
-    check_output_entries(dir, RunWrites::of_marker(dir).as_ref()).map_err(bad)?;
-    for file in [dir.join(SUMMARY_FILE), dir.join(SNAPSHOTS_DIR).join(INDEX_NAME), dir.join(SNAPSHOTS_DIR).join(VTK_SERIES_NAME)] {
-        if std::fs::symlink_metadata(&file).is_ok_and(|m| m.is_dir()) {
-            return Err(bad(format!("{} is a directory, where the run writes a file; move it away", file.display())));
-        }
-    }
-    Ok(())
+    // The summary, the indexes and the snapshots among them.
+    check_output_entries(dir, RunWrites::of_marker(dir).as_ref()).map_err(bad)
 }
 
 /// The id of the run in run directory `dir` (its marker's `run` line), where it has one: a
