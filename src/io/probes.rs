@@ -173,12 +173,16 @@ impl ProbeWriter {
         Ok(())
     }
 
-    /// Each probe, its file and its series (time, values) so far.
-    pub fn series(&self) -> Vec<(&Probe, &Path, Vec<(f64, &[f64])>)> {
+    /// Each probe, its file and its series (time, values) so far, each number as its file
+    /// holds it: a resumed run reads the lines before its checkpoint back from that text, so a
+    /// plot drawn from these values is the same picture whether the run was interrupted or not
+    /// (a value computed in f32 is written as the shortest text of that f32, which reads back
+    /// as a nearby f64, not the f32 itself).
+    pub fn series(&self) -> Vec<(&Probe, &Path, Vec<(f64, Vec<f64>)>)> {
         self.probes
             .iter()
             .zip(&self.files)
-            .map(|(p, f)| (p, f.path.as_path(), f.rows.iter().map(|r| (r.1, r.2.as_slice())).collect()))
+            .map(|(p, f)| (p, f.path.as_path(), f.rows.iter().map(|r| (as_written(r.1), r.2.iter().map(|&v| as_written(v)).collect())).collect()))
             .collect()
     }
 }
@@ -203,6 +207,12 @@ fn number(v: f64) -> String {
         (false, true) => format!("{v}"),
         (false, false) => format!("{v:e}"),
     }
+}
+
+/// `v` as a series line holds it: its text read back. Reading back what was read is the same
+/// number again, so a value taken from a file and one just computed agree.
+fn as_written(v: f64) -> f64 {
+    number(v).parse().unwrap_or(v)
 }
 
 /// One line of a series: time, step and values. `{}` writes the shortest text that reads back
@@ -300,6 +310,50 @@ mod tests {
         r.add(&samples(6..10, 0.0));
         r.write().unwrap();
         assert_eq!(std::fs::read_to_string(&path).unwrap(), before);
+    }
+
+    /// A resumed writer's series, its early lines read back from the file, holds the numbers of
+    /// the writer that never stopped, for values computed in f32 (written as an f32's shortest
+    /// text) and in f64 alike: the plots drawn from them are the same picture.
+    #[test]
+    fn a_resumed_series_holds_the_uninterrupted_series_numbers() {
+        let f32_samples = |steps: std::ops::Range<u64>| -> Vec<ProbeSample> {
+            samples(steps, 0.0)
+                .into_iter()
+                .map(|mut s| {
+                    // 0.1 + k / 3 in f32: neither f32 nor its text is an exact decimal.
+                    s.values = (0..12).map(|k| (0.1f32 + (s.step as f32 + k as f32) / 3.0) as f64).collect();
+                    s
+                })
+                .collect()
+        };
+        let f64_samples = |steps: std::ops::Range<u64>| -> Vec<ProbeSample> { samples(steps, 1.0 / 7.0) };
+        for (how, make) in [("f32", &f32_samples as &dyn Fn(std::ops::Range<u64>) -> Vec<ProbeSample>), ("f64", &f64_samples)] {
+            let dir = tempfile::tempdir().unwrap();
+            let (whole, cut) = (dir.path().join("whole"), dir.path().join("cut"));
+            let mut w = writer(&whole);
+            w.add(&make(0..20));
+            w.write().unwrap();
+            let mut c = writer(&cut);
+            c.add(&make(0..12));
+            c.write().unwrap();
+            let (mut r, missing) = ProbeWriter::resume(&cut, &Probes { probes: w.probes.clone() }, 8).unwrap();
+            assert!(missing.is_empty());
+            r.add(&make(8..20));
+            r.write().unwrap();
+            assert_eq!(files(&cut), files(&whole), "{how}");
+            let numbers = |x: &ProbeWriter| -> Vec<Vec<(u64, Vec<u64>)>> {
+                x.series().into_iter().map(|(_, _, s)| s.iter().map(|(t, v)| (t.to_bits(), v.iter().map(|x| x.to_bits()).collect())).collect()).collect()
+            };
+            assert_eq!(numbers(&r), numbers(&w), "{how}: the series' numbers differ after the resume");
+            // Read back twice is read back once: the numbers are the file's own.
+            for (_, _, s) in w.series() {
+                assert!(s.iter().all(|(t, v)| as_written(*t) == *t && v.iter().all(|&x| as_written(x) == x)), "{how}");
+            }
+        }
+        // An f32 is not its text read as f64 (what the plot of a resumed run once drew).
+        let x = (0.1f32 + 1.0 / 3.0) as f64;
+        assert_ne!(as_written(x), x);
     }
 
     /// A series that is gone restarts (and is named, for the run to say so); a file that is not

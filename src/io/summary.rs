@@ -37,7 +37,8 @@ pub struct Summary {
     pub steps: u64,
     pub sim_time: f64,
     pub dt: f64,
-    /// Smallest, largest and mean step taken (all equal to `dt` without adaptive dt).
+    /// Smallest, largest and mean step taken (all equal to `dt` without adaptive dt; 0 when the
+    /// run took no step).
     #[serde(default)]
     pub dt_min: f64,
     #[serde(default)]

@@ -137,7 +137,7 @@ pub trait Backend {
     }
     /// The steps taken so far (with adaptive dt a few bytes read from the GPU).
     fn dt_stats(&mut self) -> anyhow::Result<DtStats> {
-        Ok(DtStats::fixed(self.params().dt))
+        Ok(if self.steps_done() == 0 { DtStats::default() } else { DtStats::fixed(self.params().dt) })
     }
     /// Bytes the backend allocated for the simulation, where it knows.
     fn memory_bytes(&self) -> Option<u64> {

@@ -253,3 +253,34 @@ fn the_gpu_time_is_its_twins_sum_of_the_dts_it_chose() {
         assert!(seen.len() > 10, "{}: the step hardly changed: {seen:?}", gpu.adapter());
     }
 }
+
+/// Every backend reports the steps it took alike: none before the first step (0, as a run of
+/// `--steps 0` writes in its summary), the scene's dt after a fixed step, with or without
+/// adaptive dt.
+#[test]
+fn every_backend_reports_no_step_before_the_first_and_the_steps_after() {
+    for adaptive in [false, true] {
+        let mut s = TestScene::small_tank();
+        if adaptive {
+            s = s.adaptive().dt_max(0.002);
+        }
+        let s = s.build();
+        let mut list: Vec<Box<dyn Backend>> = vec![Box::new(common::cpu::<f64>(&s)), Box::new(common::cpu::<f32>(&s))];
+        for ctx in common::contexts() {
+            list.push(Box::new(common::gpu(ctx, &s)));
+        }
+        for mut b in list {
+            let who = format!("{} {}, adaptive {adaptive}", b.kind(), b.adapter());
+            let none = b.dt_stats().unwrap();
+            assert_eq!([none.min, none.max, none.mean, none.last], [0.0; 4], "{who}: {none:?}");
+            b.step(3).unwrap();
+            let taken = b.dt_stats().unwrap();
+            assert!(taken.min > 0.0 && taken.min <= taken.mean && taken.mean <= taken.max, "{who}: {taken:?}");
+            if !adaptive {
+                let dt = s.params().dt;
+                assert_eq!([taken.min, taken.max, taken.last], [dt; 3], "{who}: {taken:?}");
+                assert!((taken.mean - dt).abs() <= 1e-12 * dt, "{who}: {taken:?}");
+            }
+        }
+    }
+}

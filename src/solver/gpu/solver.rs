@@ -864,17 +864,17 @@ impl Backend for GpuSolver {
         }
     }
     fn dt_stats(&mut self) -> anyhow::Result<DtStats> {
+        // No step taken, no step to report (as on the CPU path).
+        if self.steps == 0 {
+            return Ok(DtStats::default());
+        }
         let Some(_) = self.params.adaptive else {
             return Ok(DtStats::fixed(self.params.dt));
         };
         let s = self.read_status()?;
         let f = |i: usize| status::float(&s, i);
         let time = status::time(&s).seconds();
-        Ok(if self.steps == 0 {
-            DtStats::default()
-        } else {
-            DtStats { min: f(status::DT_MIN), max: f(status::DT_MAX), mean: time / self.steps as f64, last: f(status::DT) }
-        })
+        Ok(DtStats { min: f(status::DT_MIN), max: f(status::DT_MAX), mean: time / self.steps as f64, last: f(status::DT) })
     }
     fn memory_bytes(&self) -> Option<u64> {
         Some(self.memory)
