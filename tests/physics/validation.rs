@@ -149,6 +149,18 @@ fn hydrostatic_pressure_with_dfsph() {
     }
 }
 
+/// The still tank with continuity density, delta-SPH diffusion and a hydrostatic start, read
+/// through its point probes: within 1 % of rho g H, and its pressure noise below that of the
+/// same tank without diffusion (the figures of the case, docs/validation.md).
+#[test]
+fn hydrostatic_pressure_read_by_probes_with_diffusion() {
+    let (backend, r, _dir) = assert_passed_on(Case::HydrostaticDiffusion, Adapters::First);
+    let probes = r.figure("point-probe pressure error / rho g H").expect("the probes' figure");
+    assert!(probes.tolerance <= 0.01 && probes.value > 0.0, "{backend}: {probes:?}");
+    let ratio = r.figure("pressure noise with diffusion / without").expect("the noise ratio");
+    assert!(ratio.tolerance < 1.0 && ratio.value > 0.0, "{backend}: {ratio:?}");
+}
+
 #[test]
 fn martin_moyce_front_and_height_with_dfsph() {
     assert_passed_on(Case::DamBreakMartinMoyceDfsph, Adapters::First);

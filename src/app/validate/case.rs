@@ -51,10 +51,13 @@ pub enum Case {
     HydrostaticDfsph,
     DamBreakMartinMoyceDfsph,
     DamBreakKoshizukaOkaDfsph,
+    /// The still tank with the density a sensor can read: carried by the continuity equation
+    /// with delta-SPH diffusion, from a hydrostatic start.
+    HydrostaticDiffusion,
 }
 
 impl Case {
-    pub const ALL: [Case; 8] = [
+    pub const ALL: [Case; 9] = [
         Case::Hydrostatic,
         Case::DamBreakMartinMoyce,
         Case::DamBreakKoshizukaOka,
@@ -63,6 +66,7 @@ impl Case {
         Case::HydrostaticDfsph,
         Case::DamBreakMartinMoyceDfsph,
         Case::DamBreakKoshizukaOkaDfsph,
+        Case::HydrostaticDiffusion,
     ];
     pub fn name(self) -> &'static str {
         match self {
@@ -74,11 +78,17 @@ impl Case {
             Case::HydrostaticDfsph => "hydrostatic_dfsph",
             Case::DamBreakMartinMoyceDfsph => "dam_break_martin_moyce_dfsph",
             Case::DamBreakKoshizukaOkaDfsph => "dam_break_koshizuka_oka_dfsph",
+            Case::HydrostaticDiffusion => "hydrostatic_diffusion",
         }
     }
     /// Whether the case runs DFSPH.
     pub fn dfsph(self) -> bool {
         matches!(self, Case::HydrostaticDfsph | Case::DamBreakMartinMoyceDfsph | Case::DamBreakKoshizukaOkaDfsph)
+    }
+    /// Whether the case carries the density by the continuity equation with delta-SPH
+    /// diffusion and starts from the hydrostatic state.
+    pub fn diffusion(self) -> bool {
+        matches!(self, Case::HydrostaticDiffusion)
     }
     pub fn from_name(name: &str) -> Option<Case> {
         Case::ALL.into_iter().find(|c| c.name() == name)

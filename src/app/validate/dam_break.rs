@@ -248,6 +248,8 @@ pub fn run_koshizuka_oka(case: Case, resolution: Resolution, out: &Path, make: &
 pub fn method(case: Case) -> &'static str {
     if case.dfsph() {
         ", DFSPH"
+    } else if case.diffusion() {
+        ", delta-SPH"
     } else {
         ""
     }

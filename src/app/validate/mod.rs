@@ -31,7 +31,7 @@ pub fn run_case(case: Case, resolution: Resolution, out: &Path, make: &mut MakeB
     std::fs::create_dir_all(out)?;
     let t0 = std::time::Instant::now();
     let mut report = match case {
-        Case::Hydrostatic | Case::HydrostaticDfsph => hydrostatic::run(case, resolution, out, make)?,
+        Case::Hydrostatic | Case::HydrostaticDfsph | Case::HydrostaticDiffusion => hydrostatic::run(case, resolution, out, make)?,
         Case::DamBreakMartinMoyce | Case::DamBreakMartinMoyceDfsph => dam_break::run_martin_moyce(case, resolution, out, make)?,
         Case::DamBreakKoshizukaOka | Case::DamBreakKoshizukaOkaDfsph => dam_break::run_koshizuka_oka(case, resolution, out, make)?,
         Case::Conservation => conservation::run(resolution, out, make)?,
