@@ -97,6 +97,11 @@ pub fn tank(resolution: Resolution) -> Tank {
     }
 }
 
+/// The probe of the noise figure: mid-depth on the centre line, sampled every step.
+fn noise_probe() -> ProbeSpec {
+    ProbeSpec::point("noise", [0.5 * DEPTH; 3], 1)
+}
+
 /// The still tank's density carried by the continuity equation with delta-SPH diffusion
 /// `delta` (0: none), from the hydrostatic state: what a readable pressure needs
 /// (docs/pressure.md).
@@ -114,7 +119,7 @@ fn with_diffusion(scene: &mut Scene, tank: &Tank, delta: f64) -> anyhow::Result<
 fn noise_without_diffusion(tank: &Tank, make: &mut MakeBackend) -> anyhow::Result<f64> {
     let mut scene = tank.scene()?;
     with_diffusion(&mut scene, tank, 0.0)?;
-    scene.probe.push(ProbeSpec::point("noise", [0.5 * DEPTH, 0.5 * DEPTH, 0.5 * DEPTH], 1));
+    scene.probe.push(noise_probe());
     let params = scene.params();
     let mut backend = make(&scene, None)?;
     backend.step(super::scenes::steps_to(SETTLE + WINDOW, params.dt))?;
@@ -145,7 +150,7 @@ pub fn run(case: Case, resolution: Resolution, out: &Path, make: &mut MakeBacken
             (probe.every_steps, probe.every_seconds) = (None, Some(0.01));
             scene.probe.push(probe);
         }
-        scene.probe.push(ProbeSpec::point("noise", [centre, 0.5 * DEPTH, centre], 1));
+        scene.probe.push(noise_probe());
     }
     let params = scene.params();
     let mut backend = make(&scene, None)?;
